@@ -1,0 +1,19 @@
+# The README's two commands: `make report` (the main job) and `make test` (the test suite).
+# Both set up .venv from the pinned requirements on a fresh machine first.
+.PHONY: setup report gate test lint
+
+setup:
+	@scripts/bootstrap
+
+report: setup
+	.venv/bin/harness gate
+
+gate: setup
+	.venv/bin/harness gate
+
+test: setup
+	@scripts/test-deps
+	.venv/bin/python -m pytest -q
+
+lint: setup
+	.venv/bin/ruff check harness problems implementations tests benchmarks
