@@ -1,0 +1,279 @@
+"""Methods as data: frozen coefficient objects that check themselves when built.
+
+Every in-house stepper is one of these objects plus the step loop of its family
+(`implementations/`). The objects know nothing about problems or arrays of states; they hold
+coefficients, validate them, and expose derived facts (stage count, explicitness, symmetry).
+
+Families
+--------
+- `ButcherTableau`: Runge-Kutta methods, y' = f(t, y). Hairer, Norsett & Wanner, *Solving
+  Ordinary Differential Equations I*, II.1.
+- `SplittingScheme`: drift/kick compositions for q'' = a(q, t) (Verlet family, Forest-Ruth,
+  Yoshida, PEFRL). Hairer, Lubich & Wanner, *Geometric Numerical Integration*, II.5 and V.3.
+- `LinearMultistep`: sum_j alpha_j y_{n+j} = h sum_j beta_j f_{n+j} (Adams, BDF).
+  Hairer, Norsett & Wanner I, III.2.
+- `SecondOrderMultistep`: sum_j alpha_j x_{n+j} = h^2 sum_j beta_j a_{n+j} (Stormer's two-step
+  form of Verlet). Hairer, Norsett & Wanner I, III.10.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import numpy as np
+
+from harness.errors import CoefficientError
+from harness.tolerances import COEFFICIENT_TOL
+
+__all__ = [
+    "ButcherTableau",
+    "SplittingScheme",
+    "LinearMultistep",
+    "SecondOrderMultistep",
+    "as_float_array",
+]
+
+Number = float | int | Fraction
+
+
+def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
+    """Convert coefficients (floats, ints, Fractions, nested lists) to a read-only float64 array."""
+    try:
+        arr = np.array(
+            [[float(v) for v in row] for row in values] if ndim == 2 else [float(v) for v in values],
+            dtype=np.float64,
+        )
+    except (TypeError, ValueError) as exc:
+        raise CoefficientError(f"`{name}` must hold real numbers: {exc}") from None
+    if arr.ndim != ndim:
+        raise CoefficientError(f"`{name}` must be {ndim}-dimensional, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise CoefficientError(f"`{name}` must be finite, got {arr.tolist()}")
+    arr.setflags(write=False)
+    return arr
+
+
+def _close(a: float, b: float) -> bool:
+    return abs(a - b) <= COEFFICIENT_TOL * max(1.0, abs(a), abs(b))
+
+
+@dataclass(frozen=True, eq=False)
+class ButcherTableau:
+    """A Runge-Kutta method: stage matrix `A`, weights `b`, nodes `c`.
+
+    Checks on creation: `A` square with as many rows as `b` and `c`; row sums of `A` equal `c`
+    (the stages are consistent in time); weights sum to one (the method is consistent).
+    Derived: `stages`, `explicit` (A strictly lower triangular), `diagonally_implicit`.
+    """
+
+    name: str
+    A: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    stages: int = field(init=False)
+    explicit: bool = field(init=False)
+
+    def __init__(self, name: str, A: Sequence, b: Sequence, c: Sequence | None = None):
+        A_arr = as_float_array(A, f"{name}.A", 2)
+        b_arr = as_float_array(b, f"{name}.b", 1)
+        s = b_arr.shape[0]
+        if A_arr.shape != (s, s):
+            raise CoefficientError(
+                f"`{name}.A` must be {s}x{s} to match {s} weights in `b`, got {A_arr.shape}"
+            )
+        row_sums = A_arr.sum(axis=1)
+        if c is None:
+            c_arr = row_sums.copy()
+            c_arr.setflags(write=False)
+        else:
+            c_arr = as_float_array(c, f"{name}.c", 1)
+            if c_arr.shape != (s,):
+                raise CoefficientError(f"`{name}.c` must have {s} nodes, got {c_arr.shape[0]}")
+            for i in range(s):
+                if not _close(row_sums[i], c_arr[i]):
+                    raise CoefficientError(
+                        f"`{name}`: row {i} of A sums to {row_sums[i]!r} but node c[{i}] is "
+                        f"{c_arr[i]!r}; the row sums of A must equal the nodes"
+                    )
+        if not _close(b_arr.sum(), 1.0):
+            raise CoefficientError(f"`{name}.b` must sum to 1 (consistency), sums to {b_arr.sum()!r}")
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "A", A_arr)
+        object.__setattr__(self, "b", b_arr)
+        object.__setattr__(self, "c", c_arr)
+        object.__setattr__(self, "stages", s)
+        object.__setattr__(self, "explicit", bool(np.all(np.triu(A_arr) == 0.0)))
+
+    def stability_function(self, z: np.ndarray) -> np.ndarray:
+        """R(z) = 1 + z b^T (I - zA)^{-1} e, evaluated for an array of complex z."""
+        z = np.asarray(z, dtype=complex)
+        s = self.stages
+        flat = z.reshape(-1)
+        eye = np.eye(s)
+        M = eye[None, :, :] - flat[:, None, None] * self.A[None, :, :]
+        ones = np.ones((flat.size, s, 1))
+        k = np.linalg.solve(M, ones)[..., 0]
+        out = 1.0 + flat * (k @ self.b)
+        return out.reshape(z.shape)
+
+    def fingerprint(self) -> str:
+        """A stable text form of the coefficients, for cache keys."""
+        return f"rk:{self.A.tobytes().hex()}:{self.b.tobytes().hex()}:{self.c.tobytes().hex()}"
+
+
+@dataclass(frozen=True, eq=False)
+class SplittingScheme:
+    """A drift/kick composition for q'' = a(q, t).
+
+    `sequence` is a tuple of ("D", a_i) drifts (q += a_i h v) and ("K", b_i) kicks
+    (v += b_i h a(q, t)). Checks on creation: only D and K, adjacent equal kinds merged, drift
+    and kick coefficients each sum to one (consistency). Derived: `symmetric` (the sequence is a
+    palindrome), `force_evals` per step with the first-same-as-last saving when the sequence
+    begins and ends with a kick.
+    """
+
+    name: str
+    sequence: tuple[tuple[str, float], ...]
+    symmetric: bool = field(init=False)
+    force_evals: int = field(init=False)
+
+    def __init__(self, name: str, sequence: Sequence[tuple[str, Number]]):
+        merged: list[list] = []
+        for item in sequence:
+            try:
+                kind, coeff = item
+            except (TypeError, ValueError):
+                raise CoefficientError(
+                    f"`{name}.sequence` entries must be (kind, coefficient) pairs, got {item!r}"
+                ) from None
+            if kind not in ("D", "K"):
+                raise CoefficientError(f"`{name}.sequence` kinds must be 'D' or 'K', got {kind!r}")
+            value = float(coeff)
+            if not np.isfinite(value):
+                raise CoefficientError(f"`{name}.sequence` coefficients must be finite, got {coeff!r}")
+            if merged and merged[-1][0] == kind:
+                merged[-1][1] += value
+            else:
+                merged.append([kind, value])
+        seq = tuple((k, v) for k, v in merged if v != 0.0)
+        drift = sum(v for k, v in seq if k == "D")
+        kick = sum(v for k, v in seq if k == "K")
+        if not _close(drift, 1.0):
+            raise CoefficientError(f"`{name}`: drift coefficients must sum to 1, sum to {drift!r}")
+        if not _close(kick, 1.0):
+            raise CoefficientError(f"`{name}`: kick coefficients must sum to 1, sum to {kick!r}")
+        n_kicks = sum(1 for k, _ in seq if k == "K")
+        fsal = len(seq) > 1 and seq[0][0] == "K" and seq[-1][0] == "K"
+        symmetric = all(
+            seq[i][0] == seq[-1 - i][0] and _close(seq[i][1], seq[-1 - i][1]) for i in range(len(seq))
+        )
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "sequence", seq)
+        object.__setattr__(self, "symmetric", symmetric)
+        object.__setattr__(self, "force_evals", n_kicks - 1 if fsal else n_kicks)
+
+    @property
+    def kick_coefficients(self) -> np.ndarray:
+        return np.array([v for k, v in self.sequence if k == "K"])
+
+    @property
+    def drift_coefficients(self) -> np.ndarray:
+        return np.array([v for k, v in self.sequence if k == "D"])
+
+    def fingerprint(self) -> str:
+        return "split:" + ";".join(f"{k}{v!r}" for k, v in self.sequence)
+
+    @classmethod
+    def compose(cls, name: str, base: SplittingScheme, weights: Sequence[Number]) -> SplittingScheme:
+        """The composition base(w_1 h) o ... o base(w_m h) (Yoshida's construction)."""
+        seq: list[tuple[str, float]] = []
+        for w in weights:
+            seq.extend((k, float(w) * v) for k, v in base.sequence)
+        return cls(name, seq)
+
+
+@dataclass(frozen=True, eq=False)
+class LinearMultistep:
+    """A k-step method sum_{j=0}^{k} alpha_j y_{n+j} = h sum_{j=0}^{k} beta_j f_{n+j}.
+
+    Coefficients are ordered from the oldest value (j = 0) to the newest (j = k), with
+    alpha_k normalised to 1. Checks on creation: equal lengths, alpha_k = 1, consistency
+    (sum alpha = 0 and sum j alpha_j = sum beta_j). Derived: `steps` (k), `explicit` (beta_k = 0).
+    """
+
+    name: str
+    alpha: np.ndarray
+    beta: np.ndarray
+    steps: int = field(init=False)
+    explicit: bool = field(init=False)
+
+    def __init__(self, name: str, alpha: Sequence[Number], beta: Sequence[Number]):
+        a = as_float_array(alpha, f"{name}.alpha", 1)
+        b = as_float_array(beta, f"{name}.beta", 1)
+        if a.shape != b.shape or a.size < 2:
+            raise CoefficientError(
+                f"`{name}`: alpha and beta must have the same length k+1 >= 2, got {a.size} and {b.size}"
+            )
+        if not _close(a[-1], 1.0):
+            raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {a[-1]!r}")
+        j = np.arange(a.size)
+        if not _close(a.sum(), 0.0):
+            raise CoefficientError(f"`{name}`: sum of alpha must be 0 (consistency), got {a.sum()!r}")
+        if not _close(float(j @ a), float(b.sum())):
+            raise CoefficientError(
+                f"`{name}`: sum j*alpha_j must equal sum beta_j (consistency), got "
+                f"{float(j @ a)!r} and {float(b.sum())!r}"
+            )
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "alpha", a)
+        object.__setattr__(self, "beta", b)
+        object.__setattr__(self, "steps", a.size - 1)
+        object.__setattr__(self, "explicit", b[-1] == 0.0)
+
+    def fingerprint(self) -> str:
+        return f"lmm:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
+
+
+@dataclass(frozen=True, eq=False)
+class SecondOrderMultistep:
+    """A k-step method for x'' = a: sum_j alpha_j x_{n+j} = h^2 sum_j beta_j a_{n+j}.
+
+    Checks on creation: alpha_k = 1, consistency of order >= 1 for second-order equations
+    (sum alpha = 0, sum j alpha_j = 0, sum j^2 alpha_j / 2 = sum beta_j).
+    Stormer's rule (the two-step Verlet form) is alpha = (1, -2, 1), beta = (0, 1, 0).
+    """
+
+    name: str
+    alpha: np.ndarray
+    beta: np.ndarray
+    steps: int = field(init=False)
+    explicit: bool = field(init=False)
+
+    def __init__(self, name: str, alpha: Sequence[Number], beta: Sequence[Number]):
+        a = as_float_array(alpha, f"{name}.alpha", 1)
+        b = as_float_array(beta, f"{name}.beta", 1)
+        if a.shape != b.shape or a.size < 3:
+            raise CoefficientError(
+                f"`{name}`: alpha and beta must have the same length k+1 >= 3, got {a.size} and {b.size}"
+            )
+        if not _close(a[-1], 1.0):
+            raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {a[-1]!r}")
+        j = np.arange(a.size, dtype=float)
+        checks = [
+            ("sum alpha_j = 0", a.sum(), 0.0),
+            ("sum j alpha_j = 0", j @ a, 0.0),
+            ("sum j^2 alpha_j / 2 = sum beta_j", (j * j) @ a / 2.0, b.sum()),
+        ]
+        for rule, lhs, rhs in checks:
+            if not _close(float(lhs), float(rhs)):
+                raise CoefficientError(f"`{name}`: consistency needs {rule}, got {lhs!r} vs {rhs!r}")
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "alpha", a)
+        object.__setattr__(self, "beta", b)
+        object.__setattr__(self, "steps", a.size - 1)
+        object.__setattr__(self, "explicit", b[-1] == 0.0)
+
+    def fingerprint(self) -> str:
+        return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"

@@ -1,0 +1,117 @@
+"""What to measure: the contract every experiment follows.
+
+Contract for an experiment (a subclass of `Experiment`, registered in `EXPERIMENTS`):
+1. `name` is its CLI name (`harness run NAME`).
+2. `cells(steppers, problems, config)` lists the independent units of work (one per stepper x
+   problem x parameters); a pair that does not apply is not a cell but a `Skip` with its reason.
+3. `run_cell(cell, config)` computes one cell and returns tidy rows (a DataFrame, one row per
+   measured point) — plain data only, so it can run in another process or on a Dask worker. It
+   looks steppers and problems up by name in the registry; it must not depend on other cells.
+4. `summarize(rows, config)` turns all rows into one record per cell (a DataFrame) with at least
+   the columns the CLI's JSON promises, including `verdict` and `passed` where the experiment
+   judges a claim.
+5. Failures stay in their cell: the runner turns an exception in `run_cell` into a failed-cell
+   record (`harness.experiments.base.failed_record`), and the run goes on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+import pandas as pd
+
+__all__ = ["Cell", "Skip", "Experiment", "EXPERIMENTS", "register_experiment", "get_experiment"]
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One independent unit of work of an experiment."""
+
+    experiment: str
+    stepper: str
+    problem: str
+    params: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def label(self) -> str:
+        extra = ",".join(f"{k}={v}" for k, v in self.params)
+        return f"{self.experiment}:{self.stepper}:{self.problem}" + (f"[{extra}]" if extra else "")
+
+    def param(self, key: str, default: Any = None) -> Any:
+        return dict(self.params).get(key, default)
+
+    def key(self, code_version: str, config: Mapping[str, Any]) -> str:
+        """Cache key: the cell, the experiment's configuration, and the code of its stepper and
+        problem (`code_version`, from their fingerprints)."""
+        blob = json.dumps(
+            {"cell": [self.experiment, self.stepper, self.problem, list(self.params)],
+             "config": config, "code": code_version},
+            sort_keys=True,
+            default=repr,
+        )
+        return hashlib.sha256(blob.encode()).hexdigest()[:32]
+
+
+@dataclass(frozen=True)
+class Skip:
+    """A stepper x problem pair an experiment does not apply to, and why."""
+
+    experiment: str
+    stepper: str
+    problem: str
+    reason: str
+
+
+class Experiment(ABC):
+    """Base class; see the module docstring for the contract."""
+
+    name: str = ""
+    description: str = ""
+    default_config: Mapping[str, Any] = MappingProxyType({})
+    quick_config: Mapping[str, Any] = MappingProxyType({})
+
+    def config(self, overrides: Mapping[str, Any] | None = None, *, quick: bool = False) -> dict:
+        base = dict(self.default_config)
+        if quick:
+            base.update(self.quick_config)
+        base.update(overrides or {})
+        return base
+
+    @abstractmethod
+    def cells(
+        self, steppers: Sequence[str], problems: Sequence[str], config: Mapping[str, Any]
+    ) -> tuple[list[Cell], list[Skip]]: ...
+
+    @abstractmethod
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame: ...
+
+    @abstractmethod
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame: ...
+
+
+EXPERIMENTS: dict[str, Experiment] = {}
+
+
+def register_experiment(exp: Experiment) -> Experiment:
+    EXPERIMENTS[exp.name] = exp
+    return exp
+
+
+def get_experiment(name: str) -> Experiment:
+    from harness import experiments  # noqa: F401  (registers the built-in experiments)
+    from harness.errors import UnknownNameError
+
+    try:
+        return EXPERIMENTS[name]
+    except KeyError:
+        import difflib
+
+        close = difflib.get_close_matches(str(name), EXPERIMENTS, n=3)
+        hint = f"; closest: {', '.join(close)}" if close else f"; known: {', '.join(sorted(EXPERIMENTS))}"
+        raise UnknownNameError(f"unknown experiment {name!r}{hint}") from None

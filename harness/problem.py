@@ -1,0 +1,417 @@
+"""What to integrate: a problem defined once, symbolically, and everything derived from it.
+
+A `Problem` is written with heyoka expressions: state variables, the first-order right-hand side
+(or, for Newtonian problems, the acceleration a(q, t) or a(q, v, t), from which the first-order
+system is built), parameters (`hy.par[i]`), invariants, an optional exact solution, and a
+literature reference. From that single definition the harness derives, on demand and cached per
+process:
+
+- `Dynamics`: NumPy-callable, ensemble-batched right-hand side, acceleration and Jacobian
+  (heyoka compiled functions), with evaluation counters;
+- invariant functions;
+- the ground-truth integrator (`harness.ground_truth`).
+
+Contract for a problem definition (checked in `Problem.__init__`):
+1. `variables` are distinct heyoka variables; `rhs` has one expression per variable.
+2. A Newtonian problem orders its state as (positions..., velocities...); its acceleration uses
+   only positions, velocities, parameters and `hy.time`.
+3. `y0` has one finite value per variable; `t_span` is finite with t_end > t0.
+4. Parameters are `hy.par[0..P-1]` in the order of `parameters` (name -> default value).
+5. `exact(t, y0, t0, pars)`, when given, maps initial states shaped (dim, N) to states at t.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import heyoka as hy
+import numpy as np
+
+from harness import cache
+from harness.errors import InputError
+
+__all__ = ["Problem", "NewtonianForm", "Dynamics", "check_state", "check_time"]
+
+ExactSolution = Callable[[float, np.ndarray, float, np.ndarray], np.ndarray]
+
+
+def _names(exprs: Sequence[hy.expression]) -> set[str]:
+    out: set[str] = set()
+    for e in exprs:
+        out.update(hy.get_variables(e))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class NewtonianForm:
+    """q'' = a(q, v, t): position and velocity variables and the acceleration expressions."""
+
+    positions: tuple[hy.expression, ...]
+    velocities: tuple[hy.expression, ...]
+    acceleration: tuple[hy.expression, ...]
+
+    @property
+    def velocity_dependent(self) -> bool:
+        used = _names(self.acceleration)
+        return any(str(v) in used for v in self.velocities)
+
+
+class Problem:
+    """One entry of the problem catalogue (see the module docstring for the contract)."""
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        variables: Sequence[hy.expression],
+        rhs: Sequence[hy.expression] | None = None,
+        newtonian: NewtonianForm | None = None,
+        y0: Sequence[float],
+        t_span: tuple[float, float],
+        parameters: Mapping[str, float] | None = None,
+        invariants: Mapping[str, hy.expression] | None = None,
+        exact: ExactSolution | None = None,
+        description: str = "",
+        reference: str = "",
+        conservative: bool = False,
+        central_force: bool = False,
+        convergence_t_end: float | None = None,
+        perturbation: float | None = None,
+        tags: Sequence[str] = (),
+    ):
+        if not isinstance(name, str) or not name.strip():
+            raise InputError(f"problem `name` must be a non-empty string, got {name!r}")
+        variables = tuple(variables)
+        var_names = [str(v) for v in variables]
+        if len(set(var_names)) != len(var_names):
+            raise InputError(f"problem {name!r}: `variables` must be distinct, got {var_names}")
+        if newtonian is not None:
+            nq = len(newtonian.positions)
+            if tuple(map(str, newtonian.positions + newtonian.velocities)) != tuple(var_names):
+                raise InputError(
+                    f"problem {name!r}: a Newtonian state must be (positions..., velocities...)"
+                )
+            if len(newtonian.acceleration) != nq:
+                raise InputError(
+                    f"problem {name!r}: `acceleration` needs {nq} expressions, got "
+                    f"{len(newtonian.acceleration)}"
+                )
+            derived = tuple(newtonian.velocities) + tuple(newtonian.acceleration)
+            if rhs is not None:
+                raise InputError(f"problem {name!r}: give `rhs` or `newtonian`, not both")
+            rhs = derived
+        if rhs is None:
+            raise InputError(f"problem {name!r}: `rhs` (or `newtonian`) is required")
+        rhs = tuple(hy.expression(r) if not isinstance(r, hy.expression) else r for r in rhs)
+        if len(rhs) != len(variables):
+            raise InputError(
+                f"problem {name!r}: `rhs` needs one expression per variable ({len(variables)}), "
+                f"got {len(rhs)}"
+            )
+        parameters = dict(parameters or {})
+        unknown = _names(rhs) - set(var_names)
+        if unknown:
+            raise InputError(f"problem {name!r}: `rhs` uses undeclared variables {sorted(unknown)}")
+        y0_arr = np.asarray(y0, dtype=np.float64)
+        if y0_arr.shape != (len(variables),):
+            raise InputError(
+                f"problem {name!r}: `y0` needs {len(variables)} values, got shape {y0_arr.shape}"
+            )
+        if not np.all(np.isfinite(y0_arr)):
+            raise InputError(f"problem {name!r}: `y0` must be finite, got {y0_arr.tolist()}")
+        t0, t_end = (float(t_span[0]), float(t_span[1]))
+        if not (math.isfinite(t0) and math.isfinite(t_end)) or t_end <= t0:
+            raise InputError(f"problem {name!r}: `t_span` must be finite with t_end > t0, got {t_span}")
+        y0_arr.setflags(write=False)
+        self.name = name
+        self.variables = variables
+        self.rhs = rhs
+        self.newtonian = newtonian
+        self.y0 = y0_arr
+        self.t0 = t0
+        self.t_end = t_end
+        self.parameters = parameters
+        self.invariants = dict(invariants or {})
+        self.exact = exact
+        self.description = description
+        self.reference = reference
+        self.conservative = conservative
+        self.central_force = central_force
+        self.convergence_t_end = float(convergence_t_end) if convergence_t_end else t_end
+        self.perturbation = perturbation
+        self.tags = tuple(tags)
+        self._lock = threading.Lock()
+
+    # -- declared facts -------------------------------------------------------------------------
+    @property
+    def dim(self) -> int:
+        return len(self.variables)
+
+    @property
+    def form(self) -> str:
+        """'newtonian' when an acceleration is declared, else 'first-order'."""
+        return "newtonian" if self.newtonian is not None else "first-order"
+
+    @property
+    def velocity_dependent(self) -> bool:
+        return self.newtonian is not None and self.newtonian.velocity_dependent
+
+    @cached_property
+    def time_dependent(self) -> bool:
+        return bool(self.compiled("rhs", None).is_time_dependent)
+
+    @property
+    def parameter_values(self) -> np.ndarray:
+        return np.array(list(self.parameters.values()), dtype=np.float64)
+
+    def describe(self) -> dict[str, Any]:
+        """Declared properties as plain data (for `harness list problems`)."""
+        return {
+            "name": self.name,
+            "form": self.form,
+            "dim": self.dim,
+            "variables": [str(v) for v in self.variables],
+            "rhs": [str(e) for e in self.rhs],
+            "y0": self.y0.tolist(),
+            "t_span": [self.t0, self.t_end],
+            "convergence_t_end": self.convergence_t_end,
+            "parameters": dict(self.parameters),
+            "invariants": sorted(self.invariants),
+            "exact_solution": self.exact is not None,
+            "velocity_dependent": self.velocity_dependent,
+            "time_dependent": self.time_dependent,
+            "conservative": self.conservative,
+            "reference": self.reference,
+            "description": self.description,
+        }
+
+    def fingerprint(self) -> str:
+        """A text form of the whole definition: changes whenever the problem changes."""
+        parts = [self.name, *map(str, self.variables), *map(str, self.rhs), self.y0.tobytes().hex()]
+        parts += [repr((self.t0, self.t_end, self.convergence_t_end))]
+        parts += [f"{k}={v!r}" for k, v in self.parameters.items()]
+        parts += [f"{k}:{e}" for k, e in sorted(self.invariants.items())]
+        return "|".join(parts)
+
+    # -- initial states -------------------------------------------------------------------------
+    def ensemble(self, size: int, *, seed: int = 0, scale: float | None = None) -> np.ndarray:
+        """`size` initial states shaped (dim, size): member 0 is `y0`, the others perturbed.
+
+        Each component is moved by a relative amount drawn uniformly from [-scale, scale]
+        (absolute where the component is zero), so an order is never the artefact of one start.
+        """
+        from harness.tolerances import ENSEMBLE_PERTURBATION
+
+        size = check_ensemble_size(size)
+        if scale is None:
+            scale = self.perturbation if self.perturbation is not None else ENSEMBLE_PERTURBATION
+        rng = np.random.default_rng(seed)
+        base = np.repeat(self.y0[:, None], size, axis=1)
+        magnitude = np.where(self.y0 != 0.0, np.abs(self.y0), 1.0)[:, None]
+        noise = rng.uniform(-scale, scale, size=(self.dim, size)) * magnitude
+        noise[:, 0] = 0.0
+        return base + noise
+
+    def pars_for(self, size: int, pars: np.ndarray | Mapping[str, float] | None = None) -> np.ndarray:
+        """Parameter values shaped (P, size), from defaults, a mapping, or an array."""
+        P = len(self.parameters)
+        if pars is None:
+            return np.repeat(self.parameter_values[:, None], size, axis=1)
+        if isinstance(pars, Mapping):
+            unknown = set(pars) - set(self.parameters)
+            if unknown:
+                raise InputError(
+                    f"`pars` names unknown parameters {sorted(unknown)} of problem {self.name!r}; "
+                    f"known: {sorted(self.parameters)}"
+                )
+            vals = np.array([float(pars.get(k, v)) for k, v in self.parameters.items()])
+            return np.repeat(vals[:, None], size, axis=1)
+        arr = np.asarray(pars, dtype=np.float64)
+        if arr.ndim == 1:
+            arr = np.repeat(arr[:, None], size, axis=1)
+        if arr.shape != (P, size):
+            raise InputError(f"`pars` must have shape ({P}, {size}), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise InputError("`pars` must be finite")
+        return arr
+
+    # -- derived numerical functions --------------------------------------------------------------
+    def dynamics(self, pars: np.ndarray | None = None, size: int = 1) -> Dynamics:
+        """Ensemble-batched numerical functions bound to parameter values (P, size)."""
+        return Dynamics(self, self.pars_for(size, pars))
+
+    @cached_property
+    def _jacobian_exprs(self) -> list[hy.expression]:
+        return [hy.diff(f, v) for f in self.rhs for v in self.variables]
+
+    def compiled(self, kind: str, constants: tuple[float, ...] | None) -> Any:
+        """The compiled function `kind` ('rhs', 'accel', 'jac', 'inv'), parameters either
+        substituted as constants (a tuple of values) or left as runtime parameters (None)."""
+        key = (kind, constants)
+        with self._lock:
+            store = self.__dict__.setdefault("_compiled", {})
+            if key in store:
+                return store[key]
+        if kind == "rhs":
+            exprs = list(self.rhs)
+        elif kind == "accel":
+            if self.newtonian is None:
+                raise InputError(f"problem {self.name!r} has no Newtonian form (no acceleration)")
+            exprs = list(self.newtonian.acceleration)
+        elif kind == "jac":
+            exprs = self._jacobian_exprs
+        elif kind == "inv":
+            exprs = [self.invariants[k] for k in sorted(self.invariants)]
+        else:
+            raise InputError(f"`kind` must be rhs, accel, jac or inv, got {kind!r}")
+        if constants is not None and self.parameters:
+            mapping = {f"p{i}": hy.expression(float(v)) for i, v in enumerate(constants)}
+            exprs = [_subs_pars(e, mapping) for e in exprs]
+        cache.configure_heyoka_cache()
+        fn = hy.cfunc(exprs, list(self.variables)) if exprs else None
+        with self._lock:
+            self.__dict__["_compiled"][key] = fn
+        return fn
+
+    def invariant_values(self, y: np.ndarray, t: float = 0.0, pars: np.ndarray | None = None) -> dict:
+        """Invariants of states shaped (dim, N): name -> array (N,)."""
+        if not self.invariants:
+            return {}
+        y = np.asarray(y, dtype=np.float64)
+        N = y.shape[1]
+        P = self.pars_for(N, pars)
+        fn = self.compiled("inv", None)
+        out = fn(np.ascontiguousarray(y), pars=P, time=np.full(N, float(t)))
+        return {k: out[i] for i, k in enumerate(sorted(self.invariants))}
+
+    def __repr__(self) -> str:
+        return f"Problem({self.name!r}, dim={self.dim}, form={self.form})"
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.pop("_lock", None)
+        state.pop("_compiled", None)
+        state.pop("_jacobian_exprs", None)
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+
+def _subs_pars(e: hy.expression, mapping: dict[str, hy.expression]) -> hy.expression:
+    """Replace runtime parameters p0, p1, ... by constants."""
+    pars = [hy.par[int(k[1:])] for k in mapping]
+    return hy.subs(e, dict(zip(pars, mapping.values(), strict=True)))
+
+
+class Dynamics:
+    """A problem's numerical functions for one ensemble: f(t, Y), a(t, Q, V), J(t, Y).
+
+    States are shaped (dim, N), ensemble axis last. Each call counts as one right-hand-side (or
+    force, or Jacobian) evaluation of the whole ensemble: `counts` keeps the books.
+    Parameters shared by all members are compiled in as constants (faster calls); differing
+    parameters are passed at run time.
+    """
+
+    def __init__(self, problem: Problem, pars: np.ndarray):
+        self.problem = problem
+        self.pars = np.ascontiguousarray(pars, dtype=np.float64)
+        self.size = self.pars.shape[1] if self.pars.ndim == 2 else 1
+        uniform = self.pars.size == 0 or bool(np.all(self.pars == self.pars[:, :1]))
+        self.constants = tuple(float(v) for v in self.pars[:, 0]) if uniform and self.size else None
+        self.time_dependent = problem.time_dependent
+        self.dim = problem.dim
+        self.nq = len(problem.newtonian.positions) if problem.newtonian is not None else 0
+        self.counts = {"rhs": 0, "accel": 0, "jac": 0}
+        self._f = problem.compiled("rhs", self.constants)
+        self._a = problem.compiled("accel", self.constants) if problem.newtonian is not None else None
+        self._tbuf = np.zeros(self.size)
+        self._qv = np.empty((self.dim, self.size)) if problem.newtonian is not None else None
+
+    def _kwargs(self, t: float, n: int) -> dict:
+        kw = {}
+        if self.constants is None and self.pars.size:
+            kw["pars"] = self.pars
+        if self.time_dependent:
+            if self._tbuf.shape[0] != n:
+                self._tbuf = np.zeros(n)
+            self._tbuf.fill(t)
+            kw["time"] = self._tbuf
+        return kw
+
+    def f(self, t: float, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """First-order right-hand side, y shaped (dim, N)."""
+        self.counts["rhs"] += 1
+        if out is None:
+            return self._f(y, **self._kwargs(t, y.shape[1]))
+        self._f(y, outputs=out, **self._kwargs(t, y.shape[1]))
+        return out
+
+    def accel(self, t: float, q: np.ndarray, v: np.ndarray | None = None, out=None) -> np.ndarray:
+        """Acceleration a(q, v, t), q and v shaped (nq, N). v may be None when a ignores it."""
+        if self._a is None:
+            raise InputError(f"problem {self.problem.name!r} has no Newtonian form")
+        self.counts["accel"] += 1
+        n = q.shape[1]
+        if self._qv is None or self._qv.shape[1] != n:
+            self._qv = np.empty((self.dim, n))
+        self._qv[: self.nq] = q
+        if v is None:
+            self._qv[self.nq :] = 0.0
+        else:
+            self._qv[self.nq :] = v
+        if out is None:
+            return self._a(self._qv, **self._kwargs(t, n))
+        self._a(self._qv, outputs=out, **self._kwargs(t, n))
+        return out
+
+    def jac(self, t: float, y: np.ndarray) -> np.ndarray:
+        """Jacobian df/dy shaped (dim, dim, N)."""
+        self.counts["jac"] += 1
+        fn = self.problem.compiled("jac", self.constants)
+        out = fn(y, **self._kwargs(t, y.shape[1]))
+        return out.reshape(self.dim, self.dim, y.shape[1])
+
+
+# -- input checks shared by the public API ------------------------------------------------------
+def check_time(value: Any, name: str) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"`{name}` must be a real number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise InputError(f"`{name}` must be finite, got {x!r}")
+    return x
+
+
+def check_ensemble_size(size: Any) -> int:
+    from harness.tolerances import MAX_ENSEMBLE_SIZE
+
+    if isinstance(size, bool) or not isinstance(size, int | np.integer):
+        raise InputError(f"`ensemble` size must be a positive integer, got {size!r}")
+    if size < 1:
+        raise InputError(f"`ensemble` size must be at least 1, got {size}")
+    if size > MAX_ENSEMBLE_SIZE:
+        raise InputError(f"`ensemble` size must be at most {MAX_ENSEMBLE_SIZE}, got {size}")
+    return int(size)
+
+
+def check_state(y: Any, dim: int, name: str = "y0") -> np.ndarray:
+    """A state shaped (dim,) or (dim, N) as a float64 (dim, N) array, finite."""
+    try:
+        arr = np.array(y, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"`{name}` must be numeric, got {type(y).__name__}") from None
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2 or arr.shape[0] != dim or arr.shape[1] < 1:
+        raise InputError(f"`{name}` must have shape ({dim},) or ({dim}, N), got {np.shape(y)}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"`{name}` must be finite (no NaN or inf)")
+    return arr

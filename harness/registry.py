@@ -1,0 +1,249 @@
+"""The registry of steppers and problems: built-ins, entry points, and users' plugin files.
+
+- Built-ins are registered in one place each: `implementations.builtin_steppers()` and
+  `problems.builtin_problems()`.
+- Third-party packages add entries through the entry-point groups `harness.steppers` and
+  `harness.problems`; an entry point names a Stepper/Problem instance, a class, or a callable
+  returning one or a list of them. They are loaded lazily, on the first lookup.
+- `load_plugin(path)` imports a user's own file (`--plugin FILE.py`) and registers every
+  module-level Stepper or Problem it defines (or those listed in `STEPPERS` / `PROBLEMS`).
+A file or entry point that fails to import is reported by name (`PluginError`); the rest of the
+registry still loads.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import importlib.util
+import sys
+import threading
+from collections.abc import Callable, Iterable
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Generic, TypeVar
+
+from harness.errors import InputError, PluginError, UnknownNameError
+from harness.problem import Problem
+from harness.stepper import Stepper
+
+__all__ = [
+    "Registry",
+    "steppers",
+    "problems",
+    "get_stepper",
+    "get_problem",
+    "load_plugin",
+    "plugin_errors",
+]
+
+T = TypeVar("T")
+
+
+class Registry(Generic[T]):
+    """A name -> object map for one kind of entry, filled lazily on the first lookup."""
+
+    def __init__(self, kind: str, cls: type, group: str, builtins: Callable[[], Iterable[T]]):
+        self.kind = kind
+        self.cls = cls
+        self.group = group
+        self._builtins = builtins
+        self._items: dict[str, T] = {}
+        self._origin: dict[str, str] = {}
+        self._loaded = False
+        self._lock = threading.RLock()
+        self.errors: list[str] = []
+
+    def _ensure(self) -> None:
+        if self._loaded:
+            return
+        with self._lock:
+            if self._loaded:
+                return
+            self._loaded = True
+            for obj in self._builtins():
+                self.register(obj, origin="builtin")
+            self._load_entry_points()
+
+    def _load_entry_points(self) -> None:
+        try:
+            eps = metadata.entry_points(group=self.group)
+        except Exception as exc:  # a broken distribution must not take the registry down
+            self.errors.append(f"entry points {self.group}: {exc}")
+            return
+        for ep in eps:
+            try:
+                loaded = ep.load()
+                for obj in _expand(loaded, self.cls):
+                    self.register(obj, origin=f"entry point {ep.name} ({ep.value})")
+            except Exception as exc:
+                self.errors.append(f"entry point {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}")
+
+    def register(self, obj: T, *, origin: str = "user", replace: bool = False) -> T:
+        if not isinstance(obj, self.cls):
+            raise InputError(f"only {self.cls.__name__} objects can be registered as {self.kind}s")
+        name = _name_of(obj)
+        if not isinstance(name, str) or not name:
+            raise InputError(f"a {self.kind}'s name must be a non-empty string, got {name!r}")
+        with self._lock:
+            if name in self._items and not replace and self._items[name] is not obj:
+                raise InputError(
+                    f"{self.kind} name {name!r} is already registered (by {self._origin[name]})"
+                )
+            self._items[name] = obj
+            self._origin[name] = origin
+        return obj
+
+    def unregister(self, name: str) -> None:
+        with self._lock:
+            self._items.pop(name, None)
+            self._origin.pop(name, None)
+
+    def get(self, name: Any) -> T:
+        self._ensure()
+        if not isinstance(name, str) or not name:
+            raise UnknownNameError(f"{self.kind} name must be a non-empty string, got {name!r}")
+        try:
+            return self._items[name]
+        except KeyError:
+            close = difflib.get_close_matches(name, self._items, n=3, cutoff=0.5)
+            hint = f"; closest: {', '.join(close)}" if close else ""
+            shown = name if len(name) <= 60 else name[:57] + "..."
+            raise UnknownNameError(
+                f"unknown {self.kind} {shown!r}{hint} (see `harness list {self.kind}s`)"
+            ) from None
+
+    def origin(self, name: str) -> str:
+        self._ensure()
+        return self._origin[name]
+
+    def names(self) -> list[str]:
+        self._ensure()
+        return list(self._items)
+
+    def all(self) -> list[T]:
+        self._ensure()
+        return list(self._items.values())
+
+    def __contains__(self, name: object) -> bool:
+        self._ensure()
+        return name in self._items
+
+    def __len__(self) -> int:
+        self._ensure()
+        return len(self._items)
+
+
+def _name_of(obj: Any) -> str:
+    return obj.info.name if isinstance(obj, Stepper) else obj.name
+
+
+def _expand(loaded: Any, cls: type) -> list:
+    if isinstance(loaded, cls):
+        return [loaded]
+    if isinstance(loaded, type) and issubclass(loaded, cls):
+        return [loaded()]
+    if callable(loaded):
+        return _expand(loaded(), cls)
+    if isinstance(loaded, Iterable) and not isinstance(loaded, str | bytes):
+        out = []
+        for item in loaded:
+            out.extend(_expand(item, cls))
+        return out
+    raise PluginError(f"expected a {cls.__name__}, a list of them, or a callable; got {type(loaded).__name__}")
+
+
+def _builtin_steppers() -> list[Stepper]:
+    from implementations import builtin_steppers
+
+    return builtin_steppers()
+
+
+def _builtin_problems() -> list[Problem]:
+    from problems import builtin_problems
+
+    return builtin_problems()
+
+
+steppers: Registry[Stepper] = Registry("stepper", Stepper, "harness.steppers", _builtin_steppers)
+problems: Registry[Problem] = Registry("problem", Problem, "harness.problems", _builtin_problems)
+
+_plugins: dict[str, list[str]] = {}
+_plugin_errors: list[str] = []
+
+
+def get_stepper(name: str) -> Stepper:
+    return steppers.get(name)
+
+
+def get_problem(name: str) -> Problem:
+    return problems.get(name)
+
+
+def plugin_errors() -> list[str]:
+    """Every plugin file or entry point that failed to load, with its reason."""
+    return [*steppers.errors, *problems.errors, *_plugin_errors]
+
+
+def load_plugin(path: str | Path, *, strict: bool = True) -> list[str]:
+    """Import a user's plugin file and register its steppers and problems; return their names.
+
+    A file that does not exist or does not import raises `PluginError` naming the file (or, with
+    `strict=False`, records the error in `plugin_errors()` and returns []).
+    """
+    p = Path(path)
+    key = str(p.resolve()) if p.exists() else str(p)
+    if key in _plugins:
+        return _plugins[key]
+    try:
+        if p.suffix != ".py":
+            raise PluginError(f"plugin {str(path)!r}: `--plugin` must name a .py file")
+        if not p.is_file():
+            raise PluginError(f"plugin {str(path)!r}: no such file")
+        mod_name = "harness_plugin_" + hashlib.sha1(key.encode()).hexdigest()[:12]
+        spec = importlib.util.spec_from_file_location(mod_name, p)
+        if spec is None or spec.loader is None:
+            raise PluginError(f"plugin {str(path)!r}: cannot be imported as a Python module")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException as exc:  # SyntaxError, ImportError, anything the file raises
+            sys.modules.pop(mod_name, None)
+            if isinstance(exc, KeyboardInterrupt | SystemExit):
+                raise PluginError(f"plugin {str(path)!r} exited while importing") from None
+            raise PluginError(
+                f"plugin {str(path)!r} failed to import: {type(exc).__name__}: {exc}"
+            ) from None
+        names: list[str] = []
+        listed_s = getattr(module, "STEPPERS", None)
+        listed_p = getattr(module, "PROBLEMS", None)
+        objs = []
+        if listed_s is not None or listed_p is not None:
+            objs = list(listed_s or []) + list(listed_p or [])
+        else:
+            objs = [v for v in vars(module).values() if isinstance(v, Stepper | Problem)]
+        if not objs:
+            raise PluginError(f"plugin {str(path)!r} defines no Stepper or Problem objects")
+        for obj in objs:
+            reg = steppers if isinstance(obj, Stepper) else problems
+            if not isinstance(obj, Stepper | Problem):
+                raise PluginError(
+                    f"plugin {str(path)!r}: STEPPERS/PROBLEMS may hold only Stepper or Problem "
+                    f"objects, got {type(obj).__name__}"
+                )
+            reg.register(obj, origin=f"plugin {p.name}", replace=False)
+            names.append(_name_of(obj))
+        _plugins[key] = names
+        return names
+    except PluginError as exc:
+        if strict:
+            raise
+        _plugin_errors.append(str(exc))
+        return []
+    except InputError as exc:
+        err = PluginError(f"plugin {str(path)!r}: {exc}")
+        if strict:
+            raise err from None
+        _plugin_errors.append(str(err))
+        return []

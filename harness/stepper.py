@@ -1,0 +1,311 @@
+"""How to step: the contract every stepper follows, and the bookkeeping they share.
+
+Contract for a stepper (a subclass of `Stepper`):
+1. It declares `info: StepperInfo` — name, family, claimed order, explicit/implicit, symplectic,
+   symmetric, evaluations per step, the form it needs, whether it accepts velocity-dependent
+   accelerations, and a literature reference. Claims are data; experiments compare them with
+   measurements.
+2. It advances an ensemble: states are shaped (dim, N), ensemble axis last; one call moves all
+   N members together. It never modifies the caller's arrays.
+3. It implements the private math only: `_start(dyn, t0, y0, h)` builds a carry (whatever the
+   method remembers between steps), `_step(dyn, c)` advances the carry by one step in place,
+   `_observe(dyn, c)` returns the physical state (dim, N) at the carry's time as a new array.
+   `_reverse(dyn, c)` turns time around (default: h -> -h; multistep and staggered families
+   also reorder their history).
+4. It evaluates the problem only through `dyn` (a `harness.problem.Dynamics`), which counts
+   right-hand-side, force and Jacobian evaluations.
+5. It signals a failed step (an implicit solve that does not converge) by raising `StepFailure`;
+   it never returns an unconverged state silently. Overflow produces inf/NaN, which the public
+   methods detect and report.
+6. It is registered in `implementations/__init__.py` (or through the `harness.steppers` entry
+   point); `coefficients` holds its data object when it has one.
+Public methods (`integrate`, `round_trip`) check their input and keep the books.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from harness.errors import HarnessError, IncompatibleError, InputError
+from harness.problem import Dynamics, Problem, check_state, check_time
+
+__all__ = [
+    "StepperInfo",
+    "Stepper",
+    "Carry",
+    "Trajectory",
+    "StepFailure",
+    "check_compatible",
+    "check_step_size",
+    "check_steps",
+    "FORMS",
+]
+
+FORMS = ("first-order", "newtonian")
+MAX_STEPS = 100_000_000
+
+
+class StepFailure(HarnessError):
+    """A step could not be completed (an implicit stage solve did not converge)."""
+
+
+@dataclass(frozen=True)
+class StepperInfo:
+    """What a stepper claims about itself. Every field is reported beside its measurement."""
+
+    name: str
+    family: str
+    claimed_order: int | None
+    explicit: bool
+    symplectic: bool
+    symmetric: bool
+    evals_per_step: float
+    form: str
+    velocity_dependent: bool
+    reference: str
+    description: str = ""
+    adaptive: bool = False
+    implementation: str = "numpy"
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.form not in FORMS:
+            raise InputError(f"stepper {self.name!r}: `form` must be one of {FORMS}, got {self.form!r}")
+        if self.claimed_order is not None and (
+            not isinstance(self.claimed_order, int) or self.claimed_order < 1
+        ):
+            raise InputError(
+                f"stepper {self.name!r}: `claimed_order` must be a positive integer or None, "
+                f"got {self.claimed_order!r}"
+            )
+        if not self.reference:
+            raise InputError(f"stepper {self.name!r}: `reference` (literature source) is required")
+
+    def as_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.update(d.pop("extra"))
+        return d
+
+
+class Carry:
+    """What a stepper remembers between steps. `t` is derived from the step count, not summed."""
+
+    __slots__ = ("t0", "h", "n", "y", "__dict__")
+
+    def __init__(self, t0: float, h: float, y: np.ndarray, **extra: Any):
+        self.t0 = t0
+        self.h = h
+        self.n = 0
+        self.y = y
+        self.__dict__.update(extra)
+
+    @property
+    def t(self) -> float:
+        return self.t0 + self.n * self.h
+
+
+@dataclass
+class Trajectory:
+    """States saved at chosen step indices: `y[k]` is the state (dim, N) after `steps[k]` steps."""
+
+    stepper: str
+    problem: str
+    h: float
+    steps: np.ndarray
+    t: np.ndarray
+    y: np.ndarray
+    evals: dict
+    wall_s: float
+    finite: bool
+
+    @property
+    def final(self) -> np.ndarray:
+        return self.y[-1]
+
+
+def check_step_size(h: Any) -> float:
+    try:
+        x = float(h)
+    except (TypeError, ValueError):
+        raise InputError(f"`h` must be a real number, got {h!r}") from None
+    if math.isnan(x) or math.isinf(x):
+        raise InputError(f"`h` must be finite, got {x!r}")
+    if x <= 0.0:
+        raise InputError(f"`h` must be positive, got {x!r}")
+    return x
+
+
+def check_steps(n: Any, name: str = "n_steps") -> int:
+    if isinstance(n, bool) or not isinstance(n, int | np.integer):
+        raise InputError(f"`{name}` must be a whole number, got {n!r}")
+    if n < 1:
+        raise InputError(f"`{name}` must be at least 1, got {n}")
+    if n > MAX_STEPS:
+        raise InputError(f"`{name}` must be at most {MAX_STEPS}, got {n}")
+    return int(n)
+
+
+def check_compatible(stepper: Stepper, problem: Problem) -> None:
+    """Raise IncompatibleError when `stepper` cannot integrate `problem` (with the reason)."""
+    info = stepper.info
+    if info.form == "newtonian" and problem.newtonian is None:
+        raise IncompatibleError(
+            f"stepper {info.name!r} needs a Newtonian problem (q'' = a(q, t)); "
+            f"problem {problem.name!r} is a first-order system"
+        )
+    if info.form == "newtonian" and problem.velocity_dependent and not info.velocity_dependent:
+        raise IncompatibleError(
+            f"stepper {info.name!r} needs an acceleration independent of velocity; "
+            f"problem {problem.name!r} has a(q, v, t)"
+        )
+    reason = stepper.incompatibility(problem)
+    if reason:
+        raise IncompatibleError(f"stepper {info.name!r} cannot run problem {problem.name!r}: {reason}")
+
+
+class Stepper(ABC):
+    """Base class: see the module docstring for the numbered contract."""
+
+    info: StepperInfo
+    coefficients: Any = None
+
+    # -- optional hooks --------------------------------------------------------------------------
+    def incompatibility(self, problem: Problem) -> str | None:
+        """A reason this stepper cannot run `problem` beyond the declared form, or None."""
+        return None
+
+    def compatible(self, problem: Problem) -> bool:
+        try:
+            check_compatible(self, problem)
+        except IncompatibleError:
+            return False
+        return True
+
+    def fingerprint(self) -> str:
+        """Changes whenever the method changes: its coefficients and its class's source."""
+        import inspect
+
+        parts = [self.info.name, repr(sorted(self.info.as_dict().items()))]
+        if self.coefficients is not None and hasattr(self.coefficients, "fingerprint"):
+            parts.append(self.coefficients.fingerprint())
+        for cls in type(self).__mro__:
+            if cls in (object, ABC, Stepper):
+                continue
+            try:
+                parts.append(inspect.getsource(cls))
+            except (OSError, TypeError):
+                parts.append(cls.__qualname__)
+        return "\n".join(parts)
+
+    # -- private math ----------------------------------------------------------------------------
+    @abstractmethod
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry: ...
+
+    @abstractmethod
+    def _step(self, dyn: Dynamics, c: Carry) -> None: ...
+
+    def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
+        return c.y.copy()
+
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        c.t0 = c.t
+        c.n = 0
+        c.h = -c.h
+
+    def _advance(self, dyn: Dynamics, c: Carry, n: int) -> None:
+        step = self._step
+        for _ in range(n):
+            step(dyn, c)
+            c.n += 1
+
+    # -- public API ------------------------------------------------------------------------------
+    def _prepare(self, problem, h, y0, t0, pars):
+        if not isinstance(problem, Problem):
+            raise InputError(f"`problem` must be a Problem, got {type(problem).__name__}")
+        check_compatible(self, problem)
+        h = check_step_size(h)
+        t0 = problem.t0 if t0 is None else check_time(t0, "t0")
+        y = check_state(problem.y0 if y0 is None else y0, problem.dim, "y0")
+        dyn = problem.dynamics(pars, y.shape[1])
+        return h, t0, y, dyn
+
+    def integrate(
+        self,
+        problem: Problem,
+        *,
+        h: float,
+        n_steps: int,
+        y0: np.ndarray | None = None,
+        t0: float | None = None,
+        pars: np.ndarray | None = None,
+        save_steps: Sequence[int] | None = None,
+    ) -> Trajectory:
+        """Advance `n_steps` steps of size `h` from (t0, y0); save the state at `save_steps`
+        (step indices, 0..n_steps; default: the start and the end)."""
+        h, t0, y, dyn = self._prepare(problem, h, y0, t0, pars)
+        n_steps = check_steps(n_steps)
+        if save_steps is None:
+            save = np.array([0, n_steps])
+        else:
+            save = np.unique(np.asarray(save_steps, dtype=np.int64))
+            if save.size == 0 or save[0] < 0 or save[-1] > n_steps:
+                raise InputError(f"`save_steps` must lie in [0, {n_steps}], got {save_steps!r}")
+        out = np.empty((save.size, problem.dim, y.shape[1]))
+        finite = True
+        started = time.perf_counter()
+        with np.errstate(all="ignore"):
+            c = self._start(dyn, t0, y.copy(), h)
+            done = 0
+            for k, target in enumerate(save):
+                if target > done:
+                    self._advance(dyn, c, int(target - done))
+                    done = int(target)
+                out[k] = self._observe(dyn, c)
+                if not np.all(np.isfinite(out[k])):
+                    finite = False
+                    out[k + 1 :] = np.nan
+                    break
+        wall = time.perf_counter() - started
+        return Trajectory(
+            stepper=self.info.name,
+            problem=problem.name,
+            h=h,
+            steps=save,
+            t=t0 + save * h,
+            y=out,
+            evals=dict(dyn.counts),
+            wall_s=wall,
+            finite=finite,
+        )
+
+    def round_trip(
+        self,
+        problem: Problem,
+        *,
+        h: float,
+        n_steps: int,
+        y0: np.ndarray | None = None,
+        t0: float | None = None,
+        pars: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`n_steps` forward, time reversed (h -> -h), `n_steps` back. Returns (start, returned)."""
+        h, t0, y, dyn = self._prepare(problem, h, y0, t0, pars)
+        n_steps = check_steps(n_steps)
+        with np.errstate(all="ignore"):
+            c = self._start(dyn, t0, y.copy(), h)
+            start = self._observe(dyn, c)
+            self._advance(dyn, c, n_steps)
+            self._reverse(dyn, c)
+            self._advance(dyn, c, n_steps)
+            back = self._observe(dyn, c)
+        return start, back
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.info.name!r}>"
