@@ -46,6 +46,7 @@ __all__ = [
     "check_step_size",
     "check_steps",
     "FORMS",
+    "AdaptiveStepper",
 ]
 
 FORMS = ("first-order", "newtonian")
@@ -309,3 +310,30 @@ class Stepper(ABC):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.info.name!r}>"
+
+
+class AdaptiveStepper(Stepper):
+    """A stepper that chooses its own internal steps to meet a tolerance.
+
+    Adds to the contract:
+    7. `tol` is the requested tolerance; `with_tolerance(tol)` returns a copy at another one.
+    8. `_step` advances exactly to the next output time t + h with internal adaptive steps and
+       adds the internal steps it took to `dyn.counts["internal_steps"]`.
+    Experiments measure adaptive steppers by tolerance sweeps (error and cost against `tol`),
+    not by step-size sweeps; `info.claimed_order` may be None (variable order).
+    """
+
+    tol: float = 1e-10
+
+    def with_tolerance(self, tol: float) -> AdaptiveStepper:
+        import copy
+
+        try:
+            tol = float(tol)
+        except (TypeError, ValueError):
+            raise InputError(f"`tol` must be a real number, got {tol!r}") from None
+        if not (math.isfinite(tol) and tol > 0.0):
+            raise InputError(f"`tol` must be positive and finite, got {tol!r}")
+        clone = copy.copy(self)
+        clone.tol = tol
+        return clone
