@@ -215,6 +215,17 @@ class Stepper(ABC):
     def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
         return c.y.copy()
 
+    #: How many past states the method's recurrence uses (1 for one-step methods).
+    history_length: int = 1
+
+    def _start_from_history(self, dyn: Dynamics, t0: float, h: float, history: list) -> Carry:
+        """A carry at t0 + (k-1)h from exact states at t0, t0+h, ..., t0+(k-1)h (k =
+        `history_length`), so the local error of the recurrence itself can be measured.
+        One-step methods use the last state only; multistep families override this."""
+        k = len(history)
+        c = self._start(dyn, t0 + (k - 1) * h, history[-1], h)
+        return c
+
     def _reverse(self, dyn: Dynamics, c: Carry) -> None:
         c.t0 = c.t
         c.n = 0
@@ -307,6 +318,36 @@ class Stepper(ABC):
             self._advance(dyn, c, n_steps)
             back = self._observe(dyn, c)
         return start, back
+
+    def step_from_history(
+        self,
+        problem: Problem,
+        *,
+        h: float,
+        history: Sequence[np.ndarray],
+        t0: float | None = None,
+        pars: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """One step of the recurrence from exact past states (oldest first; `history_length`
+        of them at t0, t0+h, ...). Returns the state after that step: its difference from the
+        exact state is the method's local error."""
+        h = check_step_size(h)
+        if not isinstance(problem, Problem):
+            raise InputError(f"`problem` must be a Problem, got {type(problem).__name__}")
+        check_compatible(self, problem)
+        t0 = problem.t0 if t0 is None else check_time(t0, "t0")
+        if len(history) != self.history_length:
+            raise InputError(
+                f"`history` must hold {self.history_length} states for {self.info.name!r}, "
+                f"got {len(history)}"
+            )
+        states = [check_state(y, problem.dim, "history") for y in history]
+        dyn = problem.dynamics(pars, states[0].shape[1])
+        with np.errstate(all="ignore"):
+            c = self._start_from_history(dyn, t0, h, [y.copy() for y in states])
+            self._step(dyn, c)
+            c.n += 1
+            return self._observe(dyn, c)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.info.name!r}>"
