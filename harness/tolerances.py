@@ -49,3 +49,8 @@ SWEEP_STEP_BUDGET = 400_000
 
 # Largest ensemble accepted (memory: a 1e7-member state of dimension 12 is ~1 GB per copy).
 MAX_ENSEMBLE_SIZE = 10_000_000
+
+# Adaptive steppers: the global error may exceed the requested tolerance by this factor (times
+# the state's scale) before the tolerance counts as missed; local error control does not bound
+# the global error, and a factor of 100 is what a user of such a solver usually tolerates.
+TOLERANCE_FACTOR = 100.0

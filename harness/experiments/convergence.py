@@ -1,0 +1,457 @@
+"""Convergence order: global error against step size, fitted only where the asymptotic law holds.
+
+For one (stepper, problem) cell:
+
+1. An ensemble of `ensemble` perturbed initial conditions (member 0 is the problem's own start)
+   is integrated to the problem's `convergence_t_end` with n = n0, 2 n0, 4 n0, ... steps. The
+   sweep starts where the error first falls below `start_error` and continues until the error
+   reaches the roundoff floor or the step budget is spent; it is chosen per pair, so a
+   high-order method does not waste steps below its floor and a first-order method reaches its
+   asymptotic range.
+2. The error of a point is the max-norm over components and ensemble members of the difference
+   from the certified ground truth (`harness.ground_truth.reference`).
+3. Points are excluded from the fit, each with its reason: `blow-up` (non-finite or huge),
+   `reference` (error not at least REFERENCE_MARGIN x the reference's certified error),
+   `roundoff` (error within ROUNDOFF_MARGIN x the rounding level sqrt(n) eps |y|),
+   `pre-asymptotic` (outside the longest run of points whose local slopes agree).
+4. The order is the least-squares slope of log(error) against log(h) over the points kept, with
+   its residual and a 95 % confidence interval. With fewer than MIN_FIT_POINTS points the sweep
+   widens itself (intermediate step sizes, then smaller ones) before giving up.
+5. Verdicts: `converged`, `exact` (errors at rounding for every step size), `unstable` (blows
+   up at every step size within the budget), `insufficient-range`, `failed` (a step failure).
+6. The local (one-step) error is measured as well, from exact history for multistep methods:
+   `local_exponent` q in error ~ h^q (q = p + 1 for a one-step method of order p), on the whole
+   state and, for Newtonian problems, on positions alone (`local_exponent_q`).
+
+Adaptive steppers are measured by a tolerance sweep instead: error against requested tolerance;
+the verdict says whether the error stays within TOLERANCE_FACTOR x tol x |y|.
+Reference: Hairer, Norsett & Wanner, *Solving ODEs I*, II.1 and II.4 (order, error constants).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.stepper import AdaptiveStepper, StepFailure, Stepper
+
+__all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
+
+ROW_COLUMNS = [
+    "stepper", "problem", "kind", "h", "tol", "n_steps", "t_end", "error", "reference_error",
+    "rounding_level", "excluded", "in_fit", "rhs_evals", "force_evals", "wall_s",
+    "ensemble_size",
+]
+SUMMARY_COLUMNS = [
+    "stepper", "problem", "claimed_order", "measured_order", "order_ci_low", "order_ci_high",
+    "fit_residual", "fit_points", "fit_h_min", "fit_h_max", "fit_error_min", "fit_error_max",
+    "local_exponent", "local_exponent_q", "verdict", "reference_error", "reference_precision",
+    "points", "total_steps", "wall_s", "message",
+]
+
+
+# -- fitting ----------------------------------------------------------------------------------
+def _local_slopes(h: np.ndarray, e: np.ndarray) -> np.ndarray:
+    return np.diff(np.log(e)) / np.diff(np.log(h))
+
+
+def fit_order(h: Sequence[float], error: Sequence[float]) -> dict[str, float]:
+    """Least-squares slope of log(error) against log(h), with RMS residual (in log10 units) and
+    a 95 % confidence interval from Student's t."""
+    from scipy import stats
+
+    x = np.log(np.asarray(h, dtype=float))
+    y = np.log(np.asarray(error, dtype=float))
+    n = x.size
+    if n < 2:
+        raise ValueError("`h` needs at least two points to fit a slope")
+    A = np.vstack([x, np.ones_like(x)]).T
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    slope, intercept = float(coef[0]), float(coef[1])
+    resid = y - (slope * x + intercept)
+    rms = float(np.sqrt(np.mean(resid**2)) / math.log(10))
+    if n > 2:
+        s2 = float(resid @ resid) / (n - 2)
+        se = math.sqrt(s2 / float(((x - x.mean()) ** 2).sum()))
+        half = float(stats.t.ppf(0.975, n - 2)) * se
+    else:
+        half = float("nan")
+    return {"order": slope, "intercept": intercept, "residual": rms, "ci_low": slope - half,
+            "ci_high": slope + half}
+
+
+def classify_points(
+    h: np.ndarray, error: np.ndarray, reference_error: np.ndarray, rounding_level: np.ndarray
+) -> np.ndarray:
+    """Reason each point is excluded from the fit ('' when it is kept), by the rules above."""
+    n = h.size
+    reason = np.array([""] * n, dtype=object)
+    for i in range(n):
+        if not np.isfinite(error[i]) or error[i] > tol.BLOWUP_ERROR:
+            reason[i] = "blow-up"
+        elif error[i] < tol.REFERENCE_MARGIN * reference_error[i]:
+            reason[i] = "reference"
+        elif error[i] < tol.ROUNDOFF_MARGIN * rounding_level[i]:
+            reason[i] = "roundoff"
+    # Candidates: the longest run of consecutive usable points whose local slopes agree.
+    usable = np.flatnonzero(reason == "")
+    best: tuple[int, int] | None = None
+    runs: list[list[int]] = []
+    for i in usable:
+        if runs and runs[-1][-1] == i - 1:
+            runs[-1].append(int(i))
+        else:
+            runs.append([int(i)])
+    for run in runs:
+        if len(run) < 2:
+            continue
+        idx = np.array(run)
+        slopes = _local_slopes(h[idx], error[idx])
+        # Largest window [a, b] of points whose local slopes all lie within the tolerance of
+        # the window's median; ties go to the window at smaller h (more asymptotic).
+        for length in range(len(idx), 1, -1):
+            found = None
+            for a in range(len(idx) - length, -1, -1):  # points run from large h to small h
+                window = slopes[a : a + length - 1]
+                med = float(np.median(window))
+                if np.all(np.abs(window - med) <= tol.PLATEAU_SLOPE_TOL):
+                    found = (int(idx[a]), int(idx[a + length - 1]))
+                    break
+            if found is not None:
+                if best is None or (found[1] - found[0]) > (best[1] - best[0]):
+                    best = found
+                break
+    for i in usable:
+        if best is None or not (best[0] <= i <= best[1]):
+            reason[i] = "pre-asymptotic"
+    return reason
+
+
+# -- the experiment ---------------------------------------------------------------------------
+class ConvergenceExperiment(Experiment):
+    name = "convergence"
+    description = "Global and local error order against step size (tolerance for adaptive steppers)."
+    default_config: Mapping[str, Any] = {
+        "ensemble": tol.ENSEMBLE_SIZE,
+        "seed": 0,
+        "start_error": tol.SWEEP_START_ERROR,
+        "ratio": tol.SWEEP_RATIO,
+        "step_budget": tol.SWEEP_STEP_BUDGET,
+        "n_start": 4,
+        "tolerances": [10.0**-k for k in range(3, 15)],
+        "local": True,
+    }
+    quick_config: Mapping[str, Any] = {"ensemble": 8, "step_budget": tol.SWEEP_STEP_BUDGET // 4}
+
+    def cells(self, steppers, problems, config):
+        from harness.errors import IncompatibleError
+        from harness.registry import get_problem, get_stepper
+        from harness.stepper import check_compatible
+
+        cells, skips = [], []
+        for s in steppers:
+            stepper = get_stepper(s)
+            for p in problems:
+                problem = get_problem(p)
+                try:
+                    check_compatible(stepper, problem)
+                except IncompatibleError as exc:
+                    skips.append(Skip(self.name, s, p, str(exc)))
+                    continue
+                cells.append(Cell(self.name, s, p))
+        return cells, skips
+
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_problem, get_stepper
+
+        stepper = get_stepper(cell.stepper)
+        problem = get_problem(cell.problem)
+        if isinstance(stepper, AdaptiveStepper):
+            return _tolerance_sweep(stepper, problem, config)
+        return _step_sweep(stepper, problem, config)
+
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_stepper
+
+        out = []
+        if rows.empty:
+            return pd.DataFrame(columns=SUMMARY_COLUMNS)
+        for (s, p), g in rows.groupby(["stepper", "problem"], sort=False):
+            out.append(_summarize_cell(get_stepper(s), p, g))
+        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+
+
+def _scale(*arrays: np.ndarray) -> float:
+    return max(1.0, max(float(np.max(np.abs(a))) for a in arrays))
+
+
+def _errors(y: np.ndarray, ref: np.ndarray) -> float:
+    with np.errstate(all="ignore"):
+        d = np.abs(y - ref)
+    if not np.all(np.isfinite(d)):
+        return float("inf")
+    return float(np.max(d))
+
+
+def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
+    from harness.ground_truth import reference
+
+    T0, T = problem.t0, problem.convergence_t_end
+    span = T - T0
+    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
+    scale0 = _scale(y0)
+    ref = reference(problem, np.array([T]), y0, required_error=tol.EPS * scale0)
+    y_ref = ref.y[-1]
+    ref_err = float(np.max(ref.error[-1]))
+    scale = _scale(y0, y_ref)
+    budget = int(config["step_budget"])
+    ratio = float(config["ratio"])
+    records: dict[int, dict] = {}
+    spent = 0
+
+    def run(n: int) -> dict:
+        nonlocal spent
+        if n in records:
+            return records[n]
+        spent += n
+        started = time.perf_counter()
+        try:
+            tr = stepper.integrate(problem, h=span / n, n_steps=n, y0=y0, t0=T0)
+            err = _errors(tr.final, y_ref) if tr.finite else float("inf")
+            evals = tr.evals
+            msg = ""
+        except StepFailure as exc:
+            err, evals, msg = float("nan"), {}, str(exc)
+        rec = {
+            "n_steps": n, "h": span / n, "error": err, "reference_error": ref_err,
+            "rounding_level": math.sqrt(n) * tol.EPS * scale,
+            "rhs_evals": int(evals.get("rhs", 0)), "force_evals": int(evals.get("accel", 0)),
+            "wall_s": time.perf_counter() - started, "message": msg,
+        }
+        records[n] = rec
+        return rec
+
+    # Phase 1: coarse to fine until the error first falls below start_error.
+    n = int(config["n_start"])
+    while spent + n <= budget:
+        rec = run(n)
+        if np.isfinite(rec["error"]) and rec["error"] < float(config["start_error"]):
+            break
+        n = int(math.ceil(n * ratio))
+    # Phase 2: keep refining until the floor, the budget, or enough points at the floor.
+    floor_hits = 0
+    while True:
+        last = records[max(records)]
+        if not np.isfinite(last["error"]) or last["error"] >= float(config["start_error"]):
+            break  # never reached the asymptotic range within the budget
+        at_floor = last["error"] < tol.ROUNDOFF_MARGIN * last["rounding_level"] or (
+            last["error"] < tol.REFERENCE_MARGIN * ref_err
+        )
+        floor_hits += int(at_floor)
+        if floor_hits >= 2:
+            break
+        n = int(math.ceil(max(records) * ratio))
+        if spent + n > budget:
+            break
+        run(n)
+    # Phase 3: widen when fewer than MIN_FIT_POINTS points survive.
+    for _ in range(2):
+        frame = _frame(records)
+        reasons = classify_points(frame.h.values, frame.error.values,
+                                  frame.reference_error.values, frame.rounding_level.values)
+        kept = np.flatnonzero(reasons == "")
+        if kept.size >= tol.MIN_FIT_POINTS:
+            break
+        usable = [i for i in range(len(frame)) if reasons[i] != "blow-up"
+                  and frame.error.values[i] < float(config["start_error"])]
+        if not usable:
+            break
+        lo, hi = int(frame.n_steps.values[usable[0]]), int(frame.n_steps.values[usable[-1]])
+        new = []
+        ns = sorted(records)
+        for a, b in zip(ns, ns[1:], strict=False):
+            if lo <= a and b <= hi:
+                new.append(int(round(math.sqrt(a * b))))
+        new.append(int(math.ceil(hi * ratio)))
+        for m in new:
+            if m not in records and spent + m <= budget:
+                run(m)
+    frame = _frame(records)
+    frame["excluded"] = classify_points(frame.h.values, frame.error.values,
+                                        frame.reference_error.values, frame.rounding_level.values)
+    frame["in_fit"] = frame["excluded"] == ""
+    frame["kind"] = "global"
+    frame["tol"] = np.nan
+    frame["reference_precision"] = ref.precision
+    rows = [frame]
+    if config.get("local", True):
+        rows.append(_local_sweep(stepper, problem, y0, frame, config))
+    out = pd.concat(rows, ignore_index=True)
+    out["stepper"] = stepper.info.name
+    out["problem"] = problem.name
+    out["t_end"] = T
+    out["ensemble_size"] = y0.shape[1]
+    return out
+
+
+def _frame(records: dict[int, dict]) -> pd.DataFrame:
+    return pd.DataFrame([records[k] for k in sorted(records)])
+
+
+def _local_sweep(stepper: Stepper, problem, y0: np.ndarray, global_frame: pd.DataFrame, config):
+    """One step of the recurrence from exact history, for h from the global fit range down."""
+    from harness.ground_truth import reference
+
+    k = stepper.history_length
+    fit = global_frame[global_frame.in_fit]
+    h_max = float(fit.h.max()) if len(fit) else float(global_frame.h.min())
+    h_max = min(h_max, (problem.convergence_t_end - problem.t0) / max(k, 1))
+    hs = h_max * 0.5 ** np.arange(0, 12)
+    records = []
+    nq = len(problem.newtonian.positions) if problem.newtonian is not None else None
+    for h in hs:
+        times = problem.t0 + h * np.arange(0, k + 1)
+        ref = reference(problem, times[1:], y0, t0=problem.t0)
+        history = [y0] + [ref.y[i] for i in range(k - 1)]
+        try:
+            y1 = stepper.step_from_history(problem, h=float(h), history=history, t0=problem.t0)
+        except StepFailure as exc:
+            records.append({"h": h, "error": np.nan, "message": str(exc)})
+            continue
+        exact = ref.y[k - 1]
+        scale = _scale(y0, exact)
+        rec = {
+            "h": float(h), "n_steps": 1, "error": _errors(y1, exact),
+            "reference_error": float(np.max(ref.error[k - 1])),
+            "rounding_level": tol.EPS * scale, "message": "",
+        }
+        if nq:
+            rec["error_q"] = _errors(y1[:nq], exact[:nq])
+        records.append(rec)
+    frame = pd.DataFrame(records)
+    frame["excluded"] = classify_points(frame.h.values, frame.error.values,
+                                        frame.reference_error.values, frame.rounding_level.values)
+    frame["in_fit"] = frame["excluded"] == ""
+    frame["kind"] = "local"
+    if nq:
+        qf = frame.copy()
+        qf["error"] = qf["error_q"]
+        qf["excluded"] = classify_points(qf.h.values, qf.error.values,
+                                         qf.reference_error.values, qf.rounding_level.values)
+        qf["in_fit"] = qf["excluded"] == ""
+        qf["kind"] = "local-q"
+        frame = pd.concat([frame, qf], ignore_index=True)
+    return frame.drop(columns=["error_q"], errors="ignore")
+
+
+def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
+    from harness.ground_truth import reference
+
+    T0, T = problem.t0, problem.convergence_t_end
+    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
+    ref = reference(problem, np.array([T]), y0, required_error=tol.EPS * _scale(y0))
+    y_ref = ref.y[-1]
+    scale = _scale(y0, y_ref)
+    records = []
+    for tolerance in config["tolerances"]:
+        started = time.perf_counter()
+        s = stepper.with_tolerance(tolerance)
+        try:
+            tr = s.integrate(problem, h=T - T0, n_steps=1, y0=y0, t0=T0)
+            err = _errors(tr.final, y_ref) if tr.finite else float("inf")
+            evals, msg = tr.evals, ""
+        except StepFailure as exc:
+            err, evals, msg = float("nan"), {}, str(exc)
+        records.append({
+            "tol": tolerance, "h": np.nan, "n_steps": int(evals.get("internal_steps", 0)),
+            "error": err, "reference_error": float(np.max(ref.error[-1])),
+            "rounding_level": tol.EPS * scale, "rhs_evals": int(evals.get("rhs", 0)),
+            "force_evals": int(evals.get("accel", 0)),
+            "wall_s": time.perf_counter() - started, "message": msg,
+        })
+    frame = pd.DataFrame(records)
+    limit = tol.TOLERANCE_FACTOR * frame["tol"] * scale
+    frame["excluded"] = np.where(~np.isfinite(frame.error), "blow-up",
+                                 np.where(frame.error < tol.REFERENCE_MARGIN * frame.reference_error,
+                                          "reference", ""))
+    frame["in_fit"] = frame["excluded"] == ""
+    frame["within_tolerance"] = (frame.error <= limit) | (frame.excluded == "reference")
+    frame["kind"] = "tolerance"
+    frame["reference_precision"] = ref.precision
+    frame["stepper"] = stepper.info.name
+    frame["problem"] = problem.name
+    frame["t_end"] = T
+    frame["ensemble_size"] = y0.shape[1]
+    return frame
+
+
+def _fit_kind(g: pd.DataFrame, kind: str) -> float:
+    sub = g[(g.kind == kind) & g.in_fit]
+    if len(sub) < tol.MIN_FIT_POINTS:
+        return float("nan")
+    return fit_order(sub.h.values, sub.error.values)["order"]
+
+
+def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
+    info = stepper.info
+    base = {
+        "stepper": info.name, "problem": problem, "claimed_order": info.claimed_order,
+        "measured_order": np.nan, "order_ci_low": np.nan, "order_ci_high": np.nan,
+        "fit_residual": np.nan, "fit_points": 0, "fit_h_min": np.nan, "fit_h_max": np.nan,
+        "fit_error_min": np.nan, "fit_error_max": np.nan, "local_exponent": np.nan,
+        "local_exponent_q": np.nan,
+        "reference_error": float(g.reference_error.max()),
+        "reference_precision": str(g["reference_precision"].dropna().iloc[0])
+        if "reference_precision" in g and g["reference_precision"].notna().any() else "",
+        "points": int((g.kind.isin(["global", "tolerance"])).sum()),
+        "total_steps": int(g.loc[g.kind == "global", "n_steps"].sum()),
+        "wall_s": float(g.wall_s.sum(skipna=True)) if "wall_s" in g else np.nan,
+        "message": "",
+    }
+    messages = [m for m in g.get("message", pd.Series(dtype=str)).fillna("") if m]
+    if (g.kind == "tolerance").any():
+        t = g[g.kind == "tolerance"]
+        ok = bool(t.within_tolerance.all()) and t.error.notna().all()
+        base["verdict"] = "meets-tolerance" if ok else "misses-tolerance"
+        fit_rows = t[t.in_fit]
+        if len(fit_rows) >= 2:
+            f = fit_order(fit_rows.tol.values, fit_rows.error.values)
+            base["measured_order"] = f["order"]  # tolerance proportionality exponent
+        if messages:
+            base["verdict"], base["message"] = "failed", messages[0]
+        return base
+    gl = g[g.kind == "global"].sort_values("h", ascending=False)
+    kept = gl[gl.in_fit]
+    finite = gl[np.isfinite(gl.error) & (gl.error <= tol.BLOWUP_ERROR)]
+    if messages and len(kept) < tol.MIN_FIT_POINTS:
+        base["verdict"], base["message"] = "failed", messages[0]
+    elif len(gl) and (gl.excluded.isin(["roundoff", "reference"]).all()):
+        base["verdict"] = "exact"
+    elif len(kept) >= tol.MIN_FIT_POINTS:
+        f = fit_order(kept.h.values, kept.error.values)
+        base.update({
+            "verdict": "converged", "measured_order": f["order"], "order_ci_low": f["ci_low"],
+            "order_ci_high": f["ci_high"], "fit_residual": f["residual"],
+            "fit_points": len(kept), "fit_h_min": float(kept.h.min()),
+            "fit_h_max": float(kept.h.max()), "fit_error_min": float(kept.error.min()),
+            "fit_error_max": float(kept.error.max()),
+        })
+    elif finite.empty or not np.isfinite(gl.error.iloc[-1]) or gl.error.iloc[-1] > tol.BLOWUP_ERROR:
+        base["verdict"] = "unstable"
+    else:
+        base["verdict"] = "insufficient-range"
+    base["local_exponent"] = _fit_kind(g, "local")
+    base["local_exponent_q"] = _fit_kind(g, "local-q")
+    if messages and not base["message"]:
+        base["message"] = messages[0]
+    return base
+
+
+register_experiment(ConvergenceExperiment())

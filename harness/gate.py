@@ -1,0 +1,118 @@
+"""The CI gate: every stepper's measured convergence order against its claim.
+
+A cell passes when
+- the verdict is `converged` and the measured order is within GATE_ORDER_TOL of the claimed
+  order, or the verdict and order match the cell's entry in `EXPECTATIONS` (a known exception
+  with its reason: an `exact` pair, a superconvergent pair, ...);
+- for adaptive steppers, the error stays within the requested tolerance at every tolerance
+  (`meets-tolerance`);
+- and the order computed from the stepper's coefficients (where it has coefficients) equals the
+  claimed order: a mislabelled table fails even if the measurement happens to look right.
+The gate exits 1 when any cell fails. Every expectation below says why it holds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+
+__all__ = ["Expectation", "EXPECTATIONS", "judge", "gate_table", "GATE_COLUMNS"]
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """What a cell is expected to show instead of `converged` at the claimed order."""
+
+    verdict: str
+    reason: str
+    order: float | None = None
+
+
+# (stepper or "*", problem) -> Expectation. One table, each entry with its reason.
+_SECOND_ORDER_EXACT_ON_CONSTANT_FORCE = (
+    "with a constant acceleration the solution is a quadratic in t, which every consistent "
+    "method of order >= 2 for q'' = a reproduces exactly; only rounding remains"
+)
+EXPECTATIONS: dict[tuple[str, str], Expectation] = {}
+for _name in (
+    "midpoint", "heun", "ralston", "rk3", "rk4", "rk38", "velocity-verlet", "position-verlet",
+    "leapfrog", "stormer-verlet", "forest-ruth", "pefrl", "yoshida6", "yoshida8",
+    "implicit-midpoint", "trapezoid", "gauss-legendre-4", "ab2", "ab3", "ab4", "am3", "bdf2",
+    "verlet-damped",
+):
+    EXPECTATIONS[(_name, "free-fall")] = Expectation("exact", _SECOND_ORDER_EXACT_ON_CONSTANT_FORCE)
+
+GATE_COLUMNS = [
+    "stepper", "problem", "claimed_order", "coefficient_order", "measured_order",
+    "order_ci_low", "order_ci_high", "fit_points", "fit_h_min", "fit_h_max", "verdict",
+    "expected", "passed", "reason",
+]
+
+
+def _expectation(stepper: str, problem: str) -> Expectation | None:
+    return EXPECTATIONS.get((stepper, problem)) or EXPECTATIONS.get(("*", problem))
+
+
+def _coefficient_order(stepper_name: str) -> float | None:
+    try:
+        from harness.theory import order_from_coefficients
+    except ImportError:
+        return None
+    from harness.registry import get_stepper
+
+    value = order_from_coefficients(get_stepper(stepper_name))
+    return None if value is None else float(value)
+
+
+def judge(record: Mapping, coefficient_order: float | None = None) -> tuple[bool, str, str]:
+    """(passed, expected verdict, reason) for one convergence summary record."""
+    verdict = record["verdict"]
+    claimed = record["claimed_order"]
+    measured = record["measured_order"]
+    exp = _expectation(record["stepper"], record["problem"])
+    if coefficient_order is not None and claimed is not None and not pd.isna(claimed):
+        if abs(coefficient_order - float(claimed)) > 1e-9:
+            return False, "converged", (
+                f"coefficients give order {coefficient_order:g}, the stepper claims {claimed}"
+            )
+    if claimed is None or pd.isna(claimed):
+        ok = verdict == "meets-tolerance"
+        return ok, "meets-tolerance", "" if ok else f"adaptive stepper: {verdict}"
+    if exp is not None:
+        ok = verdict == exp.verdict
+        if ok and exp.order is not None:
+            ok = bool(np.isfinite(measured)) and abs(measured - exp.order) <= tol.GATE_ORDER_TOL
+        why = exp.reason if ok else f"expected {exp.verdict} ({exp.reason}); got {verdict}"
+        return ok, exp.verdict, why
+    if verdict != "converged":
+        msg = record.get("message") or ""
+        return False, "converged", f"verdict {verdict}" + (f": {msg}" if msg else "")
+    diff = abs(float(measured) - float(claimed))
+    ok = diff <= tol.GATE_ORDER_TOL
+    return ok, "converged", "" if ok else (
+        f"measured order {measured:.3f} differs from claimed {claimed} by {diff:.3f} "
+        f"> {tol.GATE_ORDER_TOL}"
+    )
+
+
+def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Judge every convergence summary record; failing rows first."""
+    rows = []
+    orders: dict[str, float | None] = {}
+    for rec in summary.to_dict("records"):
+        if rec["stepper"] not in orders:
+            orders[rec["stepper"]] = _coefficient_order(rec["stepper"])
+        ok, expected, why = judge(rec, orders[rec["stepper"]])
+        row = {k: rec.get(k) for k in GATE_COLUMNS if k in rec}
+        row.update({"coefficient_order": orders[rec["stepper"]], "expected": expected,
+                    "passed": bool(ok), "reason": why})
+        rows.append(row)
+    table = pd.DataFrame(rows, columns=GATE_COLUMNS)
+    if len(table):
+        table = table.sort_values(["passed", "stepper", "problem"], kind="stable")
+    return table.reset_index(drop=True)
