@@ -94,11 +94,11 @@ class ButcherTableau:
             for i in range(s):
                 if not _close(row_sums[i], c_arr[i]):
                     raise CoefficientError(
-                        f"`{name}`: row {i} of A sums to {row_sums[i]!r} but node c[{i}] is "
-                        f"{c_arr[i]!r}; the row sums of A must equal the nodes"
+                        f"`{name}`: row {i} of A sums to {float(row_sums[i])!r} but node c[{i}] is "
+                        f"{float(c_arr[i])!r}; the row sums of A must equal the nodes"
                     )
         if not _close(b_arr.sum(), 1.0):
-            raise CoefficientError(f"`{name}.b` must sum to 1 (consistency), sums to {b_arr.sum()!r}")
+            raise CoefficientError(f"`{name}.b` must sum to 1 (consistency), sums to {float(b_arr.sum())!r}")
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "A", A_arr)
         object.__setattr__(self, "b", b_arr)
@@ -217,10 +217,10 @@ class LinearMultistep:
                 f"`{name}`: alpha and beta must have the same length k+1 >= 2, got {a.size} and {b.size}"
             )
         if not _close(a[-1], 1.0):
-            raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {a[-1]!r}")
+            raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {float(a[-1])!r}")
         j = np.arange(a.size)
         if not _close(a.sum(), 0.0):
-            raise CoefficientError(f"`{name}`: sum of alpha must be 0 (consistency), got {a.sum()!r}")
+            raise CoefficientError(f"`{name}`: sum of alpha must be 0 (consistency), got {float(a.sum())!r}")
         if not _close(float(j @ a), float(b.sum())):
             raise CoefficientError(
                 f"`{name}`: sum j*alpha_j must equal sum beta_j (consistency), got "
@@ -259,7 +259,7 @@ class SecondOrderMultistep:
                 f"`{name}`: alpha and beta must have the same length k+1 >= 3, got {a.size} and {b.size}"
             )
         if not _close(a[-1], 1.0):
-            raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {a[-1]!r}")
+            raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {float(a[-1])!r}")
         j = np.arange(a.size, dtype=float)
         checks = [
             ("sum alpha_j = 0", a.sum(), 0.0),
@@ -268,7 +268,9 @@ class SecondOrderMultistep:
         ]
         for rule, lhs, rhs in checks:
             if not _close(float(lhs), float(rhs)):
-                raise CoefficientError(f"`{name}`: consistency needs {rule}, got {lhs!r} vs {rhs!r}")
+                raise CoefficientError(
+                    f"`{name}`: consistency needs {rule}, got {float(lhs)!r} vs {float(rhs)!r}"
+                )
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "alpha", a)
         object.__setattr__(self, "beta", b)

@@ -76,6 +76,7 @@ class Problem:
         parameters: Mapping[str, float] | None = None,
         invariants: Mapping[str, hy.expression] | None = None,
         exact: ExactSolution | None = None,
+        approximations: Mapping[str, ExactSolution] | None = None,
         description: str = "",
         reference: str = "",
         conservative: bool = False,
@@ -138,6 +139,7 @@ class Problem:
         self.parameters = parameters
         self.invariants = dict(invariants or {})
         self.exact = exact
+        self.approximations = dict(approximations or {})
         self.description = description
         self.reference = reference
         self.conservative = conservative
@@ -183,6 +185,7 @@ class Problem:
             "parameters": dict(self.parameters),
             "invariants": sorted(self.invariants),
             "exact_solution": self.exact is not None,
+            "approximations": sorted(self.approximations),
             "velocity_dependent": self.velocity_dependent,
             "time_dependent": self.time_dependent,
             "conservative": self.conservative,
@@ -250,7 +253,8 @@ class Problem:
         return [hy.diff(f, v) for f in self.rhs for v in self.variables]
 
     def compiled(self, kind: str, constants: tuple[float, ...] | None) -> Any:
-        """The compiled function `kind` ('rhs', 'accel', 'jac', 'inv'), parameters either
+        """The compiled function `kind` ('rhs', 'accel', 'accel_q' (of positions only, for
+        accelerations that ignore velocity), 'jac', 'inv'), parameters either
         substituted as constants (a tuple of values) or left as runtime parameters (None)."""
         key = (kind, constants)
         with self._lock:
@@ -259,7 +263,7 @@ class Problem:
                 return store[key]
         if kind == "rhs":
             exprs = list(self.rhs)
-        elif kind == "accel":
+        elif kind in ("accel", "accel_q"):
             if self.newtonian is None:
                 raise InputError(f"problem {self.name!r} has no Newtonian form (no acceleration)")
             exprs = list(self.newtonian.acceleration)
@@ -268,12 +272,13 @@ class Problem:
         elif kind == "inv":
             exprs = [self.invariants[k] for k in sorted(self.invariants)]
         else:
-            raise InputError(f"`kind` must be rhs, accel, jac or inv, got {kind!r}")
+            raise InputError(f"`kind` must be rhs, accel, accel_q, jac or inv, got {kind!r}")
         if constants is not None and self.parameters:
             mapping = {f"p{i}": hy.expression(float(v)) for i, v in enumerate(constants)}
             exprs = [_subs_pars(e, mapping) for e in exprs]
         cache.configure_heyoka_cache()
-        fn = hy.cfunc(exprs, list(self.variables)) if exprs else None
+        variables = list(self.newtonian.positions) if kind == "accel_q" else list(self.variables)
+        fn = hy.cfunc(exprs, variables) if exprs else None
         with self._lock:
             self.__dict__["_compiled"][key] = fn
         return fn
@@ -316,7 +321,9 @@ class Dynamics:
     States are shaped (dim, N), ensemble axis last. Each call counts as one right-hand-side (or
     force, or Jacobian) evaluation of the whole ensemble: `counts` keeps the books.
     Parameters shared by all members are compiled in as constants (faster calls); differing
-    parameters are passed at run time.
+    parameters are passed at run time. The call path is chosen once, here, because steppers
+    call these functions millions of times: a plain compiled call costs ~2.5 us, and every
+    keyword argument or dictionary built per call adds to it.
     """
 
     def __init__(self, problem: Problem, pars: np.ndarray):
@@ -329,14 +336,20 @@ class Dynamics:
         self.dim = problem.dim
         self.nq = len(problem.newtonian.positions) if problem.newtonian is not None else 0
         self.counts = {"rhs": 0, "accel": 0, "jac": 0}
-        self._f = problem.compiled("rhs", self.constants)
-        self._a = problem.compiled("accel", self.constants) if problem.newtonian is not None else None
+        self._runtime_pars = self.constants is None and self.pars.size > 0
         self._tbuf = np.zeros(self.size)
+        self._f = problem.compiled("rhs", self.constants)
+        self._a = None
+        self._a_positions_only = False
+        if problem.newtonian is not None:
+            self._a_positions_only = not problem.velocity_dependent
+            kind = "accel_q" if self._a_positions_only else "accel"
+            self._a = problem.compiled(kind, self.constants)
         self._qv = np.empty((self.dim, self.size)) if problem.newtonian is not None else None
 
     def _kwargs(self, t: float, n: int) -> dict:
         kw = {}
-        if self.constants is None and self.pars.size:
+        if self._runtime_pars:
             kw["pars"] = self.pars
         if self.time_dependent:
             if self._tbuf.shape[0] != n:
@@ -345,19 +358,31 @@ class Dynamics:
             kw["time"] = self._tbuf
         return kw
 
+    def _call(self, fn, t: float, x: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+        if not (self.time_dependent or self._runtime_pars):
+            if out is None:
+                return fn(x)
+            fn(x, outputs=out)
+            return out
+        if out is None:
+            return fn(x, **self._kwargs(t, x.shape[1]))
+        fn(x, outputs=out, **self._kwargs(t, x.shape[1]))
+        return out
+
     def f(self, t: float, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """First-order right-hand side, y shaped (dim, N)."""
         self.counts["rhs"] += 1
-        if out is None:
-            return self._f(y, **self._kwargs(t, y.shape[1]))
-        self._f(y, outputs=out, **self._kwargs(t, y.shape[1]))
-        return out
+        return self._call(self._f, t, y, out)
 
     def accel(self, t: float, q: np.ndarray, v: np.ndarray | None = None, out=None) -> np.ndarray:
         """Acceleration a(q, v, t), q and v shaped (nq, N). v may be None when a ignores it."""
         if self._a is None:
             raise InputError(f"problem {self.problem.name!r} has no Newtonian form")
         self.counts["accel"] += 1
+        if self._a_positions_only:
+            if not q.flags.c_contiguous:
+                q = np.ascontiguousarray(q)
+            return self._call(self._a, t, q, out)
         n = q.shape[1]
         if self._qv is None or self._qv.shape[1] != n:
             self._qv = np.empty((self.dim, n))
@@ -366,16 +391,13 @@ class Dynamics:
             self._qv[self.nq :] = 0.0
         else:
             self._qv[self.nq :] = v
-        if out is None:
-            return self._a(self._qv, **self._kwargs(t, n))
-        self._a(self._qv, outputs=out, **self._kwargs(t, n))
-        return out
+        return self._call(self._a, t, self._qv, out)
 
     def jac(self, t: float, y: np.ndarray) -> np.ndarray:
         """Jacobian df/dy shaped (dim, dim, N)."""
         self.counts["jac"] += 1
         fn = self.problem.compiled("jac", self.constants)
-        out = fn(y, **self._kwargs(t, y.shape[1]))
+        out = self._call(fn, t, y, None)
         return out.reshape(self.dim, self.dim, y.shape[1])
 
 

@@ -54,3 +54,74 @@ MAX_ENSEMBLE_SIZE = 10_000_000
 # the state's scale) before the tolerance counts as missed; local error control does not bound
 # the global error, and a factor of 100 is what a user of such a solver usually tolerates.
 TOLERANCE_FACTOR = 100.0
+
+# Newton's method for implicit stages (implicit Runge-Kutta, implicit multistep): the increment,
+# componentwise scaled by 1 + |y_n|, must fall to 1e-14 (~50 ulps, just above the rounding noise
+# of a well-conditioned solve), so the stage error stays far below every error a sweep measures.
+NEWTON_TOL = 1e-14
+# Iterations allowed before a step counts as failed: full Newton from the step's start needs 2-5;
+# simplified Newton contracts by ~0.1 per iteration at large stiff steps, so ~15 to reach 1e-14.
+NEWTON_MAX_ITER = 20
+
+# Order from an exact local-error series (harness.theory): a coefficient of h^n in the local
+# error counts as zero below this, relative to the exact solution's coefficient; float64
+# coefficients leave ~1e-15 there, a violated order condition leaves ~1e-4 or more.
+SERIES_ORDER_TOL = 1e-10
+
+# Linear stability intervals (harness.theory.stability_boundary): |R| <= 1 + this counts as
+# stable (a few roundings of a one-step evaluation; Euler's 1 + y^2/2 exceeds it at y ~ 1e-6) ...
+STABILITY_AMPLIFICATION_TOL = 1e-12
+# ... the crossing is bracketed on a scan, linear with this step up to ...
+STABILITY_SCAN_STEP = 1e-2
+STABILITY_SCAN_LINEAR_END = 10.0
+# ... then geometric with this ratio up to the search limit (beyond it: "unbounded") ...
+STABILITY_SCAN_RATIO = 1.02
+STABILITY_SEARCH_LIMIT = 1e3
+# ... and refined by Brent's method to this absolute accuracy (the figures are quoted to 1e-8).
+STABILITY_XTOL = 1e-10
+
+# scipy's solve_ivp raises any rtol below 100 machine epsilons to that value (with a warning);
+# the external peers apply the same floor themselves and record the rtol actually used.
+SCIPY_MIN_RTOL = 100.0 * EPS
+# h*omega limits of Newtonian steppers are searched up to this (the catalogue's are below 4).
+STABILITY_HW_SEARCH_LIMIT = 100.0
+# Stability probe against the coefficients' formula: largest relative difference of recurrence
+# coefficients (R(z), c_j, propagator entries) allowed; a step is a few dozen roundings.
+STABILITY_AGREEMENT_TOL = 1e-12
+# Interval figures from the probe and from the formula must agree to this (each is root-found
+# to STABILITY_XTOL; the amplification tolerance shifts a transversal crossing by ~1e-12).
+STABILITY_INTERVAL_AGREEMENT = 1e-7
+# A declared stability figure is quoted to ~5 significant digits (rk3: 2.5127): relative
+# difference allowed between the claim and the measured figure.
+STABILITY_CLAIM_RTOL = 1e-4
+
+# Energy drift (harness.experiments.energy). An energy off by 10 % belongs to a different orbit:
+# the motion is destroyed and the run counts as `unstable` (past that point the envelope's shape
+# describes the wreck, e.g. an escaping or collapsed Kepler orbit, not a drift) ...
+ENERGY_BLOWUP_ERROR = 0.1
+# ... errors are floored here before taking logarithms (an exactly conserved quantity has no
+# envelope to fit; 1e-20 is far below any float64 rounding of an O(1) quantity) ...
+ENERGY_ERROR_FLOOR = 1e-20
+# ... the envelope's growth exponent (log-log slope of the running maximum) separates the
+# classes halfway between the ideal exponents 0 (bounded), 1/2 (random walk) and 1 (linear);
+# above 1.5 the growth is faster than any drift a consistent method produces (blow-up) ...
+DRIFT_SQRT_EXPONENT = 0.25
+DRIFT_LINEAR_EXPONENT = 0.75
+DRIFT_UNSTABLE_EXPONENT = 1.5
+# ... the fit window starts no earlier than this many natural periods, so the envelope has
+# seen every phase of the motion at least once ...
+FIT_MIN_PERIODS = 2.0
+# ... rounding adds a few ulps to an invariant per step, as a random walk (Brouwer's law):
+# growth up to ENERGY_ROUNDING_ULPS * sqrt(n) * eps is what rounding explains ...
+ENERGY_ROUNDING_ULPS = 100.0
+# ... and a method that conserves a quadratic invariant exactly keeps it to within this many
+# ulps per step (systematic rounding grows at most linearly in n).
+ANGULAR_MOMENTUM_ROUNDING_ULPS = 1.0
+
+# Memory guard (harness.runner): a run is refused up front when its estimated peak exceeds this
+# fraction of the memory available when it starts (the rest is for Python, libraries, the OS).
+MEMORY_HEADROOM = 0.8
+
+# Convergence sweep: stop refining once this many points lie in the asymptotic range; six
+# points over a factor 32 in h pin an order to a few hundredths, and more only cost steps.
+TARGET_FIT_POINTS = 6

@@ -26,7 +26,15 @@ from typing import Any
 
 import pandas as pd
 
-__all__ = ["Cell", "Skip", "Experiment", "EXPERIMENTS", "register_experiment", "get_experiment"]
+__all__ = [
+    "Cell",
+    "Skip",
+    "Experiment",
+    "EXPERIMENTS",
+    "register_experiment",
+    "get_experiment",
+    "failed_record",
+]
 
 
 @dataclass(frozen=True)
@@ -115,3 +123,21 @@ def get_experiment(name: str) -> Experiment:
         close = difflib.get_close_matches(str(name), EXPERIMENTS, n=3)
         hint = f"; closest: {', '.join(close)}" if close else f"; known: {', '.join(sorted(EXPERIMENTS))}"
         raise UnknownNameError(f"unknown experiment {name!r}{hint}") from None
+
+
+def failed_record(
+    cell: Cell, message: str, *, kind: str = "error", traceback: str = "", key: str = ""
+) -> dict[str, Any]:
+    """The record of a failed cell, as the runner stores it and the report lists it: the cell,
+    what kind of failure (`harness.runner.FAILURE_KINDS`), the message, a short traceback."""
+    return {
+        "experiment": cell.experiment,
+        "cell": cell.label,
+        "stepper": cell.stepper,
+        "problem": cell.problem,
+        "params": json.dumps({str(k): v for k, v in cell.params}, sort_keys=True, default=repr),
+        "key": key,
+        "kind": kind,
+        "message": message,
+        "traceback": traceback,
+    }

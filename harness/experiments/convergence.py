@@ -88,9 +88,14 @@ def fit_order(h: Sequence[float], error: Sequence[float]) -> dict[str, float]:
 
 
 def classify_points(
-    h: np.ndarray, error: np.ndarray, reference_error: np.ndarray, rounding_level: np.ndarray
+    h: np.ndarray,
+    error: np.ndarray,
+    reference_error: np.ndarray,
+    rounding_level: np.ndarray,
+    start_error: float | None = None,
 ) -> np.ndarray:
-    """Reason each point is excluded from the fit ('' when it is kept), by the rules above."""
+    """Reason each point is excluded from the fit ('' when it is kept), by the rules above.
+    Points must be ordered from the largest h to the smallest."""
     n = h.size
     reason = np.array([""] * n, dtype=object)
     for i in range(n):
@@ -100,6 +105,8 @@ def classify_points(
             reason[i] = "reference"
         elif error[i] < tol.ROUNDOFF_MARGIN * rounding_level[i]:
             reason[i] = "roundoff"
+        elif start_error is not None and error[i] >= start_error:
+            reason[i] = "pre-asymptotic"
     # Candidates: the longest run of consecutive usable points whose local slopes agree.
     usable = np.flatnonzero(reason == "")
     best: tuple[int, int] | None = None
@@ -145,6 +152,7 @@ class ConvergenceExperiment(Experiment):
         "ratio": tol.SWEEP_RATIO,
         "step_budget": tol.SWEEP_STEP_BUDGET,
         "n_start": 4,
+        "target_points": tol.TARGET_FIT_POINTS,
         "tolerances": [10.0**-k for k in range(3, 15)],
         "local": True,
     }
@@ -245,17 +253,22 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         if np.isfinite(rec["error"]) and rec["error"] < float(config["start_error"]):
             break
         n = int(math.ceil(n * ratio))
-    # Phase 2: keep refining until the floor, the budget, or enough points at the floor.
-    floor_hits = 0
+    # Phase 2: refine until the roundoff floor, enough points in the asymptotic range, or the
+    # budget, whichever comes first.
+    start_error = float(config["start_error"])
+    target = int(config["target_points"])
     while True:
         last = records[max(records)]
-        if not np.isfinite(last["error"]) or last["error"] >= float(config["start_error"]):
+        if not np.isfinite(last["error"]) or last["error"] >= start_error:
             break  # never reached the asymptotic range within the budget
-        at_floor = last["error"] < tol.ROUNDOFF_MARGIN * last["rounding_level"] or (
+        if last["error"] < tol.ROUNDOFF_MARGIN * last["rounding_level"] or (
             last["error"] < tol.REFERENCE_MARGIN * ref_err
-        )
-        floor_hits += int(at_floor)
-        if floor_hits >= 2:
+        ):
+            break  # at the floor: smaller steps only measure rounding
+        frame = _frame(records)
+        kept = classify_points(frame.h.values, frame.error.values, frame.reference_error.values,
+                               frame.rounding_level.values, start_error) == ""
+        if kept.sum() >= target:
             break
         n = int(math.ceil(max(records) * ratio))
         if spent + n > budget:
@@ -265,7 +278,8 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
     for _ in range(2):
         frame = _frame(records)
         reasons = classify_points(frame.h.values, frame.error.values,
-                                  frame.reference_error.values, frame.rounding_level.values)
+                                  frame.reference_error.values, frame.rounding_level.values,
+                                  start_error)
         kept = np.flatnonzero(reasons == "")
         if kept.size >= tol.MIN_FIT_POINTS:
             break
@@ -285,7 +299,8 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
                 run(m)
     frame = _frame(records)
     frame["excluded"] = classify_points(frame.h.values, frame.error.values,
-                                        frame.reference_error.values, frame.rounding_level.values)
+                                        frame.reference_error.values, frame.rounding_level.values,
+                                        start_error)
     frame["in_fit"] = frame["excluded"] == ""
     frame["kind"] = "global"
     frame["tol"] = np.nan
@@ -316,20 +331,26 @@ def _local_sweep(stepper: Stepper, problem, y0: np.ndarray, global_frame: pd.Dat
     hs = h_max * 0.5 ** np.arange(0, 12)
     records = []
     nq = len(problem.newtonian.positions) if problem.newtonian is not None else None
+    # One reference call for every time any step size needs: t0 + j h for j = 1..k.
+    times = np.unique(np.concatenate([problem.t0 + h * np.arange(1, k + 1) for h in hs]))
+    ref = reference(problem, times, y0, t0=problem.t0)
+
+    def at(t: float) -> tuple[np.ndarray, float]:
+        i = int(np.argmin(np.abs(times - t)))
+        return ref.y[i], float(np.max(ref.error[i]))
+
     for h in hs:
-        times = problem.t0 + h * np.arange(0, k + 1)
-        ref = reference(problem, times[1:], y0, t0=problem.t0)
-        history = [y0] + [ref.y[i] for i in range(k - 1)]
+        history = [y0] + [at(problem.t0 + j * h)[0] for j in range(1, k)]
         try:
             y1 = stepper.step_from_history(problem, h=float(h), history=history, t0=problem.t0)
         except StepFailure as exc:
             records.append({"h": h, "error": np.nan, "message": str(exc)})
             continue
-        exact = ref.y[k - 1]
+        exact, exact_err = at(problem.t0 + k * h)
         scale = _scale(y0, exact)
         rec = {
             "h": float(h), "n_steps": 1, "error": _errors(y1, exact),
-            "reference_error": float(np.max(ref.error[k - 1])),
+            "reference_error": exact_err,
             "rounding_level": tol.EPS * scale, "message": "",
         }
         if nq:

@@ -1,0 +1,476 @@
+"""Long-term energy drift: the envelope of the energy error over 10^5-10^6 steps, classified.
+
+For one (stepper, problem) cell:
+
+1. A small ensemble (member 0 is the problem's own start) is integrated with the problem's step
+   size from `TIME_SCALES` (a fixed fraction of the problem's natural period, the same h for
+   every stepper of the problem) for `steps` steps; implicit steppers (a Newton solve per step,
+   10-30 times the cost of an explicit step) take `implicit_steps`. Adaptive steppers choose
+   their own steps: they run at their own tolerance with `adaptive_outputs` output steps over
+   `adaptive_periods` natural periods (each output step costs a solver call per member).
+2. The state is saved on a log-spaced grid of step indices (`samples_per_decade`) merged with a
+   uniform grid (`uniform_samples`). The relative energy error |E(t) - E0| / |E0| is taken as the
+   maximum over members; for problems with an angular momentum invariant the relative error of
+   L (largest component change over |L0|) is measured the same way.
+3. The envelope is the running maximum M(n) of the error, read on the log grid. Its growth
+   exponent is the Theil-Sen slope of log M against log n over the later decades: n from
+   max(n_end / 10^fit_decades, FIT_MIN_PERIODS natural periods) to n_end.
+   Classes (thresholds in `harness.tolerances`): `unstable` (non-finite, an error of order one,
+   or growth faster than linear), `linear` (drift proportional to t; `drift_slope` is the
+   Theil-Sen slope of M against t), `sqrt` (random-walk growth proportional to sqrt(t), the
+   signature of rounding), `bounded` (no secular trend).
+4. Verdicts. A stepper claimed symplectic must be `bounded`, or show a secular growth within
+   what rounding explains (Brouwer's law: rounding makes the energy error a random walk,
+   ~ sqrt(n) eps; HLW VIII.5): `as-claimed`, else `claim-false`. Pairs listed in `EXPECTATIONS`
+   must show their expected class (RK4 drifts linearly on Kepler: HLW I.2.3). Other pairs are
+   measured without a claim (`no-claim`). For central-force problems, steppers whose
+   structure conserves quadratic invariants (symplectic Runge-Kutta, splitting and Stormer
+   methods: HLW IV.2 and VI.4) must keep the angular momentum to rounding.
+
+References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), I.2-I.3
+(Kepler and the outer solar system), IX.3 (near-conservation of energy by symplectic methods),
+VIII.5 (rounding: Brouwer's law); course material 004_bfdbb1594143ed8b.txt (energy of the Kepler
+orbit under RK4 and symplectic integrators).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
+from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.stepper import AdaptiveStepper, StepFailure, Stepper
+
+__all__ = [
+    "EnergyExperiment",
+    "TimeScale",
+    "TIME_SCALES",
+    "EXPECTATIONS",
+    "Expectation",
+    "classify_drift",
+    "problem_table_cells",
+    "conserves_quadratic_invariants",
+    "ROW_COLUMNS",
+    "SUMMARY_COLUMNS",
+]
+
+
+@dataclass(frozen=True)
+class TimeScale:
+    """A problem's natural period and the number of fixed steps per period the experiments use."""
+
+    period: float
+    steps_per_period: int
+    reason: str
+
+    @property
+    def h(self) -> float:
+        return self.period / self.steps_per_period
+
+
+_TWO_PI = 2.0 * math.pi
+# Natural periods, and steps per period chosen so that every stable method resolves the motion
+# (h * frequency ~ 0.1) and its drift class shows within 10^4-10^5 steps.
+TIME_SCALES: dict[str, TimeScale] = {
+    "harmonic": TimeScale(_TWO_PI, 64, "period 2 pi (omega = 1); h omega = 0.098"),
+    "pendulum": TimeScale(
+        326.717261 / 50.0, 64, "true period 4K(sin^2(pi/8)) = 6.534 of the pi/4 swing"
+    ),
+    "pendulum-small": TimeScale(
+        314.280426 / 50.0, 64, "true period 6.286 of the pi/40 swing (~2 pi)"
+    ),
+    "kepler-circular": TimeScale(16.0 * math.pi, 64, "orbital period 16 pi (a = 4); h n = 0.098"),
+    "kepler-elliptic": TimeScale(
+        _TWO_PI, 256,
+        "orbital period 2 pi (a = 1, e = 0.6); 256 steps so the pericentre passage "
+        "(r = 0.4, speed 2: time scale 0.2) gets h v / r = 0.12",
+    ),
+    "henon-heiles": TimeScale(_TWO_PI, 64, "linearised frequencies 1: period 2 pi"),
+    "henon-heiles-chaotic": TimeScale(_TWO_PI, 64, "linearised frequencies 1: period 2 pi"),
+    "outer-solar-system": TimeScale(
+        4332.59, 100, "Jupiter's period, 4332.59 days; h = 43 days (HLW I.2.4 use 10-200 days)"
+    ),
+    "lennard-jones": TimeScale(0.4, 64, "fastest normal mode, period ~0.4 (25 periods on [0, 10])"),
+    "free-fall": TimeScale(1.0, 64, "the fall time scale of the t_span, 1"),
+}
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """The drift class a (stepper, problem) pair is expected to show, and why."""
+
+    drift_class: str
+    reason: str
+
+
+_RK_KEPLER = (
+    "explicit Runge-Kutta methods are neither symplectic nor symmetric: on the Kepler orbit "
+    "the energy error accumulates linearly in time (HLW I.2.3, Fig. 2.2; course file 004)"
+)
+EXPECTATIONS: dict[tuple[str, str], Expectation] = {
+    ("rk4", "kepler-elliptic"): Expectation("linear", _RK_KEPLER),
+    ("rk4", "kepler-circular"): Expectation("linear", _RK_KEPLER),
+    ("rk38", "kepler-elliptic"): Expectation("linear", _RK_KEPLER),
+}
+
+DRIFT_CLASSES = ("bounded", "sqrt", "linear", "unstable")
+
+ROW_COLUMNS = [
+    "stepper", "problem", "quantity", "step", "t", "error", "running_max", "h", "tol",
+    "ensemble_size", "wall_s", "message",
+]
+SUMMARY_COLUMNS = [
+    "stepper", "problem", "h", "tol", "steps", "t_end", "claimed_symplectic", "expected_class",
+    "max_rel_energy_error", "drift_class", "drift_exponent", "drift_slope", "secular_growth",
+    "rounding_growth", "fit_start", "max_rel_angular_momentum_error", "angular_momentum_class",
+    "angular_momentum_rounding", "angular_momentum_expected", "angular_momentum_conserved",
+    "verdict", "passed", "ensemble_size", "wall_s", "message",
+]
+
+
+# -- cells shared by the long-run experiments -----------------------------------------------------
+def problem_table_cells(
+    experiment: str,
+    steppers: Sequence[str],
+    problems: Sequence[str],
+    configured: Sequence[str],
+    applicable,
+) -> tuple[list[Cell], list[Skip]]:
+    """Cells for the (stepper, problem) pairs whose problem is in `configured` and passes
+    `applicable(problem) -> reason or None`; every other pair becomes a `Skip` with its reason."""
+    from harness.errors import IncompatibleError
+    from harness.registry import get_problem, get_stepper
+    from harness.stepper import check_compatible
+
+    cells: list[Cell] = []
+    skips: list[Skip] = []
+    for p in problems:
+        problem = get_problem(p)
+        reason = applicable(problem)
+        if reason is None and p not in configured:
+            reason = (
+                f"problem {p!r} is not in this experiment's problem set "
+                f"({', '.join(configured)}; config `problems`)"
+            )
+        for s in steppers:
+            stepper = get_stepper(s)
+            if reason is not None:
+                skips.append(Skip(experiment, s, p, reason))
+                continue
+            try:
+                check_compatible(stepper, problem)
+            except IncompatibleError as exc:
+                skips.append(Skip(experiment, s, p, str(exc)))
+                continue
+            cells.append(Cell(experiment, s, p))
+    return cells, skips
+
+
+def conserves_quadratic_invariants(stepper: Stepper) -> bool:
+    """True for methods whose structure conserves quadratic first integrals such as the angular
+    momentum of a central force: symplectic Runge-Kutta methods (b_i a_ij + b_j a_ji = b_i b_j,
+    HLW IV.2.1), drift/kick splittings (each drift and kick keeps q x v when a is parallel to q,
+    HLW IV.2.2) and Stormer's rule (velocity Verlet in two-step form, HLW I.1.4)."""
+    info = stepper.info
+    coeffs = stepper.coefficients
+    if not info.symplectic:
+        return False
+    if isinstance(coeffs, SplittingScheme | SecondOrderMultistep):
+        return True
+    if isinstance(coeffs, ButcherTableau):
+        b, A = coeffs.b, coeffs.A
+        M = b[:, None] * A + (b[:, None] * A).T - np.outer(b, b)
+        return bool(np.max(np.abs(M)) <= tol.COEFFICIENT_TOL * 10)
+    return info.family in ("splitting", "stormer")
+
+
+# -- classification -------------------------------------------------------------------------------
+def classify_drift(
+    steps: np.ndarray,
+    t: np.ndarray,
+    error: np.ndarray,
+    *,
+    fit_start: int,
+    checkpoints_per_decade: int = 20,
+) -> dict[str, Any]:
+    """Classify the envelope of a relative error sampled at step indices `steps` (times `t`).
+
+    Returns drift_class, drift_exponent (log-log slope of the running maximum over the fit
+    window), drift_slope (slope of the running maximum against t, per unit time),
+    secular_growth (rise of the running maximum across the fit window), max_error and the
+    checkpoints (step, running max) used."""
+    steps = np.asarray(steps, dtype=float)
+    t = np.asarray(t, dtype=float)
+    error = np.asarray(error, dtype=float)
+    out: dict[str, Any] = {
+        "drift_class": "unstable", "drift_exponent": float("nan"), "drift_slope": float("nan"),
+        "secular_growth": float("nan"), "max_error": float("nan"), "fit_start": int(fit_start),
+    }
+    finite = np.isfinite(error)
+    if not np.all(finite):
+        out["max_error"] = float("inf")
+        return out
+    out["max_error"] = float(np.max(error)) if error.size else float("nan")
+    if error.size == 0 or out["max_error"] >= tol.ENERGY_BLOWUP_ERROR:
+        return out
+    running = np.maximum.accumulate(np.maximum(error, tol.ENERGY_ERROR_FLOOR))
+    n_end = float(steps[-1])
+    start = float(min(max(fit_start, 1), n_end / 10.0))
+    decades = math.log10(n_end / start)
+    points = max(5, int(round(decades * checkpoints_per_decade)) + 1)
+    marks = np.unique(np.geomspace(start, n_end, points))
+    idx = np.searchsorted(steps, marks, side="right") - 1
+    idx = np.unique(idx[idx >= 0])
+    if idx.size < 3:
+        out["drift_class"] = "bounded"
+        return out
+    from scipy import stats
+
+    x, m = steps[idx], running[idx]
+    exponent = float(stats.theilslopes(np.log(m), np.log(x))[0])
+    slope = float(stats.theilslopes(m, t[idx])[0])
+    out.update(drift_exponent=exponent, drift_slope=slope,
+               secular_growth=float(m[-1] - m[0]), fit_start=int(x[0]))
+    if exponent > tol.DRIFT_UNSTABLE_EXPONENT:
+        out["drift_class"] = "unstable"
+    elif exponent >= tol.DRIFT_LINEAR_EXPONENT:
+        out["drift_class"] = "linear"
+    elif exponent >= tol.DRIFT_SQRT_EXPONENT:
+        out["drift_class"] = "sqrt"
+    else:
+        out["drift_class"] = "bounded"
+    return out
+
+
+def rounding_growth(n_steps: float) -> float:
+    """What rounding alone can add to a relative invariant error over n steps: a random walk of
+    ENERGY_ROUNDING_ULPS ulps per step (Brouwer's law), ENERGY_ROUNDING_ULPS * sqrt(n) * eps."""
+    return tol.ENERGY_ROUNDING_ULPS * math.sqrt(max(n_steps, 1.0)) * tol.EPS
+
+
+# -- the experiment -------------------------------------------------------------------------------
+class EnergyExperiment(Experiment):
+    name = "energy"
+    description = "Long-run energy (and angular momentum) error envelope: bounded, sqrt, linear or unstable."
+    default_config: Mapping[str, Any] = {
+        "problems": ["harmonic", "pendulum", "kepler-circular", "kepler-elliptic", "henon-heiles",
+                     "outer-solar-system"],
+        "steps": 100_000,
+        "implicit_steps": 10_000,
+        "adaptive_outputs": 200,
+        "adaptive_periods": 20,
+        "adaptive_ensemble": 1,
+        "ensemble": 2,
+        "seed": 0,
+        "fit_decades": 2.0,
+        "samples_per_decade": 40,
+        "uniform_samples": 2000,
+    }
+    quick_config: Mapping[str, Any] = {
+        "problems": ["harmonic", "kepler-elliptic"],
+        "steps": 10_000,
+        "implicit_steps": 2_000,
+        "adaptive_outputs": 50,
+        "adaptive_periods": 5,
+        "ensemble": 1,
+    }
+
+    def cells(self, steppers, problems, config):
+        def applicable(problem) -> str | None:
+            if not problem.conservative or "energy" not in problem.invariants:
+                return f"problem {problem.name!r} is not conservative (no conserved energy to follow)"
+            if problem.name not in TIME_SCALES:
+                return f"problem {problem.name!r} has no natural time scale in energy.TIME_SCALES"
+            return None
+
+        return problem_table_cells(self.name, steppers, problems, list(config["problems"]), applicable)
+
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_problem, get_stepper
+
+        stepper = get_stepper(cell.stepper)
+        problem = get_problem(cell.problem)
+        return _run(stepper, problem, config)
+
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_stepper
+
+        if rows.empty:
+            return pd.DataFrame(columns=SUMMARY_COLUMNS)
+        out = [_summarize_cell(get_stepper(s), p, g, config)
+               for (s, p), g in rows.groupby(["stepper", "problem"], sort=False)]
+        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+
+
+def _plan(stepper: Stepper, scale: TimeScale, config: Mapping[str, Any]) -> tuple[float, int, float]:
+    """(h, n_steps, tolerance or NaN) for this stepper on a problem of this time scale."""
+    if isinstance(stepper, AdaptiveStepper):
+        n = int(config["adaptive_outputs"])
+        return float(config["adaptive_periods"]) * scale.period / n, n, float(stepper.tol)
+    n = int(config["steps"]) if stepper.info.explicit else int(config["implicit_steps"])
+    return scale.h, n, float("nan")
+
+
+def save_grid(n: int, per_decade: int, uniform: int) -> np.ndarray:
+    """Step indices 0..n: log-spaced (`per_decade` per decade) merged with `uniform` even ones."""
+    logs = np.round(np.logspace(0.0, math.log10(n), max(2, int(per_decade * math.log10(max(n, 10))))))
+    even = np.round(np.linspace(0, n, min(uniform, n) + 1))
+    return np.unique(np.concatenate([[0, n], logs, even]).astype(np.int64))
+
+
+def _invariant_errors(problem, y: np.ndarray) -> dict[str, np.ndarray]:
+    """Relative errors (nt,) of energy and, where declared, angular momentum, max over members."""
+    nt, dim, N = y.shape
+    flat = np.ascontiguousarray(np.transpose(y, (1, 0, 2)).reshape(dim, nt * N))
+    values = problem.invariant_values(flat)
+    out: dict[str, np.ndarray] = {}
+    with np.errstate(all="ignore"):
+        E = values["energy"].reshape(nt, N)
+        E0 = E[0]
+        rel = np.abs(E - E0) / np.maximum(np.abs(E0), tol.EPS)
+        out["energy"] = _max_members(rel)
+        keys = sorted(k for k in values if k.startswith("angular_momentum"))
+        if keys:
+            L = np.stack([values[k].reshape(nt, N) for k in keys])  # (components, nt, N)
+            L0 = L[:, :1, :]
+            norm0 = np.sqrt(np.sum(L0 * L0, axis=0))
+            dev = np.max(np.abs(L - L0), axis=0) / np.maximum(norm0, tol.EPS)
+            out["angular_momentum"] = _max_members(dev)
+    return out
+
+
+def _max_members(rel: np.ndarray) -> np.ndarray:
+    bad = ~np.isfinite(rel)
+    m = np.max(np.where(bad, 0.0, rel), axis=1)
+    return np.where(bad.any(axis=1), np.inf, m)
+
+
+def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
+    scale = TIME_SCALES[problem.name]
+    h, n, tolerance = _plan(stepper, scale, config)
+    size = int(config["adaptive_ensemble" if isinstance(stepper, AdaptiveStepper) else "ensemble"])
+    y0 = problem.ensemble(size, seed=int(config["seed"]))
+    save = save_grid(n, int(config["samples_per_decade"]), int(config["uniform_samples"]))
+    started = time.perf_counter()
+    message = ""
+    try:
+        tr = stepper.integrate(problem, h=h, n_steps=n, y0=y0, save_steps=save)
+        steps, times, states = tr.steps, tr.t, tr.y
+        if not tr.finite:
+            message = "the state overflowed (non-finite)"
+    except StepFailure as exc:
+        steps, times = np.array([0, n]), problem.t0 + np.array([0, n]) * h
+        states = np.stack([y0, np.full_like(y0, np.nan)])
+        message = f"step failure: {exc}"
+    wall = time.perf_counter() - started
+    errors = _invariant_errors(problem, states)
+    frames = []
+    for quantity, err in errors.items():
+        frames.append(pd.DataFrame({
+            "quantity": quantity, "step": steps, "t": times, "error": err,
+            "running_max": np.maximum.accumulate(np.where(np.isfinite(err), err, np.inf)),
+        }))
+    out = pd.concat(frames, ignore_index=True)
+    out["stepper"] = stepper.info.name
+    out["problem"] = problem.name
+    out["h"] = h
+    out["tol"] = tolerance
+    out["ensemble_size"] = size
+    out["wall_s"] = wall
+    out["message"] = message
+    out["steps_per_period"] = scale.period / h
+    return out[ROW_COLUMNS + ["steps_per_period"]]
+
+
+def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> dict:
+    info = stepper.info
+    first = g.iloc[0]
+    steps_per_period = float(first["steps_per_period"])
+    message = str(first["message"] or "")
+    energy = g[g.quantity == "energy"].sort_values("step")
+    n_end = int(energy.step.iloc[-1])
+    fit_start = max(n_end / 10.0 ** float(config["fit_decades"]),
+                    tol.FIT_MIN_PERIODS * steps_per_period)
+    e = classify_drift(energy.step.values, energy.t.values, energy.error.values,
+                       fit_start=int(fit_start))
+    if message.startswith("step failure"):
+        e["drift_class"] = "unstable"  # an implicit solve broke down: the motion is destroyed
+    expected = EXPECTATIONS.get((info.name, problem))
+    limit = rounding_growth(n_end)
+    rec = {
+        "stepper": info.name, "problem": problem, "h": float(first["h"]), "tol": float(first["tol"]),
+        "steps": n_end, "t_end": float(energy.t.iloc[-1]),
+        "claimed_symplectic": bool(info.symplectic),
+        "expected_class": expected.drift_class if expected else "",
+        "max_rel_energy_error": e["max_error"], "drift_class": e["drift_class"],
+        "drift_exponent": e["drift_exponent"], "drift_slope": e["drift_slope"],
+        "secular_growth": e["secular_growth"], "rounding_growth": limit,
+        "fit_start": e["fit_start"],
+        "max_rel_angular_momentum_error": np.nan, "angular_momentum_class": "",
+        "angular_momentum_rounding": np.nan, "angular_momentum_expected": False,
+        "angular_momentum_conserved": None,
+        "ensemble_size": int(first["ensemble_size"]), "wall_s": float(first["wall_s"]),
+        "message": message,
+    }
+    reasons: list[str] = []
+    passed = True
+    if info.symplectic:
+        ok = e["drift_class"] == "bounded" or (
+            e["drift_class"] in ("sqrt", "linear") and e["secular_growth"] <= limit
+        )
+        verdict = "as-claimed" if ok else "claim-false"
+        if not ok:
+            passed = False
+            reasons.append(
+                f"claimed symplectic but the energy error is {e['drift_class']} (growth "
+                f"{e['secular_growth']:.3g} over the fit window, rounding explains {limit:.3g})"
+            )
+    elif expected is not None:
+        ok = e["drift_class"] == expected.drift_class
+        verdict = "as-expected" if ok else "unexpected"
+        if not ok:
+            passed = False
+            reasons.append(f"expected {expected.drift_class} ({expected.reason}), measured "
+                           f"{e['drift_class']}")
+    else:
+        verdict = "no-claim"
+    L = g[g.quantity == "angular_momentum"].sort_values("step")
+    problem_obj = _problem(problem)
+    if len(L):
+        lc = classify_drift(L.step.values, L.t.values, L.error.values, fit_start=int(fit_start))
+        L_limit = tol.ANGULAR_MOMENTUM_ROUNDING_ULPS * n_end * tol.EPS
+        rec.update(max_rel_angular_momentum_error=lc["max_error"],
+                   angular_momentum_class=lc["drift_class"], angular_momentum_rounding=L_limit)
+        conserved = bool(np.isfinite(lc["max_error"]) and lc["max_error"] <= L_limit)
+        rec["angular_momentum_conserved"] = conserved
+        if problem_obj.central_force and conserves_quadratic_invariants(stepper):
+            rec["angular_momentum_expected"] = True
+            if not conserved:
+                passed = False
+                verdict = "claim-false"
+                reasons.append(
+                    f"angular momentum error {lc['max_error']:.3g} exceeds the rounding bound "
+                    f"{L_limit:.3g} of a method that conserves quadratic invariants"
+                )
+    rec["verdict"] = verdict
+    rec["passed"] = passed
+    if reasons:
+        rec["message"] = "; ".join([m for m in [message] if m] + reasons)
+    return rec
+
+
+def _problem(name: str):
+    from harness.registry import get_problem
+
+    return get_problem(name)
+
+
+register_experiment(EnergyExperiment())

@@ -1,0 +1,606 @@
+"""Linear stability (the lambda h test), measured from the outside and checked against theory.
+
+First-order steppers run Dahlquist's test equation y' = lambda y (registry problem `dahlquist`,
+state (Re y, Im y), parameters lambda_re, lambda_im) with h = 1, so z = lambda h = lambda:
+
+1. Black-box probe. The recurrence y_k = sum_j C_j y_j (2x2 real blocks C_j, k = the
+   stepper's `history_length`, 1 for one-step methods) is read off by stepping unit vectors of
+   the history through the public `Stepper.step_from_history`: every grid point and every unit
+   vector is one ensemble member, with its own lambda, so the whole complex grid is one call.
+   The amplification is the spectral radius of the block companion matrix (|R(z)| for a
+   one-step method, whose C_0 is R(z) written as a real 2x2 block).
+2. Analytic, where the coefficients allow (`harness.theory`): R(z) = 1 + z b^T (I - zA)^{-1} e
+   for Runge-Kutta tableaux, c_j = -(alpha_j - z beta_j) / (alpha_k - z beta_k) and the root
+   condition for linear multistep methods. Probe and formula must agree entry by entry to
+   STABILITY_AGREEMENT_TOL (relative to max(1, |analytic|)) on the whole grid; comparing the
+   recurrence coefficients rather than root moduli keeps the test sharp where roots are nearly
+   double (a root there moves by sqrt(eps)).
+3. Real and imaginary stability intervals by root finding on the probe itself
+   (`harness.theory.stability_boundary`: a scan for the first crossing of 1, then Brent's
+   method), compared with the same figures from the formula.
+
+Newtonian steppers run x'' = -omega^2 x (registry problem `harmonic`, omega = 1, so h = h
+omega). The one-step propagator on (x, v) comes from stepping the two unit states; a stepper
+with a longer history (`history_length` > 1) is probed by unit history vectors; a two-step
+position recurrence (a `SecondOrderMultistep` table run by a stepper without a history hook,
+e.g. Stormer's rule with a Taylor start) is identified from the observed positions x_0..x_2 of
+the two unit starts and confirmed on x_3, and its companion matrix acts on (x_(n-1), x_n).
+`hw_limit` is the largest h omega with spectral radius <= 1 (+ STABILITY_AMPLIFICATION_TOL) on
+(0, h omega], by root finding; the formula side uses `splitting_propagator` or the roots of
+sum_j (alpha_j + (h omega)^2 beta_j) zeta^j.
+
+A claim in `info.extra['stability']` ({'real_interval': ..., 'imag_interval': ...} or
+{'hw_limit': ...}; float('inf') for unbounded) is compared with the probe's figure.
+Verdicts: `agrees`, `disagree` (probe and formula differ: the implementation is not the method
+its coefficients describe), `claim-false` (the declared figure is wrong), `measured` (nothing
+to compare with). Adaptive steppers are skipped (their step is not a fixed linear map).
+
+References: Hairer & Wanner, *Solving ODEs II*, IV.2 (stability function, A-stability) and V.1
+(root condition); Hairer, Lubich & Wanner, *Geometric Numerical Integration*, I.5 (linear
+stability of Verlet); the course's ODE notes (course-material file 004, the lambda h test).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import theory
+from harness import tolerances as tol
+from harness.coefficients import (
+    ButcherTableau,
+    LinearMultistep,
+    SecondOrderMultistep,
+    SplittingScheme,
+)
+from harness.errors import InputError
+from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.stepper import AdaptiveStepper, StepFailure, Stepper
+
+__all__ = [
+    "StabilityExperiment",
+    "FirstOrderProbe",
+    "NewtonianProbe",
+    "GRID_COLUMNS",
+    "SUMMARY_COLUMNS",
+    "FIRST_ORDER_PROBLEM",
+    "NEWTONIAN_PROBLEM",
+]
+
+FIRST_ORDER_PROBLEM = "dahlquist"
+NEWTONIAN_PROBLEM = "harmonic"
+
+GRID_COLUMNS = ["stepper", "problem", "kind", "z_re", "z_im", "hw", "abs_r_probe", "abs_r_analytic"]
+SUMMARY_COLUMNS = [
+    "stepper", "problem", "form", "probe", "real_interval", "imag_interval", "hw_limit",
+    "analytic_real_interval", "analytic_imag_interval", "analytic_hw_limit", "analytic_agrees",
+    "max_probe_analytic_diff", "claimed", "verdict", "passed", "unbounded", "search_limit",
+    "message", "wall_s",
+]
+
+_CLAIM_KEYS = {"first-order": ("real_interval", "imag_interval"), "newtonian": ("hw_limit",)}
+_FAILURES = (StepFailure, np.linalg.LinAlgError)
+
+
+# =============================================================================================
+# Probes
+# =============================================================================================
+def _block_companion(C: np.ndarray) -> np.ndarray:
+    """Companion matrix of y_k = sum_j C_j y_j: C shaped (M, k, d, d) -> (M, k d, k d) acting
+    on the stacked history (y_0, ..., y_{k-1})."""
+    M, k, d, _ = C.shape
+    out = np.zeros((M, k * d, k * d))
+    for i in range(k - 1):
+        out[:, i * d : (i + 1) * d, (i + 1) * d : (i + 2) * d] = np.eye(d)
+    for j in range(k):
+        out[:, (k - 1) * d :, j * d : (j + 1) * d] = C[:, j]
+    return out
+
+
+def _split_on_failure(run: Callable[[np.ndarray], np.ndarray], idx: np.ndarray, out: np.ndarray):
+    """Run `run` on points `idx`; when a step fails for the ensemble, bisect so only the
+    failing points are marked NaN (an implicit solve exactly at a pole of R, say)."""
+    try:
+        out[idx] = run(idx)
+    except _FAILURES:
+        if idx.size == 1:
+            out[idx] = np.nan
+            return
+        half = idx.size // 2
+        _split_on_failure(run, idx[:half], out)
+        _split_on_failure(run, idx[half:], out)
+
+
+class FirstOrderProbe:
+    """Black-box recurrence of a first-order stepper on y' = lambda y with h = 1."""
+
+    chunk_points = 4096
+
+    def __init__(self, stepper: Stepper, problem):
+        self.stepper = stepper
+        self.problem = problem
+        self.k = int(getattr(stepper, "history_length", 1))
+        names = list(problem.parameters)
+        if problem.dim != 2 or "lambda_re" not in names or "lambda_im" not in names:
+            raise InputError(
+                f"problem {problem.name!r} must be the complex test equation with state "
+                f"(Re y, Im y) and parameters lambda_re, lambda_im"
+            )
+        self._i_re, self._i_im = names.index("lambda_re"), names.index("lambda_im")
+        self._defaults = problem.parameter_values
+
+    def _pars(self, z: np.ndarray) -> np.ndarray:
+        P = np.repeat(self._defaults[:, None], z.size, axis=1)
+        P[self._i_re] = z.real
+        P[self._i_im] = z.imag
+        return P
+
+    def _blocks_once(self, z: np.ndarray) -> np.ndarray:
+        k, d = self.k, 2
+        m = z.size
+        per = k * d
+        N = m * per
+        history = [np.zeros((d, N)) for _ in range(k)]
+        for j in range(k):
+            for a in range(d):
+                history[j][a, np.arange(m) * per + j * d + a] = 1.0
+        pars = np.repeat(self._pars(z), per, axis=1)
+        if N < 2 or np.all(pars == pars[:, :1]):
+            # one distinct lambda would be compiled in as a constant (a new compile per value):
+            # a padding member with another lambda keeps the runtime-parameter function
+            pad = pars[:, :1] + 1.0
+            pars = np.concatenate([pars, pad], axis=1)
+            history = [np.concatenate([hj, np.zeros((d, 1))], axis=1) for hj in history]
+        y = self.stepper.step_from_history(
+            self.problem, h=1.0, history=history, t0=self.problem.t0, pars=pars
+        )[:, :N]
+        # member m*per + j*d + a holds column a of C_j at point m
+        return y.reshape(d, m, k, d).transpose(1, 2, 0, 3)
+
+    def blocks(self, z: Any) -> np.ndarray:
+        """C_j at each z: shape (M, k, 2, 2); NaN where the step failed."""
+        z = np.asarray(z, dtype=complex).reshape(-1)
+        out = np.empty((z.size, self.k, 2, 2))
+        for start in range(0, z.size, self.chunk_points):
+            idx = np.arange(start, min(start + self.chunk_points, z.size))
+            _split_on_failure(lambda i: self._blocks_once(z[i]), idx, out)
+        return out
+
+    def amplification(self, z: Any) -> np.ndarray:
+        """Spectral radius of the block companion matrix (|R(z)| for one-step methods)."""
+        z = np.asarray(z, dtype=complex)
+        C = self.blocks(z)
+        if self.k == 1:
+            r = np.hypot(C[:, 0, 0, 0], C[:, 0, 1, 0])  # |R|: C_0 = [[Re R, -Im R], [Im R, Re R]]
+        else:
+            r = theory.spectral_radius(_block_companion(C))
+        return r.reshape(z.shape)
+
+
+class NewtonianProbe:
+    """Black-box propagator of a Newtonian stepper on x'' = -x (omega = 1), step h = h omega.
+
+    Modes: 'one-step' (unit states (x, v) through one step), 'history' (unit history vectors
+    through `step_from_history`), 'position-recurrence' (two-step position recurrence
+    x_2 = c_0 x_0 + c_1 x_1 identified from the two unit starts, confirmed on x_3).
+    """
+
+    def __init__(self, stepper: Stepper, problem):
+        self.stepper = stepper
+        self.problem = problem
+        if problem.newtonian is None or len(problem.newtonian.positions) != 1:
+            raise InputError(f"problem {problem.name!r} must be the 1-D oscillator x'' = -x")
+        self.k = int(getattr(stepper, "history_length", 1))
+        coeffs = stepper.coefficients
+        if self.k > 1:
+            self.mode = "history"
+        elif isinstance(coeffs, SecondOrderMultistep) and coeffs.steps == 2:
+            self.mode = "position-recurrence"
+        elif isinstance(coeffs, SecondOrderMultistep | LinearMultistep) and coeffs.steps > 1:
+            raise InputError(
+                f"stepper {stepper.info.name!r} is a {coeffs.steps}-step method without a history "
+                "hook (`history_length`); its propagator cannot be probed"
+            )
+        else:
+            self.mode = "one-step"
+        self.recurrence_mismatch = 0.0
+        self.last_blocks: np.ndarray | None = None  # C_j of the last 'history' probe, (k, 2, 2)
+
+    def matrix(self, hw: float) -> np.ndarray:
+        """The propagator at step h omega = `hw`: (x, v) -> (x, v) for 'one-step'; the block
+        companion for 'history'; [[0, 1], [c_0, c_1]] on (x_(n-1), x_n) for
+        'position-recurrence'."""
+        s, p = self.stepper, self.problem
+        if self.mode == "one-step":
+            return s.step_from_history(p, h=hw, history=[np.eye(2)], t0=p.t0)
+        if self.mode == "history":
+            k, d = self.k, 2
+            N = k * d
+            history = [np.zeros((d, N)) for _ in range(k)]
+            for j in range(k):
+                for a in range(d):
+                    history[j][a, j * d + a] = 1.0
+            y = s.step_from_history(p, h=hw, history=history, t0=p.t0)
+            C = y.reshape(d, 1, k, d).transpose(1, 2, 0, 3)
+            self.last_blocks = C[0]
+            return _block_companion(C)[0]
+        tr = s.integrate(p, h=hw, n_steps=3, y0=np.eye(2), t0=p.t0, save_steps=[0, 1, 2, 3])
+        X = tr.y[:, 0, :]  # positions, (4 steps, 2 starts)
+        c = np.linalg.solve(np.stack([X[0], X[1]], axis=1), X[2])
+        pred = c[0] * X[1] + c[1] * X[2]
+        mismatch = float(np.max(np.abs(pred - X[3])) / max(1.0, float(np.max(np.abs(X[3])))))
+        self.recurrence_mismatch = max(self.recurrence_mismatch, mismatch)
+        return np.array([[0.0, 1.0], [c[0], c[1]]])
+
+    def amplification(self, hw: Any) -> np.ndarray:
+        hw = np.asarray(hw, dtype=float)
+        out = np.empty(hw.size)
+        for i, x in enumerate(hw.reshape(-1)):
+            try:
+                out[i] = theory.spectral_radius(self.matrix(float(x)))
+            except _FAILURES:
+                out[i] = np.nan
+        return out.reshape(hw.shape)
+
+
+# =============================================================================================
+# Comparison with the coefficients
+# =============================================================================================
+def _complex_block(c: np.ndarray) -> np.ndarray:
+    """Complex numbers (...) -> their real 2x2 multiplication blocks (..., 2, 2)."""
+    out = np.empty((*c.shape, 2, 2))
+    out[..., 0, 0] = c.real
+    out[..., 0, 1] = -c.imag
+    out[..., 1, 0] = c.imag
+    out[..., 1, 1] = c.real
+    return out
+
+
+def _analytic_blocks(coeffs: Any, z: np.ndarray, k: int) -> np.ndarray | None:
+    """The recurrence blocks the coefficients predict at each z, shaped like the probe's, or
+    None when the coefficients do not describe a first-order recurrence of length k."""
+    if isinstance(coeffs, ButcherTableau) and k == 1:
+        return _complex_block(theory.rk_stability_function(coeffs, z))[:, None]
+    if isinstance(coeffs, LinearMultistep) and coeffs.steps == k:
+        with np.errstate(all="ignore"):
+            lead = coeffs.alpha[-1] - z * coeffs.beta[-1]
+            c = -(coeffs.alpha[None, :-1] - z[:, None] * coeffs.beta[None, :-1]) / lead[:, None]
+        return _complex_block(c)
+    return None
+
+
+def _first_order_analytic_amp(coeffs: Any, z: np.ndarray) -> np.ndarray | None:
+    if isinstance(coeffs, ButcherTableau):
+        return np.abs(theory.rk_stability_function(coeffs, z))
+    if isinstance(coeffs, LinearMultistep):
+        return theory.lmm_amplification(coeffs, z)
+    return None
+
+
+def _relative_diff(probe: np.ndarray, analytic: np.ndarray) -> tuple[float, int, int]:
+    """max |probe - analytic| / max(1, |analytic|) per point over points where the analytic
+    value is finite; also the number of such points where the probe failed, and the number of
+    points excluded (poles of the formula)."""
+    axes = tuple(range(1, analytic.ndim))
+    finite_a = np.all(np.isfinite(analytic), axis=axes)
+    finite_p = np.all(np.isfinite(probe), axis=axes)
+    both = finite_a & finite_p
+    if both.any():
+        scale = np.maximum(1.0, np.max(np.abs(analytic[both]), axis=axes))
+        diff = float(np.max(np.max(np.abs(probe[both] - analytic[both]), axis=axes) / scale))
+    else:
+        diff = 0.0
+    return diff, int(np.sum(finite_a & ~finite_p)), int(np.sum(~finite_a))
+
+
+def _intervals_agree(a: float, b: float) -> bool:
+    if math.isinf(a) or math.isinf(b):
+        return math.isinf(a) and math.isinf(b)
+    return abs(a - b) <= tol.STABILITY_INTERVAL_AGREEMENT
+
+
+def _claim_check(claim: Any, measured: Mapping[str, float], form: str) -> tuple[bool | None, str]:
+    """(claim holds?, message). None when there is no claim."""
+    if claim is None:
+        return None, ""
+    if not isinstance(claim, Mapping):
+        return False, f"info.extra['stability'] must be a mapping, got {type(claim).__name__}"
+    problems = []
+    checked = 0
+    for key, value in claim.items():
+        if key not in _CLAIM_KEYS[form]:
+            problems.append(f"claim {key!r} is not a {form} figure (known: {_CLAIM_KEYS[form]})")
+            continue
+        try:
+            c = float(value)
+        except (TypeError, ValueError):
+            problems.append(f"claimed {key} {value!r} is not a number")
+            continue
+        m = measured[key]
+        checked += 1
+        if math.isinf(c) or math.isinf(m):
+            ok = math.isinf(c) and math.isinf(m)
+        else:
+            ok = abs(c - m) <= tol.STABILITY_CLAIM_RTOL * max(abs(m), 1e-3)
+        if not ok:
+            problems.append(f"claimed {key} {c:.10g}, measured {m:.10g}")
+    return (not problems and checked > 0), "; ".join(problems)
+
+
+# =============================================================================================
+# The experiment
+# =============================================================================================
+def _check_config(config: Mapping[str, Any]) -> dict:
+    out = dict(config)
+    for key in ("grid", "hw_grid"):
+        v = out[key]
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or not 3 <= v <= 1001:
+            raise InputError(f"`{key}` must be a whole number in [3, 1001], got {v!r}")
+    for key in ("im_max", "search_limit", "hw_search_limit", "hw_grid_max", "scan_step",
+                "hw_scan_step"):
+        v = out[key]
+        if not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+            raise InputError(f"`{key}` must be a positive finite number, got {v!r}")
+    lo, hi = out["re_min"], out["re_max"]
+    if not all(isinstance(v, int | float) and math.isfinite(v) for v in (lo, hi)) or lo >= hi:
+        raise InputError(f"`re_min` must be below `re_max` (both finite), got {lo!r} and {hi!r}")
+    for key, lim in (("scan_step", "search_limit"), ("hw_scan_step", "hw_search_limit")):
+        if out[key] > min(1.0, out[lim]):
+            raise InputError(f"`{key}` must be at most min(1, `{lim}`), got {out[key]!r}")
+    return out
+
+
+class StabilityExperiment(Experiment):
+    name = "stability"
+    description = (
+        "Linear stability: |R(z)| over the complex lambda h plane, real/imaginary intervals and "
+        "h omega limits by root finding, probe against the coefficients' formula."
+    )
+    default_config: Mapping[str, Any] = {
+        "re_min": -5.0, "re_max": 1.0, "im_max": 4.0, "grid": 121,
+        "search_limit": tol.STABILITY_SEARCH_LIMIT,
+        "scan_step": tol.STABILITY_SCAN_STEP,
+        "hw_grid_max": 4.0, "hw_grid": 201, "hw_search_limit": tol.STABILITY_HW_SEARCH_LIMIT,
+        "hw_scan_step": tol.STABILITY_SCAN_STEP,
+    }
+    # the quick run scans h omega (one call per point) more coarsely: gaps narrower than the
+    # scan step go unseen, the limit itself is still root-found to STABILITY_XTOL
+    quick_config: Mapping[str, Any] = {"grid": 61, "hw_grid": 81, "hw_scan_step": 0.05}
+
+    def cells(
+        self, steppers: Sequence[str], problems: Sequence[str], config: Mapping[str, Any]
+    ) -> tuple[list[Cell], list[Skip]]:
+        """One cell per stepper; `problems` is ignored (the test equations are fixed)."""
+        from harness.registry import get_stepper
+        from harness.registry import problems as problem_registry
+
+        cells, skips = [], []
+        for s in steppers:
+            stepper = get_stepper(s)
+            p = NEWTONIAN_PROBLEM if stepper.info.form == "newtonian" else FIRST_ORDER_PROBLEM
+            if isinstance(stepper, AdaptiveStepper) or stepper.info.adaptive:
+                skips.append(Skip(self.name, s, p, "adaptive stepper: its step is not a fixed "
+                                  "linear map of lambda h, so it has no stability function"))
+                continue
+            if p not in problem_registry:
+                skips.append(Skip(self.name, s, p, f"test problem {p!r} is not registered"))
+                continue
+            coeffs = stepper.coefficients
+            k = int(getattr(stepper, "history_length", 1))
+            steps = getattr(coeffs, "steps", 1)
+            if isinstance(coeffs, LinearMultistep) and steps > k:
+                skips.append(Skip(self.name, s, p, f"{steps}-step method without a history hook "
+                                  f"(history_length = {k}): its recurrence cannot be probed"))
+                continue
+            cells.append(Cell(self.name, s, p))
+        return cells, skips
+
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_problem, get_stepper
+
+        config = _check_config({**self.default_config, **dict(config)})
+        stepper = get_stepper(cell.stepper)
+        problem = get_problem(cell.problem)
+        started = time.perf_counter()
+        if stepper.info.form == "newtonian":
+            grid, summary = _run_newtonian(stepper, problem, config)
+        else:
+            grid, summary = _run_first_order(stepper, problem, config)
+        summary["wall_s"] = time.perf_counter() - started
+        summary.update(stepper=stepper.info.name, problem=problem.name, kind="summary")
+        grid["stepper"] = stepper.info.name
+        grid["problem"] = problem.name
+        return pd.concat([grid, pd.DataFrame([summary])], ignore_index=True)
+
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        if rows.empty or "kind" not in rows:
+            return pd.DataFrame(columns=SUMMARY_COLUMNS)
+        out = rows[rows["kind"] == "summary"].reset_index(drop=True)
+        for col in SUMMARY_COLUMNS:
+            if col not in out:
+                out[col] = None
+        out = out[SUMMARY_COLUMNS].copy()
+        out["passed"] = out["passed"].astype(bool)
+        return out
+
+
+def _verdict(agrees: bool | None, claim_ok: bool | None) -> str:
+    if agrees is False:
+        return "disagree"
+    if claim_ok is False:
+        return "claim-false"
+    if agrees is None and claim_ok is None:
+        return "measured"
+    return "agrees"
+
+
+def _unbounded(figures: Mapping[str, float]) -> str:
+    return ",".join(k for k, v in figures.items() if v is not None and math.isinf(v))
+
+
+def _run_first_order(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, dict]:
+    probe = FirstOrderProbe(stepper, problem)
+    coeffs = stepper.coefficients
+    n = int(config["grid"])
+    re = np.linspace(config["re_min"], config["re_max"], n)
+    im = np.linspace(-config["im_max"], config["im_max"], n)
+    Z = (re[None, :] + 1j * im[:, None]).reshape(-1)
+    C = probe.blocks(Z)
+    if probe.k == 1:
+        abs_probe = np.hypot(C[:, 0, 0, 0], C[:, 0, 1, 0])
+    else:
+        abs_probe = theory.spectral_radius(_block_companion(C))
+    abs_analytic = _first_order_analytic_amp(coeffs, Z)
+    grid = pd.DataFrame({
+        "kind": "grid", "z_re": Z.real, "z_im": Z.imag, "abs_r_probe": abs_probe,
+        "abs_r_analytic": abs_analytic if abs_analytic is not None else np.nan,
+    })
+    limit = float(config["search_limit"])
+    step = float(config["scan_step"])
+    real_iv = theory.real_stability_interval(probe.amplification, limit=limit, scan_step=step)
+    imag_iv = theory.imag_stability_interval(probe.amplification, limit=limit, scan_step=step)
+    messages = []
+    agrees: bool | None = None
+    diff = math.nan
+    a_real = a_imag = math.nan
+    expected = _analytic_blocks(coeffs, Z, probe.k)
+    if expected is not None:
+        diff, failed, poles = _relative_diff(C, expected)
+        a = theory.analytic_stability(coeffs, limit=limit)
+        a_real, a_imag = a["real_interval"], a["imag_interval"]
+        agrees = (diff <= tol.STABILITY_AGREEMENT_TOL and failed == 0
+                  and _intervals_agree(real_iv, a_real) and _intervals_agree(imag_iv, a_imag))
+        if diff > tol.STABILITY_AGREEMENT_TOL:
+            messages.append(f"probe differs from the coefficients' formula by {diff:.3g} "
+                            f"(allowed {tol.STABILITY_AGREEMENT_TOL:g})")
+        if failed:
+            messages.append(f"the step failed at {failed} grid point(s) where the formula is finite")
+        if poles:
+            messages.append(f"{poles} grid point(s) at a pole of the formula left out")
+        for key, m, f in (("real interval", real_iv, a_real), ("imaginary interval", imag_iv, a_imag)):
+            if not _intervals_agree(m, f):
+                messages.append(f"{key}: probe {m:.10g}, formula {f:.10g}")
+    elif coeffs is not None:
+        messages.append(f"no stability formula for coefficients of type {type(coeffs).__name__} "
+                        f"with history length {probe.k}")
+    claim = stepper.info.extra.get("stability")
+    claim_ok, claim_msg = _claim_check(
+        claim, {"real_interval": real_iv, "imag_interval": imag_iv}, "first-order")
+    if claim_msg:
+        messages.append(claim_msg)
+    verdict = _verdict(agrees, claim_ok)
+    summary = {
+        "form": "first-order", "probe": "one-step" if probe.k == 1 else f"history-{probe.k}",
+        "real_interval": real_iv, "imag_interval": imag_iv, "hw_limit": math.nan,
+        "analytic_real_interval": a_real, "analytic_imag_interval": a_imag,
+        "analytic_hw_limit": math.nan, "analytic_agrees": agrees,
+        "max_probe_analytic_diff": diff, "claimed": json.dumps(claim) if claim is not None else "",
+        "verdict": verdict, "passed": verdict in ("agrees", "measured"),
+        "unbounded": _unbounded({"real_interval": real_iv, "imag_interval": imag_iv}),
+        "search_limit": limit, "message": "; ".join(messages),
+    }
+    return grid, summary
+
+
+def _newtonian_pair(coeffs: Any, probe: NewtonianProbe, hw: float, matrix: np.ndarray):
+    """(measured, predicted) arrays to compare at step `hw`, in the probe's coordinates, or None
+    when the coefficients say nothing about what this probe sees."""
+    if isinstance(coeffs, SplittingScheme) and probe.mode == "one-step":
+        return matrix, theory.splitting_propagator(coeffs, hw)
+    if not isinstance(coeffs, SecondOrderMultistep):
+        return None
+    w2 = hw * hw
+    k = coeffs.steps
+    c = -(coeffs.alpha[:k] + w2 * coeffs.beta[:k]) / (coeffs.alpha[k] + w2 * coeffs.beta[k])
+    if probe.mode == "position-recurrence" and k == 2:
+        return matrix, np.array([[0.0, 1.0], [c[0], c[1]]])
+    if probe.mode == "history" and probe.k == k and probe.last_blocks is not None:
+        # the position row of each block: x_k = sum_j c_j x_j, no dependence on the velocities
+        measured = probe.last_blocks[:, 0, :]
+        return measured, np.stack([c, np.zeros(k)], axis=1)
+    return None
+
+
+def _newtonian_analytic_amp(coeffs: Any, hw: np.ndarray) -> np.ndarray | None:
+    if isinstance(coeffs, SplittingScheme):
+        return theory.splitting_amplification(coeffs, hw)
+    if isinstance(coeffs, SecondOrderMultistep):
+        return theory.second_order_lmm_amplification(coeffs, hw)
+    return None
+
+
+def _run_newtonian(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, dict]:
+    probe = NewtonianProbe(stepper, problem)
+    coeffs = stepper.coefficients
+    hw_max, n = float(config["hw_grid_max"]), int(config["hw_grid"])
+    hws = np.linspace(hw_max / n, hw_max, n)
+    mats, pairs = [], []
+    for x in hws:
+        try:
+            m = probe.matrix(float(x))
+        except _FAILURES:
+            m = None
+        mats.append(m)
+        pairs.append(_newtonian_pair(coeffs, probe, float(x), m) if m is not None else None)
+    abs_probe = np.array([float(theory.spectral_radius(m)) if m is not None else np.nan for m in mats])
+    abs_analytic = _newtonian_analytic_amp(coeffs, hws)
+    grid = pd.DataFrame({
+        "kind": "grid-hw", "hw": hws, "abs_r_probe": abs_probe,
+        "abs_r_analytic": abs_analytic if abs_analytic is not None else np.nan,
+    })
+    limit = float(config["hw_search_limit"])
+    hw_limit = theory.hw_stability_limit(probe.amplification, limit=limit,
+                                         scan_step=float(config["hw_scan_step"]))
+    messages = []
+    agrees: bool | None = None
+    diff = math.nan
+    a_limit = math.nan
+    if any(pr is not None for pr in pairs):
+        ok = [pr for pr in pairs if pr is not None and np.all(np.isfinite(pr[0]))]
+        failed = len(pairs) - len(ok)
+        diff = max((float(np.max(np.abs(m - e))) / max(1.0, float(np.max(np.abs(e))))
+                    for m, e in ok), default=0.0)
+        a = theory.analytic_stability(coeffs, limit=limit)
+        a_limit = a["hw_limit"]
+        agrees = (diff <= tol.STABILITY_AGREEMENT_TOL and failed == 0
+                  and _intervals_agree(hw_limit, a_limit))
+        if diff > tol.STABILITY_AGREEMENT_TOL:
+            messages.append(f"probe propagator differs from the coefficients' by {diff:.3g} "
+                            f"(allowed {tol.STABILITY_AGREEMENT_TOL:g})")
+        if failed:
+            messages.append(f"the step failed at {failed} h omega value(s)")
+        if not _intervals_agree(hw_limit, a_limit):
+            messages.append(f"h omega limit: probe {hw_limit:.10g}, formula {a_limit:.10g}")
+    elif all(m is None for m in mats):
+        messages.append("the step failed at every h omega of the grid")
+    elif coeffs is not None:
+        messages.append(f"no propagator formula for coefficients of type {type(coeffs).__name__} "
+                        f"probed as {probe.mode}")
+    if probe.mode == "position-recurrence" and probe.recurrence_mismatch > tol.STABILITY_AGREEMENT_TOL:
+        agrees = False
+        messages.append(f"observed positions do not follow a two-step recurrence "
+                        f"(mismatch {probe.recurrence_mismatch:.3g})")
+    claim = stepper.info.extra.get("stability")
+    claim_ok, claim_msg = _claim_check(claim, {"hw_limit": hw_limit}, "newtonian")
+    if claim_msg:
+        messages.append(claim_msg)
+    verdict = _verdict(agrees, claim_ok)
+    summary = {
+        "form": "newtonian", "probe": probe.mode, "real_interval": math.nan,
+        "imag_interval": math.nan, "hw_limit": hw_limit, "analytic_real_interval": math.nan,
+        "analytic_imag_interval": math.nan, "analytic_hw_limit": a_limit,
+        "analytic_agrees": agrees, "max_probe_analytic_diff": diff,
+        "claimed": json.dumps(claim) if claim is not None else "", "verdict": verdict,
+        "passed": verdict in ("agrees", "measured"), "unbounded": _unbounded({"hw_limit": hw_limit}),
+        "search_limit": limit, "message": "; ".join(messages),
+    }
+    return grid, summary
+
+
+register_experiment(StabilityExperiment())

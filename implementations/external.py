@@ -1,0 +1,224 @@
+"""External peers: scipy's `solve_ivp` methods, wrapped (not reimplemented), as adaptive steppers.
+
+`scipy-rk45`, `scipy-dop853`, `scipy-radau`, `scipy-bdf`, `scipy-lsoda`. Each `_step` integrates
+every ensemble member separately from t to t + h with `scipy.integrate.solve_ivp`, at
+rtol = atol = tol (rtol raised to scipy's own floor of 100 machine epsilons when tol is below
+it); the implicit methods get the problem's symbolic Jacobian, one member at a time. A solve that
+scipy reports as failed (status < 0) raises `StepFailure` with scipy's message.
+
+Evaluation counts (the harness's unit is one evaluation of the whole ensemble): the right-hand
+side and Jacobian are evaluated through the run's `Dynamics` on one member at a time, so the
+member calls are converted to ensemble units (member calls / N, the mean per trajectory) in
+`counts['rhs']` and `counts['jac']`; the raw totals over all members are kept in
+`counts['member_rhs']`, `counts['member_jac']`, beside scipy's own `counts['scipy_nfev']`,
+`counts['scipy_njev']`, `counts['scipy_nlu']` (LU decompositions) and
+`counts['internal_steps']` (accepted internal steps, summed over members, as for `taylor`).
+
+References: P. Virtanen et al., SciPy 1.0, Nature Methods 17 (2020) 261-272; J. R. Dormand &
+P. J. Prince, J. Comput. Appl. Math. 6 (1980) 19-26 (RK45); E. Hairer, S. P. Norsett, G. Wanner,
+*Solving Ordinary Differential Equations I*, II.5 (DOP853); E. Hairer & G. Wanner, *Solving
+Ordinary Differential Equations II*, IV.8 (Radau IIA, order 5); L. F. Shampine & M. W. Reichelt,
+SIAM J. Sci. Comput. 18 (1997) 1-22 (variable-order NDF/BDF); L. Petzold, SIAM J. Sci. Stat.
+Comput. 4 (1983) 136-148 (LSODA, automatic Adams/BDF switching).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import warnings
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from harness.problem import Dynamics
+from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
+from harness.tolerances import SCIPY_MIN_RTOL
+
+__all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS"]
+
+_SCIPY = "P. Virtanen et al., SciPy 1.0, Nature Methods 17 (2020) 261-272"
+_HNW1 = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I"
+_HW2 = "Hairer & Wanner, Solving Ordinary Differential Equations II"
+
+# method -> (registry name, claimed order, explicit, uses Jacobian, typical f evals per internal
+# step, reference, description)
+SCIPY_METHODS: dict[str, tuple] = {
+    "RK45": (
+        "scipy-rk45",
+        5,
+        True,
+        False,
+        6.0,
+        f"J. R. Dormand & P. J. Prince, J. Comput. Appl. Math. 6 (1980) 19-26; {_SCIPY}",
+        "Dormand-Prince 5(4) embedded pair (order 5 propagated, 4 for the error estimate); "
+        "7 stages, first same as last: 6 f evaluations per accepted internal step.",
+    ),
+    "DOP853": (
+        "scipy-dop853",
+        8,
+        True,
+        False,
+        12.0,
+        f"{_HNW1}, II.5 (DOP853); {_SCIPY}",
+        "Dormand-Prince 8(5,3) pair; 12 f evaluations per accepted internal step.",
+    ),
+    "Radau": (
+        "scipy-radau",
+        5,
+        False,
+        True,
+        6.0,
+        f"{_HW2}, IV.8 (RADAU5); {_SCIPY}",
+        "Three-stage Radau IIA collocation (order 5), simplified Newton with the problem's "
+        "Jacobian; f evaluations per internal step vary with the Newton iterations (typical "
+        "figure given).",
+    ),
+    "BDF": (
+        "scipy-bdf",
+        None,
+        False,
+        True,
+        2.0,
+        f"L. F. Shampine & M. W. Reichelt, SIAM J. Sci. Comput. 18 (1997) 1-22; {_SCIPY}",
+        "Variable-order (1-5) numerical differentiation / backward differentiation formulas "
+        "with the problem's Jacobian; order varies, so no single order is claimed; f "
+        "evaluations per internal step vary with the Newton iterations (typical figure given).",
+    ),
+    "LSODA": (
+        "scipy-lsoda",
+        None,
+        False,
+        True,
+        2.0,
+        f"L. Petzold, SIAM J. Sci. Stat. Comput. 4 (1983) 136-148 (LSODA, ODEPACK); {_SCIPY}",
+        "ODEPACK LSODA: switches automatically between non-stiff Adams (orders 1-12) and stiff "
+        "BDF (orders 1-5), the Jacobian from the problem; order varies, so no single order is "
+        "claimed; f evaluations per internal step are a typical figure.",
+    ),
+}
+
+
+class _MemberDynamics:
+    """One ensemble member's view of a run's `Dynamics`: same compiled functions and the same
+    counters (so every call is booked), that member's parameters."""
+
+    def __init__(self, dyn: Dynamics, member: int):
+        view = copy.copy(dyn)  # shallow: shares `counts` and the compiled functions
+        view.pars = np.ascontiguousarray(dyn.pars[:, member : member + 1])
+        view.size = 1
+        view._tbuf = np.zeros(1)
+        view._qv = None
+        self._view = view
+
+    def f(self, t: float, y: np.ndarray) -> np.ndarray:
+        return self._view.f(t, np.ascontiguousarray(y).reshape(-1, 1))[:, 0]
+
+    def jac(self, t: float, y: np.ndarray) -> np.ndarray:
+        return self._view.jac(t, np.ascontiguousarray(y).reshape(-1, 1))[:, :, 0]
+
+
+class ScipyStepper(AdaptiveStepper):
+    """`scipy.integrate.solve_ivp(method=...)` advancing each member to the next output time."""
+
+    def __init__(self, method: str, tol: float = AdaptiveStepper.tol):
+        if method not in SCIPY_METHODS:
+            from harness.errors import InputError
+
+            raise InputError(f"`method` must be one of {sorted(SCIPY_METHODS)}, got {method!r}")
+        name, order, explicit, uses_jac, evals, reference, description = SCIPY_METHODS[method]
+        self.method = method
+        self.uses_jacobian = uses_jac
+        self.tol = float(tol)
+        self.info = StepperInfo(
+            name=name,
+            family="external",
+            claimed_order=order,
+            explicit=explicit,
+            symplectic=False,
+            symmetric=False,
+            evals_per_step=evals,
+            form="first-order",
+            velocity_dependent=True,
+            reference=reference,
+            description=(
+                f"scipy.integrate.solve_ivp(method={method!r}), wrapped: {description} "
+                "Each output step restarts the solver for every member from t to t + h at "
+                "rtol = atol = tol (rtol at least scipy's floor 100 eps). evals_per_step is per "
+                "accepted internal step; counts['rhs'] and counts['jac'] are in ensemble units "
+                "(member calls / N), counts['internal_steps'] is summed over members."
+            ),
+            adaptive=True,
+            implementation="scipy",
+            extra=self._extra(),
+        )
+
+    def _extra(self) -> dict:
+        return {
+            "tol": self.tol,
+            "rtol": max(self.tol, SCIPY_MIN_RTOL),
+            "atol": self.tol,
+            "scipy_method": self.method,
+            "jacobian": "symbolic (dyn.jac)" if self.uses_jacobian else "not used",
+            "evals_unit": "ensemble evaluations (member calls / N)",
+        }
+
+    def with_tolerance(self, tol: float) -> ScipyStepper:
+        clone = super().with_tolerance(tol)
+        clone.info = dataclasses.replace(clone.info, extra=clone._extra())
+        return clone
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        members = [_MemberDynamics(dyn, m) for m in range(y0.shape[1])]
+        for key in ("internal_steps", "member_rhs", "member_jac", "scipy_nfev", "scipy_njev",
+                    "scipy_nlu"):
+            dyn.counts.setdefault(key, 0)
+        return Carry(t0, h, y0, members=members)
+
+    def _step(self, dyn: Dynamics, c: Carry) -> None:
+        y = c.y
+        N = y.shape[1]
+        t, target = c.t, c.t0 + (c.n + 1) * c.h
+        rtol, atol = max(self.tol, SCIPY_MIN_RTOL), self.tol
+        rhs0, jac0 = dyn.counts["rhs"], dyn.counts["jac"]
+        totals = {"internal_steps": 0, "scipy_nfev": 0, "scipy_njev": 0, "scipy_nlu": 0}
+        try:
+            for m in range(N):
+                if not np.all(np.isfinite(y[:, m])):
+                    continue
+                member = c.members[m]
+                options = {"jac": member.jac} if self.uses_jacobian else {}
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)  # overflow is reported below
+                    sol = solve_ivp(
+                        member.f,
+                        (t, target),
+                        y[:, m].copy(),
+                        method=self.method,
+                        rtol=rtol,
+                        atol=atol,
+                        **options,
+                    )
+                if sol.status < 0:
+                    raise StepFailure(
+                        f"stepper {self.info.name!r}: scipy {self.method} failed for ensemble "
+                        f"member {m} between t={t!r} and t={target!r} (reached "
+                        f"t={float(sol.t[-1])!r}): {sol.message}"
+                    )
+                y[:, m] = sol.y[:, -1]
+                totals["internal_steps"] += sol.t.size - 1
+                totals["scipy_nfev"] += int(sol.nfev)
+                totals["scipy_njev"] += int(sol.njev)
+                totals["scipy_nlu"] += int(sol.nlu)
+        finally:
+            member_rhs = dyn.counts["rhs"] - rhs0
+            member_jac = dyn.counts["jac"] - jac0
+            dyn.counts["rhs"] = rhs0 + member_rhs / N
+            dyn.counts["jac"] = jac0 + member_jac / N
+            dyn.counts["member_rhs"] += member_rhs
+            dyn.counts["member_jac"] += member_jac
+            for key, value in totals.items():
+                dyn.counts[key] += value
+
+
+STEPPERS: list[Stepper] = [ScipyStepper(method) for method in SCIPY_METHODS]

@@ -1,0 +1,406 @@
+"""Implicit Runge-Kutta methods: Butcher tableaux plus one Newton-solved step loop.
+
+`backward-euler`, `trapezoid` (Crank-Nicolson, the implicit Adams-Moulton rule, written as the
+two-stage Lobatto IIIA tableau), `implicit-midpoint` and `gauss-legendre-4` (two-stage Gauss).
+
+The stage equations Z_i = h sum_j a_ij f(t + c_j h, y + Z_j) are solved by Newton's method with
+the Jacobian derived from the problem's symbolic definition (`dyn.jac`); every ensemble member is
+solved at once with a batched linear solve over the ensemble axis. The new state is
+y + h sum_e w_e F_e + sum_i d_i Z_i (d = A^{-T} b on the implicit stages), so no right-hand side is
+evaluated after the iteration has converged (Hairer & Wanner, *Solving Ordinary Differential
+Equations II*, IV.8). A step whose iteration does not reach `newton_tol` within `newton_max_iter`
+iterations raises `StepFailure`; it is never accepted.
+
+References: course material 004_bfdbb1594143ed8b.txt (backward Euler and its unconditional
+stability; the implicit trapezoid/Adams-Moulton rule); E. Hairer, G. Wanner, *Solving Ordinary
+Differential Equations II*, IV.5 (collocation: Gauss, Lobatto IIIA) and IV.8 (Newton for the
+stage equations); E. Hairer, C. Lubich, G. Wanner, *Geometric Numerical Integration*, II.1 and
+VI.4 (symplectic and symmetric Gauss methods; quadratic invariants).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from harness.coefficients import ButcherTableau
+from harness.errors import InputError
+from harness.problem import Dynamics
+from harness.stepper import Carry, StepFailure, Stepper, StepperInfo
+from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
+
+__all__ = [
+    "STEPPERS",
+    "ImplicitRungeKutta",
+    "NewtonSettings",
+    "newton_solve",
+    "scaled_norm",
+    "BACKWARD_EULER",
+    "TRAPEZOID",
+    "IMPLICIT_MIDPOINT",
+    "GAUSS_LEGENDRE_4",
+]
+
+NEWTON_MODES = ("full", "simplified")
+# Newton iterations per step on a typical nonlinear problem (for the declared evals_per_step).
+TYPICAL_NEWTON_ITERATIONS = 3
+
+
+# -- Newton's method on the ensemble axis ---------------------------------------------------------
+@dataclass(frozen=True)
+class NewtonSettings:
+    """How implicit equations are solved.
+
+    `mode`: 'full' re-evaluates the Jacobian at every iterate (quadratic convergence);
+    'simplified' evaluates it once per step at (t_n, y_n) (linear convergence, cheaper).
+    `tol`: bound on the max-norm of the Newton increment (or of its estimated remaining error),
+    componentwise scaled by 1 + |y_n|. `max_iter`: iterations allowed before the step fails.
+    """
+
+    tol: float = NEWTON_TOL
+    max_iter: int = NEWTON_MAX_ITER
+    mode: str = "full"
+
+    def __post_init__(self):
+        try:
+            tol = float(self.tol)
+        except (TypeError, ValueError):
+            raise InputError(f"`newton_tol` must be a real number, got {self.tol!r}") from None
+        if not (math.isfinite(tol) and tol >= 0.0):
+            raise InputError(f"`newton_tol` must be finite and >= 0, got {self.tol!r}")
+        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int | np.integer):
+            raise InputError(f"`newton_max_iter` must be a whole number, got {self.max_iter!r}")
+        if self.max_iter < 1:
+            raise InputError(f"`newton_max_iter` must be at least 1, got {self.max_iter}")
+        if self.mode not in NEWTON_MODES:
+            raise InputError(f"`newton` must be one of {NEWTON_MODES}, got {self.mode!r}")
+        object.__setattr__(self, "tol", tol)
+        object.__setattr__(self, "max_iter", int(self.max_iter))
+
+    def describe(self) -> str:
+        return f"{self.mode} Newton, tolerance {self.tol:.0e}, at most {self.max_iter} iterations"
+
+
+def scaled_norm(dx: np.ndarray, scale: np.ndarray) -> float:
+    """max_i |dx_i| / scale_i over components and ensemble members (NaN propagates)."""
+    return float(np.max(np.abs(dx) / scale))
+
+
+def newton_solve(
+    residual: Callable[[np.ndarray], np.ndarray],
+    matrix: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    scale: np.ndarray,
+    *,
+    settings: NewtonSettings,
+    counts: dict,
+    stepper: str,
+    t: float,
+) -> np.ndarray:
+    """Solve residual(x) = 0 for x shaped (m, N), all ensemble members together.
+
+    `matrix(x)` returns the iteration matrix d residual / dx shaped (N, m, m); it is called at the
+    first iterate and, in 'full' mode, at every iterate. Converged when the scaled increment is at
+    most `settings.tol`, or when the contraction rate theta of two successive increments gives an
+    estimated remaining error theta / (1 - theta) * |dx| at most `settings.tol` (Hairer & Wanner
+    II, IV.8, eq. 8.10). Iterations are added to counts['newton_iterations']. Raises `StepFailure`
+    naming `stepper`, the time, the increment and the residual when it does not converge.
+    """
+    tol = settings.tol
+    previous = math.inf
+    mat = None
+    norm = math.inf
+    res_norm = math.inf
+    theta = math.nan
+    for k in range(1, settings.max_iter + 1):
+        g = residual(x)
+        if mat is None or settings.mode == "full":
+            mat = matrix(x)
+        counts["newton_iterations"] = counts.get("newton_iterations", 0) + 1
+        res_norm = scaled_norm(g, scale)
+        try:
+            dx = np.linalg.solve(mat, -g.T[..., None])[..., 0].T
+        except np.linalg.LinAlgError:
+            raise StepFailure(
+                f"stepper {stepper!r}: singular Newton matrix at t={t:.17g} (iteration {k}); "
+                f"scaled residual {res_norm:.3e}"
+            ) from None
+        x = x + dx
+        norm = scaled_norm(dx, scale)
+        if not math.isfinite(norm):
+            break
+        if norm <= tol:
+            return x
+        if math.isfinite(previous):
+            theta = norm / previous
+            if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
+                return x
+        previous = norm
+    raise StepFailure(
+        f"stepper {stepper!r}: Newton iteration did not converge at t={t:.17g} after "
+        f"{settings.max_iter} iteration(s) ({settings.mode}): scaled increment {norm:.3e}, "
+        f"scaled residual {res_norm:.3e}, contraction {theta:.3g}, tolerance {tol:.1e}"
+    )
+
+
+# -- the step loop ------------------------------------------------------------------------------
+class ImplicitRungeKutta(Stepper):
+    """One step loop for every implicit Runge-Kutta tableau.
+
+    Stages whose row of A is zero (the first stage of Lobatto IIIA) are explicit: they cost one
+    evaluation at (t_n, y_n) per step, or none when the tableau is first-same-as-last (first row
+    zero, last row equal to b, c = (0, ..., 1)), in which case the derivative at the end of the
+    step is recovered from the converged stage equations instead of re-evaluated. The remaining
+    stages are the Newton unknowns: each iteration evaluates f once per implicit stage (and, in
+    'full' mode, the Jacobian once per implicit stage).
+    """
+
+    def __init__(
+        self,
+        tableau: ButcherTableau,
+        *,
+        name: str,
+        claimed_order: int,
+        symplectic: bool,
+        symmetric: bool,
+        reference: str,
+        description: str,
+        newton: str = "full",
+        newton_tol: float = NEWTON_TOL,
+        newton_max_iter: int = NEWTON_MAX_ITER,
+    ):
+        if not isinstance(tableau, ButcherTableau):
+            raise InputError(f"`tableau` must be a ButcherTableau, got {type(tableau).__name__}")
+        if tableau.explicit:
+            raise InputError(
+                f"`tableau` {tableau.name!r} is explicit; use the explicit Runge-Kutta family"
+            )
+        self.coefficients = tableau
+        self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
+        A, b, c = tableau.A, tableau.b, tableau.c
+        zero_rows = np.all(A == 0.0, axis=1)
+        self._expl = np.flatnonzero(zero_rows)
+        self._impl = np.flatnonzero(~zero_rows)
+        A_ii = A[np.ix_(self._impl, self._impl)]
+        A_ie = A[np.ix_(self._impl, self._expl)]
+        try:
+            A_ii_inv = np.linalg.inv(A_ii)
+        except np.linalg.LinAlgError:
+            raise InputError(
+                f"`tableau` {tableau.name!r}: the implicit block of A must be invertible"
+            ) from None
+        # y_{n+1} = y_n + h * w . F_explicit + d . Z_implicit
+        self._d = A_ii_inv.T @ b[self._impl]
+        self._w = b[self._expl] - A_ie.T @ self._d
+        self._A_ii = A_ii
+        self._A_ie = A_ie
+        self._c_impl = c[self._impl]
+        s = tableau.stages
+        self._fsal = bool(
+            self._expl.size == 1
+            and self._expl[0] == 0
+            and self._impl.size == s - 1
+            and np.array_equal(A[-1], b)
+            and c[-1] == 1.0
+        )
+        # the derivative at the last stage, recovered from Z: h F_impl = A_ii^{-1} (Z - h A_ie F_e)
+        self._last_row_inv = A_ii_inv[-1]
+        n_impl = self._impl.size
+        explicit_evals = 0 if self._fsal or self._expl.size == 0 else 1
+        per_iter = n_impl
+        self._jac_note = (
+            f"{n_impl} Jacobian evaluation(s) per iteration"
+            if newton == "full"
+            else "1 Jacobian evaluation per step"
+        )
+        self.info = StepperInfo(
+            name=name,
+            family="implicit-rk",
+            claimed_order=claimed_order,
+            explicit=False,
+            symplectic=symplectic,
+            symmetric=symmetric,
+            # typical figure: three Newton iterations (two on linear problems, where the second
+            # increment only confirms the first); the measured count is in the run's `evals`.
+            evals_per_step=float(TYPICAL_NEWTON_ITERATIONS * per_iter + explicit_evals),
+            form="first-order",
+            velocity_dependent=True,
+            reference=reference,
+            description=" ".join(
+                part
+                for part in [
+                    f"{description} Stage equations: {self.newton.describe()} (increments scaled "
+                    "by 1 + |y_n|), all ensemble members in one batched solve;",
+                    f"per iteration {per_iter} f evaluation(s); {self._jac_note};",
+                    "1 f evaluation per step for the explicit stage;" if explicit_evals else "",
+                    "the derivative at the step end is reused (first same as last);"
+                    if self._fsal
+                    else "",
+                    "evals_per_step is a typical figure (three Newton iterations; two on a linear "
+                    "problem); measured counts, with counts['newton_iterations'], are recorded "
+                    "with every run.",
+                ]
+                if part
+            ),
+            extra={
+                "newton": self.newton.mode,
+                "newton_tol": self.newton.tol,
+                "newton_max_iter": self.newton.max_iter,
+                "stages": s,
+                "implicit_stages": n_impl,
+            },
+        )
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        return Carry(t0, h, y0, f_start=None)
+
+    def _step(self, dyn: Dynamics, c: Carry) -> None:
+        t, h, y = c.t, c.h, c.y
+        if not np.all(np.isfinite(y)):
+            c.y = np.full_like(y, np.nan)  # a blown-up state stays blown up; public methods report it
+            c.f_start = None
+            return
+        dim, N = y.shape
+        impl = self._impl.size
+        m = impl * dim
+        c_impl = self._c_impl
+        A_ii, A_ie = self._A_ii, self._A_ie
+        f_expl = None
+        if self._expl.size:
+            f_expl = c.f_start if c.f_start is not None else dyn.f(t, y)
+        # constant part of the residual: h * A_ie F_e, shaped (impl, dim, N)
+        const = None
+        if f_expl is not None:
+            const = h * A_ie.sum(axis=1)[:, None, None] * f_expl[None]
+        scale = np.broadcast_to((1.0 + np.abs(y))[None], (impl, dim, N)).reshape(m, N)
+        eye = np.eye(m)
+
+        def residual(x: np.ndarray) -> np.ndarray:
+            Z = x.reshape(impl, dim, N)
+            F = np.stack([dyn.f(t + c_impl[i] * h, y + Z[i]) for i in range(impl)])
+            g = Z - h * np.einsum("ij,jdn->idn", A_ii, F)
+            if const is not None:
+                g -= const
+            return g.reshape(m, N)
+
+        if self.newton.mode == "full":
+
+            def matrix(x: np.ndarray) -> np.ndarray:
+                Z = x.reshape(impl, dim, N)
+                J = np.stack([dyn.jac(t + c_impl[i] * h, y + Z[i]) for i in range(impl)])
+                blocks = np.einsum("ij,jabn->niajb", A_ii, J).reshape(N, m, m)
+                return eye - h * blocks
+
+        else:
+
+            def matrix(x: np.ndarray) -> np.ndarray:
+                J = dyn.jac(t, y)
+                blocks = np.einsum("ij,abn->niajb", A_ii, J).reshape(N, m, m)
+                return eye - h * blocks
+
+        x = newton_solve(
+            residual,
+            matrix,
+            np.zeros((m, N)),
+            scale,
+            settings=self.newton,
+            counts=dyn.counts,
+            stepper=self.info.name,
+            t=t,
+        )
+        Z = x.reshape(impl, dim, N)
+        y_new = y + np.einsum("i,idn->dn", self._d, Z)
+        if f_expl is not None:
+            y_new += h * float(self._w.sum()) * f_expl
+        if self._fsal:
+            hF_last = np.einsum("i,idn->dn", self._last_row_inv, Z - (const if const is not None else 0.0))
+            c.f_start = hF_last / h
+        c.y = y_new
+
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        super()._reverse(dyn, c)  # f(t, y) at the current point stays valid in either direction
+
+
+# -- tableaux (data) ------------------------------------------------------------------------------
+_SQ3 = math.sqrt(3.0)
+_COURSE_ODE = (
+    "course material 004_bfdbb1594143ed8b.txt (A. Mignone, lecture notes 'Ordinary Differential "
+    "Equations: Initial Value Problems', Univ. Torino 2017-18)"
+)
+
+BACKWARD_EULER = ButcherTableau("backward-euler", A=[[1.0]], b=[1.0], c=[1.0])
+TRAPEZOID = ButcherTableau(
+    "trapezoid", A=[[0.0, 0.0], [0.5, 0.5]], b=[0.5, 0.5], c=[0.0, 1.0]
+)
+IMPLICIT_MIDPOINT = ButcherTableau("implicit-midpoint", A=[[0.5]], b=[1.0], c=[0.5])
+GAUSS_LEGENDRE_4 = ButcherTableau(
+    "gauss-legendre-4",
+    A=[[0.25, 0.25 - _SQ3 / 6.0], [0.25 + _SQ3 / 6.0, 0.25]],
+    b=[0.5, 0.5],
+    c=[0.5 - _SQ3 / 6.0, 0.5 + _SQ3 / 6.0],
+)
+
+STEPPERS: list[Stepper] = [
+    ImplicitRungeKutta(
+        BACKWARD_EULER,
+        name="backward-euler",
+        claimed_order=1,
+        symplectic=False,
+        symmetric=False,
+        reference=(
+            f"{_COURSE_ODE}, the implicit (backward) Euler method and its unconditional "
+            "stability; Hairer & Wanner, Solving ODEs II, IV.3."
+        ),
+        description="Backward (implicit) Euler y_{n+1} = y_n + h f(t_{n+1}, y_{n+1}); L-stable.",
+    ),
+    ImplicitRungeKutta(
+        TRAPEZOID,
+        name="trapezoid",
+        claimed_order=2,
+        symplectic=False,
+        symmetric=True,
+        reference=(
+            f"{_COURSE_ODE}, the implicit Adams-Moulton (trapezoidal) rule; J. Crank & P. "
+            "Nicolson, Proc. Camb. Phil. Soc. 43 (1947) 50-67; Hairer & Wanner, Solving ODEs II, "
+            "IV.5 (Lobatto IIIA, s = 2)."
+        ),
+        description=(
+            "Trapezoidal rule (Crank-Nicolson, one-step Adams-Moulton) "
+            "y_{n+1} = y_n + h/2 (f_n + f_{n+1}), as the two-stage Lobatto IIIA tableau; A-stable."
+        ),
+    ),
+    ImplicitRungeKutta(
+        IMPLICIT_MIDPOINT,
+        name="implicit-midpoint",
+        claimed_order=2,
+        symplectic=True,
+        symmetric=True,
+        reference=(
+            "Hairer, Lubich & Wanner, Geometric Numerical Integration, I.1 and VI.3 (implicit "
+            "midpoint rule; symplectic, symmetric, preserves quadratic invariants)."
+        ),
+        description=(
+            "Implicit midpoint rule y_{n+1} = y_n + h f(t_n + h/2, (y_n + y_{n+1})/2), the "
+            "one-stage Gauss method; A-stable."
+        ),
+    ),
+    ImplicitRungeKutta(
+        GAUSS_LEGENDRE_4,
+        name="gauss-legendre-4",
+        claimed_order=4,
+        symplectic=True,
+        symmetric=True,
+        reference=(
+            "J. C. Butcher, Math. Comp. 18 (1964) 50-64 (implicit Runge-Kutta processes); Hairer "
+            "& Wanner, Solving ODEs II, IV.5, Table 5.1; Hairer, Lubich & Wanner, Geometric "
+            "Numerical Integration, II.1.3 and VI.4."
+        ),
+        description=(
+            "Two-stage Gauss-Legendre collocation method, nodes 1/2 -+ sqrt(3)/6; order 4, "
+            "A-stable, symplectic, symmetric, preserves quadratic invariants."
+        ),
+    ),
+]

@@ -1,0 +1,332 @@
+"""Linear multistep methods: (alpha, beta) tables plus one step loop for explicit and implicit ones.
+
+`ab2`, `ab3`, `ab4` (Adams-Bashforth), `am3` (the two-step Adams-Moulton method, order 3) and
+`bdf2` (second-order backward differentiation formula). A k-step method
+sum_j alpha_j y_{n+j} = h sum_j beta_j f_{n+j} needs k - 1 starting values beyond y_0; they come
+from a stated source, the `starter`, recorded in `info.extra['starter']` and the description,
+because a low-order start spoils the measured order:
+- 'reference': the certified ground truth (`harness.ground_truth.reference`) at t0 + h, ...;
+- a registered one-step stepper's name (default 'rk4', the classical Runge-Kutta method), or a
+  `Stepper` object, run through the stepper contract with the same `Dynamics`, so its evaluations
+  are counted with the multistep method's.
+Implicit tables are solved by Newton's method (`implementations.implicit_rk.newton_solve`); the
+derivative at the new point is recovered from the converged equation, not re-evaluated.
+
+References: course material 004_bfdbb1594143ed8b.txt (two-step Adams-Bashforth, fourth-order
+Adams-Bashforth Y_{n+1} = Y_n + h/24 (55 R_n - 59 R_{n-1} + 37 R_{n-2} - 9 R_{n-3}), the trapezoidal
+Adams-Moulton rule, and the need for a one-step starter); E. Hairer, S. P. Norsett, G. Wanner,
+*Solving Ordinary Differential Equations I*, III.1 (Adams methods, BDF) and III.2 (order).
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+
+from harness.coefficients import LinearMultistep
+from harness.errors import IncompatibleError, InputError, UnknownNameError
+from harness.problem import Dynamics
+from harness.stepper import Carry, Stepper, StepperInfo, check_compatible
+from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
+from implementations.implicit_rk import NewtonSettings, newton_solve
+
+__all__ = ["STEPPERS", "LinearMultistepStepper", "AB2", "AB3", "AB4", "AM3", "BDF2"]
+
+DEFAULT_STARTER = "rk4"
+
+
+class LinearMultistepStepper(Stepper):
+    """One step loop for every linear multistep table, explicit or implicit.
+
+    The carry holds the last k states (oldest first) with their derivatives (evaluated lazily,
+    only where a beta needs them) and `pending`: states already known ahead of the current one
+    (the starting values after `_start`, the stored history after `_reverse`). A step first
+    consumes a pending value; only then does it apply the multistep formula.
+    `_reverse` reverses the history order and negates h: the stored past becomes the pending
+    future of the backward run, so a round trip retraces exactly the points it visited.
+    """
+
+    def __init__(
+        self,
+        table: LinearMultistep,
+        *,
+        name: str,
+        claimed_order: int,
+        reference: str,
+        description: str,
+        starter: str | Stepper = DEFAULT_STARTER,
+        newton: str = "full",
+        newton_tol: float = NEWTON_TOL,
+        newton_max_iter: int = NEWTON_MAX_ITER,
+    ):
+        if not isinstance(table, LinearMultistep):
+            raise InputError(f"`table` must be a LinearMultistep, got {type(table).__name__}")
+        if isinstance(starter, Stepper):
+            starter_name = starter.info.name
+        elif isinstance(starter, str) and starter.strip():
+            starter_name = starter
+        else:
+            raise InputError(
+                "`starter` must be 'reference', a registered stepper name or a Stepper, "
+                f"got {starter!r}"
+            )
+        if isinstance(starter, LinearMultistepStepper):
+            raise InputError(
+                f"`starter` must be a one-step method, got the multistep method {starter_name!r}"
+            )
+        self.coefficients = table
+        self.starter = starter
+        self.starter_name = starter_name
+        self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
+        self._construct = dict(
+            name=name, claimed_order=claimed_order, reference=reference, description=description
+        )
+        k = table.steps
+        explicit = bool(table.explicit)
+        if explicit:
+            cost = "1 f evaluation per step"
+            evals = 1.0
+        else:
+            cost = (
+                f"implicit: {self.newton.describe()} (scaled by 1 + |y_n|); 1 f and "
+                f"{'1 Jacobian' if self.newton.mode == 'full' else 'at most 1 Jacobian'} "
+                "evaluation per iteration; evals_per_step is a typical figure (two iterations), "
+                "measured counts (counts['newton_iterations']) are recorded with every run"
+            )
+            evals = 2.0
+        start = (
+            "the certified ground truth"
+            if starter_name == "reference"
+            else f"the one-step method {starter_name!r}"
+        )
+        self.info = StepperInfo(
+            name=name,
+            family="multistep",
+            claimed_order=claimed_order,
+            explicit=explicit,
+            symplectic=False,
+            symmetric=False,
+            evals_per_step=evals,
+            form="first-order",
+            velocity_dependent=True,
+            reference=reference,
+            description=(
+                f"{description} {k}-step; {cost}. Starting values y_1..y_{k - 1} from {start} "
+                f"(starter={starter_name!r}); the starter's own evaluations are counted."
+            ),
+            extra={
+                "starter": starter_name,
+                "steps": k,
+                **({} if explicit else {"newton": self.newton.mode, "newton_tol": self.newton.tol}),
+            },
+        )
+
+    def with_starter(self, starter: str | Stepper) -> LinearMultistepStepper:
+        """The same method with another source of starting values."""
+        return LinearMultistepStepper(
+            self.coefficients,
+            starter=starter,
+            newton=self.newton.mode,
+            newton_tol=self.newton.tol,
+            newton_max_iter=self.newton.max_iter,
+            **self._construct,
+        )
+
+    def incompatibility(self, problem) -> str | None:
+        if self.starter_name == "reference":
+            return None
+        try:
+            starter = self._starter_stepper()
+        except (UnknownNameError, InputError) as exc:
+            return f"its starter cannot be used: {exc}"
+        if not starter.compatible(problem):
+            return f"its starter {self.starter_name!r} cannot run this problem"
+        return None
+
+    # -- starting values ---------------------------------------------------------------------------
+    def _starter_stepper(self) -> Stepper:
+        if isinstance(self.starter, Stepper):
+            return self.starter
+        from harness.registry import get_stepper  # lazy: the registry imports this module
+
+        starter = get_stepper(self.starter)
+        if isinstance(starter, LinearMultistepStepper):
+            raise InputError(
+                f"`starter` must be a one-step method, got the multistep method {self.starter!r}"
+            )
+        return starter
+
+    def _starting_values(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> list:
+        count = self.coefficients.steps - 1
+        if count == 0:
+            return []
+        if self.starter_name == "reference":
+            from harness.ground_truth import reference  # lazy: heavy, only for this starter
+
+            times = t0 + h * np.arange(1, count + 1)
+            ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)
+            values = [np.array(ref.y[i], dtype=np.float64) for i in range(count)]
+        else:
+            starter = self._starter_stepper()
+            try:
+                check_compatible(starter, dyn.problem)
+            except IncompatibleError as exc:
+                raise IncompatibleError(f"starter of {self.info.name!r}: {exc}") from None
+            sc = starter._start(dyn, t0, y0.copy(), h)
+            values = []
+            for _ in range(count):
+                starter._step(dyn, sc)
+                sc.n += 1
+                values.append(starter._observe(dyn, sc))
+        dyn.counts["starter_steps"] = dyn.counts.get("starter_steps", 0) + count
+        return values
+
+    # -- contract ----------------------------------------------------------------------------------
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        pending = [(y, None) for y in self._starting_values(dyn, t0, y0, h)]
+        return Carry(t0, h, y0, hist_y=[y0], hist_f=[None], pending=pending)
+
+    def _push(self, c: Carry, y: np.ndarray, f: np.ndarray | None) -> None:
+        k = self.coefficients.steps
+        c.hist_y.append(y)
+        c.hist_f.append(f)
+        if len(c.hist_y) > k:
+            del c.hist_y[0]
+            del c.hist_f[0]
+        c.y = y
+
+    def _step(self, dyn: Dynamics, c: Carry) -> None:
+        if c.pending:
+            y, f = c.pending.pop(0)
+            self._push(c, y, f)
+            return
+        table = self.coefficients
+        k = table.steps
+        alpha, beta = table.alpha, table.beta
+        t, h = c.t, c.h
+        hist_y, hist_f = c.hist_y, c.hist_f
+        if not np.all(np.isfinite(hist_y[-1])):
+            self._push(c, np.full_like(hist_y[-1], np.nan), None)
+            return
+        psi = np.zeros_like(hist_y[-1])
+        for j in range(k):
+            if alpha[j] != 0.0:
+                psi -= alpha[j] * hist_y[j]
+            if beta[j] != 0.0:
+                if hist_f[j] is None:
+                    hist_f[j] = dyn.f(t - (k - 1 - j) * h, hist_y[j])
+                psi += (h * beta[j]) * hist_f[j]
+        if table.explicit:
+            self._push(c, psi, None)
+            return
+        t_new = t + h
+        hb = h * beta[k]
+        dim, N = psi.shape
+        eye = np.eye(dim)
+        y_n = hist_y[-1]
+
+        def residual(x: np.ndarray) -> np.ndarray:
+            return x - psi - hb * dyn.f(t_new, x)
+
+        if self.newton.mode == "full":
+
+            def matrix(x: np.ndarray) -> np.ndarray:
+                return eye - hb * dyn.jac(t_new, x).transpose(2, 0, 1)
+
+        else:
+
+            def matrix(x: np.ndarray) -> np.ndarray:
+                return eye - hb * dyn.jac(t, y_n).transpose(2, 0, 1)
+
+        y_new = newton_solve(
+            residual,
+            matrix,
+            y_n.copy(),
+            1.0 + np.abs(y_n),
+            settings=self.newton,
+            counts=dyn.counts,
+            stepper=self.info.name,
+            t=t,
+        )
+        self._push(c, y_new, (y_new - psi) / hb)
+
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        super()._reverse(dyn, c)
+        known = list(zip(c.hist_y, c.hist_f, strict=True))  # oldest .. current
+        ahead = [(y, f) for y, f in reversed(known[:-1])]  # the past, now ahead
+        behind = [(y, f) for y, f in reversed(c.pending)] + [known[-1]]  # the future, now behind
+        behind = behind[-self.coefficients.steps :]
+        c.hist_y = [y for y, _ in behind]
+        c.hist_f = [f for _, f in behind]
+        c.pending = ahead
+        c.y = c.hist_y[-1]
+
+
+# -- tables (data), oldest coefficient first ------------------------------------------------------
+def _fr(*values: int | str) -> list[Fraction]:
+    return [Fraction(v) for v in values]
+
+
+AB2 = LinearMultistep("ab2", alpha=_fr(0, -1, 1), beta=_fr("-1/2", "3/2", 0))
+AB3 = LinearMultistep("ab3", alpha=_fr(0, 0, -1, 1), beta=_fr("5/12", "-16/12", "23/12", 0))
+AB4 = LinearMultistep(
+    "ab4", alpha=_fr(0, 0, 0, -1, 1), beta=_fr("-9/24", "37/24", "-59/24", "55/24", 0)
+)
+AM3 = LinearMultistep("am3", alpha=_fr(0, -1, 1), beta=_fr("-1/12", "8/12", "5/12"))
+BDF2 = LinearMultistep("bdf2", alpha=_fr("1/3", "-4/3", 1), beta=_fr(0, 0, "2/3"))
+
+_COURSE_ODE = (
+    "course material 004_bfdbb1594143ed8b.txt (A. Mignone, lecture notes 'Ordinary Differential "
+    "Equations: Initial Value Problems', Univ. Torino 2017-18)"
+)
+_HNW = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I"
+
+STEPPERS: list[Stepper] = [
+    LinearMultistepStepper(
+        AB2,
+        name="ab2",
+        claimed_order=2,
+        reference=f"{_COURSE_ODE}, the two-step Adams-Bashforth method; {_HNW}, III.1.",
+        description="Adams-Bashforth y_{n+1} = y_n + h (3/2 f_n - 1/2 f_{n-1}).",
+    ),
+    LinearMultistepStepper(
+        AB3,
+        name="ab3",
+        claimed_order=3,
+        reference=f"{_HNW}, III.1, Table 1.1 (explicit Adams methods).",
+        description="Adams-Bashforth y_{n+1} = y_n + h/12 (23 f_n - 16 f_{n-1} + 5 f_{n-2}).",
+    ),
+    LinearMultistepStepper(
+        AB4,
+        name="ab4",
+        claimed_order=4,
+        reference=f"{_COURSE_ODE}, the fourth-order Adams-Bashforth method; {_HNW}, III.1.",
+        description=(
+            "Adams-Bashforth y_{n+1} = y_n + h/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3})."
+        ),
+    ),
+    LinearMultistepStepper(
+        AM3,
+        name="am3",
+        claimed_order=3,
+        reference=f"{_HNW}, III.1, Table 1.2 (implicit Adams methods, k = 2).",
+        description=(
+            "Implicit Adams-Moulton y_{n+1} = y_n + h/12 (5 f_{n+1} + 8 f_n - f_{n-1}), solved "
+            "by Newton's method."
+        ),
+    ),
+    LinearMultistepStepper(
+        BDF2,
+        name="bdf2",
+        claimed_order=2,
+        reference=(
+            f"{_HNW}, III.1, eq. (1.22'); C. F. Curtiss & J. O. Hirschfelder, PNAS 38 (1952) 235 "
+            "(backward differentiation formulas)."
+        ),
+        description=(
+            "Backward differentiation formula y_{n+1} - 4/3 y_n + 1/3 y_{n-1} = 2/3 h f_{n+1}; "
+            "A-stable, solved by Newton's method."
+        ),
+    ),
+]

@@ -1,0 +1,185 @@
+"""Explicit Runge-Kutta methods: one step loop (`ExplicitRungeKutta`) for every tableau.
+
+A method is a `harness.coefficients.ButcherTableau` plus its claimed order and reference; the
+loop reads the stage matrix, weights and nodes from it and nothing else. The methods work on
+every problem through its first-order right-hand side y' = f(t, y).
+
+Tableaux (Hairer, Norsett & Wanner, *Solving Ordinary Differential Equations I*, 2nd ed.,
+Sect. II.1, Tables 1.1-1.2; the course's ODE lecture notes, course-material file 004):
+`euler`, `midpoint`, `heun`, `ralston`, `rk3` (Kutta's third order), `rk4`, `rk38`.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction as F
+
+import numpy as np
+
+from harness.coefficients import ButcherTableau
+from harness.errors import CoefficientError
+from harness.problem import Dynamics
+from harness.stepper import Carry, Stepper, StepperInfo
+
+__all__ = ["ExplicitRungeKutta", "TABLEAUX", "STEPPERS"]
+
+
+class ExplicitRungeKutta(Stepper):
+    """Any explicit Runge-Kutta method, given by its Butcher tableau.
+
+    One step: k_i = f(t + c_i h, y + h sum_{j<i} a_ij k_j), y <- y + h sum_i b_i k_i
+    (Hairer, Norsett & Wanner I, Sect. II.1, eq. (1.8)). Stage buffers are allocated once per
+    run; the stage sums are one matrix-vector product over the flattened stage stack, so the
+    per-step overhead does not grow with the number of nonzero coefficients.
+    """
+
+    def __init__(
+        self,
+        tableau: ButcherTableau,
+        *,
+        claimed_order: int,
+        reference: str,
+        description: str = "",
+    ):
+        if not isinstance(tableau, ButcherTableau):
+            raise CoefficientError(
+                f"`tableau` must be a ButcherTableau, got {type(tableau).__name__}"
+            )
+        if not tableau.explicit:
+            raise CoefficientError(
+                f"`{tableau.name}`: an explicit Runge-Kutta stepper needs a strictly lower "
+                "triangular stage matrix A"
+            )
+        self.coefficients = tableau
+        self.info = StepperInfo(
+            name=tableau.name,
+            family="explicit-rk",
+            claimed_order=claimed_order,
+            explicit=True,
+            symplectic=False,
+            symmetric=False,
+            evals_per_step=float(tableau.stages),
+            form="first-order",
+            velocity_dependent=True,
+            reference=reference,
+            description=description,
+        )
+        A, b = tableau.A, tableau.b
+        # For each stage after the first: the indices of its nonzero coefficients.
+        self._stage_terms = [tuple(np.flatnonzero(A[i, :i])) for i in range(tableau.stages)]
+        self._weight_terms = tuple(np.flatnonzero(b))
+
+    # -- private math -----------------------------------------------------------------------------
+    def _scale(self, c: Carry) -> None:
+        """Coefficients times the (signed) step size, refreshed whenever h changes."""
+        tab = self.coefficients
+        c.hA = tab.A * c.h
+        c.hb = tab.b * c.h
+        c.hc = tab.c * c.h
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        s = self.coefficients.stages
+        dim, n = y0.shape
+        c = Carry(t0, h, y0)
+        c.k = np.empty((s, dim, n))
+        c.k_flat = c.k.reshape(s, dim * n)
+        c.stage = np.empty((dim, n))
+        c.stage_flat = c.stage.reshape(dim * n)
+        self._scale(c)
+        return c
+
+    def _combine(self, out, out_flat, terms, coeffs, k, k_flat):
+        """out = sum_j coeffs[j] k_j over the nonzero `terms` (one or two array calls)."""
+        if len(terms) == 1:
+            j = terms[0]
+            np.multiply(k[j], coeffs[j], out=out)
+        else:
+            last = terms[-1] + 1
+            np.dot(coeffs[:last], k_flat[:last], out=out_flat)
+
+    def _step(self, dyn: Dynamics, c: Carry) -> None:
+        y, k, stage = c.y, c.k, c.stage
+        t = c.t
+        f = dyn.f
+        for i, terms in enumerate(self._stage_terms):
+            if not terms:
+                f(t + c.hc[i], y, out=k[i])
+                continue
+            self._combine(stage, c.stage_flat, terms, c.hA[i], k, c.k_flat)
+            stage += y
+            f(t + c.hc[i], stage, out=k[i])
+        self._combine(stage, c.stage_flat, self._weight_terms, c.hb, k, c.k_flat)
+        y += stage
+
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        super()._reverse(dyn, c)
+        self._scale(c)
+
+
+_HNW = "Hairer, Norsett & Wanner, Solving ODEs I, 2nd ed., Sect. II.1"
+_COURSE = "course-material file 004 (ODE initial value problems)"
+
+TABLEAUX: dict[str, tuple[ButcherTableau, int, str, str]] = {
+    "euler": (
+        ButcherTableau("euler", [[0]], [1], [0]),
+        1,
+        f"L. Euler, Institutionum calculi integralis (1768); {_HNW}; {_COURSE}",
+        "explicit (forward) Euler: one evaluation at the start of the step",
+    ),
+    "midpoint": (
+        ButcherTableau("midpoint", [[0, 0], [F(1, 2), 0]], [0, 1], [0, F(1, 2)]),
+        2,
+        f"C. Runge, Math. Ann. 46 (1895) 167-178; {_HNW}; {_COURSE} (RK midpoint)",
+        "explicit midpoint rule: an Euler half step predicts the midpoint slope",
+    ),
+    "heun": (
+        ButcherTableau("heun", [[0, 0], [1, 0]], [F(1, 2), F(1, 2)], [0, 1]),
+        2,
+        f"K. Heun, Z. Math. Phys. 45 (1900) 23-38; {_HNW}; {_COURSE} (modified Euler)",
+        "Heun's method: Euler predictor, trapezoidal corrector",
+    ),
+    "ralston": (
+        ButcherTableau("ralston", [[0, 0], [F(2, 3), 0]], [F(1, 4), F(3, 4)], [0, F(2, 3)]),
+        2,
+        "A. Ralston, Runge-Kutta methods with minimum error bounds, Math. Comp. 16 (1962) "
+        "431-437",
+        "Ralston's second-order method (c2 = 2/3, minimal truncation-error bound)",
+    ),
+    "rk3": (
+        ButcherTableau(
+            "rk3",
+            [[0, 0, 0], [F(1, 2), 0, 0], [-1, 2, 0]],
+            [F(1, 6), F(2, 3), F(1, 6)],
+            [0, F(1, 2), 1],
+        ),
+        3,
+        f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.1",
+        "Kutta's third-order method (Simpson weights)",
+    ),
+    "rk4": (
+        ButcherTableau(
+            "rk4",
+            [[0, 0, 0, 0], [F(1, 2), 0, 0, 0], [0, F(1, 2), 0, 0], [0, 0, 1, 0]],
+            [F(1, 6), F(1, 3), F(1, 3), F(1, 6)],
+            [0, F(1, 2), F(1, 2), 1],
+        ),
+        4,
+        f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.2; {_COURSE}",
+        "the classical fourth-order Runge-Kutta method",
+    ),
+    "rk38": (
+        ButcherTableau(
+            "rk38",
+            [[0, 0, 0, 0], [F(1, 3), 0, 0, 0], [F(-1, 3), 1, 0, 0], [1, -1, 1, 0]],
+            [F(1, 8), F(3, 8), F(3, 8), F(1, 8)],
+            [0, F(1, 3), F(2, 3), 1],
+        ),
+        4,
+        f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.2",
+        "Kutta's 3/8 rule, fourth order",
+    ),
+}
+
+STEPPERS: list[Stepper] = [
+    ExplicitRungeKutta(tab, claimed_order=order, reference=ref, description=desc)
+    for tab, order, ref, desc in TABLEAUX.values()
+]

@@ -1,0 +1,127 @@
+"""heyoka's adaptive Taylor integrator as a stepper (`taylor`).
+
+Each `_step` advances every ensemble member from t to t + h with heyoka's own adaptive steps
+(variable order, tolerance `tol`, `high_accuracy=True`): F. Biscani & D. Izzo, Revisiting
+high-order Taylor methods for astrodynamics and celestial mechanics, MNRAS 504 (2021) 2614-2628.
+The integrator is compiled once per problem and tolerance (heyoka's on-disk cache under the
+harness's cache directory) and reused: each member sets its own state, time and parameters.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import threading
+
+import heyoka as hy
+import numpy as np
+
+from harness import cache
+from harness.problem import Dynamics, Problem
+from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
+from harness.tolerances import EPS
+
+__all__ = ["TaylorStepper", "STEPPERS"]
+
+
+class TaylorStepper(AdaptiveStepper):
+    """heyoka `taylor_adaptive` advancing each member to the next output time.
+
+    Counts the internal steps in `dyn.counts["internal_steps"]`; one internal step is one
+    evaluation of the Taylor coefficients (the jet) of the right-hand side.
+    """
+
+    def __init__(self, tol: float = EPS, *, high_accuracy: bool = True):
+        self.tol = float(tol)
+        self.high_accuracy = high_accuracy
+        self._templates: dict[tuple, hy.taylor_adaptive] = {}
+        self._lock = threading.Lock()
+        self.info = StepperInfo(
+            name="taylor",
+            family="taylor",
+            claimed_order=None,
+            explicit=True,
+            symplectic=False,
+            symmetric=False,
+            evals_per_step=1.0,
+            form="first-order",
+            velocity_dependent=True,
+            reference=(
+                "F. Biscani & D. Izzo, Revisiting high-order Taylor methods for astrodynamics and "
+                "celestial mechanics, MNRAS 504 (2021) 2614-2628 (heyoka)"
+            ),
+            description=(
+                "heyoka adaptive Taylor integrator (variable order, tol = float64 epsilon by "
+                "default, high_accuracy=True); evaluations are counted as internal steps, one "
+                "Taylor-coefficient (jet) evaluation each"
+            ),
+            adaptive=True,
+            implementation="heyoka",
+            extra={"tol": self.tol, "evals_unit": "internal Taylor steps"},
+        )
+
+    def with_tolerance(self, tol: float) -> TaylorStepper:
+        clone = super().with_tolerance(tol)
+        clone.info = dataclasses.replace(clone.info, extra={**clone.info.extra, "tol": clone.tol})
+        return clone
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.pop("_lock", None)
+        state["_templates"] = {}
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+    def _template(self, problem: Problem) -> hy.taylor_adaptive:
+        key = (problem.fingerprint(), self.tol, self.high_accuracy)
+        with self._lock:
+            ta = self._templates.get(key)
+            if ta is None:
+                cache.configure_heyoka_cache()
+                ta = hy.taylor_adaptive(
+                    list(zip(problem.variables, problem.rhs, strict=True)),
+                    problem.y0.tolist(),
+                    tol=self.tol,
+                    high_accuracy=self.high_accuracy,
+                    pars=problem.parameter_values.tolist(),
+                )
+                self._templates[key] = ta
+        return ta
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        c = Carry(t0, h, y0)
+        c.ta = copy.copy(self._template(dyn.problem))  # a private integrator for this run
+        c.pars = dyn.pars
+        dyn.counts.setdefault("internal_steps", 0)
+        return c
+
+    def _step(self, dyn: Dynamics, c: Carry) -> None:
+        ta, y = c.ta, c.y
+        t, target = c.t, c.t0 + (c.n + 1) * c.h
+        has_pars = c.pars.size > 0
+        steps = 0
+        for j in range(y.shape[1]):
+            if not np.all(np.isfinite(y[:, j])):
+                continue
+            ta.time = t
+            ta.state[:] = y[:, j]
+            if has_pars:
+                ta.pars[:] = c.pars[:, j]
+            outcome, _, _, n_steps, *_ = ta.propagate_until(target)
+            steps += int(n_steps)
+            if outcome == hy.taylor_outcome.time_limit:
+                y[:, j] = ta.state
+            elif outcome == hy.taylor_outcome.err_nf_state:
+                y[:, j] = np.nan  # overflow: reported by the public methods as non-finite
+            else:
+                raise StepFailure(
+                    f"stepper 'taylor': heyoka stopped at t={float(ta.time)!r} before "
+                    f"t={target!r} with outcome {outcome}"
+                )
+        dyn.counts["internal_steps"] += steps
+
+
+STEPPERS: list[Stepper] = [TaylorStepper()]

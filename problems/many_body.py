@@ -1,0 +1,285 @@
+"""Problems with several degrees of freedom: `henon-heiles`, `henon-heiles-chaotic`,
+`outer-solar-system`, `lennard-jones`.
+
+The state may have any size; these problems exercise the ensemble design on larger systems and
+carry the invariants a structure-preserving method should keep (energy, total momentum, angular
+momentum). Integer powers are written as products (heyoka's Taylor recurrence for pow divides by
+its base).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import heyoka as hy
+import numpy as np
+from scipy import optimize
+
+from harness.problem import NewtonianForm, Problem
+
+__all__ = [
+    "PROBLEMS",
+    "HENON_HEILES",
+    "HENON_HEILES_CHAOTIC",
+    "OUTER_SOLAR_SYSTEM",
+    "LENNARD_JONES",
+    "henon_heiles_start",
+]
+
+_GNI = "E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed., Springer 2006"
+
+
+# -- Hénon-Heiles ---------------------------------------------------------------------------------
+def henon_heiles_start(energy: float, y0: float) -> list[float]:
+    """A start on the section x = 0 with py = 0 and px > 0 chosen so that H = `energy`."""
+    px2 = 2.0 * energy - y0 * y0 + 2.0 * y0 * y0 * y0 / 3.0
+    return [0.0, y0, math.sqrt(px2), 0.0]
+
+
+_hx, _hy, _hpx, _hpy = hy.make_vars("x", "y", "px", "py")
+_HH_NEWTONIAN = NewtonianForm(
+    positions=(_hx, _hy),
+    velocities=(_hpx, _hpy),
+    acceleration=(-_hx - 2.0 * _hx * _hy, -_hy - _hx * _hx + _hy * _hy),
+)
+_HH_ENERGY = {
+    "energy": (_hpx * _hpx + _hpy * _hpy) / 2.0
+    + (_hx * _hx + _hy * _hy) / 2.0
+    + _hx * _hx * _hy
+    - _hy * _hy * _hy / 3.0
+}
+_HH_REF = f"M. Hénon, C. Heiles, Astron. J. 69 (1964) 73-79; energies 1/12 and 1/8 as in {_GNI}, section I.3."
+
+HENON_HEILES = Problem(
+    "henon-heiles",
+    variables=[_hx, _hy, _hpx, _hpy],
+    newtonian=_HH_NEWTONIAN,
+    y0=henon_heiles_start(1.0 / 12.0, 0.1),
+    t_span=(0.0, 50.0),
+    invariants=_HH_ENERGY,
+    conservative=True,
+    description=(
+        "Hénon-Heiles Hamiltonian H = (px^2 + py^2)/2 + (x^2 + y^2)/2 + x^2 y - y^3/3 at energy "
+        "1/12, start x = 0, y = 0.1, py = 0 on a regular (quasi-periodic) orbit: the finite-time "
+        "Lyapunov exponent over t = 3000 is below 1e-4. Span [0, 50]."
+    ),
+    reference=_HH_REF,
+    tags=("newtonian", "hamiltonian", "regular"),
+)
+
+HENON_HEILES_CHAOTIC = Problem(
+    "henon-heiles-chaotic",
+    variables=[_hx, _hy, _hpx, _hpy],
+    newtonian=_HH_NEWTONIAN,
+    y0=henon_heiles_start(1.0 / 8.0, -0.2),
+    t_span=(0.0, 50.0),
+    invariants=_HH_ENERGY,
+    conservative=True,
+    description=(
+        "Hénon-Heiles at energy 1/8, start x = 0, y = -0.2, py = 0 in the chaotic sea (finite-time "
+        "Lyapunov exponent ~0.07 over t = 3000): errors grow ~30x over the span [0, 50], so the "
+        "reference's own error is what limits how far a method can be judged."
+    ),
+    reference=_HH_REF,
+    tags=("newtonian", "hamiltonian", "chaotic"),
+)
+
+
+# -- gravitational N-body -------------------------------------------------------------------------
+def _nbody(
+    masses: Sequence[float], G: float, names: Sequence[str]
+) -> tuple[list[hy.expression], NewtonianForm, dict[str, hy.expression]]:
+    """Variables, Newtonian form and invariants of a 3-D gravitational N-body system."""
+    n = len(masses)
+    q = [hy.make_vars(*(f"{b}_{c}" for c in "xyz")) for b in names]
+    v = [hy.make_vars(*(f"{b}_v{c}" for c in "xyz")) for b in names]
+    acc = [[hy.expression(0.0)] * 3 for _ in range(n)]
+    potential = hy.expression(0.0)
+    for i in range(n):
+        for j in range(i + 1, n):
+            d = [q[j][c] - q[i][c] for c in range(3)]
+            r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+            inv_r3 = r2 ** (-1.5)
+            for c in range(3):
+                acc[i][c] = acc[i][c] + (G * masses[j]) * d[c] * inv_r3
+                acc[j][c] = acc[j][c] - (G * masses[i]) * d[c] * inv_r3
+            potential = potential - (G * masses[i] * masses[j]) * r2 ** (-0.5)
+    kinetic = hy.expression(0.0)
+    for i in range(n):
+        kinetic = kinetic + (masses[i] / 2.0) * sum((v[i][c] * v[i][c] for c in range(3)), hy.expression(0.0))
+    invariants = {"energy": kinetic + potential}
+    for c, axis in enumerate("xyz"):
+        invariants[f"momentum_{axis}"] = sum((masses[i] * v[i][c] for i in range(n)), hy.expression(0.0))
+    for c, axis in enumerate("xyz"):
+        a, b = (c + 1) % 3, (c + 2) % 3
+        invariants[f"angular_momentum_{axis}"] = sum(
+            (masses[i] * (q[i][a] * v[i][b] - q[i][b] * v[i][a]) for i in range(n)), hy.expression(0.0)
+        )
+    positions = tuple(x for body in q for x in body)
+    velocities = tuple(x for body in v for x in body)
+    accel = tuple(a for body in acc for a in body)
+    nf = NewtonianForm(positions=positions, velocities=velocities, acceleration=accel)
+    return list(positions + velocities), nf, invariants
+
+
+# Hairer, Lubich & Wanner, GNI section I.2.4, Table 2.1: masses relative to the Sun (the Sun's
+# includes the inner planets), heliocentric positions in AU, velocities in AU/day; G in
+# AU^3 / (solar mass day^2). The same table is reproduced in
+# SciML/DiffEqDocs.jl (docs/src/models/physical.md) and in the MatMol examples (G_solar.m).
+_SOLAR_G = 2.95912208286e-4
+_SOLAR_BODIES = (
+    # name, mass, position, velocity
+    ("sun", 1.00000597682, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
+    (
+        "jupiter",
+        0.000954786104043,
+        (-3.5023653, -3.8169847, -1.5507963),
+        (0.00565429, -0.00412490, -0.00190589),
+    ),
+    ("saturn", 0.000285583733151, (9.0755314, -3.0458353, -1.6483708), (0.00168318, 0.00483525, 0.00192462)),
+    (
+        "uranus",
+        0.0000437273164546,
+        (8.3101420, -16.2901086, -7.2521278),
+        (0.00354178, 0.00137102, 0.00055029),
+    ),
+    (
+        "neptune",
+        0.0000517759138449,
+        (11.4707666, -25.7294829, -10.8169456),
+        (0.00288930, 0.00114527, 0.00039677),
+    ),
+    ("pluto", 1.0 / 1.3e8, (-15.5387357, -25.2225594, -3.1902382), (0.00276725, -0.00170702, -0.00136504)),
+)
+_solar_vars, _solar_nf, _solar_inv = _nbody(
+    [b[1] for b in _SOLAR_BODIES], _SOLAR_G, [b[0] for b in _SOLAR_BODIES]
+)
+
+OUTER_SOLAR_SYSTEM = Problem(
+    "outer-solar-system",
+    variables=_solar_vars,
+    newtonian=_solar_nf,
+    y0=[c for b in _SOLAR_BODIES for c in b[2]] + [c for b in _SOLAR_BODIES for c in b[3]],
+    t_span=(0.0, 20000.0),
+    invariants=_solar_inv,
+    conservative=True,
+    # 1 Jupiter orbit (~4330 days) is enough to measure an order; the full 20000 days (~1.7
+    # Saturn orbits) would cost low-order methods far more steps than the sweep budget allows.
+    convergence_t_end=4000.0,
+    # The positions are in AU and the velocities ~1e-3 AU/day: a 1e-3 relative perturbation
+    # keeps every perturbed member a bound, planet-like system.
+    perturbation=1e-3,
+    description=(
+        "The Sun and the five outer bodies (Jupiter, Saturn, Uranus, Neptune, Pluto) under "
+        "Newtonian gravity, G = 2.95912208286e-4 AU^3/(solar mass day^2), days as time unit; "
+        "36 state variables, span [0, 20000] days. Energy, total momentum and total angular "
+        "momentum are conserved."
+    ),
+    reference=(
+        f"{_GNI}, section I.2.4 (outer solar system, Table 2.1 data, G = 2.95912208286e-4); "
+        "table reproduced in SciML/DiffEqDocs.jl docs/src/models/physical.md."
+    ),
+    tags=("newtonian", "hamiltonian", "n-body"),
+)
+
+
+# -- Lennard-Jones cluster ------------------------------------------------------------------------
+def _lennard_jones(
+    n_atoms: int,
+) -> tuple[list[hy.expression], NewtonianForm, dict[str, hy.expression]]:
+    """2-D Lennard-Jones cluster, epsilon = sigma = mass = 1: V = sum 4 (r^-12 - r^-6)."""
+    q = [hy.make_vars(f"a{i}_x", f"a{i}_y") for i in range(n_atoms)]
+    v = [hy.make_vars(f"a{i}_vx", f"a{i}_vy") for i in range(n_atoms)]
+    acc = [[hy.expression(0.0), hy.expression(0.0)] for _ in range(n_atoms)]
+    potential = hy.expression(0.0)
+    for i in range(n_atoms):
+        for j in range(i + 1, n_atoms):
+            dx, dy = q[i][0] - q[j][0], q[i][1] - q[j][1]
+            inv_r2 = 1.0 / (dx * dx + dy * dy)
+            inv_r6 = inv_r2 * inv_r2 * inv_r2
+            # force on i along (q_i - q_j): 24 (2 r^-12 - r^-6) / r^2
+            scale = 24.0 * (2.0 * inv_r6 * inv_r6 - inv_r6) * inv_r2
+            for c, d in enumerate((dx, dy)):
+                acc[i][c] = acc[i][c] + scale * d
+                acc[j][c] = acc[j][c] - scale * d
+            potential = potential + 4.0 * (inv_r6 * inv_r6 - inv_r6)
+    kinetic = sum(((vx * vx + vy * vy) / 2.0 for vx, vy in v), hy.expression(0.0))
+    invariants = {
+        "energy": kinetic + potential,
+        "momentum_x": sum((vx for vx, _ in v), hy.expression(0.0)),
+        "momentum_y": sum((vy for _, vy in v), hy.expression(0.0)),
+        "angular_momentum": sum(
+            (x * vy - y * vx for (x, y), (vx, vy) in zip(q, v, strict=True)), hy.expression(0.0)
+        ),
+    }
+    positions = tuple(c for atom in q for c in atom)
+    velocities = tuple(c for atom in v for c in atom)
+    nf = NewtonianForm(
+        positions=positions, velocities=velocities, acceleration=tuple(a for atom in acc for a in atom)
+    )
+    return list(positions + velocities), nf, invariants
+
+
+def _hexagon_radius() -> float:
+    """Radius of the centred regular hexagon at which every atom is in equilibrium.
+
+    By symmetry the central atom feels no force and a ring atom only a radial one; that radial
+    force vanishes slightly inside the pair minimum 2^(1/6) (second neighbours attract).
+    """
+
+    def pair_force(r: float) -> float:  # -dV/dr, positive when repulsive
+        return 24.0 * (2.0 * r**-13 - r**-7)
+
+    def radial(radius: float) -> float:
+        total = pair_force(radius)  # from the centre
+        for k in range(1, 6):
+            d = 2.0 * radius * math.sin(k * math.pi / 6.0)  # chord to the k-th ring neighbour
+            total += pair_force(d) * math.sin(k * math.pi / 6.0)  # its radial component
+        return total
+
+    return optimize.brentq(radial, 1.0, 1.2, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+
+
+_LJ_RADIUS = _hexagon_radius()
+_LJ_POSITIONS = [(0.0, 0.0)] + [
+    (_LJ_RADIUS * math.cos(k * math.pi / 3.0), _LJ_RADIUS * math.sin(k * math.pi / 3.0)) for k in range(6)
+]
+# Small fixed velocities (kinetic energy ~1e-3 per atom against a well depth of 1) with zero
+# total momentum: the last atom's velocity balances the others.
+_LJ_VELOCITIES = [
+    (0.031, -0.017),
+    (-0.024, 0.042),
+    (0.015, 0.028),
+    (-0.038, -0.009),
+    (0.022, -0.035),
+    (0.007, 0.019),
+]
+_LJ_VELOCITIES.append((-sum(v[0] for v in _LJ_VELOCITIES), -sum(v[1] for v in _LJ_VELOCITIES)))
+_lj_vars, _lj_nf, _lj_inv = _lennard_jones(7)
+
+LENNARD_JONES = Problem(
+    "lennard-jones",
+    variables=_lj_vars,
+    newtonian=_lj_nf,
+    y0=[c for p in _LJ_POSITIONS for c in p] + [c for v in _LJ_VELOCITIES for c in v],
+    t_span=(0.0, 10.0),
+    invariants=_lj_inv,
+    conservative=True,
+    # Relative perturbations of 1e-2 would move atoms by ~1e-2 sigma: still near equilibrium.
+    description=(
+        "Seven Lennard-Jones atoms in the plane (epsilon = sigma = mass = 1): a central atom and "
+        "a regular hexagon at its equilibrium radius (just inside the pair minimum 2^(1/6)), "
+        "with small velocities of zero total momentum, so the cluster vibrates near equilibrium "
+        "over [0, 10] (~25 periods of the fastest normal mode). 28 state variables; energy, "
+        "momentum and angular momentum are conserved."
+    ),
+    reference=(
+        "The two-dimensional 7-atom Lennard-Jones cluster of C. Dellago, P. G. Bolhuis, "
+        "D. Chandler, J. Chem. Phys. 108 (1998) 9236; L. Verlet, Phys. Rev. 159 (1967) 98 (the "
+        "molecular-dynamics use of the Verlet scheme, course material 002_b3abae41bf42a307.txt)."
+    ),
+    tags=("newtonian", "hamiltonian", "n-body", "molecular-dynamics"),
+)
+
+PROBLEMS: list[Problem] = [HENON_HEILES, HENON_HEILES_CHAOTIC, OUTER_SOLAR_SYSTEM, LENNARD_JONES]
