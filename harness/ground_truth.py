@@ -9,25 +9,28 @@ step's Taylor remainder, not the global error, so the error is measured, never a
     error[t, n] = max over components of ( |y_level - y_next| + |fl64(y_level) - y_level| ),
 
 the difference with the next level (computed exactly in the higher precision) plus the rounding
-of the stored float64 value. This bounds the stored value's error whenever the next level is much
-more accurate than the level itself (its unit roundoff is 2^-11 to 2^-79 times smaller).
+of the stored float64 value. The certifying run uses the tolerance max(its own unit roundoff,
+the certified level's x `CERTIFIER_TOL_FACTOR` = 2^-16): its error is then ~1e-5 of the
+certified level's, so the difference measures the level's error (on Kepler e = 0.6 at t = 100
+the float64 level's certified 2.04e-12 matches its true error, from the exact solution, to 0.01 %).
 
 Level policy (`required_error`):
-- None (default): long double certified by real128. Measured on this machine type (2 cores):
-  every catalogue problem for a 16-member ensemble at its convergence final time costs about
-  2 s cold in total, almost all of it in real128 (see `README`-level notes in the report); the
-  certified errors are ~1e-16 relative, i.e. the float64 rounding of the stored value itself.
-  Without real128 support the best available pair is used.
+- None (default): long double certified by real128 (the best available pair without real128).
+  Measured on this machine type: all 15 catalogue problems, a 16-member ensemble each, at their
+  convergence final times cost ~2 s of CPU in total (~90 % in the real128 certifier; the most
+  expensive are `lennard-jones` and `outer-solar-system`, ~0.45 s each), with certified errors
+  at the float64 rounding of the state (<= 1.2e-16 relative). A fresh heyoka JIT cache adds a
+  one-time ~7 s of compilation; a cached reference loads in ~1-10 ms.
 - a number: the cheapest level whose certified error (max over times and members) meets it;
   `ReferenceError_` names the required and the best achieved error when none does. When the
   float64 rounding of the state alone already exceeds the requirement, the dearer levels are
   skipped (their error includes that same rounding).
 
-Integrators are compiled once per (problem, level) and process and reset per ensemble member
-(parameters are runtime values); heyoka's on-disk JIT cache lives in the harness cache directory.
-References are cached on disk under `cache_dir()/references`, keyed by a hash of the problem's
-fingerprint, times, t0, initial states, parameters, level and heyoka version; files are written
-atomically, and a corrupt file is ignored and recomputed.
+Integrators are compiled once per (problem, level, tolerance) and process and reset per ensemble
+member (parameters are runtime values); heyoka's on-disk JIT cache lives in the harness cache
+directory. References are cached on disk under `cache_dir()/references`, keyed by a hash of the
+problem's fingerprint, times, t0, initial states, parameters, level, tolerance factors and heyoka
+version; files are written atomically, and a corrupt file is ignored and recomputed.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ import os
 import tempfile
 import threading
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,6 +53,7 @@ import numpy as np
 from harness import cache
 from harness.errors import InputError, ReferenceError_
 from harness.problem import Problem, check_state, check_time
+from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
 
 __all__ = [
     "Reference",
@@ -63,10 +68,14 @@ __all__ = [
 # Bump when the stored format or the error formula changes: old cache files are then ignored.
 _SCHEMA = 1
 
-# Problems with at least this many state variables are compiled in heyoka's compact mode:
-# compilation of the unrolled Taylor recurrences of a 36-variable N-body system in real128
-# takes seconds, compact mode a fraction of that, at a modest cost per step.
-_COMPACT_MODE_DIM = 20
+# heyoka's compact mode compiles the Taylor recurrences as loops instead of unrolled code. It is
+# used for every software-emulated level (real128, real192): there it compiles 3-5x faster
+# (pendulum: 0.24 s instead of 0.73 s cold) for 10-25 % more time per step; and at any level
+# for right-hand sides longer than this many characters of printed form (a cheap size measure):
+# the unrolled 3-atom Lennard-Jones system takes ~20 s to compile in real128, 7 atoms ~300 s in
+# long double, against under 1 s in compact mode.
+_COMPACT_MODE_SIZE = 1000
+_SOFTWARE_LEVELS = ("real128", "real192")
 
 
 @dataclass(frozen=True)
@@ -82,8 +91,9 @@ class _Level:
         return -(-self.bits // 53) + 1
 
     @property
-    def tol(self) -> Any:
-        return self.scalar(2.0 ** (1 - self.bits))
+    def eps(self) -> float:
+        """Unit roundoff (machine epsilon) as a float."""
+        return 2.0 ** (1 - self.bits)
 
     def scalar(self, x: float) -> Any:
         x = float(x)
@@ -131,7 +141,13 @@ def _level_available(lv: _Level) -> bool:
 
 
 def _chain() -> list[_Level]:
-    return [lv for lv in _ALL_LEVELS if _level_available(lv)]
+    """Available levels of strictly increasing precision (where long double is IEEE quad, it
+    replaces real128 rather than being certified by an equally precise level)."""
+    chain: list[_Level] = []
+    for lv in _ALL_LEVELS:
+        if _level_available(lv) and (not chain or lv.bits > chain[-1].bits):
+            chain.append(lv)
+    return chain
 
 
 def available_levels() -> list[str]:
@@ -148,7 +164,15 @@ def certifier_of(level: str) -> str:
     return names[names.index(level) + 1]
 
 
-DEFAULT_LEVEL = "longdouble" if "longdouble" in available_levels() else available_levels()[-1]
+def _default_level() -> str:
+    levels = available_levels()
+    if "longdouble" in levels:
+        return "longdouble"
+    return levels[-1] if levels else "float64"
+
+
+#: The level used when no `required_error` is given.
+DEFAULT_LEVEL = _default_level()
 
 
 @dataclass
@@ -181,8 +205,8 @@ _integrators: dict[tuple[str, str], tuple[threading.Lock, Any]] = {}
 _integrators_lock = threading.Lock()
 
 
-def _integrator(problem: Problem, level: _Level) -> tuple[threading.Lock, Any]:
-    key = (problem.fingerprint(), level.name)
+def _integrator(problem: Problem, level: _Level, tol: float) -> tuple[threading.Lock, Any]:
+    key = (problem.fingerprint(), level.name, tol)
     with _integrators_lock:
         found = _integrators.get(key)
     if found is not None:
@@ -190,9 +214,10 @@ def _integrator(problem: Problem, level: _Level) -> tuple[threading.Lock, Any]:
     cache.configure_heyoka_cache()
     sys = list(zip(problem.variables, problem.rhs, strict=True))
     kwargs: dict[str, Any] = {
-        "tol": level.tol,
+        "tol": level.scalar(tol),
         "high_accuracy": True,
-        "compact_mode": problem.dim >= _COMPACT_MODE_DIM,
+        "compact_mode": level.name in _SOFTWARE_LEVELS
+        or sum(len(str(e)) for e in problem.rhs) > _COMPACT_MODE_SIZE,
     }
     if level.name != "float64":
         kwargs["fp_type"] = level.fp_type
@@ -204,11 +229,25 @@ def _integrator(problem: Problem, level: _Level) -> tuple[threading.Lock, Any]:
         return _integrators.setdefault(key, entry)
 
 
+def _reference_tol(level: _Level) -> float:
+    return level.eps * REFERENCE_TOL_FACTOR
+
+
+def _certifier_tol(cert: _Level, level: _Level) -> float:
+    return max(cert.eps, _reference_tol(level) * CERTIFIER_TOL_FACTOR)
+
+
 def _propagate(
-    problem: Problem, level: _Level, times: np.ndarray, y0: np.ndarray, t0: float, pars: np.ndarray
+    problem: Problem,
+    level: _Level,
+    tol: float,
+    times: np.ndarray,
+    y0: np.ndarray,
+    t0: float,
+    pars: np.ndarray,
 ) -> tuple[np.ndarray, float]:
     """States at `times` for every member, shaped (nt, dim, N), in the level's number type."""
-    lock, ta = _integrator(problem, level)
+    lock, ta = _integrator(problem, level, tol)
     prepend = times[0] > t0
     grid = level.array(np.concatenate([[t0], times]) if prepend else times)
     n_members = y0.shape[1]
@@ -294,6 +333,7 @@ def _key(problem: Problem, level: str, times, t0, y0, pars) -> str:
     for part in (
         f"schema={_SCHEMA}",
         f"heyoka={hy.__version__}",
+        f"tol={REFERENCE_TOL_FACTOR!r},{CERTIFIER_TOL_FACTOR!r}",
         problem.fingerprint(),
         level,
         repr(float(t0)),
@@ -312,19 +352,24 @@ def _cache_path(problem: Problem, level: str, key: str) -> Path:
     return references_dir() / f"{safe}-{level}-{key}.npz"
 
 
-def _load(path: Path, problem: Problem, times: np.ndarray, shape: tuple[int, int, int]):
+def _load(path: Path, times: np.ndarray, shape: tuple[int, int, int]):
     if not path.exists():
         return None
     try:
         with np.load(path, allow_pickle=False) as data:
-            y, error, t = data["y"], data["error"], data["t"]
+            y, error, floor, t = data["y"], data["error"], data["floor"], data["t"]
             certified_by = str(data["certified_by"])
             compute_s = float(data["compute_s"])
-        if y.shape != shape or error.shape != (shape[0], shape[2]) or not np.array_equal(t, times):
+        if (
+            y.shape != shape
+            or error.shape != (shape[0], shape[2])
+            or floor.shape != error.shape
+            or not np.array_equal(t, times)
+        ):
             return None
-        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(error))):
+        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(error)) and np.all(error >= 0)):
             return None
-        return y, error, certified_by, compute_s
+        return y, error, floor, certified_by, compute_s
     except Exception:  # a truncated or corrupt file is recomputed, never trusted
         return None
 
@@ -399,17 +444,22 @@ def reference(
     n_members = y.shape[1]
     P = problem.pars_for(n_members, pars)
     required = _check_required(required_error)
+    if not available_levels():
+        raise ReferenceError_(
+            f"ground truth for problem {problem.name!r} cannot be certified: no precision above "
+            "float64 is available (long double is double here and heyoka lacks real128)"
+        )
     chain = _chain()
     names = [lv.name for lv in chain]
     candidates = [DEFAULT_LEVEL] if required is None else available_levels()
     shape = (times.size, problem.dim, n_members)
 
-    runs: dict[str, tuple[np.ndarray, float]] = {}
+    runs: dict[tuple[str, float], tuple[np.ndarray, float]] = {}
 
-    def run(lv: _Level) -> tuple[np.ndarray, float]:
-        if lv.name not in runs:
-            runs[lv.name] = _propagate(problem, lv, times, y, t0, P)
-        return runs[lv.name]
+    def run(lv: _Level, tol: float) -> tuple[np.ndarray, float]:
+        if (lv.name, tol) not in runs:
+            runs[lv.name, tol] = _propagate(problem, lv, tol, times, y, t0, P)
+        return runs[lv.name, tol]
 
     best: tuple[float, str] | None = None
     for name in candidates:
@@ -417,9 +467,9 @@ def reference(
         cert = chain[names.index(name) + 1]
         key = _key(problem, name, times, t0, y, P)
         path = _cache_path(problem, name, key)
-        loaded = _load(path, problem, times, shape)
+        loaded = _load(path, times, shape)
         if loaded is not None:
-            y_ref, error, certified_by, compute_s = loaded
+            y_ref, error, floor, certified_by, compute_s = loaded
             ref = Reference(
                 problem.name,
                 times,
@@ -431,20 +481,23 @@ def reference(
                 cached=True,
                 compute_s=compute_s,
             )
-            floor = None
         else:
-            values, cost_level = run(level)
-            higher, cost_cert = run(cert)
+            values, cost_level = run(level, _reference_tol(level))
+            higher, cost_cert = run(cert, _certifier_tol(cert, level))
             y_ref, error, floor = _certify(values, level, higher, cert)
             compute_s = cost_level + cost_cert
-            _store(
-                path,
-                y=y_ref,
-                error=error,
-                t=times,
-                certified_by=np.array(cert.name),
-                compute_s=np.array(compute_s),
-            )
+            try:
+                _store(
+                    path,
+                    y=y_ref,
+                    error=error,
+                    floor=floor,
+                    t=times,
+                    certified_by=np.array(cert.name),
+                    compute_s=np.array(compute_s),
+                )
+            except OSError as exc:  # the cache is an optimisation: a read-only disk is no error
+                warnings.warn(f"reference cache not written ({path}): {exc}", stacklevel=2)
             ref = Reference(
                 problem.name,
                 times,
@@ -465,7 +518,7 @@ def reference(
         # The stored float64 value's own rounding is part of every level's error: when it alone
         # exceeds the requirement (less the spread between this level and its certifier), no
         # dearer level can succeed.
-        if floor is not None and float(np.max(floor)) > required:
+        if float(np.max(floor)) > required:
             break
     assert best is not None
     raise ReferenceError_(

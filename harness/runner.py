@@ -862,7 +862,7 @@ def _run_dask(tasks: Sequence[_Task], client: Any, accept) -> None:
         for t in tasks:
             fut = client.submit(_execute, t.payload, key=f"harness-cell-{t.key}-{tag}", pure=False)
             futures[fut] = t
-        for fut in as_completed(list(futures)):
+        for fut in as_completed(list(futures), loop=client.loop):
             t = futures[fut]
             try:
                 out = fut.result()

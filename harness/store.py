@@ -317,6 +317,8 @@ def resolve_run(run: str | os.PathLike | None = None, root: str | os.PathLike | 
     if _SAFE_NAME.match(text) and (base / text).is_dir():
         return base / text
     if (os.sep in text or as_path.is_absolute() or text.startswith(".")) and as_path.is_dir():
+        if not (as_path / "meta.json").is_file():
+            raise ResultsError(f"`run` {text[:200]!r} is a directory but not a saved run (no meta.json)")
         return as_path
     ids = list_runs(base)
     import difflib

@@ -125,3 +125,44 @@ MEMORY_HEADROOM = 0.8
 # Convergence sweep: stop refining once this many points lie in the asymptotic range; six
 # points over a factor 32 in h pin an order to a few hundredths, and more only cost steps.
 TARGET_FIT_POINTS = 6
+# A scipy solver that evaluates f this many times in a row at one time value has a collapsed step
+# size (scipy's LSODA then loops forever instead of failing); no solver needs more than a few
+# tens of evaluations at one time (Newton iterations, Jacobian retries) in a healthy step.
+SCIPY_STALL_CALLS = 1000
+
+# Ground truth: a certifying run uses the tolerance max(its own unit roundoff, the certified
+# level's unit roundoff x this): its step error is then 65536x below the certified level's,
+# enough to measure that level's error to ~1e-4 relative, at 2-4x less real128 cost than its
+# full precision would take.
+CERTIFIER_TOL_FACTOR = 2.0**-16
+
+# Roundoff experiment: the smallest step counts as rounding-limited when its error exceeds the
+# truncation error predicted there (error(h_max) (h / h_max)^3 at a fixed step count) by this
+# factor: an order of magnitude leaves no doubt which of the two dominates.
+ROUNDOFF_TRUNCATION_FACTOR = 10.0
+# Report claim "two-step Verlet is more prone to rounding than leapfrog": its roundoff floor must
+# exceed the one-step form's by this factor on every problem measured (the rounding models
+# predict a ratio of ~1/(h omega), thousands at the sweep's small end; 10 is far above noise).
+ROUNDOFF_CLAIM_RATIO = 10.0
+
+# Reversibility (harness.experiments.reversibility). A symmetric method's step rounds its state
+# to about one ulp; measured on the registry, the return error stays below ~0.2 ulps per step
+# where the flow does not amplify (harmonic) and within the flow's own amplification elsewhere,
+# so 2 ulps per step, carried by the flow's sensitivity, is what rounding explains ...
+REVERSIBILITY_ULPS_PER_STEP = 2.0
+# ... the flow's sensitivity is measured by central differences of relative size 1e-6 (the
+# linearisation error ~1e-6 stays far below the factor-of-ten margins the bound has) ...
+REVERSIBILITY_FLOW_DELTA = 1e-6
+# ... on a ground truth certified to 1e-10 of the state's scale (1e-4 of the difference).
+REVERSIBILITY_FLOW_REFERENCE_ERROR = 1e-10
+
+# Symplecticity (harness.experiments.symplecticity). The one-step Jacobian comes from
+# fourth-order central differences with steps of 1e-3 of each component's scale: truncation
+# ~delta^4 |Phi^(5)| ~ 1e-12 and rounding ~eps/delta ~ 2e-13 per entry ...
+SYMPLECTIC_FD_DELTA = 1e-3
+# ... so a symplectic map shows ||J^T Omega J - Omega|| / ||J||^2 at that level (measured:
+# below ~1e-12 for every symplectic stepper of the registry, implicit solves included); 1e-10
+# leaves a hundredfold margin ...
+SYMPLECTIC_FD_TOL = 1e-10
+# ... and a method claimed not symplectic must exceed it tenfold to count as clearly above it.
+SYMPLECTIC_CLEAR_FACTOR = 10.0

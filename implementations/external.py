@@ -33,7 +33,7 @@ from scipy.integrate import solve_ivp
 
 from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
-from harness.tolerances import SCIPY_MIN_RTOL
+from harness.tolerances import SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
 
 __all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS"]
 
@@ -99,9 +99,17 @@ SCIPY_METHODS: dict[str, tuple] = {
 }
 
 
+class _Stalled(Exception):
+    """The solver keeps evaluating at one time value: its step size has collapsed to zero."""
+
+
 class _MemberDynamics:
     """One ensemble member's view of a run's `Dynamics`: same compiled functions and the same
-    counters (so every call is booked), that member's parameters."""
+    counters (so every call is booked), that member's parameters.
+
+    It also watches for a stalled solver: scipy's LSODA, once its step size underflows to zero
+    (e.g. at a finite-time blow-up), evaluates f at the same time forever instead of failing.
+    """
 
     def __init__(self, dyn: Dynamics, member: int):
         view = copy.copy(dyn)  # shallow: shares `counts` and the compiled functions
@@ -110,8 +118,20 @@ class _MemberDynamics:
         view._tbuf = np.zeros(1)
         view._qv = None
         self._view = view
+        self.reset()
+
+    def reset(self) -> None:
+        self._last_t = None
+        self._same_t = 0
 
     def f(self, t: float, y: np.ndarray) -> np.ndarray:
+        if t == self._last_t:
+            self._same_t += 1
+            if self._same_t >= SCIPY_STALL_CALLS:
+                raise _Stalled(t)
+        else:
+            self._last_t = t
+            self._same_t = 0
         return self._view.f(t, np.ascontiguousarray(y).reshape(-1, 1))[:, 0]
 
     def jac(self, t: float, y: np.ndarray) -> np.ndarray:
@@ -187,18 +207,27 @@ class ScipyStepper(AdaptiveStepper):
                 if not np.all(np.isfinite(y[:, m])):
                     continue
                 member = c.members[m]
+                member.reset()
                 options = {"jac": member.jac} if self.uses_jacobian else {}
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RuntimeWarning)  # overflow is reported below
-                    sol = solve_ivp(
-                        member.f,
-                        (t, target),
-                        y[:, m].copy(),
-                        method=self.method,
-                        rtol=rtol,
-                        atol=atol,
-                        **options,
-                    )
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", RuntimeWarning)  # overflow: see below
+                        sol = solve_ivp(
+                            member.f,
+                            (t, target),
+                            y[:, m].copy(),
+                            method=self.method,
+                            rtol=rtol,
+                            atol=atol,
+                            **options,
+                        )
+                except _Stalled as stall:
+                    raise StepFailure(
+                        f"stepper {self.info.name!r}: scipy {self.method} stalled for ensemble "
+                        f"member {m} between t={t!r} and t={target!r}: {SCIPY_STALL_CALLS} "
+                        f"consecutive evaluations at t={stall.args[0]!r} (step size collapsed "
+                        "to zero)"
+                    ) from None
                 if sol.status < 0:
                     raise StepFailure(
                         f"stepper {self.info.name!r}: scipy {self.method} failed for ensemble "

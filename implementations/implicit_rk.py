@@ -171,6 +171,7 @@ class ImplicitRungeKutta(Stepper):
         newton: str = "full",
         newton_tol: float = NEWTON_TOL,
         newton_max_iter: int = NEWTON_MAX_ITER,
+        stability: dict | None = None,
     ):
         if not isinstance(tableau, ButcherTableau):
             raise InputError(f"`tableau` must be a ButcherTableau, got {type(tableau).__name__}")
@@ -180,6 +181,15 @@ class ImplicitRungeKutta(Stepper):
             )
         self.coefficients = tableau
         self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
+        self._construct = dict(
+            name=name,
+            claimed_order=claimed_order,
+            symplectic=symplectic,
+            symmetric=symmetric,
+            reference=reference,
+            description=description,
+            stability=stability,
+        )
         A, b, c = tableau.A, tableau.b, tableau.c
         zero_rows = np.all(A == 0.0, axis=1)
         self._expl = np.flatnonzero(zero_rows)
@@ -251,7 +261,20 @@ class ImplicitRungeKutta(Stepper):
                 "newton_max_iter": self.newton.max_iter,
                 "stages": s,
                 "implicit_stages": n_impl,
+                **({"stability": dict(stability)} if stability else {}),
             },
+        )
+
+    def with_newton(
+        self, mode: str | None = None, tol: float | None = None, max_iter: int | None = None
+    ) -> ImplicitRungeKutta:
+        """The same method with other Newton settings (unchanged where None)."""
+        return ImplicitRungeKutta(
+            self.coefficients,
+            newton=self.newton.mode if mode is None else mode,
+            newton_tol=self.newton.tol if tol is None else tol,
+            newton_max_iter=self.newton.max_iter if max_iter is None else max_iter,
+            **self._construct,
         )
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
@@ -331,6 +354,10 @@ _COURSE_ODE = (
     "Equations: Initial Value Problems', Univ. Torino 2017-18)"
 )
 
+# A-stable: |R(z)| <= 1 on the whole left half-plane, so the real stability interval is unbounded
+# (Hairer & Wanner II, IV.3); checked by the stability experiment.
+_A_STABLE = {"real_interval": math.inf}
+
 BACKWARD_EULER = ButcherTableau("backward-euler", A=[[1.0]], b=[1.0], c=[1.0])
 TRAPEZOID = ButcherTableau(
     "trapezoid", A=[[0.0, 0.0], [0.5, 0.5]], b=[0.5, 0.5], c=[0.0, 1.0]
@@ -355,6 +382,7 @@ STEPPERS: list[Stepper] = [
             "stability; Hairer & Wanner, Solving ODEs II, IV.3."
         ),
         description="Backward (implicit) Euler y_{n+1} = y_n + h f(t_{n+1}, y_{n+1}); L-stable.",
+        stability=_A_STABLE,
     ),
     ImplicitRungeKutta(
         TRAPEZOID,
@@ -371,6 +399,7 @@ STEPPERS: list[Stepper] = [
             "Trapezoidal rule (Crank-Nicolson, one-step Adams-Moulton) "
             "y_{n+1} = y_n + h/2 (f_n + f_{n+1}), as the two-stage Lobatto IIIA tableau; A-stable."
         ),
+        stability=_A_STABLE,
     ),
     ImplicitRungeKutta(
         IMPLICIT_MIDPOINT,
@@ -386,6 +415,7 @@ STEPPERS: list[Stepper] = [
             "Implicit midpoint rule y_{n+1} = y_n + h f(t_n + h/2, (y_n + y_{n+1})/2), the "
             "one-stage Gauss method; A-stable."
         ),
+        stability=_A_STABLE,
     ),
     ImplicitRungeKutta(
         GAUSS_LEGENDRE_4,
@@ -402,5 +432,6 @@ STEPPERS: list[Stepper] = [
             "Two-stage Gauss-Legendre collocation method, nodes 1/2 -+ sqrt(3)/6; order 4, "
             "A-stable, symplectic, symmetric, preserves quadratic invariants."
         ),
+        stability=_A_STABLE,
     ),
 ]

@@ -20,6 +20,7 @@ Adams-Moulton rule, and the need for a one-step starter); E. Hairer, S. P. Norse
 
 from __future__ import annotations
 
+import math
 from fractions import Fraction
 
 import numpy as np
@@ -59,6 +60,7 @@ class LinearMultistepStepper(Stepper):
         newton: str = "full",
         newton_tol: float = NEWTON_TOL,
         newton_max_iter: int = NEWTON_MAX_ITER,
+        stability: dict | None = None,
     ):
         if not isinstance(table, LinearMultistep):
             raise InputError(f"`table` must be a LinearMultistep, got {type(table).__name__}")
@@ -76,11 +78,16 @@ class LinearMultistepStepper(Stepper):
                 f"`starter` must be a one-step method, got the multistep method {starter_name!r}"
             )
         self.coefficients = table
+        self.history_length = table.steps
         self.starter = starter
         self.starter_name = starter_name
         self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
         self._construct = dict(
-            name=name, claimed_order=claimed_order, reference=reference, description=description
+            name=name,
+            claimed_order=claimed_order,
+            reference=reference,
+            description=description,
+            stability=stability,
         )
         k = table.steps
         explicit = bool(table.explicit)
@@ -118,6 +125,7 @@ class LinearMultistepStepper(Stepper):
             extra={
                 "starter": starter_name,
                 "steps": k,
+                **({"stability": dict(stability)} if stability else {}),
                 **({} if explicit else {"newton": self.newton.mode, "newton_tol": self.newton.tol}),
             },
         )
@@ -130,6 +138,19 @@ class LinearMultistepStepper(Stepper):
             newton=self.newton.mode,
             newton_tol=self.newton.tol,
             newton_max_iter=self.newton.max_iter,
+            **self._construct,
+        )
+
+    def with_newton(
+        self, mode: str | None = None, tol: float | None = None, max_iter: int | None = None
+    ) -> LinearMultistepStepper:
+        """The same method with other Newton settings (unchanged where None)."""
+        return LinearMultistepStepper(
+            self.coefficients,
+            starter=self.starter,
+            newton=self.newton.mode if mode is None else mode,
+            newton_tol=self.newton.tol if tol is None else tol,
+            newton_max_iter=self.newton.max_iter if max_iter is None else max_iter,
             **self._construct,
         )
 
@@ -186,6 +207,14 @@ class LinearMultistepStepper(Stepper):
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         pending = [(y, None) for y in self._starting_values(dyn, t0, y0, h)]
         return Carry(t0, h, y0, hist_y=[y0], hist_f=[None], pending=pending)
+
+    def _start_from_history(self, dyn: Dynamics, t0: float, h: float, history: list) -> Carry:
+        """A carry at t0 + (k-1) h holding the given exact states (oldest first) as its history,
+        so the next step applies the multistep formula itself (local error measurement)."""
+        k = len(history)
+        return Carry(
+            t0 + (k - 1) * h, h, history[-1], hist_y=list(history), hist_f=[None] * k, pending=[]
+        )
 
     def _push(self, c: Carry, y: np.ndarray, f: np.ndarray | None) -> None:
         k = self.coefficients.steps
@@ -281,6 +310,8 @@ _COURSE_ODE = (
     "Equations: Initial Value Problems', Univ. Torino 2017-18)"
 )
 _HNW = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I"
+# Real stability intervals (-x, 0) claimed below: Hairer & Wanner, Solving ODEs II, V.1
+# (Adams methods: ab2 1, ab3 6/11, ab4 3/10, two-step Adams-Moulton 6; bdf2 is A-stable).
 
 STEPPERS: list[Stepper] = [
     LinearMultistepStepper(
@@ -289,6 +320,7 @@ STEPPERS: list[Stepper] = [
         claimed_order=2,
         reference=f"{_COURSE_ODE}, the two-step Adams-Bashforth method; {_HNW}, III.1.",
         description="Adams-Bashforth y_{n+1} = y_n + h (3/2 f_n - 1/2 f_{n-1}).",
+        stability={"real_interval": 1.0},
     ),
     LinearMultistepStepper(
         AB3,
@@ -296,6 +328,7 @@ STEPPERS: list[Stepper] = [
         claimed_order=3,
         reference=f"{_HNW}, III.1, Table 1.1 (explicit Adams methods).",
         description="Adams-Bashforth y_{n+1} = y_n + h/12 (23 f_n - 16 f_{n-1} + 5 f_{n-2}).",
+        stability={"real_interval": 6.0 / 11.0},
     ),
     LinearMultistepStepper(
         AB4,
@@ -305,6 +338,7 @@ STEPPERS: list[Stepper] = [
         description=(
             "Adams-Bashforth y_{n+1} = y_n + h/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3})."
         ),
+        stability={"real_interval": 0.3},
     ),
     LinearMultistepStepper(
         AM3,
@@ -315,6 +349,7 @@ STEPPERS: list[Stepper] = [
             "Implicit Adams-Moulton y_{n+1} = y_n + h/12 (5 f_{n+1} + 8 f_n - f_{n-1}), solved "
             "by Newton's method."
         ),
+        stability={"real_interval": 6.0},
     ),
     LinearMultistepStepper(
         BDF2,
@@ -328,5 +363,6 @@ STEPPERS: list[Stepper] = [
             "Backward differentiation formula y_{n+1} - 4/3 y_n + 1/3 y_{n-1} = 2/3 h f_{n+1}; "
             "A-stable, solved by Newton's method."
         ),
+        stability={"real_interval": math.inf},
     ),
 ]

@@ -1,0 +1,1 @@
+"""Plain C reference loops (velocity Verlet and RK4 on Kepler), compiled at benchmark time."""

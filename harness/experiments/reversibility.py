@@ -1,0 +1,239 @@
+"""Time reversibility: N steps forward, time reversed, N steps back; how far from the start?
+
+A symmetric method (Phi_{-h} = Phi_h^{-1}) returns to its start exactly in exact arithmetic, on
+any problem; only rounding remains. A method that is not symmetric misses by about its
+truncation error, ~h^p T, far above rounding. One cell is one (stepper, problem, N):
+
+1. An ensemble (member 0 is the problem's own start) takes `Stepper.round_trip`: N steps of the
+   problem's step size h (`energy.TIME_SCALES`, the same h for every stepper), h -> -h (the
+   stepper's own `_reverse`, which also reorders a multistep history), N steps back.
+2. The return error is the max-norm of (returned - start) over components and members; in
+   ulps it is divided by eps * max|y_start| per member (the largest over members is reported).
+3. What rounding explains. Each step of a symmetric method adds about one ulp of rounding, and
+   the flow carries it along: on integrable problems with shear (Kepler, the pendulum) a
+   perturbation grows linearly in time. The flow's sensitivity A(N) = ||dPhi_t(y0)||_inf over
+   the span t = N h is measured once per (problem, N) on the certified ground truth (central
+   differences of `harness.ground_truth.reference` along every coordinate). The
+   rounding bound is REVERSIBILITY_ULPS_PER_STEP * N * max(1, A(N)) ulps: growth no faster
+   than N eps where the flow does not amplify (harmonic), and the flow's own amplification
+   where it does.
+4. Verdicts. Claimed symmetric: within the bound (`reversible`), else `claim-false`. Not
+   claimed symmetric: above the bound (`irreversible`, the claim verified); within it
+   (`claim-false`: the method behaves symmetrically although it says it is not, or the step is
+   too small to show it, which the chosen h rules out for every registered method).
+   `growth_exponent` is the log-log slope of the return error (ulps) against N over a
+   (stepper, problem)'s cells.
+
+Adaptive steppers run at `adaptive_tol` (their truncation must show above rounding) with
+`adaptive_steps` output steps of `adaptive_output_periods` natural periods each (an output step
+caps the solver's internal step) and `adaptive_ensemble` members (each output step costs a
+solver call per member).
+References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), II.3
+(symmetric methods, Phi_h^* = Phi_{-h}^{-1}), V.1 (reversibility); course material
+002_b3abae41bf42a307.txt (Verlet's time reversibility and the rounding argument).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.experiments.energy import TIME_SCALES, problem_table_cells
+from harness.stepper import AdaptiveStepper, StepFailure, Stepper
+
+__all__ = ["ReversibilityExperiment", "flow_amplification", "rounding_bound_ulps", "ROW_COLUMNS",
+           "SUMMARY_COLUMNS"]
+
+ROW_COLUMNS = [
+    "stepper", "problem", "steps", "h", "tol", "t_span", "return_error", "return_error_ulps",
+    "flow_amplification", "rounding_bound_ulps", "ensemble_size", "wall_s", "message",
+]
+SUMMARY_COLUMNS = [
+    "stepper", "problem", "steps", "h", "tol", "return_error", "return_error_ulps",
+    "rounding_bound_ulps", "flow_amplification", "claimed_symmetric", "growth_exponent",
+    "verdict", "passed", "ensemble_size", "wall_s", "message",
+]
+
+
+def rounding_bound_ulps(n_steps: int, amplification: float) -> float:
+    """What rounding explains for a symmetric method's N-step round trip, in ulps of the state:
+    REVERSIBILITY_ULPS_PER_STEP ulps per step, carried by the flow's sensitivity A(N) >= 1."""
+    a = amplification if np.isfinite(amplification) else 1.0
+    return tol.REVERSIBILITY_ULPS_PER_STEP * n_steps * max(1.0, a)
+
+
+def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> float:
+    """||d Phi_span(y0)||_inf (the largest row sum of the flow's Jacobian): how many ulps of the
+    state an error of one ulp in every component becomes after `span`. Central differences on
+    the certified ground truth (`harness.ground_truth.reference`, cached on disk)."""
+    from harness.ground_truth import reference
+
+    base = np.asarray(problem.y0 if y0 is None else y0, dtype=float).reshape(problem.dim)
+    scale = np.where(base != 0.0, np.abs(base), 1.0)
+    delta = tol.REVERSIBILITY_FLOW_DELTA * scale
+    members = [base]
+    for j in range(problem.dim):
+        for sign in (1.0, -1.0):
+            y = base.copy()
+            y[j] += sign * delta[j]
+            members.append(y)
+    Y = np.stack(members, axis=1)
+    ref = reference(problem, np.array([problem.t0 + span]), Y,
+                    required_error=tol.REVERSIBILITY_FLOW_REFERENCE_ERROR * float(np.max(scale)))
+    end = ref.y[-1]
+    J = np.stack([(end[:, 1 + 2 * j] - end[:, 2 + 2 * j]) / (2.0 * delta[j])
+                  for j in range(problem.dim)], axis=1)
+    return float(np.max(np.sum(np.abs(J), axis=1)))
+
+
+class ReversibilityExperiment(Experiment):
+    name = "reversibility"
+    description = "Return error of N steps forward and N back (ulps), against the symmetry claim."
+    default_config: Mapping[str, Any] = {
+        "problems": ["harmonic", "pendulum", "kepler-elliptic"],
+        "steps": [100, 1_000, 10_000, 100_000],
+        "implicit_steps": [100, 1_000, 10_000],
+        "adaptive_steps": [3, 30],
+        "adaptive_tol": 1e-8,
+        "adaptive_output_periods": 1.0,
+        "adaptive_ensemble": 1,
+        "ensemble": 8,
+        "seed": 0,
+    }
+    quick_config: Mapping[str, Any] = {
+        "problems": ["harmonic", "kepler-elliptic"],
+        "steps": [100, 1_000],
+        "implicit_steps": [100],
+        "adaptive_steps": [3],
+        "ensemble": 4,
+    }
+
+    def cells(self, steppers, problems, config):
+        from harness.registry import get_stepper
+
+        def applicable(problem) -> str | None:
+            if not problem.conservative:
+                return (f"problem {problem.name!r} is not conservative: its backward flow "
+                        "amplifies rounding exponentially, so a round trip measures the problem")
+            if problem.name not in TIME_SCALES:
+                return f"problem {problem.name!r} has no natural time scale in energy.TIME_SCALES"
+            return None
+
+        pairs, skips = problem_table_cells(self.name, steppers, problems, list(config["problems"]),
+                                           applicable)
+        cells = []
+        for c in pairs:
+            for n in _step_counts(get_stepper(c.stepper), config):
+                cells.append(Cell(self.name, c.stepper, c.problem, (("steps", int(n)),)))
+        return cells, skips
+
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_problem, get_stepper
+
+        stepper = get_stepper(cell.stepper)
+        problem = get_problem(cell.problem)
+        return _round_trip(stepper, problem, int(cell.param("steps")), config)
+
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_stepper
+
+        if rows.empty:
+            return pd.DataFrame(columns=SUMMARY_COLUMNS)
+        out = []
+        for (s, p), g in rows.groupby(["stepper", "problem"], sort=False):
+            stepper = get_stepper(s)
+            g = g.sort_values("steps")
+            exponent = _growth_exponent(g.steps.values, g.return_error_ulps.values)
+            for _, r in g.iterrows():
+                out.append(_judge(stepper, r, exponent))
+        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+
+
+def _step_counts(stepper: Stepper, config: Mapping[str, Any]) -> list[int]:
+    if isinstance(stepper, AdaptiveStepper):
+        return list(config["adaptive_steps"])
+    return list(config["steps"] if stepper.info.explicit else config["implicit_steps"])
+
+
+def _round_trip(stepper: Stepper, problem, n: int, config: Mapping[str, Any]) -> pd.DataFrame:
+    scale = TIME_SCALES[problem.name]
+    h = scale.h
+    tolerance = float("nan")
+    if isinstance(stepper, AdaptiveStepper):
+        # An output step caps the solver's internal step: one natural period per output step
+        # leaves the solver free to take the steps its tolerance allows.
+        stepper = stepper.with_tolerance(float(config["adaptive_tol"]))
+        tolerance = float(config["adaptive_tol"])
+        h = float(config["adaptive_output_periods"]) * scale.period
+    size = int(config["adaptive_ensemble" if isinstance(stepper, AdaptiveStepper) else "ensemble"])
+    y0 = problem.ensemble(size, seed=int(config["seed"]))
+    amplification = flow_amplification(problem, n * h)
+    message = ""
+    started = time.perf_counter()
+    try:
+        start, back = stepper.round_trip(problem, h=h, n_steps=n, y0=y0)
+        with np.errstate(all="ignore"):
+            diff = np.abs(back - start)
+        per_member = np.max(diff, axis=0)
+        per_member = np.where(np.all(np.isfinite(diff), axis=0), per_member, np.inf)
+        scale = np.max(np.abs(start), axis=0)
+        error = float(np.max(per_member))
+        ulps = float(np.max(per_member / (tol.EPS * np.maximum(scale, tol.EPS))))
+        if not math.isfinite(error):
+            message = "the state overflowed (non-finite) during the round trip"
+    except StepFailure as exc:
+        error = ulps = float("inf")
+        message = f"step failure: {exc}"
+    wall = time.perf_counter() - started
+    return pd.DataFrame([{
+        "stepper": stepper.info.name, "problem": problem.name, "steps": n, "h": h, "tol": tolerance,
+        "t_span": n * h, "return_error": error, "return_error_ulps": ulps,
+        "flow_amplification": amplification,
+        "rounding_bound_ulps": rounding_bound_ulps(n, amplification),
+        "ensemble_size": int(y0.shape[1]), "wall_s": wall, "message": message,
+    }], columns=ROW_COLUMNS)
+
+
+def _growth_exponent(steps: np.ndarray, ulps: np.ndarray) -> float:
+    ok = np.isfinite(ulps) & (ulps > 0)
+    if ok.sum() < 2:
+        return float("nan")
+    return float(np.polyfit(np.log(steps[ok].astype(float)), np.log(ulps[ok]), 1)[0])
+
+
+def _judge(stepper: Stepper, r: pd.Series, exponent: float) -> dict:
+    info = stepper.info
+    bound = float(r.rounding_bound_ulps)
+    ulps = float(r.return_error_ulps)
+    within = math.isfinite(ulps) and ulps <= bound
+    message = str(r.message or "")
+    if info.symmetric:
+        verdict = "reversible" if within else "claim-false"
+        if not within:
+            message = "; ".join(filter(None, [message, (
+                f"claimed symmetric but the round trip misses by {ulps:.3g} ulps, above the "
+                f"{bound:.3g} ulps rounding explains")]))
+    else:
+        verdict = "irreversible" if not within else "claim-false"
+        if within:
+            message = "; ".join(filter(None, [message, (
+                f"claimed not symmetric but the round trip returns within rounding ({ulps:.3g} <= "
+                f"{bound:.3g} ulps): the method is symmetric or h is too small to show it")]))
+    return {
+        "stepper": info.name, "problem": r.problem, "steps": int(r.steps), "h": float(r.h),
+        "tol": float(r.tol), "return_error": float(r.return_error), "return_error_ulps": ulps,
+        "rounding_bound_ulps": bound, "flow_amplification": float(r.flow_amplification),
+        "claimed_symmetric": bool(info.symmetric), "growth_exponent": exponent,
+        "verdict": verdict, "passed": verdict != "claim-false",
+        "ensemble_size": int(r.ensemble_size), "wall_s": float(r.wall_s), "message": message,
+    }
+
+
+register_experiment(ReversibilityExperiment())

@@ -1,0 +1,248 @@
+"""Symplecticity: is the one-step map's Jacobian J symplectic, J^T Omega J = Omega?
+
+For one (stepper, problem) cell, on a Newtonian problem with unit masses (q'' = -grad V(q), so
+the flow preserves dq ^ dv and Omega = [[0, I], [-I, 0]] in the state's own (q, v) order):
+
+1. Base states: `states` points along the problem's exact orbit from its start, a natural period
+   apart divided evenly (`harness.ground_truth.reference`), so a Kepler orbit is probed at
+   pericentre and apocentre alike.
+2. J by fourth-order central differences of the stepper's one-step map
+   (`Stepper.integrate(n_steps=1)`): every base state and every perturbation y +- delta e_j,
+   y +- 2 delta e_j (delta = SYMPLECTIC_FD_DELTA of the component's scale) is one member of a
+   single ensemble call. Complex steps are not available: steppers and compiled right-hand sides
+   work in real float64.
+3. deviation = max over base states of ||J^T Omega J - Omega||_F / ||J||_F^2 (the finite
+   difference error E in J enters as E^T Omega J + J^T Omega E, so this ratio measures it
+   relative to J); `raw_deviation` is max ||J^T Omega J - Omega||_max.
+4. Verdicts (thresholds in `harness.tolerances`): claimed symplectic must stay at the finite
+   difference level, deviation <= SYMPLECTIC_FD_TOL (`symplectic`), else `claim-false`.
+   Claimed not symplectic must be clearly above it, deviation >= SYMPLECTIC_CLEAR_FACTOR x
+   SYMPLECTIC_FD_TOL (`non-symplectic`). A map of a non-symplectic method can still be
+   symplectic on one problem (the trapezoidal rule on a linear problem is the Cayley transform,
+   which is), so such a cell is `symplectic-here` and passes as long as the same method is
+   clearly non-symplectic on another problem of the run; otherwise the claim is `claim-false`.
+
+Multistep methods (`history_length` > 1) map k past states to the next: the map from one
+observed state (x_n, v_n) that `integrate(n_steps=1)` measures is their starting procedure, not
+the method, and symplecticity of a multistep method is defined through its underlying one-step
+method (HLW XV.4), so they are skipped with that reason. The exception is Stormer's two-step
+rule with its Taylor start and central-difference velocity (`SecondOrderMultistep`): in exact
+arithmetic its observed map (x_n, v_n) -> (x_{n+1}, v_{n+1}) is velocity Verlet (HLW I.1.4), a
+genuine one-step map, and that is what is measured. Adaptive steppers run at `adaptive_tol` over
+one natural period (an output step caps the solver's internal step).
+
+References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), VI.2-VI.4
+(symplectic maps; symplectic Runge-Kutta and partitioned methods), VI.3 (trapezoidal rule as a
+non-symplectic but conjugate-symplectic method); course material 004_bfdbb1594143ed8b.txt
+(symplectic integrators, Forest-Ruth).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.coefficients import SecondOrderMultistep
+from harness.experiments.base import Cell, Experiment, register_experiment
+from harness.experiments.energy import TIME_SCALES, problem_table_cells
+from harness.stepper import AdaptiveStepper, StepFailure, Stepper
+
+__all__ = ["SymplecticityExperiment", "one_step_jacobians", "symplectic_deviation",
+           "canonical_form", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
+
+ROW_COLUMNS = [
+    "stepper", "problem", "state", "h", "tol", "deviation", "raw_deviation", "jacobian_norm",
+    "ensemble_size", "wall_s", "message",
+]
+SUMMARY_COLUMNS = [
+    "stepper", "problem", "h", "tol", "states", "deviation", "raw_deviation", "threshold",
+    "claimed_symplectic", "verdict", "passed", "wall_s", "message",
+]
+
+
+def canonical_form(dim: int) -> np.ndarray:
+    """Omega = [[0, I], [-I, 0]] for a state ordered (q..., v...)."""
+    n = dim // 2
+    omega = np.zeros((dim, dim))
+    omega[:n, n:] = np.eye(n)
+    omega[n:, :n] = -np.eye(n)
+    return omega
+
+
+def symplectic_deviation(J: np.ndarray) -> tuple[float, float]:
+    """(||J^T Omega J - Omega||_F / ||J||_F^2, ||J^T Omega J - Omega||_max) of one Jacobian."""
+    omega = canonical_form(J.shape[0])
+    D = J.T @ omega @ J - omega
+    return float(np.linalg.norm(D) / np.linalg.norm(J) ** 2), float(np.max(np.abs(D)))
+
+
+def one_step_jacobians(
+    stepper: Stepper, problem, states: np.ndarray, h: float, *, delta_rel: float | None = None
+) -> np.ndarray:
+    """Jacobians (S, dim, dim) of the stepper's one-step map at the states (dim, S), by
+    fourth-order central differences, all perturbations as one ensemble."""
+    delta_rel = tol.SYMPLECTIC_FD_DELTA if delta_rel is None else delta_rel
+    dim, S = states.shape
+    scale = np.max(np.abs(states), axis=1)
+    delta = delta_rel * np.where(scale > 0.0, scale, 1.0)
+    offsets = (1.0, -1.0, 2.0, -2.0)
+    members = np.empty((dim, S, dim, len(offsets)))
+    for j in range(dim):
+        for k, m in enumerate(offsets):
+            y = states.copy()
+            y[j] += m * delta[j]
+            members[:, :, j, k] = y
+    Y = members.reshape(dim, -1)
+    tr = stepper.integrate(problem, h=h, n_steps=1, y0=Y)
+    out = tr.final.reshape(dim, S, dim, len(offsets))
+    d1 = (out[..., 0] - out[..., 1]) / 2.0  # (dim_out, S, dim_in)
+    d2 = (out[..., 2] - out[..., 3]) / 4.0
+    J = (4.0 * d1 - d2) / 3.0 / delta[None, None, :]
+    return np.transpose(J, (1, 0, 2))
+
+
+class SymplecticityExperiment(Experiment):
+    name = "symplecticity"
+    description = "max ||J^T Omega J - Omega|| of the one-step map's Jacobian, against the claim."
+    default_config: Mapping[str, Any] = {
+        "problems": ["harmonic", "pendulum", "kepler-elliptic", "henon-heiles"],
+        "states": 8,
+        "adaptive_tol": 1e-6,
+        "adaptive_output_periods": 1.0,
+    }
+    quick_config: Mapping[str, Any] = {"states": 4}
+
+    def cells(self, steppers, problems, config):
+        from harness.registry import get_stepper
+
+        def applicable(problem) -> str | None:
+            if problem.newtonian is None or problem.velocity_dependent or not problem.conservative:
+                return (f"problem {problem.name!r} is not a conservative Newtonian problem "
+                        "q'' = a(q): its flow preserves no symplectic form to test against")
+            if problem.name not in TIME_SCALES:
+                return f"problem {problem.name!r} has no natural time scale in energy.TIME_SCALES"
+            return None
+
+        cells, skips = problem_table_cells(self.name, steppers, problems, list(config["problems"]),
+                                           applicable)
+        kept = []
+        for c in cells:
+            reason = _not_one_step(get_stepper(c.stepper))
+            if reason:
+                from harness.experiments.base import Skip
+
+                skips.append(Skip(self.name, c.stepper, c.problem, reason))
+            else:
+                kept.append(c)
+        return kept, skips
+
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_problem, get_stepper
+
+        return _measure(get_stepper(cell.stepper), get_problem(cell.problem), config)
+
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_stepper
+
+        if rows.empty:
+            return pd.DataFrame(columns=SUMMARY_COLUMNS)
+        cells = []
+        for (s, p), g in rows.groupby(["stepper", "problem"], sort=False):
+            dev = g.deviation.to_numpy(dtype=float)
+            cells.append({
+                "stepper": s, "problem": p, "h": float(g.h.iloc[0]), "tol": float(g.tol.iloc[0]),
+                "states": int(len(g)),
+                "deviation": float(np.max(np.where(np.isnan(dev), np.inf, dev))),
+                "raw_deviation": float(np.max(g.raw_deviation.fillna(np.inf))),
+                "threshold": tol.SYMPLECTIC_FD_TOL,
+                "wall_s": float(g.wall_s.iloc[0]),
+                "message": str(g.message.iloc[0] or ""),
+            })
+        clear = tol.SYMPLECTIC_CLEAR_FACTOR * tol.SYMPLECTIC_FD_TOL
+        shown = {c["stepper"] for c in cells if c["deviation"] >= clear}
+        out = []
+        for c in cells:
+            info = get_stepper(c["stepper"]).info
+            c["claimed_symplectic"] = bool(info.symplectic)
+            d = c["deviation"]
+            notes = [c["message"]] if c["message"] else []
+            if info.symplectic:
+                c["verdict"] = "symplectic" if d <= tol.SYMPLECTIC_FD_TOL else "claim-false"
+                if c["verdict"] == "claim-false":
+                    notes.append(f"claimed symplectic but ||J^T Omega J - Omega|| / ||J||^2 = {d:.3g} "
+                                 f"exceeds the finite-difference level {tol.SYMPLECTIC_FD_TOL:.3g}")
+            elif d >= clear:
+                c["verdict"] = "non-symplectic"
+            elif c["stepper"] in shown:
+                c["verdict"] = "symplectic-here"
+                notes.append(f"the map is symplectic on this problem to {d:.3g} (below {clear:.3g}); "
+                             "the method is clearly non-symplectic on another problem of this run")
+            else:
+                c["verdict"] = "claim-false"
+                notes.append(f"claimed not symplectic but the deviation {d:.3g} is not clearly above "
+                             f"the finite-difference level ({clear:.3g}) on any problem of this run")
+            c["passed"] = c["verdict"] != "claim-false"
+            c["message"] = "; ".join(notes)
+            out.append(c)
+        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+
+
+def _not_one_step(stepper: Stepper) -> str | None:
+    if stepper.history_length > 1 and not isinstance(stepper.coefficients, SecondOrderMultistep):
+        return (f"stepper {stepper.info.name!r} is a {stepper.history_length}-step method: the map "
+                "from one observed state measures its starting procedure, not the method, and a "
+                "multistep method's symplecticity is defined through its underlying one-step "
+                "method (HLW XV.4)")
+    return None
+
+
+def _base_states(problem, n: int) -> np.ndarray:
+    from harness.ground_truth import reference
+
+    period = TIME_SCALES[problem.name].period
+    times = problem.t0 + period * np.arange(1, n) / n
+    states = [problem.y0[:, None]]
+    if n > 1:
+        ref = reference(problem, times)
+        states.extend(ref.y[k] for k in range(n - 1))
+    return np.concatenate(states, axis=1)
+
+
+def _measure(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
+    scale = TIME_SCALES[problem.name]
+    h, tolerance = scale.h, float("nan")
+    if isinstance(stepper, AdaptiveStepper):
+        tolerance = float(config["adaptive_tol"])
+        stepper = stepper.with_tolerance(tolerance)
+        h = float(config["adaptive_output_periods"]) * scale.period
+    states = _base_states(problem, int(config["states"]))
+    started = time.perf_counter()
+    message = ""
+    try:
+        Js = one_step_jacobians(stepper, problem, states, h)
+    except StepFailure as exc:
+        Js = np.full((states.shape[1], problem.dim, problem.dim), np.nan)
+        message = f"step failure: {exc}"
+    wall = time.perf_counter() - started
+    records = []
+    for k, J in enumerate(Js):
+        if np.all(np.isfinite(J)):
+            dev, raw = symplectic_deviation(J)
+            norm = float(np.linalg.norm(J))
+        else:
+            dev = raw = norm = float("nan")
+        records.append({
+            "stepper": stepper.info.name, "problem": problem.name, "state": k, "h": h,
+            "tol": tolerance, "deviation": dev, "raw_deviation": raw, "jacobian_norm": norm,
+            "ensemble_size": int(states.shape[1] * problem.dim * 4), "wall_s": wall,
+            "message": message,
+        })
+    return pd.DataFrame(records, columns=ROW_COLUMNS)
+
+
+register_experiment(SymplecticityExperiment())

@@ -1,0 +1,266 @@
+"""Claims from the course material, each checked against this run's measurements.
+
+The four course texts (`../shared/course-material/`, see its README) make statements about the
+methods the harness measures. Each `ClaimSpec` paraphrases one statement (the texts are cited,
+not quoted), names its source file and a phrase that locates it (the line number is looked up
+when the file is present), and a `judge` function that turns this run's summary tables into a
+`ClaimResult`: the measurement in words and numbers, and `agree`, `disagree` or `not measured`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.provenance import PROJECT_ROOT
+
+__all__ = ["ClaimSpec", "ClaimResult", "CLAIMS", "check_claims", "course_material_dir"]
+
+AGREE, DISAGREE, NOT_MEASURED = "agree", "disagree", "not measured"
+
+Tables = Mapping[str, pd.DataFrame]
+
+
+@dataclass(frozen=True)
+class ClaimSpec:
+    key: str
+    claim: str
+    source: str
+    anchor: str
+    judge: Callable[[Tables], tuple[str, str, list[dict]]]
+
+
+@dataclass
+class ClaimResult:
+    key: str
+    claim: str
+    source: str
+    line: int | None
+    status: str
+    measurement: str
+    values: list[dict] = field(default_factory=list)
+
+
+def course_material_dir() -> Path:
+    """Where the course texts live: `../shared/course-material/` beside the project."""
+    return PROJECT_ROOT.parent / "shared" / "course-material"
+
+
+def _line_of(source: str, anchor: str) -> int | None:
+    path = course_material_dir() / source
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for i, line in enumerate(fh, 1):
+                if anchor in line:
+                    return i
+    except OSError:
+        return None
+    return None
+
+
+def _summary(tables: Tables, name: str) -> pd.DataFrame:
+    df = tables.get(name)
+    return df if isinstance(df, pd.DataFrame) else pd.DataFrame()
+
+
+def _num(x: object) -> float:
+    try:
+        v = float(x)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return math.nan
+    return v
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    return "n/a" if not math.isfinite(x) else f"{x:.{digits}g}"
+
+
+# -- the judges -------------------------------------------------------------------------------------
+def _verlet_local_h4(tables: Tables) -> tuple[str, str, list[dict]]:
+    conv = _summary(tables, "convergence")
+    if conv.empty or "local_exponent_q" not in conv:
+        return NOT_MEASURED, "no convergence results", []
+    s = conv[conv["stepper"] == "stormer-verlet"]
+    q = s["local_exponent_q"].astype(float)
+    values = [{"stepper": "stormer-verlet", "problem": p, "local exponent (positions)": _fmt(v, 4)}
+              for p, v in zip(s["problem"], q, strict=True)]
+    q = q[np.isfinite(q)]
+    if q.empty:
+        return NOT_MEASURED, "stormer-verlet's local error was not measured on any problem", values
+    med = float(q.median())
+    ok = abs(med - 4.0) <= tol.GATE_ORDER_TOL
+    text = (f"one step of the two-step recurrence from exact history: position error ~ h^q with "
+            f"q = {med:.3f} (median over {len(q)} problems, range {q.min():.3f} to {q.max():.3f}); "
+            f"agreement means |q - 4| <= {tol.GATE_ORDER_TOL}")
+    return (AGREE if ok else DISAGREE), text, values
+
+
+def _velocity_verlet_two_orders(tables: Tables) -> tuple[str, str, list[dict]]:
+    conv = _summary(tables, "convergence")
+    if conv.empty:
+        return NOT_MEASURED, "no convergence results", []
+    orders: dict[str, float] = {}
+    values = []
+    for name in ("stormer-verlet", "velocity-verlet"):
+        s = conv[(conv["stepper"] == name) & (conv["verdict"] == "converged")]
+        m = s["measured_order"].astype(float)
+        m = m[np.isfinite(m)]
+        if m.empty:
+            continue
+        orders[name] = float(m.median())
+        loc = conv.loc[conv["stepper"] == name, "local_exponent_q"].astype(float) \
+            if "local_exponent_q" in conv else pd.Series(dtype=float)
+        loc = loc[np.isfinite(loc)]
+        values.append({"stepper": name, "global order (median)": f"{orders[name]:.3f}",
+                       "problems": str(len(m)),
+                       "local exponent, positions (median)": _fmt(float(loc.median()), 4)
+                       if not loc.empty else "n/a"})
+    if len(orders) < 2:
+        return NOT_MEASURED, "needs converged cells of both stormer-verlet and velocity-verlet", values
+    gap = orders["stormer-verlet"] - orders["velocity-verlet"]
+    ok = abs(gap - 2.0) <= 2 * tol.GATE_ORDER_TOL
+    text = (f"global orders: stormer-verlet {orders['stormer-verlet']:.3f}, velocity-verlet "
+            f"{orders['velocity-verlet']:.3f}; difference {gap:+.3f} (the claim needs about +2). "
+            "The h^4 quoted for Verlet is its one-step position error, not its global error, "
+            "which is h^2 like velocity Verlet's")
+    return (AGREE if ok else DISAGREE), text, values
+
+
+def _rk4_drifts(tables: Tables) -> tuple[str, str, list[dict]]:
+    en = _summary(tables, "energy")
+    if en.empty:
+        return NOT_MEASURED, "no energy-drift results", []
+    s = en[en["stepper"] == "rk4"]
+    if s.empty:
+        return NOT_MEASURED, "rk4 was not run in the energy experiment", []
+    values = [{"stepper": "rk4", "problem": r["problem"], "drift class": r["drift_class"],
+               "drift exponent": _fmt(_num(r["drift_exponent"])),
+               "max relative energy error": _fmt(_num(r["max_rel_energy_error"]))}
+              for r in s.to_dict("records")]
+    classes = list(s["drift_class"])
+    ok = all(c in ("linear", "unstable") for c in classes) and "linear" in classes
+    text = (f"energy error envelope of rk4: {', '.join(f'{p}: {c}' for p, c in zip(s['problem'], classes, strict=True))}; "
+            "agreement means a secular drift (linear in t) on every problem measured")
+    return (AGREE if ok else DISAGREE), text, values
+
+
+_VERLET_FAMILY = ("leapfrog", "velocity-verlet", "position-verlet", "stormer-verlet")
+
+
+def _angular_momentum_exact(tables: Tables) -> tuple[str, str, list[dict]]:
+    en = _summary(tables, "energy")
+    if en.empty or "angular_momentum_conserved" not in en:
+        return NOT_MEASURED, "no energy-drift results", []
+    s = en[en["stepper"].isin(_VERLET_FAMILY) & en["max_rel_angular_momentum_error"].notna()]
+    s = s[np.isfinite(s["max_rel_angular_momentum_error"].astype(float))]
+    if s.empty:
+        return NOT_MEASURED, ("no leapfrog/Verlet run on a problem with angular momentum (the "
+                              "Kepler problems) in this report"), []
+    values = []
+    for r in s.to_dict("records"):
+        err = _num(r["max_rel_angular_momentum_error"])
+        bound = _num(r["angular_momentum_rounding"])
+        values.append({"stepper": r["stepper"], "problem": r["problem"], "steps": str(r["steps"]),
+                       "max relative error of L": _fmt(err),
+                       "in ulps": _fmt(err / tol.EPS, 3),
+                       "rounding bound (1 ulp/step)": _fmt(bound),
+                       "conserved": "yes" if bool(r["angular_momentum_conserved"]) else "no"})
+    ok = bool(s["angular_momentum_conserved"].astype(bool).all())
+    worst = float(s["max_rel_angular_momentum_error"].astype(float).max())
+    text = (f"largest relative change of the angular momentum over {len(s)} runs: {worst:.3g} "
+            f"({worst / tol.EPS:.3g} ulps); 'exactly' is read as 'to rounding': at most "
+            f"{tol.ANGULAR_MOMENTUM_ROUNDING_ULPS:g} ulp per step")
+    return (AGREE if ok else DISAGREE), text, values
+
+
+def _euler_interval(tables: Tables) -> tuple[str, str, list[dict]]:
+    st = _summary(tables, "stability")
+    if st.empty:
+        return NOT_MEASURED, "no stability results", []
+    s = st[st["stepper"] == "euler"]
+    if s.empty:
+        return NOT_MEASURED, "euler was not in this report's stability run", []
+    r = s.iloc[0]
+    real = _num(r["real_interval"])
+    imag = _num(r["imag_interval"])
+    values = [{"stepper": "euler", "real interval (probe)": f"[-{real:.10g}, 0]",
+               "real interval (formula)": f"[-{_num(r['analytic_real_interval']):.10g}, 0]",
+               "imaginary interval": f"±{imag:.3g}"}]
+    ok = math.isfinite(real) and abs(real - 2.0) <= tol.STABILITY_INTERVAL_AGREEMENT
+    text = (f"real stability interval found by root finding on the black-box probe: "
+            f"[-{real:.10g}, 0] (agreement within {tol.STABILITY_INTERVAL_AGREEMENT:g})")
+    return (AGREE if ok else DISAGREE), text, values
+
+
+def _verlet_rounding(tables: Tables) -> tuple[str, str, list[dict]]:
+    ro = _summary(tables, "roundoff")
+    if ro.empty:
+        return NOT_MEASURED, "no roundoff results", []
+    values = []
+    ratios = []
+    for problem, g in ro.groupby("problem", sort=False):
+        two = g[g["stepper"] == "stormer-verlet"]["floor_error"].astype(float)
+        one = g[g["stepper"].isin(["leapfrog", "velocity-verlet"])]["floor_error"].astype(float)
+        if two.empty or one.empty or not np.isfinite(two).all() or not np.isfinite(one).any():
+            continue
+        ratio = float(two.iloc[0]) / max(float(one[np.isfinite(one)].max()), tol.EPS * tol.EPS)
+        ratios.append(ratio)
+        values.append({"problem": problem, "steps": str(int(g["n_steps"].iloc[0])),
+                       "floor, stormer-verlet": _fmt(float(two.iloc[0])),
+                       "floor, leapfrog / velocity-verlet (worst)": _fmt(float(one.max())),
+                       "ratio": _fmt(ratio)})
+    if not ratios:
+        return NOT_MEASURED, ("needs stormer-verlet and leapfrog or velocity-verlet in the "
+                              "roundoff experiment"), values
+    ok = min(ratios) >= tol.ROUNDOFF_CLAIM_RATIO
+    text = (f"lowest relative position error reached at a fixed step count as h shrinks: the "
+            f"two-step form's floor is {min(ratios):.3g} to {max(ratios):.3g} times the one-step "
+            f"forms' (agreement needs at least {tol.ROUNDOFF_CLAIM_RATIO:g} on every problem)")
+    return (AGREE if ok else DISAGREE), text, values
+
+
+CLAIMS: tuple[ClaimSpec, ...] = (
+    ClaimSpec("verlet-local-h4",
+              "The position-only Verlet step x(n+1) = 2x(n) - x(n-1) + h^2 a(n) makes a local "
+              "error proportional to h^4.",
+              "000_30bd195af4439699.txt", "scales like $h^4$", _verlet_local_h4),
+    ClaimSpec("velocity-verlet-two-orders",
+              "Velocity Verlet, with an error term of order h^2, is two orders worse than the "
+              "plain Verlet method.",
+              "001_99dff2c5051246a9.txt", "two orders of magnitude worse", _velocity_verlet_two_orders),
+    ClaimSpec("rk4-drifts",
+              "RK4 does not conserve the energy: over long times it drifts away.",
+              "004_bfdbb1594143ed8b.txt", "do not conserve energy", _rk4_drifts),
+    ClaimSpec("verlet-angular-momentum",
+              "In a central (spherically symmetric) field, leapfrog and velocity or position "
+              "Verlet keep the angular momentum exactly.",
+              "004_bfdbb1594143ed8b.txt", "conserves it exactly", _angular_momentum_exact),
+    ClaimSpec("euler-interval",
+              "Forward Euler is stable on y' = lambda y (lambda real) exactly when -2 < h lambda < 0.",
+              "004_bfdbb1594143ed8b.txt", "-2 < h\\lambda < 0", _euler_interval),
+    ClaimSpec("verlet-rounding",
+              "The original two-step Verlet form suffers more from rounding than leapfrog, because "
+              "it adds h^2 times the acceleration, a very small number, to numbers the size of the "
+              "positions.",
+              "002_b3abae41bf42a307.txt", "square of the time step", _verlet_rounding),
+)
+
+
+def check_claims(tables: Tables) -> list[ClaimResult]:
+    """Judge every claim against `tables` (experiment name -> summary DataFrame). A judge that
+    fails on unexpected data gives `not measured` with the error, never an exception."""
+    out = []
+    for spec in CLAIMS:
+        try:
+            status, text, values = spec.judge(tables)
+        except Exception as exc:  # a summary table without the expected columns
+            status, text, values = NOT_MEASURED, f"could not judge: {type(exc).__name__}: {exc}", []
+        out.append(ClaimResult(spec.key, spec.claim, spec.source, _line_of(spec.source, spec.anchor),
+                               status, text, values))
+    return out

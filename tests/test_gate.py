@@ -1,0 +1,138 @@
+"""The gate can fail: broken methods are caught, by their coefficients or by measurement."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from harness.coefficients import ButcherTableau
+from harness.experiments.base import Cell
+from harness.experiments.convergence import ConvergenceExperiment, classify_points, fit_order
+from harness.gate import EXPECTATIONS, gate_table, judge
+from harness.registry import steppers
+from implementations.runge_kutta import TABLEAUX, ExplicitRungeKutta
+
+# A nonlinear, time-dependent problem: linear test problems cannot see every order condition.
+PROBLEM = "forced-duffing"
+
+
+def _rk4_variant(name: str, A=None, b=None, claimed: int = 4, cls=ExplicitRungeKutta):
+    rk4 = TABLEAUX["rk4"][0]
+    tab = ButcherTableau(name, rk4.A.tolist() if A is None else A, rk4.b.tolist() if b is None else b)
+    return cls(tab, claimed_order=claimed, reference="deliberately broken test method")
+
+
+class DropsLastStage(ExplicitRungeKutta):
+    """Claims the rk4 tableau but silently reuses the third stage instead of evaluating the
+    fourth: the coefficients are right, only a measurement can catch it."""
+
+    def _step(self, dyn, c):
+        y, k, stage, t = c.y, c.k, c.stage, c.t
+        dyn.f(t, y, out=k[0])
+        for i in (1, 2):
+            np.multiply(k[i - 1], c.hA[i, i - 1], out=stage)
+            stage += y
+            dyn.f(t + c.hc[i], stage, out=k[i])
+        k[3] = k[2]
+        self._combine(stage, c.stage_flat, self._weight_terms, c.hb, k, c.k_flat)
+        y += stage
+
+
+@pytest.fixture
+def registered():
+    added = []
+
+    def add(stepper):
+        steppers.register(stepper, origin="test")
+        added.append(stepper.info.name)
+        return stepper
+
+    yield add
+    for name in added:
+        steppers.unregister(name)
+
+
+def _measure(name: str, problem: str = PROBLEM) -> pd.DataFrame:
+    exp = ConvergenceExperiment()
+    config = exp.config({"local": False})
+    rows = exp.run_cell(Cell("convergence", name, problem), config)
+    return exp.summarize(rows, config)
+
+
+def _perturbed_a21():
+    A = TABLEAUX["rk4"][0].A.tolist()
+    A[2][1] += 1e-2  # nodes follow the row sums, so the tableau still passes its self-checks
+    return A
+
+
+MUTANTS = {
+    # name: (builder, caught by the coefficient check?)
+    "mutant-perturbed-coefficient": (lambda n: _rk4_variant(n, A=_perturbed_a21()), True),
+    "mutant-wrong-claim": (
+        lambda n: ExplicitRungeKutta(
+            ButcherTableau(n, TABLEAUX["heun"][0].A.tolist(), TABLEAUX["heun"][0].b.tolist()),
+            claimed_order=3, reference="Heun's method relabelled as third order"),
+        True,
+    ),
+    "mutant-dropped-stage": (lambda n: _rk4_variant(n, cls=DropsLastStage), False),
+}
+
+
+@pytest.mark.parametrize("name", list(MUTANTS))
+def test_gate_fails_on_broken_method(name, registered):
+    build, by_coefficients = MUTANTS[name]
+    registered(build(name))
+    summary = _measure(name)
+    table = gate_table(summary)
+    assert not table["passed"].any(), table.to_dict("records")
+    record = summary.iloc[0].to_dict()
+    # The measurement alone (without the coefficient check) must catch it too.
+    ok, _, why = judge(record, coefficient_order=None)
+    assert not ok, f"the measured order alone let {name} through: {record}"
+    assert "measured order" in why or "verdict" in why
+    if by_coefficients:
+        assert "coefficients give order" in table.iloc[0]["reason"]
+    else:
+        assert table.iloc[0]["coefficient_order"] == 4
+
+
+def test_unbroken_rk4_passes_on_the_same_problem():
+    summary = _measure("rk4")
+    table = gate_table(summary)
+    assert table["passed"].all(), table.to_dict("records")
+    assert abs(summary.iloc[0]["measured_order"] - 4) <= 0.2
+
+
+def test_every_expectation_names_a_registered_stepper_and_problem():
+    from harness.registry import problems
+
+    for (stepper, problem), exp in EXPECTATIONS.items():
+        assert stepper == "*" or stepper in steppers, stepper
+        assert problem in problems, problem
+        assert exp.reason, (stepper, problem)
+
+
+def test_fit_order_recovers_a_known_slope_and_interval():
+    h = 0.1 * 0.5 ** np.arange(6)
+    e = 3.0 * h**2.5
+    f = fit_order(h, e)
+    assert f["order"] == pytest.approx(2.5, abs=1e-12)
+    assert f["residual"] < 1e-12
+
+
+def test_classification_excludes_floor_reference_and_pre_asymptotic_points():
+    h = 0.5 ** np.arange(12)
+    e = 0.5 * h**2
+    e[:2] = [0.4, 0.2]  # pre-asymptotic start (slope far from 2)
+    e[-2:] = 1e-15  # roundoff floor
+    ref = np.full(12, 1e-18)
+    ref[-3] = 1e-7  # a point whose reference is not clearly more accurate
+    rounding = np.full(12, 1e-16)
+    reasons = classify_points(h, e, ref, rounding, start_error=1e-2)
+    assert list(reasons[:2]) == ["pre-asymptotic", "pre-asymptotic"]
+    assert list(reasons[-2:]) == ["roundoff", "roundoff"]
+    assert reasons[-3] == "reference"
+    kept = np.flatnonzero(reasons == "")
+    assert len(kept) >= 3
+    assert fit_order(h[kept], e[kept])["order"] == pytest.approx(2.0, abs=1e-9)
