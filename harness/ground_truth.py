@@ -328,10 +328,26 @@ def references_dir() -> Path:
     return d
 
 
+def _code_hash() -> str:
+    """This module's source: a change to how references are computed or certified invalidates
+    every cached reference, with no schema number to remember to bump."""
+    import inspect
+    import sys
+
+    global _CODE_HASH
+    if _CODE_HASH is None:
+        _CODE_HASH = hashlib.sha256(inspect.getsource(sys.modules[__name__]).encode()).hexdigest()
+    return _CODE_HASH
+
+
+_CODE_HASH: str | None = None
+
+
 def _key(problem: Problem, level: str, times, t0, y0, pars) -> str:
     h = hashlib.sha256()
     for part in (
         f"schema={_SCHEMA}",
+        _code_hash(),
         f"heyoka={hy.__version__}",
         f"tol={REFERENCE_TOL_FACTOR!r},{CERTIFIER_TOL_FACTOR!r}",
         problem.fingerprint(),

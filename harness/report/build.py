@@ -1,0 +1,261 @@
+"""`harness report`: run (or reuse) every experiment, save the run, write one self-contained HTML file.
+
+Steps of `build_report`:
+1. Every report experiment runs over the selected steppers x problems through
+   `harness.runner.run_experiments` (finished cells come from the cell cache, so a rerun, or a
+   run after `kill -9`, recomputes only what is missing); one progress display for all of them.
+2. The results are saved with their provenance (`harness.store.save_run`) and read back
+   (`load_run`), so the report shows exactly what the results directory holds.
+3. The sections (`harness.report.sections`) turn the tables into HTML tables and inline SVG
+   figures; Jinja2 renders `templates/report.html.j2` with autoescaping on.
+4. The report is assembled in a hidden staging directory and renamed into
+   `<reports>/<run id>/index.html` (run id = `<UTC timestamp>-<short git sha>`), then
+   `<reports>/latest` is swapped to point at it (a relative symlink replaced with `os.replace`;
+   where symlinks are not possible, a copied directory swapped by renames).
+
+The reports directory is `output`, else `HARNESS_REPORTS_DIR`, else `<project>/reports` (the
+current directory's `reports/` when the package is installed elsewhere).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from harness.errors import InputError
+from harness.progress import Progress
+from harness.provenance import PROJECT_ROOT
+
+__all__ = ["build_report", "REPORT_EXPERIMENTS", "reports_root", "render_html"]
+
+# The experiments a report runs, in the order of its sections; those not registered in this
+# build are left out (their sections say so).
+REPORT_EXPERIMENTS = (
+    "convergence",
+    "stability",
+    "reversibility",
+    "energy",
+    "symplecticity",
+    "work-precision",
+    "roundoff",
+)
+
+TEMPLATE = "report.html.j2"
+
+
+def reports_root(output: str | os.PathLike | None = None) -> Path:
+    """Where reports are written: `output`, `HARNESS_REPORTS_DIR`, or `<project>/reports`."""
+    if output is None:
+        env = os.environ.get("HARNESS_REPORTS_DIR")
+        if env:
+            output = env
+        elif (PROJECT_ROOT / "pyproject.toml").exists():
+            output = PROJECT_ROOT / "reports"
+        else:
+            output = Path.cwd() / "reports"
+    if not isinstance(output, str | os.PathLike) or not os.fspath(output) or "\x00" in os.fspath(output):
+        raise InputError(f"`output` must be a directory path, got {output!r}")
+    path = Path(output)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"`output` must be a directory, but {str(path)!r} is a file")
+    return path
+
+
+def _say(progress: Progress, message: str) -> None:
+    if progress.mode == "off":
+        return
+    progress.stream.write(f"report: {message}\n")
+    progress.stream.flush()
+
+
+def render_html(context: dict[str, Any]) -> str:
+    """Render the report template with autoescaping on (every text is escaped; only figure SVG,
+    checked by `figures.check_svg`, is inserted as markup)."""
+    import jinja2
+
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("harness.report", "templates"),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=False,
+        lstrip_blocks=False,
+    )
+    return env.get_template(TEMPLATE).render(**context)
+
+
+def _write_report(root: Path, report_id: str, html: str) -> Path:
+    """Write `<root>/<report id>/index.html` atomically (staging directory, then rename) and
+    point `<root>/latest` at it. Returns the index.html path."""
+    root.mkdir(parents=True, exist_ok=True)
+    final = root / report_id
+    n = 2
+    while final.exists():
+        final = root / f"{report_id}-{n}"
+        n += 1
+    staging = root / f".staging-{final.name}@{os.getpid()}"
+    if staging.exists():
+        shutil.rmtree(staging)
+    staging.mkdir()
+    try:
+        index = staging / "index.html"
+        with open(index, "w", encoding="utf-8") as fh:
+            fh.write(html)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.rename(staging, final)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    _point_latest(root, final.name)
+    return final / "index.html"
+
+
+def _point_latest(root: Path, name: str) -> None:
+    latest = root / "latest"
+    tmp = root / f".latest-{os.getpid()}"
+    with contextlib.suppress(FileNotFoundError):
+        if tmp.is_symlink() or tmp.is_file():
+            tmp.unlink()
+        elif tmp.is_dir():
+            shutil.rmtree(tmp)
+    if not (latest.exists() and latest.is_dir() and not latest.is_symlink()):
+        try:
+            os.symlink(name, tmp, target_is_directory=True)
+            os.replace(tmp, latest)  # atomic: readers see the old or the new target
+            return
+        except OSError:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+    # a real directory (or no symlinks here): copy, then swap by renames
+    shutil.copytree(root / name, tmp)
+    old = root / f".latest-old-{os.getpid()}"
+    if latest.is_symlink() or latest.is_file():
+        latest.unlink()
+    elif latest.exists():
+        os.rename(latest, old)
+    os.rename(tmp, latest)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _check_flag(name: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise InputError(f"`{name}` must be True or False, got {value!r}")
+    return value
+
+
+def build_report(
+    steppers: Sequence[str] | None = None,
+    problems: Sequence[str] | None = None,
+    quick: bool = False,
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    fresh: bool = False,
+    plugins: Sequence[str | os.PathLike] = (),
+    output: str | os.PathLike | None = None,
+    *,
+    cache_dir: str | os.PathLike | None = None,
+    results_root: str | os.PathLike | None = None,
+    cell_timeout: float | None = None,
+    progress: Progress | bool | str | None = None,
+) -> Path:
+    """Run every report experiment over `steppers` x `problems` (None: the whole registry), save
+    the run, and write the HTML report; return the path of its index.html.
+
+    `quick` uses every experiment's CI-sized settings (every section is still there); `jobs`,
+    `scheduler`, `fresh`, `plugins`, `cell_timeout` are as in `harness.runner.run_experiment`;
+    `output` is the reports directory; `cache_dir` the cell cache, `results_root` where runs are
+    saved; `progress` as in the runner (None: a bar on a terminal, plain lines otherwise).
+    Failed cells do not stop the report: they are listed in it."""
+    started = time.perf_counter()
+    quick = _check_flag("quick", quick)
+    fresh = _check_flag("fresh", fresh)
+    root = reports_root(output)
+    from harness import registry
+    from harness.experiments import EXPERIMENTS
+    from harness.experiments import roundoff as _roundoff  # noqa: F401  (registers `roundoff`)
+    from harness.runner import _check_names, _check_plugins, run_experiments
+
+    plugin_paths = _check_plugins(plugins)
+    for p in plugin_paths:
+        registry.load_plugin(p)
+    stepper_names = _check_names("steppers", steppers)
+    problem_names = _check_names("problems", problems)
+    if not stepper_names:
+        raise InputError("`steppers` must name at least one stepper")
+    if not problem_names:
+        raise InputError("`problems` must name at least one problem")
+    experiments = [e for e in REPORT_EXPERIMENTS if e in EXPERIMENTS]
+
+    if isinstance(progress, Progress):
+        bar, own = progress, False
+    else:
+        mode = {None: "auto", True: "auto", False: "off"}.get(progress, progress)  # type: ignore[arg-type]
+        bar, own = Progress(0, "report", mode=mode), True
+    try:
+        results = run_experiments(
+            experiments, stepper_names, problem_names, quick=quick, jobs=jobs,
+            scheduler=scheduler, fresh=fresh, cache_dir=cache_dir, plugins=plugin_paths,
+            cell_timeout=cell_timeout, progress=bar,
+        )
+    finally:
+        if own:
+            bar.close()
+    t_run = time.perf_counter() - started
+
+    from harness.store import load_run, save_run
+
+    t0 = time.perf_counter()
+    run_dir = save_run(results, root=results_root, config={
+        "command": "report", "quick": quick, "steppers": stepper_names, "problems": problem_names,
+        "plugins": plugin_paths, "jobs": jobs, "scheduler": scheduler, "fresh": fresh,
+        "cell_timeout": cell_timeout, "experiments": experiments,
+    })
+    stored = load_run(run_dir)
+    t_save = time.perf_counter() - t0
+    _say(bar, f"results saved in {run_dir}")
+
+    from harness.report import figures as F
+    from harness.report.sections import RunView, build_sections
+
+    view = RunView(
+        rows=dict(stored.rows), summaries=dict(stored.summaries), meta=stored.meta,
+        steppers=stepper_names, problems=problem_names,
+        infos={n: registry.get_stepper(n).info for n in stepper_names},
+        origins={n: registry.steppers.origin(n) for n in stepper_names},
+        quick=quick, palette=F.Palette(stepper_names),
+    )
+    t0 = time.perf_counter()
+    sections, statuses = build_sections(
+        view, run_id=stored.run_id, results_path=str(run_dir),
+        build_s={"experiments (run or load from cache)": t_run, "save and reload results": t_save},
+        progress=lambda name: _say(bar, f"section {name}"),
+    )
+    t_sections = time.perf_counter() - t0
+
+    from harness import __version__
+
+    meta = stored.meta
+    git = meta["provenance"].get("git", {})
+    totals = meta.get("totals", {})
+    headline = (f"{len(stepper_names)} steppers × {len(problem_names)} problems; "
+                f"{totals.get('cells', 0)} cells ({totals.get('computed', 0)} computed, "
+                f"{totals.get('cached', 0)} from cache, {totals.get('failed', 0)} failed) in "
+                f"{len(experiments)} experiments.")
+    html = render_html({
+        "sections": sections, "run_id": stored.run_id, "generated": meta.get("created_utc", ""),
+        "commit": git.get("short_sha") or "unknown", "dirty": bool(git.get("dirty")),
+        "mode": "quick mode (CI-sized settings)" if quick else "full settings",
+        "headline": headline, "n_failed_cells": int(totals.get("failed", 0)),
+        "n_failing_steppers": sum(1 for s in statuses.values() if s == "fail"),
+        "version": __version__, "results_path": str(run_dir),
+    })
+    path = _write_report(root, stored.run_id, html)
+    _say(bar, f"sections built in {t_sections:.1f} s; report written in "
+              f"{time.perf_counter() - started:.1f} s: {path}")
+    return path
+
