@@ -118,14 +118,20 @@ class Problem:
         unknown = _names(rhs) - set(var_names)
         if unknown:
             raise InputError(f"problem {name!r}: `rhs` uses undeclared variables {sorted(unknown)}")
-        y0_arr = np.asarray(y0, dtype=np.float64)
+        try:
+            y0_arr = np.asarray(y0, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"problem {name!r}: `y0` must be numbers, got {y0!r}") from None
         if y0_arr.shape != (len(variables),):
             raise InputError(
                 f"problem {name!r}: `y0` needs {len(variables)} values, got shape {y0_arr.shape}"
             )
         if not np.all(np.isfinite(y0_arr)):
             raise InputError(f"problem {name!r}: `y0` must be finite, got {y0_arr.tolist()}")
-        t0, t_end = (float(t_span[0]), float(t_span[1]))
+        try:
+            t0, t_end = (float(t_span[0]), float(t_span[1]))
+        except (TypeError, ValueError, OverflowError, IndexError, KeyError):
+            raise InputError(f"problem {name!r}: `t_span` must be two real numbers, got {t_span!r}") from None
         if not (math.isfinite(t0) and math.isfinite(t_end)) or t_end <= t0:
             raise InputError(f"problem {name!r}: `t_span` must be finite with t_end > t0, got {t_span}")
         y0_arr.setflags(write=False)
@@ -232,9 +238,17 @@ class Problem:
                     f"`pars` names unknown parameters {sorted(unknown)} of problem {self.name!r}; "
                     f"known: {sorted(self.parameters)}"
                 )
-            vals = np.array([float(pars.get(k, v)) for k, v in self.parameters.items()])
+            try:
+                vals = np.array([float(pars.get(k, v)) for k, v in self.parameters.items()])
+            except (TypeError, ValueError, OverflowError):
+                raise InputError(f"`pars` values must be real numbers, got {dict(pars)!r}") from None
+            if not np.all(np.isfinite(vals)):
+                raise InputError("`pars` must be finite")
             return np.repeat(vals[:, None], size, axis=1)
-        arr = np.asarray(pars, dtype=np.float64)
+        try:
+            arr = np.asarray(pars, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"`pars` must be numeric, got {type(pars).__name__}") from None
         if arr.ndim == 1:
             arr = np.repeat(arr[:, None], size, axis=1)
         if arr.shape != (P, size):
@@ -405,7 +419,7 @@ class Dynamics:
 def check_time(value: Any, name: str) -> float:
     try:
         x = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"`{name}` must be a real number, got {value!r}") from None
     if not math.isfinite(x):
         raise InputError(f"`{name}` must be finite, got {x!r}")
@@ -428,7 +442,7 @@ def check_state(y: Any, dim: int, name: str = "y0") -> np.ndarray:
     """A state shaped (dim,) or (dim, N) as a float64 (dim, N) array, finite."""
     try:
         arr = np.array(y, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"`{name}` must be numeric, got {type(y).__name__}") from None
     if arr.ndim == 1:
         arr = arr[:, None]

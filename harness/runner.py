@@ -179,7 +179,8 @@ def time_limit(seconds: float | None):
         raise CellTimeout(f"timeout after {seconds:g} s")
 
     previous = signal.signal(signal.SIGALRM, _handler)
-    outer_delay, outer_interval = signal.setitimer(signal.ITIMER_REAL, float(seconds))
+    # setitimer counts in microseconds and reads 0 as "no timer": never pass less than 1 us
+    outer_delay, outer_interval = signal.setitimer(signal.ITIMER_REAL, max(float(seconds), 1e-6))
     started = time.monotonic()
     try:
         yield

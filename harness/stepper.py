@@ -134,7 +134,7 @@ class Trajectory:
 def check_step_size(h: Any) -> float:
     try:
         x = float(h)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"`h` must be a real number, got {h!r}") from None
     if math.isnan(x) or math.isinf(x):
         raise InputError(f"`h` must be finite, got {x!r}")
@@ -266,7 +266,12 @@ class Stepper(ABC):
         if save_steps is None:
             save = np.array([0, n_steps])
         else:
-            save = np.unique(np.asarray(save_steps, dtype=np.int64))
+            try:
+                save = np.unique(np.asarray(save_steps, dtype=np.int64))
+            except (TypeError, ValueError, OverflowError):
+                raise InputError(
+                    f"`save_steps` must be whole step indices, got {save_steps!r}"
+                ) from None
             if save.size == 0 or save[0] < 0 or save[-1] > n_steps:
                 raise InputError(f"`save_steps` must lie in [0, {n_steps}], got {save_steps!r}")
         out = np.empty((save.size, problem.dim, y.shape[1]))
@@ -371,7 +376,7 @@ class AdaptiveStepper(Stepper):
 
         try:
             tol = float(tol)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise InputError(f"`tol` must be a real number, got {tol!r}") from None
         if not (math.isfinite(tol) and tol > 0.0):
             raise InputError(f"`tol` must be positive and finite, got {tol!r}")

@@ -335,7 +335,7 @@ def resolve_run(run: str | os.PathLike | None = None, root: str | os.PathLike | 
 def _check_experiment_name(name: Any) -> str:
     if not isinstance(name, str) or not _SAFE_NAME.match(name):
         raise InputError(
-            f"experiment name {name!r} cannot name a results file: use letters, digits and _.+- "
+            f"`experiment` name {name!r} cannot name a results file: use letters, digits and _.+- "
             "(at most 100 characters, starting with a letter or digit)"
         )
     return name

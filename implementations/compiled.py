@@ -421,10 +421,16 @@ def problem_module(problem: Problem) -> ModuleType:
                 mod_name = f"_harness_numba_{digest}"
                 module = sys.modules.get(mod_name)
                 if module is None:
+                    # Registered before it runs: numba's cache records the module by name and
+                    # imports it by that name when it loads a cached kernel.
                     spec = importlib.util.spec_from_file_location(mod_name, path)
                     module = importlib.util.module_from_spec(spec)
-                    spec.loader.exec_module(module)
                     sys.modules[mod_name] = module
+                    try:
+                        spec.loader.exec_module(module)
+                    except BaseException:
+                        sys.modules.pop(mod_name, None)
+                        raise
                 entry = _Entry(module, None, path)
             _modules[problem] = entry
     if entry.module is None:

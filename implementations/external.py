@@ -68,7 +68,7 @@ SCIPY_METHODS: dict[str, tuple] = {
         5,
         False,
         True,
-        6.0,
+        7.0,
         f"{_HW2}, IV.8 (RADAU5); {_SCIPY}",
         "Three-stage Radau IIA collocation (order 5), simplified Newton with the problem's "
         "Jacobian; f evaluations per internal step vary with the Newton iterations (typical "

@@ -298,6 +298,18 @@ def test_bad_newton_settings(stepper, kwargs, pattern):
         stepper.with_newton(**kwargs)
 
 
+def test_wrong_coefficient_objects_are_refused():
+    with pytest.raises(InputError, match=r"`table` must be a LinearMultistep, got ButcherTableau"):
+        LinearMultistepStepper(
+            implicit_rk.GAUSS_LEGENDRE_4, name="x", claimed_order=4, reference="r", description="d"
+        )
+    with pytest.raises(InputError, match=r"`tableau` must be a ButcherTableau, got LinearMultistep"):
+        ImplicitRungeKutta(
+            multistep.BDF2, name="x", claimed_order=2, symplectic=False, symmetric=False,
+            reference="r", description="d",
+        )
+
+
 def test_explicit_tableau_is_refused():
     with pytest.raises(InputError, match=r"`tableau` 'rk4' is explicit"):
         ImplicitRungeKutta(

@@ -94,15 +94,18 @@ def test_verlet_damped_costs_one_force_per_step_on_damped_cubic():
     assert evals["jac"] == 1
 
 
-def test_taylor_counts_internal_steps():
-    # Each member runs its own adaptive steps: three copies of a start cost three times one.
+def test_taylor_counts_internal_steps_per_trajectory():
+    # Members run their own adaptive steps; the count is that of the member that took the most.
     P = _harmonic()
     stepper = get_stepper("taylor")
-    one = stepper.integrate(P, h=5.0, n_steps=4).evals
-    three = stepper.integrate(P, h=5.0, n_steps=4, y0=np.repeat(P.y0[:, None], 3, axis=1)).evals
-    assert one["rhs"] == one["accel"] == one["jac"] == 0
-    assert one["internal_steps"] > 4  # several internal steps per output step of length 5
-    assert three["internal_steps"] == 3 * one["internal_steps"]
+    small, large = [1e-5, 0.0], [1.0, 0.0]  # heyoka's tolerance is absolute below |y| = 1
+    one_small = stepper.integrate(P, h=5.0, n_steps=4, y0=small).evals
+    one_large = stepper.integrate(P, h=5.0, n_steps=4, y0=large).evals
+    both = stepper.integrate(P, h=5.0, n_steps=4, y0=np.array([small, large]).T).evals
+    assert one_small["rhs"] == one_small["accel"] == one_small["jac"] == 0
+    assert one_small["internal_steps"] < one_large["internal_steps"]
+    assert one_large["internal_steps"] > 4  # several internal steps per output step of length 5
+    assert both["internal_steps"] == max(one_small["internal_steps"], one_large["internal_steps"])
 
 
 # -- ensemble, saving, input ----------------------------------------------------------------------

@@ -251,7 +251,7 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         rec = {
             "n_steps": n, "h": span / n, "error": err, "reference_error": ref_err,
             "rounding_level": math.sqrt(n) * tol.EPS * scale,
-            "rhs_evals": int(evals.get("rhs", 0)), "force_evals": int(evals.get("accel", 0)),
+            "rhs_evals": float(evals.get("rhs", 0)), "force_evals": float(evals.get("accel", 0)),
             "wall_s": time.perf_counter() - started, "message": msg,
         }
         records[n] = rec
@@ -402,8 +402,8 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
         records.append({
             "tol": tolerance, "h": np.nan, "n_steps": int(evals.get("internal_steps", 0)),
             "error": err, "reference_error": float(np.max(ref.error[-1])),
-            "rounding_level": tol.EPS * scale, "rhs_evals": int(evals.get("rhs", 0)),
-            "force_evals": int(evals.get("accel", 0)),
+            "rounding_level": tol.EPS * scale, "rhs_evals": float(evals.get("rhs", 0)),
+            "force_evals": float(evals.get("accel", 0)),
             "wall_s": time.perf_counter() - started, "message": msg,
         })
     frame = pd.DataFrame(records)

@@ -58,6 +58,7 @@ __all__ = [
     "classify_drift",
     "problem_table_cells",
     "conserves_quadratic_invariants",
+    "check_config",
     "ROW_COLUMNS",
     "SUMMARY_COLUMNS",
 ]
@@ -136,7 +137,46 @@ SUMMARY_COLUMNS = [
 ]
 
 
-# -- cells shared by the long-run experiments -----------------------------------------------------
+# -- settings and cells shared by the long-run experiments -----------------------------------------
+def _is_count(v: Any, minimum: int) -> bool:
+    return not isinstance(v, bool) and isinstance(v, int | np.integer) and v >= minimum
+
+
+def check_config(
+    config: Mapping[str, Any],
+    *,
+    counts: Sequence[str] = (),
+    count_lists: Sequence[str] = (),
+    positives: Sequence[str] = (),
+    name_lists: Sequence[str] = (),
+) -> None:
+    """Raise `InputError` naming the first setting that breaks its rule: `counts` are whole
+    numbers >= 1, `count_lists` non-empty lists of them, `positives` finite numbers > 0,
+    `name_lists` lists of strings."""
+    from harness.errors import InputError
+
+    for key in counts:
+        v = config.get(key)
+        if not _is_count(v, 1):
+            raise InputError(f"config `{key}` must be a whole number >= 1, got {v!r}")
+    for key in count_lists:
+        v = config.get(key)
+        if (isinstance(v, str | bytes) or not isinstance(v, Sequence) or not v
+                or not all(_is_count(x, 1) for x in v)):
+            raise InputError(f"config `{key}` must be a non-empty list of whole numbers >= 1, got {v!r}")
+    for key in positives:
+        v = config.get(key)
+        ok = not isinstance(v, bool) and isinstance(v, int | float | np.number)
+        if not ok or not (math.isfinite(float(v)) and float(v) > 0.0):
+            raise InputError(f"config `{key}` must be a positive finite number, got {v!r}")
+    for key in name_lists:
+        v = config.get(key)
+        if isinstance(v, str | bytes) or not isinstance(v, Sequence) or not all(
+            isinstance(x, str) and x for x in v
+        ):
+            raise InputError(f"config `{key}` must be a list of names, got {v!r}")
+
+
 def problem_table_cells(
     experiment: str,
     steppers: Sequence[str],
@@ -284,6 +324,10 @@ class EnergyExperiment(Experiment):
     }
 
     def cells(self, steppers, problems, config):
+        check_config(config, counts=("steps", "implicit_steps", "adaptive_outputs", "ensemble",
+                                     "adaptive_ensemble", "samples_per_decade", "uniform_samples"),
+                     positives=("fit_decades", "adaptive_periods"), name_lists=("problems",))
+
         def applicable(problem) -> str | None:
             if not problem.conservative or "energy" not in problem.invariants:
                 return f"problem {problem.name!r} is not conservative (no conserved energy to follow)"

@@ -44,8 +44,8 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.experiments.base import Cell, Experiment, Skip, register_experiment
-from harness.experiments.energy import TIME_SCALES, problem_table_cells
+from harness.experiments.base import Cell, Experiment, register_experiment
+from harness.experiments.energy import TIME_SCALES, check_config, problem_table_cells
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["ReversibilityExperiment", "flow_amplification", "rounding_bound_ulps", "ROW_COLUMNS",
@@ -118,6 +118,10 @@ class ReversibilityExperiment(Experiment):
     def cells(self, steppers, problems, config):
         from harness.registry import get_stepper
 
+        check_config(config, counts=("ensemble", "adaptive_ensemble"),
+                     count_lists=("steps", "implicit_steps", "adaptive_steps"),
+                     positives=("adaptive_tol", "adaptive_output_periods"), name_lists=("problems",))
+
         def applicable(problem) -> str | None:
             if not problem.conservative:
                 return (f"problem {problem.name!r} is not conservative: its backward flow "
@@ -147,7 +151,7 @@ class ReversibilityExperiment(Experiment):
         if rows.empty:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         out = []
-        for (s, p), g in rows.groupby(["stepper", "problem"], sort=False):
+        for (s, _p), g in rows.groupby(["stepper", "problem"], sort=False):
             stepper = get_stepper(s)
             g = g.sort_values("steps")
             exponent = _growth_exponent(g.steps.values, g.return_error_ulps.values)

@@ -8,9 +8,9 @@ the flow preserves dq ^ dv and Omega = [[0, I], [-I, 0]] in the state's own (q, 
    pericentre and apocentre alike.
 2. J by fourth-order central differences of the stepper's one-step map
    (`Stepper.integrate(n_steps=1)`): every base state and every perturbation y +- delta e_j,
-   y +- 2 delta e_j (delta = SYMPLECTIC_FD_DELTA of the component's scale) is one member of a
-   single ensemble call. Complex steps are not available: steppers and compiled right-hand sides
-   work in real float64.
+   y +- 2 delta e_j (delta = SYMPLECTIC_FD_DELTA of the component's largest value over the base
+   states) is one member of a single ensemble call. Complex steps are not available: steppers
+   and compiled right-hand sides work in real float64.
 3. deviation = max over base states of ||J^T Omega J - Omega||_F / ||J||_F^2 (the finite
    difference error E in J enters as E^T Omega J + J^T Omega E, so this ratio measures it
    relative to J); `raw_deviation` is max ||J^T Omega J - Omega||_max.
@@ -29,7 +29,9 @@ method (HLW XV.4), so they are skipped with that reason. The exception is Storme
 rule with its Taylor start and central-difference velocity (`SecondOrderMultistep`): in exact
 arithmetic its observed map (x_n, v_n) -> (x_{n+1}, v_{n+1}) is velocity Verlet (HLW I.1.4), a
 genuine one-step map, and that is what is measured. Adaptive steppers run at `adaptive_tol` over
-one natural period (an output step caps the solver's internal step).
+one natural period (an output step caps the solver's internal step; a shorter one would leave
+the solver's error, and with it the defect, below the finite-difference level) at
+`adaptive_states` base states (each member costs a solver call).
 
 References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), VI.2-VI.4
 (symplectic maps; symplectic Runge-Kutta and partitioned methods), VI.3 (trapezoidal rule as a
@@ -48,8 +50,8 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.coefficients import SecondOrderMultistep
-from harness.experiments.base import Cell, Experiment, register_experiment
-from harness.experiments.energy import TIME_SCALES, problem_table_cells
+from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.experiments.energy import TIME_SCALES, check_config, problem_table_cells
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["SymplecticityExperiment", "one_step_jacobians", "symplectic_deviation",
@@ -112,13 +114,17 @@ class SymplecticityExperiment(Experiment):
     default_config: Mapping[str, Any] = {
         "problems": ["harmonic", "pendulum", "kepler-elliptic", "henon-heiles"],
         "states": 8,
+        "adaptive_states": 2,
         "adaptive_tol": 1e-6,
         "adaptive_output_periods": 1.0,
     }
-    quick_config: Mapping[str, Any] = {"states": 4}
+    quick_config: Mapping[str, Any] = {"states": 4, "adaptive_states": 1}
 
     def cells(self, steppers, problems, config):
         from harness.registry import get_stepper
+
+        check_config(config, counts=("states", "adaptive_states"),
+                     positives=("adaptive_tol", "adaptive_output_periods"), name_lists=("problems",))
 
         def applicable(problem) -> str | None:
             if problem.newtonian is None or problem.velocity_dependent or not problem.conservative:
@@ -134,8 +140,6 @@ class SymplecticityExperiment(Experiment):
         for c in cells:
             reason = _not_one_step(get_stepper(c.stepper))
             if reason:
-                from harness.experiments.base import Skip
-
                 skips.append(Skip(self.name, c.stepper, c.problem, reason))
             else:
                 kept.append(c)
@@ -215,12 +219,13 @@ def _base_states(problem, n: int) -> np.ndarray:
 
 def _measure(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
     scale = TIME_SCALES[problem.name]
-    h, tolerance = scale.h, float("nan")
+    h, tolerance, n_states = scale.h, float("nan"), int(config["states"])
     if isinstance(stepper, AdaptiveStepper):
         tolerance = float(config["adaptive_tol"])
         stepper = stepper.with_tolerance(tolerance)
         h = float(config["adaptive_output_periods"]) * scale.period
-    states = _base_states(problem, int(config["states"]))
+        n_states = int(config["adaptive_states"])
+    states = _base_states(problem, n_states)
     started = time.perf_counter()
     message = ""
     try:

@@ -6,6 +6,12 @@ Modules: `build` (the command), `sections` (what each section shows), `figures` 
 checked inline SVG), `claims` (the course material's claims, judged), `templates/report.html.j2`.
 """
 
-from harness.report.build import REPORT_EXPERIMENTS, build_report, render_html, reports_root
+from harness.report.build import (
+    REPORT_EXPERIMENTS,
+    build_report,
+    render_html,
+    reports_root,
+    write_report,
+)
 
-__all__ = ["build_report", "render_html", "reports_root", "REPORT_EXPERIMENTS"]
+__all__ = ["build_report", "write_report", "render_html", "reports_root", "REPORT_EXPERIMENTS"]

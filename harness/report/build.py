@@ -31,7 +31,7 @@ from harness.errors import InputError
 from harness.progress import Progress
 from harness.provenance import PROJECT_ROOT
 
-__all__ = ["build_report", "REPORT_EXPERIMENTS", "reports_root", "render_html"]
+__all__ = ["build_report", "write_report", "REPORT_EXPERIMENTS", "reports_root", "render_html"]
 
 # The experiments a report runs, in the order of its sections; those not registered in this
 # build are left out (their sections say so).
@@ -218,44 +218,66 @@ def build_report(
     stored = load_run(run_dir)
     t_save = time.perf_counter() - t0
     _say(bar, f"results saved in {run_dir}")
+    path = write_report(stored, output=root, progress=bar, build_s={
+        "experiments (run or load from cache)": t_run, "save and reload results": t_save})
+    _say(bar, f"report written in {time.perf_counter() - started:.1f} s: {path}")
+    return path
 
+
+def write_report(
+    run: Any,
+    *,
+    output: str | os.PathLike | None = None,
+    progress: Progress | None = None,
+    build_s: dict[str, float] | None = None,
+) -> Path:
+    """Write the HTML report of a saved run (a `harness.store.StoredRun`, a run id, a path, or
+    None for the newest) into the reports directory; return its index.html path. The steppers,
+    problems, plugins and mode are the run's own (from its meta.json); plugins the run used
+    are loaded again so their steppers' claims can be shown."""
+    from harness import __version__, registry
     from harness.report import figures as F
     from harness.report.sections import RunView, build_sections
+    from harness.store import StoredRun, load_run
 
+    stored = run if isinstance(run, StoredRun) else load_run(run)
+    root = reports_root(output)
+    bar = progress if progress is not None else Progress(0, "report", mode="off")
+    meta = stored.meta
+    cfg = meta.get("config", {}).get("run", {})
+    for p in cfg.get("plugins", []) or []:
+        registry.load_plugin(p)
+    stepper_names = list(cfg.get("steppers") or registry.steppers.names())
+    problem_names = list(cfg.get("problems") or registry.problems.names())
+    quick = bool(cfg.get("quick", False))
+    known = [n for n in stepper_names if n in registry.steppers]
     view = RunView(
-        rows=dict(stored.rows), summaries=dict(stored.summaries), meta=stored.meta,
-        steppers=stepper_names, problems=problem_names,
-        infos={n: registry.get_stepper(n).info for n in stepper_names},
-        origins={n: registry.steppers.origin(n) for n in stepper_names},
-        quick=quick, palette=F.Palette(stepper_names),
+        rows=dict(stored.rows), summaries=dict(stored.summaries), meta=meta,
+        steppers=known, problems=[p for p in problem_names if p in registry.problems],
+        infos={n: registry.get_stepper(n).info for n in known},
+        origins={n: registry.steppers.origin(n) for n in known},
+        quick=quick, palette=F.Palette(known),
     )
     t0 = time.perf_counter()
     sections, statuses = build_sections(
-        view, run_id=stored.run_id, results_path=str(run_dir),
-        build_s={"experiments (run or load from cache)": t_run, "save and reload results": t_save},
+        view, run_id=stored.run_id, results_path=str(stored.path), build_s=dict(build_s or {}),
         progress=lambda name: _say(bar, f"section {name}"),
     )
     t_sections = time.perf_counter() - t0
-
-    from harness import __version__
-
-    meta = stored.meta
     git = meta["provenance"].get("git", {})
     totals = meta.get("totals", {})
-    headline = (f"{len(stepper_names)} steppers × {len(problem_names)} problems; "
+    headline = (f"{len(known)} steppers × {len(view.problems)} problems; "
                 f"{totals.get('cells', 0)} cells ({totals.get('computed', 0)} computed, "
                 f"{totals.get('cached', 0)} from cache, {totals.get('failed', 0)} failed) in "
-                f"{len(experiments)} experiments.")
+                f"{len(meta.get('experiments', {}))} experiments.")
     html = render_html({
         "sections": sections, "run_id": stored.run_id, "generated": meta.get("created_utc", ""),
         "commit": git.get("short_sha") or "unknown", "dirty": bool(git.get("dirty")),
         "mode": "quick mode (CI-sized settings)" if quick else "full settings",
         "headline": headline, "n_failed_cells": int(totals.get("failed", 0)),
         "n_failing_steppers": sum(1 for s in statuses.values() if s == "fail"),
-        "version": __version__, "results_path": str(run_dir),
+        "version": __version__, "results_path": str(stored.path),
     })
     path = _write_report(root, stored.run_id, html)
-    _say(bar, f"sections built in {t_sections:.1f} s; report written in "
-              f"{time.perf_counter() - started:.1f} s: {path}")
+    _say(bar, f"sections built in {t_sections:.1f} s")
     return path
-

@@ -145,7 +145,8 @@ def _rk4_drifts(tables: Tables) -> tuple[str, str, list[dict]]:
               for r in s.to_dict("records")]
     classes = list(s["drift_class"])
     ok = all(c in ("linear", "unstable") for c in classes) and "linear" in classes
-    text = (f"energy error envelope of rk4: {', '.join(f'{p}: {c}' for p, c in zip(s['problem'], classes, strict=True))}; "
+    by_problem = ", ".join(f"{p}: {c}" for p, c in zip(s["problem"], classes, strict=True))
+    text = (f"energy error envelope of rk4: {by_problem}; "
             "agreement means a secular drift (linear in t) on every problem measured")
     return (AGREE if ok else DISAGREE), text, values
 

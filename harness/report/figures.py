@@ -200,6 +200,40 @@ def _new(nrows: int = 1, ncols: int = 1, *, size: tuple[float, float] = (7.2, 4.
     return fig, axes
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _power_of_ten(value: float, _pos: Any = None) -> str:
+    """Tick label of a log axis as plain Unicode text (10⁻³), since mathtext is off."""
+    if not np.isfinite(value) or value <= 0:
+        return ""
+    exponent = math.log10(value)
+    if abs(exponent - round(exponent)) > 1e-9:
+        return ""
+    k = int(round(exponent))
+    if k == 0:
+        return "1"
+    if k == 1:
+        return "10"
+    return "10" + str(k).translate(_SUPERSCRIPT)
+
+
+def _loglog(ax: Any, x: bool = True, y: bool = True) -> None:
+    """Log scales with plain-text power-of-ten tick labels."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    for on, axis, scale, lim in ((x, ax.xaxis, ax.set_xscale, ax.get_xlim),
+                                 (y, ax.yaxis, ax.set_yscale, ax.get_ylim)):
+        if not on:
+            continue
+        scale("log")
+        axis.set_major_locator(LogLocator(base=10.0, numticks=12))
+        axis.set_major_formatter(FuncFormatter(_power_of_ten))
+        lo, hi = lim()
+        narrow = lo > 0 and hi > 0 and abs(math.log10(hi / lo)) < 1.5
+        axis.set_minor_formatter(FuncFormatter(lambda v, _p: f"{v:.2g}") if narrow else NullFormatter())
+
+
 def _label(text: Any) -> str:
     """A name as it appears in a legend: plain text, bounded length."""
     s = str(text)
@@ -291,8 +325,7 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             handles.append(Line2D([], [], color="0.3", marker=marker, markerfacecolor="none",
                                   linestyle="none", label=text))
     handles.append(Line2D([], [], color="0.3", ls="--", lw=1.6, label="fitted slope over the points used"))
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    _loglog(ax)
     ax.set_xlabel("step size h")
     ax.set_ylabel("global error (max over components and ensemble)")
     ax.set_title(f"Convergence on {_label(problem)}")
@@ -423,8 +456,7 @@ def reversibility_figure(problem: str, table: pd.DataFrame, palette: Palette,
                 lw=1.0, label=f"{_label(stepper)}{' (symmetric)' if symmetric.get(stepper) else ''}")
     n = np.geomspace(max(1.0, float(table["steps"].min())), float(table["steps"].max()), 20)
     ax.plot(n, n, ":", color="k", lw=0.9, label="N ulps (rounding alone)")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    _loglog(ax)
     ax.set_xlabel("steps N forward, then N back")
     ax.set_ylabel("return error (ulps of the state; 0 drawn at 0.1)")
     ax.set_title(f"Time reversibility on {_label(problem)}")
@@ -453,17 +485,17 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                 label=f"{_label(stepper)}{' (symplectic)' if symplectic.get(stepper) else ''}")
     what = "energy" if quantity == "energy" else "angular momentum"
     if quantity != "energy":
-        steps = g["step"].astype(float).to_numpy()
-        t = g["t"].astype(float).to_numpy()
-        pos = steps > 0
-        if pos.any():
-            k = np.argsort(steps[pos])
-            n = steps[pos][k]
-            tt = t[pos][k] - float(np.nanmin(t))
-            ax.plot(tt, tol.ANGULAR_MOMENTUM_ROUNDING_ULPS * n * tol.EPS, ":", color="k", lw=1.0,
-                    label="rounding bound (1 ulp per step)")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+        # the bound n * eps (n steps) against t, drawn for the fixed-step runs (one step size h
+        # per problem in this experiment); adaptive runs take other steps and are not bounded
+        fixed = g[~np.isfinite(g["tol"].astype(float))] if "tol" in g else g
+        if len(fixed):
+            first = fixed[fixed["stepper"] == fixed["stepper"].iloc[0]].sort_values("step")
+            n = first["step"].astype(float).to_numpy()
+            tt = first["t"].astype(float).to_numpy() - float(first["t"].astype(float).min())
+            pos = n > 0
+            ax.plot(tt[pos], tol.ANGULAR_MOMENTUM_ROUNDING_ULPS * n[pos] * tol.EPS, ":", color="k",
+                    lw=1.0, label="rounding bound of the fixed-step runs (1 ulp per step)")
+    _loglog(ax)
     ax.set_xlabel("t")
     ax.set_ylabel(f"relative {what} error (0 drawn at {LOG_FLOOR:g})")
     ax.set_title(f"{what.capitalize()} error on {_label(problem)}")
@@ -481,19 +513,25 @@ def angular_momentum_figure(problem: str, rows: pd.DataFrame, palette: Palette,
 def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                           adaptive: Mapping[str, bool], cost: str) -> Figure | None:
     """Error against cost (`cost` = 'evals' or 'wall_s'), one line per stepper; adaptive peers
-    (heyoka, scipy) drawn dashed with hollow markers."""
+    (heyoka, scipy) drawn dashed with hollow markers. Evaluations are the experiment's
+    `rhs_evals` (right-hand-side plus force calls; a stepper whose `evals_unit` differs, e.g.
+    heyoka's Taylor steps, says so in the legend)."""
     col_err = "error"
     if cost == "evals":
-        x_all = _evals(rows)
-        xlabel = "right-hand-side / force evaluations (per trajectory)"
+        x_all = (rows["rhs_evals"].astype(float) if "rhs_evals" in rows
+                 else pd.Series(np.nan, index=rows.index))
+        xlabel = "right-hand-side or force evaluations"
     else:
         x_all = rows["wall_s"].astype(float)
         xlabel = "wall time (s)"
-    frame = rows.assign(_x=x_all.to_numpy(float) if hasattr(x_all, "to_numpy") else x_all)
+    frame = rows.assign(_x=x_all.to_numpy(float))
     frame = frame[np.isfinite(frame["_x"]) & (frame["_x"] > 0)
                   & np.isfinite(frame[col_err].astype(float)) & (frame[col_err].astype(float) > 0)]
     if frame.empty:
         return None
+    units = {}
+    if "evals_unit" in frame:
+        units = {k: str(v.iloc[0]) for k, v in frame.groupby("stepper", sort=False)["evals_unit"]}
     fig, axes = _new(size=(7.4, 4.4))
     ax = axes[0][0]
     for stepper, s in frame.groupby("stepper", sort=False):
@@ -502,25 +540,16 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
         ax.plot(s["_x"], s[col_err].astype(float), "--" if peer else "-",
                 marker=palette.marker(stepper), ms=3.5, lw=1.0, color=palette.colour(stepper),
                 markerfacecolor="none" if peer else palette.colour(stepper),
-                label=f"{_label(stepper)}{' (adaptive)' if peer else ''}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+                label=_label(stepper) + (" (adaptive)" if peer else "")
+                + (f" [{units[stepper]}s]" if cost == "evals" and units.get(stepper, "f-or-force")
+                   != "f-or-force" else ""))
+    _loglog(ax)
     ax.set_xlabel(xlabel)
     ax.set_ylabel("error at the final time")
     ax.set_title(f"Work-precision on {_label(problem)}: error vs "
                  f"{'evaluations' if cost == 'evals' else 'wall time'}")
     _legend_outside(ax)
     return to_svg(fig, f"work-{cost}-{problem}", f"error against {xlabel} on {problem}")
-
-
-def _evals(rows: pd.DataFrame) -> pd.Series:
-    total = pd.Series(0.0, index=rows.index)
-    found = False
-    for c in ("rhs_evals", "force_evals", "evals"):
-        if c in rows:
-            total = total + rows[c].fillna(0).astype(float)
-            found = True
-    return total if found else pd.Series(np.nan, index=rows.index)
 
 
 # -- roundoff -------------------------------------------------------------------------------------
@@ -531,7 +560,7 @@ def roundoff_figure(rows: pd.DataFrame, palette: Palette) -> Figure | None:
     if rows.empty:
         return None
     problems = list(dict.fromkeys(rows["problem"]))
-    fig, axes = _new(1, len(problems), size=(3.9 * len(problems) + 1.6, 3.8), squeeze=False)
+    fig, axes = _new(1, len(problems), size=(3.9 * len(problems) + 1.6, 3.8))
     for ax, problem in zip(axes[0], problems, strict=True):
         g = rows[rows["problem"] == problem]
         for stepper, s in g.groupby("stepper", sort=False):
@@ -544,8 +573,7 @@ def roundoff_figure(rows: pd.DataFrame, palette: Palette) -> Figure | None:
             s = g[g["stepper"] == first["stepper"].iloc[0]].sort_values("h")
             ax.plot(s["h"], np.maximum(s["truncation_estimate"].astype(float), LOG_FLOOR), ":",
                     color="k", lw=0.9, label="truncation alone (∝ h³ at fixed N)")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        _loglog(ax)
         ax.set_xlabel("step size h")
         ax.set_title(f"{_label(problem)}, N = {int(g['n_steps'].iloc[0])} steps")
     axes[0][0].set_ylabel("relative position error")
@@ -580,7 +608,7 @@ def perf_history_figure(history: pd.DataFrame, max_panels: int = 12,
             ax.plot(s["date"], pd.to_numeric(s["value"]), marker="o", ms=3, lw=1.0,
                     label=_label(params) if params not in ("", "()", "None") else None)
         if unit in ("seconds", "s", "bytes"):
-            ax.set_yscale("log")
+            _loglog(ax, x=False)
         ax.set_title(_label(bench), fontsize=8)
         ax.set_ylabel(unit, fontsize=7)
         ax.tick_params(labelsize=6, axis="both")

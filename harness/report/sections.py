@@ -157,7 +157,9 @@ def _cell(x: Any, digits: int = 3, cls: str = "") -> TextCell:
 def _status_cell(passed: Any) -> TextCell:
     if passed is None or (isinstance(passed, float) and math.isnan(passed)):
         return TextCell(MARK[NONE], cls="status none")
-    return TextCell(MARK[PASS], cls="status pass") if bool(passed) else TextCell(MARK[FAIL], cls="status fail")
+    if bool(passed):
+        return TextCell(MARK[PASS], cls="status pass")
+    return TextCell(MARK[FAIL], cls="status fail")
 
 
 def _df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str, *,
@@ -370,7 +372,7 @@ def _evals_summary(view: RunView, stepper: str) -> str:
     if not rows.empty and {"kind", "stepper", "n_steps"} <= set(rows.columns):
         g = rows[(rows["stepper"] == stepper) & (rows["kind"] == "global")]
         if len(g):
-            evals = g.get("rhs_evals", 0).fillna(0).astype(float) + g.get("force_evals", 0).fillna(0).astype(float)
+            evals = sum(g[c].fillna(0).astype(float) for c in ("rhs_evals", "force_evals") if c in g)
             per = (evals / g["n_steps"].astype(float)).replace([np.inf, -np.inf], np.nan).dropna()
             if len(per):
                 lo, hi = per.min(), per.max()
@@ -586,13 +588,47 @@ def work_precision(view: RunView) -> Section:
                 sec.figure(F.work_precision_figure(problem, g, view.palette, adaptive, "wall_s"),
                            f"Error against wall time on {problem} (this machine; see Provenance "
                            "for its load-free CPU model).")
-    if len(summ):
-        keep = [c for c in summ.columns if c not in ("experiment", "cell", "params")]
-        cols = [(c, c.replace("_", " ")) for c in keep]
-        sec.table(_df_table(summ, cols, "Work–precision summary",
-                            status="passed" if "passed" in summ else None))
+    if len(summ) and {"stepper", "problem", "error"} <= set(summ.columns):
+        sec.table(_df_table(_work_table(summ), [
+            ("stepper", "stepper"), ("problem", "problem"), ("kind", "sweep"),
+            ("points", "points"), ("lowest_error", "lowest error"),
+            ("evals_at_lowest", "evaluations there"), ("evals_to_target", f"evaluations to reach "
+                                                     f"{WORK_TARGET_ERROR:g}"),
+            ("wall_to_target", f"wall s to reach {WORK_TARGET_ERROR:g}"),
+            ("pareto", "points on the evaluations Pareto front"), ("unit", "evaluation unit")],
+            "Work–precision summary per stepper and problem (all points are in the results "
+            "tables)", status=None, sort_failing=False))
     _skip_note(sec, view, name)
     return sec
+
+
+# A precision every method of the catalogue reaches on the work-precision problems; the table
+# says what reaching it costs.
+WORK_TARGET_ERROR = 1e-6
+
+
+def _work_table(summ: pd.DataFrame) -> pd.DataFrame:
+    out = []
+    for (stepper, problem), g in summ.groupby(["stepper", "problem"], sort=False):
+        err = g["error"].astype(float)
+        evals = g["rhs_evals"].astype(float) if "rhs_evals" in g else pd.Series(np.nan, index=g.index)
+        wall = g["wall_s"].astype(float) if "wall_s" in g else pd.Series(np.nan, index=g.index)
+        finite = np.isfinite(err)
+        rec = {"stepper": stepper, "problem": problem,
+               "kind": str(g["kind"].iloc[0]) if "kind" in g else "",
+               "points": int(len(g)), "lowest_error": math.nan, "evals_at_lowest": math.nan,
+               "evals_to_target": math.nan, "wall_to_target": math.nan,
+               "pareto": int(g["pareto_evals"].astype(bool).sum()) if "pareto_evals" in g else None,
+               "unit": str(g["evals_unit"].iloc[0]) if "evals_unit" in g else ""}
+        if finite.any():
+            k = err[finite].idxmin()
+            rec.update(lowest_error=float(err[k]), evals_at_lowest=float(evals[k]))
+            hit = g[finite & (err <= WORK_TARGET_ERROR)]
+            if len(hit):
+                j = evals[hit.index].idxmin()
+                rec.update(evals_to_target=float(evals[j]), wall_to_target=float(wall[j]))
+        out.append(rec)
+    return pd.DataFrame(out)
 
 
 # -- 7 ground truth -------------------------------------------------------------------------------
@@ -792,7 +828,7 @@ def build_sections(view: RunView, *, run_id: str, results_path: str,
                      ("work-precision", work_precision), ("ground-truth", ground_truth),
                      ("claims", claims)):
         say(name)
-        out.append(timer.run(name, lambda fn=fn: _guarded(fn, view, name)))
+        out.append(timer.run(name, lambda fn=fn, name=name: _guarded(fn, view, name)))
     say("performance history")
     perf = timer.run("performance-history", performance_history)
     out.append(provenance(view, run_id=run_id, results_path=results_path, timer=timer,

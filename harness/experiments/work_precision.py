@@ -1,0 +1,153 @@
+"""Work-precision: error at the final time against cost (evaluations and wall time).
+
+Every stepper runs on the same problem to the same final time (the problem's
+`convergence_t_end`) against the same certified ground truth:
+
+- fixed-step steppers by a step-size sweep, and adaptive steppers by a tolerance sweep
+  (`AdaptiveStepper.with_tolerance`), both the convergence experiment's own sweeps
+  (`harness.experiments.convergence._step_sweep` and `_tolerance_sweep`, reused, with the local
+  error sweep turned off), so the two experiments measure identical points;
+- one trajectory (`ensemble` = 1): the step count differs from point to point, so the ensemble
+  axis cannot batch a sweep, and one member keeps wall times comparable between NumPy steppers
+  (whose cost barely depends on the ensemble size) and per-member solvers (scipy, heyoka);
+- cost: `rhs_evals` counts right-hand-side plus force evaluations (one call of the ensemble
+  each; for `taylor`, whose unit is the Taylor jet, its internal steps, `evals_unit` says so).
+  Jacobian evaluations and linear solves of implicit methods show in the wall time only.
+  `wall_s` is the integration's wall time (plus one error evaluation), compile time excluded
+  (heyoka caches compiled code on disk; the first call per process warms it).
+Implicit steppers get a smaller step budget (`implicit_step_budget`): a Newton solve per step
+costs 10-30 explicit steps. `pareto_front` marks the points no other point beats in both cost and
+error.
+
+References: Hairer, Norsett & Wanner, *Solving Ordinary Differential Equations I*, II.10
+(work-precision diagrams); E. Hairer & G. Wanner, *Solving ODEs II*, IV.10.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.errors import InputError
+from harness.experiments.base import Cell, Experiment, register_experiment
+from harness.experiments.convergence import ConvergenceExperiment, _step_sweep, _tolerance_sweep
+from harness.experiments.energy import check_config, problem_table_cells
+from harness.stepper import AdaptiveStepper
+
+__all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS"]
+
+COLUMNS = [
+    "stepper", "problem", "kind", "h", "tol", "n_steps", "t_end", "error", "reference_error",
+    "rhs_evals", "force_evals", "evals_unit", "wall_s", "claimed_order", "explicit", "adaptive",
+    "ensemble_size", "pareto_evals", "pareto_wall", "message",
+]
+
+
+def pareto_front(df: pd.DataFrame, cost: str = "rhs_evals") -> pd.DataFrame:
+    """The points of `df` that no other point of the same problem beats in both `cost` and
+    `error` (finite errors only), sorted by problem and cost."""
+    if df.empty:
+        return df.copy()
+    keep = np.zeros(len(df), dtype=bool)
+    frame = df.reset_index(drop=True)
+    for _, g in frame.groupby("problem", sort=False):
+        g = g[np.isfinite(g["error"].to_numpy(dtype=float)) & (g[cost] > 0)]
+        g = g.sort_values([cost, "error"])
+        best = np.inf
+        for i, err in zip(g.index, g["error"], strict=True):
+            if err < best:
+                keep[i] = True
+                best = err
+    return frame[keep].sort_values(["problem", cost]).reset_index(drop=True)
+
+
+class WorkPrecisionExperiment(Experiment):
+    name = "work-precision"
+    description = "Error at the final time against evaluations and wall time (step-size or tolerance sweep)."
+    default_config: Mapping[str, Any] = {
+        "problems": ["kepler-elliptic", "harmonic"],
+        "ensemble": 1,
+        "seed": 0,
+        "start_error": tol.SWEEP_START_ERROR,
+        "ratio": tol.SWEEP_RATIO,
+        "step_budget": 200_000,
+        "implicit_step_budget": 20_000,
+        "n_start": 4,
+        "target_points": tol.TARGET_FIT_POINTS,
+        "tolerances": [10.0**-k for k in range(3, 15)],
+        "local": False,
+    }
+    quick_config: Mapping[str, Any] = {
+        "problems": ["kepler-elliptic"],
+        "step_budget": 20_000,
+        "implicit_step_budget": 4_000,
+        "tolerances": [10.0**-k for k in range(3, 13, 2)],
+    }
+
+    def cells(self, steppers, problems, config):
+        check_config(config, counts=("ensemble", "step_budget", "implicit_step_budget", "n_start"),
+                     name_lists=("problems",))
+        tolerances = config.get("tolerances")
+        if isinstance(tolerances, str | bytes) or not isinstance(tolerances, Sequence) or not tolerances \
+                or not all(isinstance(t, int | float) and not isinstance(t, bool) and 0.0 < t < 1.0
+                           for t in tolerances):
+            raise InputError(f"config `tolerances` must be a non-empty list of numbers in (0, 1), "
+                             f"got {tolerances!r}")
+
+        def applicable(problem) -> str | None:
+            return None
+
+        return problem_table_cells(self.name, steppers, problems, list(config["problems"]), applicable)
+
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.registry import get_problem, get_stepper
+
+        stepper = get_stepper(cell.stepper)
+        problem = get_problem(cell.problem)
+        # The convergence sweeps read their own settings: start from theirs, then this config.
+        cfg = {**ConvergenceExperiment.default_config, **config, "local": False}
+        if isinstance(stepper, AdaptiveStepper):
+            frame = _tolerance_sweep(stepper, problem, cfg)
+            kind = "tolerance"
+        else:
+            if not stepper.info.explicit:
+                cfg["step_budget"] = int(config["implicit_step_budget"])
+            frame = _step_sweep(stepper, problem, cfg)
+            kind = "step-size"
+        frame = frame[frame["kind"].isin(["global", "tolerance"])].copy()
+        frame["kind"] = kind
+        counted = frame["rhs_evals"].fillna(0) + frame["force_evals"].fillna(0)
+        jets = stepper.info.family == "taylor" or (counted.eq(0).all() and kind == "tolerance")
+        frame["evals_unit"] = "taylor-step" if jets else "f-or-force"
+        frame["rhs_evals"] = np.where(jets, frame["n_steps"], counted).astype(np.int64)
+        frame["claimed_order"] = float(stepper.info.claimed_order or np.nan)
+        frame["explicit"] = bool(stepper.info.explicit)
+        frame["adaptive"] = isinstance(stepper, AdaptiveStepper)
+        if "message" not in frame:
+            frame["message"] = ""
+        frame["message"] = frame["message"].fillna("").astype(str)
+        keep = [c for c in COLUMNS if c in frame.columns]
+        return frame[keep].reset_index(drop=True)
+
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        if rows.empty:
+            return pd.DataFrame(columns=COLUMNS)
+        out = rows.reset_index(drop=True).copy()
+        out["pareto_evals"] = False
+        out["pareto_wall"] = False
+        key = ["stepper", "problem", "kind", "h", "tol"]
+        for cost, column in (("rhs_evals", "pareto_evals"), ("wall_s", "pareto_wall")):
+            front = pareto_front(out, cost)
+            marks = set(map(tuple, front[key].astype(str).to_numpy()))
+            out[column] = [tuple(r) in marks for r in out[key].astype(str).to_numpy()]
+        for c in COLUMNS:
+            if c not in out:
+                out[c] = np.nan
+        return out[COLUMNS]
+
+
+register_experiment(WorkPrecisionExperiment())

@@ -1,0 +1,234 @@
+"""Long-term energy drift: the envelope classifier on synthetic envelopes, the verdicts over the
+registry, and deliberately mislabelled steppers that must be caught.
+
+Expectations: symplectic methods keep the energy error bounded (Hairer, Lubich & Wanner, GNI
+IX.3); RK4 drifts linearly on Kepler (GNI I.2.3); splitting methods and Stormer's rule keep the
+angular momentum of a central force to rounding (GNI IV.2).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+
+from harness import tolerances as tol
+from harness.errors import InputError, UnknownNameError
+from harness.experiments import get_experiment
+from harness.experiments.energy import (
+    EXPECTATIONS,
+    SUMMARY_COLUMNS,
+    TIME_SCALES,
+    classify_drift,
+    conserves_quadratic_invariants,
+)
+from harness.registry import get_problem, problems, steppers
+from harness.runner import run_experiment
+from harness.stepper import AdaptiveStepper, Carry, Stepper, StepperInfo
+
+EXP = get_experiment("energy")
+STEPPERS = steppers.names()
+# Small runs: 2000 steps still leave more than a decade after the first two periods (64 steps
+# each on the harmonic oscillator), enough to tell bounded from linear.
+SMALL = {"steps": 2_000, "implicit_steps": 1_000, "adaptive_outputs": 40, "adaptive_periods": 4,
+         "ensemble": 1}
+
+
+def run(stepper_names, problem_names, **overrides):
+    result = run_experiment(EXP, stepper_names, problem_names, quick=True, config=overrides,
+                            jobs=1, cache=False, progress=False)
+    assert not len(result.failures), result.failures
+    return result.summary.set_index(["stepper", "problem"])
+
+
+class PlainEulerLabelledSymplectic(Stepper):
+    """Explicit Euler on (q, v): q1 = q0 + h v0, v1 = v0 + h a(q0). It has the right order, but
+    the label "symplectic" is false: the symplectic Euler method kicks with the new position
+    (GNI I.1.2). The deliberate mislabel the experiments must catch."""
+
+    def __init__(self, name: str = "mislabelled-symplectic-euler"):
+        self.info = StepperInfo(
+            name=name, family="splitting", claimed_order=1, explicit=True, symplectic=True,
+            symmetric=False, evals_per_step=1, form="newtonian", velocity_dependent=False,
+            reference="Hairer, Lubich & Wanner, Geometric Numerical Integration, I.1.2 (mislabelled)",
+        )
+
+    def _start(self, dyn, t0, y0, h):
+        return Carry(t0, h, y0)
+
+    def _step(self, dyn, c):
+        q, v = c.y[: dyn.nq], c.y[dyn.nq :]
+        a = dyn.accel(c.t, q)
+        q += c.h * v
+        v += c.h * a
+
+
+def relabelled(name: str, **claims) -> Stepper:
+    original = steppers.get(name)
+    clone = copy.copy(original)
+    clone.info = dataclasses.replace(original.info, name=f"{name}-relabelled", **claims)
+    return clone
+
+
+@pytest.fixture
+def registered():
+    added = []
+
+    def add(stepper):
+        steppers.register(stepper, origin="test")
+        added.append(stepper.info.name)
+        return stepper.info.name
+
+    yield add
+    for name in added:
+        steppers.unregister(name)
+
+
+# -- the classifier on envelopes of known shape ---------------------------------------------------
+def _grid(n=100_000):
+    steps = np.unique(np.round(np.logspace(0, np.log10(n), 400))).astype(float)
+    return steps, 0.1 * steps
+
+
+@pytest.mark.parametrize("shape, expected", [
+    (lambda n: 1e-4 * np.abs(np.sin(0.37 * n)), "bounded"),
+    (lambda n: 1e-15 * np.sqrt(n) * (1.0 + 0.3 * np.sin(n)), "sqrt"),
+    (lambda n: 1e-9 * n + 1e-8 * np.abs(np.sin(n)), "linear"),
+    (lambda n: 1e-12 * np.exp(n / 4000.0), "unstable"),
+    (lambda n: np.where(n > 5e4, np.inf, 1e-6), "unstable"),
+    (lambda n: 1e-3 * n, "unstable"),  # reaches a relative error of order one
+])
+def test_classify_drift_recognises_known_envelopes(shape, expected):
+    steps, t = _grid()
+    out = classify_drift(steps, t, shape(steps), fit_start=1000)
+    assert out["drift_class"] == expected, out
+
+
+def test_linear_drift_slope_is_the_drift_per_unit_time():
+    steps, t = _grid()
+    out = classify_drift(steps, t, 3e-8 * t, fit_start=1000)
+    assert out["drift_class"] == "linear"
+    assert out["drift_slope"] == pytest.approx(3e-8, rel=1e-6)
+    assert out["drift_exponent"] == pytest.approx(1.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"steps": 0}, r"config `steps` must be a whole number >= 1, got 0"),
+    ({"ensemble": 1.5}, r"config `ensemble` must be a whole number >= 1"),
+    ({"fit_decades": -1.0}, r"config `fit_decades` must be a positive finite number"),
+    ({"problems": "harmonic"}, r"config `problems` must be a list of names"),
+])
+def test_bad_settings_are_refused_with_the_setting_named(bad, match):
+    with pytest.raises(InputError, match=match):
+        EXP.cells(["velocity-verlet"], ["harmonic"], EXP.config(bad, quick=True))
+
+
+def test_unknown_names_are_refused():
+    with pytest.raises(UnknownNameError, match=r"unknown problem 'kepler'"):
+        EXP.cells(["rk4"], ["kepler"], EXP.config(quick=True))
+
+
+def test_summarize_of_no_rows_has_the_promised_columns():
+    import pandas as pd
+
+    out = EXP.summarize(pd.DataFrame(), EXP.config(quick=True))
+    assert list(out.columns) == SUMMARY_COLUMNS
+    for field in ("stepper", "problem", "h", "steps", "max_rel_energy_error", "drift_class",
+                  "drift_slope", "verdict", "passed"):
+        assert field in SUMMARY_COLUMNS
+
+
+# -- the registry ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", STEPPERS)
+def test_every_stepper_gets_a_cell_or_a_reason_on_every_problem(name):
+    cfg = EXP.config()
+    cells, skips = EXP.cells([name], problems.names(), cfg)
+    covered = {c.problem for c in cells} | {s.problem for s in skips}
+    assert covered == set(problems.names())
+    assert all(s.reason for s in skips)
+    stepper = steppers.get(name)
+    for c in cells:
+        assert get_problem(c.problem).conservative and c.problem in cfg["problems"]
+        assert stepper.compatible(get_problem(c.problem))
+
+
+def test_every_configured_problem_has_a_time_scale_and_energy():
+    for config in (EXP.config(), EXP.config(quick=True)):
+        for name in config["problems"]:
+            assert name in TIME_SCALES, name
+            if name in problems:
+                assert "energy" in get_problem(name).invariants
+
+
+def test_expectations_name_registered_steppers_and_problems():
+    for (stepper, problem), exp in EXPECTATIONS.items():
+        assert stepper in steppers and problem in problems, (stepper, problem)
+        assert exp.reason and exp.drift_class in ("bounded", "sqrt", "linear", "unstable")
+
+
+def test_registry_on_the_oscillator_symplectic_claims_hold():
+    """Every registered stepper on the harmonic oscillator: a symplectic claim must come out
+    bounded (or rounding-level), and every record carries a class and a verdict."""
+    table = run(STEPPERS, ["harmonic"], **SMALL)
+    compatible = [s for s in STEPPERS if steppers.get(s).compatible(get_problem("harmonic"))]
+    assert set(table.index.get_level_values(0)) == set(compatible)
+    for name in compatible:
+        r = table.loc[(name, "harmonic")]
+        assert r.drift_class in ("bounded", "sqrt", "linear", "unstable")
+        if steppers.get(name).info.symplectic:
+            assert r.verdict == "as-claimed" and bool(r.passed), (name, r.drift_class, r.message)
+        if not isinstance(steppers.get(name), AdaptiveStepper):
+            expected_steps = SMALL["steps"] if steppers.get(name).info.explicit else SMALL["implicit_steps"]
+            assert r.steps == expected_steps and r.h == pytest.approx(TIME_SCALES["harmonic"].h)
+
+
+def test_rk4_drifts_linearly_on_kepler():
+    table = run(["rk4"], ["kepler-elliptic"], ensemble=1)
+    r = table.loc[("rk4", "kepler-elliptic")]
+    assert r.drift_class == "linear", r.to_dict()
+    assert r.verdict == "as-expected" and bool(r.passed)
+    assert r.drift_slope > 0 and 0.75 <= r.drift_exponent <= 1.5
+
+
+KEPLER_CONSERVING = [s for s in STEPPERS
+                     if conserves_quadratic_invariants(steppers.get(s))
+                     and steppers.get(s).compatible(get_problem("kepler-elliptic"))]
+
+
+def test_the_verlet_family_is_among_the_quadratic_invariant_conservers():
+    for name in ("velocity-verlet", "position-verlet", "leapfrog", "stormer-verlet"):
+        if name in steppers:
+            assert name in KEPLER_CONSERVING
+    for name in ("rk4", "euler", "trapezoid"):
+        if name in steppers:
+            assert name not in KEPLER_CONSERVING
+
+
+def test_angular_momentum_on_kepler_is_kept_to_rounding_by_the_verlet_family():
+    assert KEPLER_CONSERVING
+    table = run(KEPLER_CONSERVING, ["kepler-elliptic"], steps=5_000, implicit_steps=500)
+    for name in KEPLER_CONSERVING:
+        r = table.loc[(name, "kepler-elliptic")]
+        assert r.angular_momentum_expected and r.angular_momentum_conserved, r.to_dict()
+        bound = tol.ANGULAR_MOMENTUM_ROUNDING_ULPS * r.steps * tol.EPS
+        assert r.max_rel_angular_momentum_error <= bound
+        assert bool(r.passed), (name, r.message)
+
+
+# -- mislabelled steppers must fail ---------------------------------------------------------------
+@pytest.mark.parametrize("problem", ["harmonic", "kepler-elliptic"])
+def test_plain_euler_labelled_symplectic_fails(problem, registered):
+    name = registered(PlainEulerLabelledSymplectic())
+    r = run([name], [problem], **SMALL).loc[(name, problem)]
+    assert r.drift_class in ("linear", "unstable"), r.to_dict()
+    assert r.verdict == "claim-false" and not bool(r.passed)
+
+
+def test_rk4_labelled_symplectic_fails_on_kepler(registered):
+    name = registered(relabelled("rk4", symplectic=True))
+    r = run([name], ["kepler-elliptic"]).loc[(name, "kepler-elliptic")]
+    assert r.drift_class == "linear"
+    assert r.verdict == "claim-false" and not bool(r.passed)
+    assert "claimed symplectic" in r.message
