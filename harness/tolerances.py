@@ -43,9 +43,13 @@ GATE_ORDER_TOL = 0.2
 ENSEMBLE_SIZE = 16
 ENSEMBLE_PERTURBATION = 1e-2
 
-# Work budget per convergence sweep (steps summed over the sweep), so a slow method on a long
-# span reports `insufficient-range` instead of running for hours.
-SWEEP_STEP_BUDGET = 400_000
+# Work budget per convergence sweep, in right-hand-side evaluations summed over the sweep (a
+# stepper's steps = this / its evaluations per step), so a slow method on a long span reports
+# `insufficient-range` instead of running for minutes. 2^19 lets Euler reach n = 2^18 steps.
+SWEEP_WORK_BUDGET = 524_288
+# An implicit step also solves Newton systems (a batched Jacobian and LU per iteration, ~2
+# iterations per step): it counts as this many of its declared evaluations.
+IMPLICIT_STEP_COST = 4.0
 
 # Largest ensemble accepted (memory: a 1e7-member state of dimension 12 is ~1 GB per copy).
 MAX_ENSEMBLE_SIZE = 10_000_000

@@ -150,13 +150,13 @@ class ConvergenceExperiment(Experiment):
         "seed": 0,
         "start_error": tol.SWEEP_START_ERROR,
         "ratio": tol.SWEEP_RATIO,
-        "step_budget": tol.SWEEP_STEP_BUDGET,
+        "work_budget": tol.SWEEP_WORK_BUDGET,
         "n_start": 4,
         "target_points": tol.TARGET_FIT_POINTS,
         "tolerances": [10.0**-k for k in range(3, 15)],
         "local": True,
     }
-    quick_config: Mapping[str, Any] = {"ensemble": 8, "step_budget": tol.SWEEP_STEP_BUDGET // 4}
+    quick_config: Mapping[str, Any] = {"ensemble": 8, "work_budget": tol.SWEEP_WORK_BUDGET // 4}
 
     def cells(self, steppers, problems, config):
         from harness.errors import IncompatibleError
@@ -221,6 +221,19 @@ def _best_reference(problem, T: float, y0: np.ndarray):
         return reference(problem, np.array([T]), y0)
 
 
+def step_budget(stepper: Stepper, config: Mapping[str, Any]) -> int:
+    """Steps a sweep may spend: the work budget (right-hand-side evaluations) over the
+    stepper's declared cost per step; implicit steps also pay for Newton's linear solves.
+    Deterministic, so a verdict never depends on how busy the machine was."""
+    if config.get("step_budget") is not None:  # an explicit step count wins
+        return int(config["step_budget"])
+    info = stepper.info
+    per_step = max(1.0, float(info.evals_per_step))
+    if not info.explicit:
+        per_step *= tol.IMPLICIT_STEP_COST
+    return int(float(config["work_budget"]) / per_step)
+
+
 def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
 
     T0, T = problem.t0, problem.convergence_t_end
@@ -230,7 +243,7 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
     y_ref = ref.y[-1]
     ref_err = float(np.max(ref.error[-1]))
     scale = _scale(y0, y_ref)
-    budget = int(config["step_budget"])
+    budget = step_budget(stepper, config)
     ratio = float(config["ratio"])
     records: dict[int, dict] = {}
     spent = 0
