@@ -17,3 +17,15 @@ test: setup
 
 lint: setup
 	.venv/bin/ruff check harness problems implementations tests benchmarks
+
+# Performance tracking (benchmarks/, asv.conf.json; see scripts/nightly and scripts/bench).
+.PHONY: nightly perf-check bench
+
+nightly: setup
+	@scripts/nightly
+
+perf-check: setup
+	@scripts/nightly check
+
+bench: setup
+	@scripts/bench

@@ -55,7 +55,12 @@ GATE_COLUMNS = [
 
 
 def _expectation(stepper: str, problem: str) -> Expectation | None:
-    return EXPECTATIONS.get((stepper, problem)) or EXPECTATIONS.get(("*", problem))
+    method = stepper.split("@", 1)[0]  # `rk4@compiled` is rk4: every implementation shares them
+    return (
+        EXPECTATIONS.get((stepper, problem))
+        or EXPECTATIONS.get((method, problem))
+        or EXPECTATIONS.get(("*", problem))
+    )
 
 
 def _coefficient_order(stepper_name: str) -> float | None:

@@ -52,11 +52,17 @@ Time limit (`cell_timeout` seconds, from the moment the cell starts):
   a helper thread that is abandoned at the limit; the cell is recorded as timed out, but its
   thread keeps running (Python cannot stop a thread) until it returns.
 
-Crashes. When a loky worker dies, every cell in flight fails with it. Each worker leaves a claim
-file (its pid) while it runs a cell, so the runner knows which cells were in flight: cells that
-never started are resubmitted; the in-flight ones are rerun one at a time, alone, and the one
-that kills its worker again is recorded as `crash`. A Dask cluster retries a task whose worker
-died and finally reports it (`KilledWorker`), which becomes a `crash` record.
+Crashes. When a loky worker dies, every cell in flight fails with it. While a worker runs a
+cell it keeps a claim file holding its pid, faulthandler's traceback should a fatal signal
+(SIGSEGV, SIGFPE, SIGABRT, SIGBUS, SIGILL) end it, and the watchdog's note on a hard timeout.
+After the pool breaks, a claim that says why names its cell (`crash` with the fatal error, or
+`timeout`) and the other cells are resubmitted; when no claim says why (`os._exit`, a SIGKILL
+from the out-of-memory killer), the cells that were in flight are rerun one at a time, alone,
+and the one that kills its worker again is recorded as `crash`. A Dask cluster retries a task
+whose worker died and finally reports it (`KilledWorker`), which becomes a `crash` record.
+
+Time limits, crashes and the memory guard protect the run, not the machine: `jobs=1` runs cells
+in this process, so a segfault there ends the run (finished cells are in the cache).
 
 Memory guard. Before anything runs, the runner estimates each cell's peak memory (the
 experiment's `estimate_bytes` hook, else from `config['ensemble']` and the problem's dimension,
@@ -96,7 +102,14 @@ from harness.errors import HarnessError, InputError, UnknownNameError
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
 from harness.progress import Progress
 from harness.provenance import to_jsonable
-from harness.store import CELL_SCHEMA, CellCache, atomic_write_bytes, decode_parquet, encode_parquet
+from harness.store import (
+    CELL_SCHEMA,
+    CellCache,
+    ResultsError,
+    atomic_write_bytes,
+    decode_parquet,
+    encode_parquet,
+)
 
 __all__ = [
     "RunResult",
@@ -143,6 +156,8 @@ MAX_CRASH_ROUNDS = 3
 # Working arrays a stepper keeps per state (stages, carries, temporaries) in the default
 # memory estimate: 16 covers an 8-stage Runge-Kutta method with its error estimate.
 WORK_ARRAYS = 16
+# Claim directories of killed runs older than this (seconds) are removed by the next run.
+STALE_CLAIMS_S = 24 * 3600.0
 # Largest cell time limit accepted, seconds (a week).
 MAX_CELL_TIMEOUT_S = 7 * 24 * 3600.0
 
@@ -521,10 +536,15 @@ def _execute(task: Mapping[str, Any]) -> dict:
             # While the cell runs, its claim file holds this process's pid and, should the
             # process die of a fatal signal (SIGSEGV, SIGFPE, SIGABRT, SIGBUS, SIGILL), the
             # Python traceback faulthandler writes: the runner then knows which cell it was.
-            claim_fh = open(claim, "w")  # noqa: SIM115 - kept open for faulthandler
-            claim_fh.write(f"{os.getpid()}\n")
-            claim_fh.flush()
-            faulthandler.enable(file=claim_fh)
+            # Without a claim (its directory gone) the cell still runs; a crash is then found
+            # by rerunning the cells in flight alone.
+            try:
+                claim_fh = open(claim, "w")  # noqa: SIM115 - kept open for faulthandler
+                claim_fh.write(f"{os.getpid()}\n")
+                claim_fh.flush()
+                faulthandler.enable(file=claim_fh)
+            except OSError:
+                claim_fh, claim = None, None
         problem = _prepare_worker(task)
         if problem is not None:
             out.update(kind=problem[0], message=_one_line(problem[1]))
@@ -796,7 +816,19 @@ def _loky_batch(batch: Sequence[_Task], n: int, accept) -> tuple[BaseException |
     return broken, unfinished
 
 
+def _clean_stale_claims() -> None:
+    """Remove claim directories left by runs killed long ago (their process ended before its
+    `finally`); a live run touches its directory with every cell."""
+    base = Path(tempfile.gettempdir())
+    cutoff = time.time() - STALE_CLAIMS_S
+    for d in base.glob("harness-claims-*"):
+        with contextlib.suppress(OSError):
+            if d.is_dir() and d.stat().st_mtime < cutoff:
+                shutil.rmtree(d, ignore_errors=True)
+
+
 def _run_loky(tasks: Sequence[_Task], jobs: int, accept) -> None:
+    _clean_stale_claims()
     claim_dir = tempfile.mkdtemp(prefix="harness-claims-")
     try:
         for t in tasks:
@@ -920,6 +952,7 @@ def run_experiment(
     cell_timeout: float | None = None,
     progress: Progress | bool | str | None = None,
     _client: Any = None,
+    _counted: bool = False,
 ) -> RunResult:
     """Run one experiment over `steppers` x `problems` (None: the whole registry).
 
@@ -983,9 +1016,10 @@ def run_experiment(
     seen: dict[str, int] = {}
     cached = 0
     bar, own_bar = _progress(progress, exp.name)
-    bar.add_total(len(cells))
-    if not own_bar:
-        bar.set_description(exp.name)
+    if not _counted:
+        bar.add_total(len(cells))
+        if not own_bar:
+            bar.set_description(exp.name)
 
     def record(i: int, cell: Cell, key: str, status: str, was_cached: bool, wall: float,
                n_rows: int, worker: str) -> None:
@@ -1045,7 +1079,13 @@ def run_experiment(
                     bar.update(1, failed=1)
                     return
                 if store is not None:
-                    atomic_write_bytes(store.path(t.key), data)
+                    path = store.path(t.key)
+                    try:
+                        atomic_write_bytes(path, data)
+                    except OSError as exc:
+                        raise ResultsError(
+                            f"cannot write the cell cache file {str(path)!r}: {exc.strerror or exc}"
+                        ) from None
                 frames[t.index] = rows
                 record(t.index, t.cell, t.key, "ok", False, out["wall_s"], len(rows), out["worker"])
                 bar.update(1)
@@ -1148,18 +1188,37 @@ def run_experiments(
     if unknown:
         raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
     sched = _check_scheduler(scheduler)
+    from harness.registry import load_plugin
+
+    for p in _check_plugins(plugins):
+        load_plugin(p)
+    stepper_names = _check_names("steppers", steppers)
+    problem_names = _check_names("problems", problems)
     bar, own_bar = _progress(progress, "cells")
+    sizes = []
+    for exp in exps:  # the whole run's size first, so the display's total does not grow
+        try:
+            cfg = _resolve_config(exp, (configs or {}).get(exp.name), quick)
+            sizes.append(len(list(exp.cells(stepper_names, problem_names, cfg)[0])))
+        except Exception:  # run_experiment reports it properly below
+            sizes = None
+            break
+    counted = sizes is not None
+    if counted:
+        bar.add_total(sum(sizes))
     client = None
     own_client = False
     out: dict[str, RunResult] = {}
     try:
         if sched is not None:
             client, own_client = _dask_client(sched)
-        for exp in exps:
+        for i, exp in enumerate(exps, 1):
+            bar.set_description(f"[{i}/{len(exps)}] {exp.name}")
             out[exp.name] = run_experiment(
-                exp, steppers, problems, config=(configs or {}).get(exp.name), quick=quick,
-                jobs=jobs, fresh=fresh, cache=cache, cache_dir=cache_dir, plugins=plugins,
-                cell_timeout=cell_timeout, progress=bar, _client=client,
+                exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
+                quick=quick, jobs=jobs, fresh=fresh, cache=cache, cache_dir=cache_dir,
+                plugins=plugins, cell_timeout=cell_timeout, progress=bar, _client=client,
+                _counted=counted,
             )
             if sched is not None:
                 out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None

@@ -89,6 +89,7 @@ class CorruptResultsError(ResultsError):
 
     def __init__(self, path: str | Path, problem: str):
         self.path = Path(path)
+        self.problem = problem
         super().__init__(f"results file {str(path)!r}: {problem}")
 
 
@@ -622,11 +623,15 @@ class CellCache:
         p = self.path(key)
         if not p.exists():
             return None
-        df, info = read_parquet(p)
+        hint = "; delete it, or recompute with fresh=True (--fresh), which overwrites it"
+        try:
+            df, info = read_parquet(p)
+        except CorruptResultsError as exc:
+            raise CorruptResultsError(p, exc.problem + hint) from None
         if info.get("schema") != CELL_SCHEMA:
-            raise CorruptResultsError(p, f"not a harness cell file (schema {info.get('schema')!r})")
+            raise CorruptResultsError(p, f"not a harness cell file (schema {info.get('schema')!r}){hint}")
         if info.get("key") != key:
-            raise CorruptResultsError(p, f"holds cell {info.get('key')!r}, not {key!r}")
+            raise CorruptResultsError(p, f"holds cell {info.get('key')!r}, not {key!r}{hint}")
         return df, info
 
     def put(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> Path:

@@ -18,19 +18,25 @@ REFERENCE_MARGIN = 100.0
 # Ground truth: the Taylor tolerance of each precision level (its unit roundoff).
 REFERENCE_TOL_FACTOR = 1.0
 
-# Convergence sweep: start where the error first falls below this (the asymptotic law rarely
-# holds at larger errors) ...
+# Convergence sweep: start where the error first falls below this, relative to the size of the
+# state (the asymptotic law rarely holds at larger errors) ...
 SWEEP_START_ERROR = 1e-2
 # ... refine by this ratio between consecutive step sizes ...
 SWEEP_RATIO = 2.0
 # ... and treat a point as at the roundoff floor when its error is within this factor of what
 # rounding alone produces over the same number of steps (n * eps * |y|).
 ROUNDOFF_MARGIN = 100.0
-# A local slope (between neighbouring points) further than this from the median plateau slope
-# marks the point as pre-asymptotic.
-PLATEAU_SLOPE_TOL = 0.35
-# The fit needs at least this many points in the asymptotic range.
-MIN_FIT_POINTS = 3
+# A local slope (between neighbouring points) further than this from the plateau (the median of
+# the slopes next to the floor) marks the point as pre-asymptotic: 0.15 in absolute terms, or
+# 3 % of the plateau for high orders, where a halving of h moves the error by 2^8 and rounding
+# in the last points shows more.
+PLATEAU_SLOPE_TOL = 0.15
+PLATEAU_SLOPE_RTOL = 0.03
+# A state whose max-norm is below this is measured against this instead (no division by 0).
+SCALE_FLOOR = 1e-300
+# The fit needs at least this many points in the asymptotic range: three local slopes that agree
+# establish a plateau; two can agree by chance where an error term changes sign.
+MIN_FIT_POINTS = 4
 # Errors above this are a blow-up (`unstable`), as is any NaN or inf.
 BLOWUP_ERROR = 1e6
 # Errors at or below this many units of rounding at every step size: the method is exact.
@@ -163,7 +169,7 @@ REVERSIBILITY_FLOW_DELTA = 1e-7
 REVERSIBILITY_FLOW_REFERENCE_ERROR = 1e-10
 
 # Symplecticity (harness.experiments.symplecticity). The one-step Jacobian comes from
-# fourth-order central differences with steps of 2e-4 of each component's scale: truncation
+# fourth-order central differences with steps of 2e-4 of the largest state component: truncation
 # ~(delta/r)^4 stays below 1e-12 even at the Kepler pericentre (r = 0.4, where 1e-3 gave 1.5e-10
 # for every method alike), rounding ~eps |y| / delta ~ 1e-12 ...
 SYMPLECTIC_FD_DELTA = 2e-4
@@ -178,3 +184,18 @@ SYMPLECTIC_CLEAR_FACTOR = 10.0
 # equation solved by Newton's method) is off by a few ulps per operation; a reference may differ
 # from it by its certified error plus this many ulps of the state's scale.
 GROUND_TRUTH_EXACT_ULPS = 100.0
+# Compiled vs NumPy implementation of one method (implementations.compiled): the same operations,
+# except that the NumPy Runge-Kutta loop sums stages with a BLAS dot product; measured at most
+# 1.4 ulps of the state's scale after 100 steps on every compatible problem (splitting: bit for
+# bit), so 16 ulps flags any real difference in the arithmetic.
+COMPILED_AGREEMENT_ULPS = 16.0
+
+# Adaptive steppers (scipy peers, heyoka's Taylor): one output step of one ensemble member may
+# cost at most this many right-hand-side evaluations (or Taylor steps), ~1-5 s of work; beyond
+# it the step fails with a message instead of running for hours on an absurd span.
+ADAPTIVE_MAX_EVALS = 100_000
+
+# Periodic problems are measured for convergence at this many periods (orbits), never a whole
+# number: at a whole period a periodic error term returns to zero, and conjugate-symplectic
+# methods (symplectic Euler, conjugate to velocity Verlet) then measure one order too high.
+CONVERGENCE_PERIODS = 1.3

@@ -76,7 +76,7 @@ SUFFIX = "@compiled"
 # heyoka function name -> (numba expression template, number of arguments or None for any).
 _UNARY_MATH = (
     "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh",
-    "atanh", "exp", "log", "sqrt", "erf",
+    "atanh", "exp", "expm1", "log", "log1p", "sqrt", "erf", "erfc",
 )
 _CALLS: dict[str, tuple[str, int | None]] = {name: (f"math.{name}({{0}})", 1) for name in _UNARY_MATH}
 _CALLS.update({

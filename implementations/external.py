@@ -33,7 +33,7 @@ from scipy.integrate import solve_ivp
 
 from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
-from harness.tolerances import SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
+from harness.tolerances import ADAPTIVE_MAX_EVALS, SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
 
 __all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS"]
 
@@ -103,6 +103,10 @@ class _Stalled(Exception):
     """The solver keeps evaluating at one time value: its step size has collapsed to zero."""
 
 
+class _WorkLimit(Exception):
+    """One output step needed more evaluations than ADAPTIVE_MAX_EVALS allows."""
+
+
 class _MemberDynamics:
     """One ensemble member's view of a run's `Dynamics`: same compiled functions and the same
     counters (so every call is booked), that member's parameters.
@@ -123,8 +127,12 @@ class _MemberDynamics:
     def reset(self) -> None:
         self._last_t = None
         self._same_t = 0
+        self._calls = 0
 
     def f(self, t: float, y: np.ndarray) -> np.ndarray:
+        self._calls += 1
+        if self._calls > ADAPTIVE_MAX_EVALS:
+            raise _WorkLimit(t)
         if t == self._last_t:
             self._same_t += 1
             if self._same_t >= SCIPY_STALL_CALLS:
@@ -227,6 +235,13 @@ class ScipyStepper(AdaptiveStepper):
                         f"member {m} between t={t!r} and t={target!r}: {SCIPY_STALL_CALLS} "
                         f"consecutive evaluations at t={stall.args[0]!r} (step size collapsed "
                         "to zero)"
+                    ) from None
+                except _WorkLimit as limit:
+                    raise StepFailure(
+                        f"stepper {self.info.name!r}: scipy {self.method} needed more than "
+                        f"{ADAPTIVE_MAX_EVALS} evaluations for ensemble member {m} between "
+                        f"t={t!r} and t={target!r} (stopped at t={limit.args[0]!r}); the span is "
+                        f"too long for tol={self.tol:g}"
                     ) from None
                 if sol.status < 0:
                     raise StepFailure(

@@ -18,6 +18,7 @@ live at half steps, positions at whole steps; it is driven by the velocity-Verle
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.blas import daxpy as _axpy
 
 from harness.coefficients import SplittingScheme
 from harness.errors import CoefficientError
@@ -30,12 +31,14 @@ _HLW = "Hairer, Lubich & Wanner, Geometric Numerical Integration, 2nd ed. (2006)
 
 
 def _newtonian_carry(t0: float, h: float, y0: np.ndarray, dyn: Dynamics) -> Carry:
+    """State (q, v) as views of one contiguous array, with flat views for in-place BLAS axpy
+    updates (y <- y + a x: one cheap call instead of a NumPy multiply-and-add pair)."""
     nq = dyn.nq
-    c = Carry(t0, h, y0)
-    c.q = y0[:nq]
-    c.v = y0[nq:]
+    c = Carry(t0, h, np.ascontiguousarray(y0))
+    c.q, c.v = c.y[:nq], c.y[nq:]
+    c.q_flat, c.v_flat = c.q.reshape(-1), c.v.reshape(-1)
     c.a = np.empty_like(c.q)
-    c.tmp = np.empty_like(c.q)
+    c.a_flat = c.a.reshape(-1)
     return c
 
 
@@ -44,7 +47,8 @@ class SplittingStepper(Stepper):
 
     The state is (q, v); drifts move q with the current v, kicks move v with the force at the
     current q and stage time. Declared evaluations per step are the scheme's `force_evals`
-    (the first-same-as-last saving included); the first step of a run pays one more.
+    (the first-same-as-last saving included); a scheme that begins and ends with a kick pays one
+    more in the first step of a run.
     """
 
     def __init__(
@@ -85,8 +89,11 @@ class SplittingStepper(Stepper):
         )
 
     def _scale(self, c: Carry) -> None:
+        """Refresh what depends on the signed step size (at the start and on reversal): each
+        operation's coefficient times h, its stage-time offset, and the step plan of both."""
         c.hcoef = tuple(coeff * c.h for _, coeff, _ in self._ops)
         c.htau = tuple(frac * c.h for _, _, frac in self._ops)
+        c.plan = tuple(zip((kick for kick, _, _ in self._ops), c.hcoef, c.htau, strict=True))
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         c = _newtonian_carry(t0, h, y0, dyn)
@@ -95,18 +102,18 @@ class SplittingStepper(Stepper):
         return c
 
     def _step(self, dyn: Dynamics, c: Carry) -> None:
-        q, v, a, tmp = c.q, c.v, c.a, c.tmp
-        t = c.t
-        hcoef, htau = c.hcoef, c.htau
-        for i, (is_kick, _, _) in enumerate(self._ops):
+        q, a, q_flat, v_flat, a_flat = c.q, c.a, c.q_flat, c.v_flat, c.a_flat
+        t = c.t0 + c.n * c.h
+        accel, axpy = dyn.accel, _axpy
+        reuse = c.force_valid  # only the first operation can reuse the previous step's force
+        for is_kick, hcoef, htau in c.plan:
             if is_kick:
-                if not (i == 0 and c.force_valid):
-                    dyn.accel(t + htau[i], q, out=a)
-                np.multiply(a, hcoef[i], out=tmp)
-                v += tmp
+                if not reuse:
+                    accel(t + htau, q, out=a)
+                axpy(a_flat, v_flat, a=hcoef)
             else:
-                np.multiply(v, hcoef[i], out=tmp)
-                q += tmp
+                axpy(v_flat, q_flat, a=hcoef)
+            reuse = False
         c.force_valid = self._fsal
 
     def _reverse(self, dyn: Dynamics, c: Carry) -> None:
@@ -157,16 +164,14 @@ class StaggeredLeapfrog(Stepper):
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         c = _newtonian_carry(t0, h, y0, dyn)  # c.v holds v_{n+1/2}
         dyn.accel(t0, c.q, out=c.a)
-        np.multiply(c.a, self._half * h, out=c.tmp)
-        c.v += c.tmp
+        _axpy(c.a_flat, c.v_flat, a=self._half * h)
         return c
 
     def _step(self, dyn: Dynamics, c: Carry) -> None:
-        np.multiply(c.v, self._drift * c.h, out=c.tmp)
-        c.q += c.tmp
-        dyn.accel(c.t + c.h, c.q, out=c.a)
-        np.multiply(c.a, self._kick * c.h, out=c.tmp)
-        c.v += c.tmp
+        h = c.h
+        _axpy(c.v_flat, c.q_flat, a=self._drift * h)
+        dyn.accel(c.t0 + (c.n + 1) * h, c.q, out=c.a)
+        _axpy(c.a_flat, c.v_flat, a=self._kick * h)
 
     def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
         out = c.y.copy()
@@ -174,11 +179,9 @@ class StaggeredLeapfrog(Stepper):
         return out
 
     def _reverse(self, dyn: Dynamics, c: Carry) -> None:
-        np.multiply(c.a, self._half * c.h, out=c.tmp)
-        c.v -= c.tmp  # synchronise: v_n
+        _axpy(c.a_flat, c.v_flat, a=-self._half * c.h)  # synchronise: v_n
         super()._reverse(dyn, c)
-        np.multiply(c.a, self._half * c.h, out=c.tmp)
-        c.v += c.tmp  # half step in the new direction: v_{n-1/2}
+        _axpy(c.a_flat, c.v_flat, a=self._half * c.h)  # half step in the new direction: v_{n-1/2}
 
 
 # -- the schemes ---------------------------------------------------------------------------------

@@ -24,6 +24,7 @@ import threading
 
 import heyoka as hy
 import numpy as np
+from scipy.linalg.blas import daxpy as _axpy
 
 from harness.coefficients import SecondOrderMultistep
 from harness.errors import CoefficientError
@@ -145,7 +146,6 @@ class TwoStepVerlet(Stepper):
         c.cur = y0[:nq].copy()
         c.prev = np.empty_like(c.cur)
         c.a = np.empty_like(c.cur)
-        c.tmp = np.empty_like(c.cur)
         c.zero_v = np.zeros_like(c.cur)
         c.kind = self._structure(dyn.problem).kind if self._implicit_velocity else "none"
         if c.kind == "constant":
@@ -190,10 +190,9 @@ class TwoStepVerlet(Stepper):
     def _explicit_part(self, c: Carry, a: np.ndarray, out: np.ndarray) -> np.ndarray:
         """out = -alpha_1 x_n - alpha_0 x_{n-1} + h^2 beta_1 a; `out` may be x_{n-1}'s buffer."""
         np.multiply(c.prev, -self._alpha0, out=out)
-        np.multiply(c.cur, -self._alpha1, out=c.tmp)
-        out += c.tmp
-        np.multiply(a, self._beta1 * c.h * c.h, out=c.tmp)
-        out += c.tmp
+        flat = out.reshape(-1)
+        _axpy(c.cur.reshape(-1), flat, a=-self._alpha1)
+        _axpy(a.reshape(-1), flat, a=self._beta1 * c.h * c.h)
         return out
 
     def _solve_next(self, dyn: Dynamics, c: Carry, t: float) -> None:

@@ -25,6 +25,7 @@ import numpy as np
 
 from harness.errors import InputError
 from harness.problem import NewtonianForm, Problem
+from harness.tolerances import CONVERGENCE_PERIODS
 
 __all__ = ["PROBLEMS", "KEPLER_CIRCULAR", "KEPLER_ELLIPTIC", "kepler_exact", "orbital_elements"]
 
@@ -125,7 +126,7 @@ KEPLER_CIRCULAR = Problem(
     central_force=True,
     # 1 orbit: 10 orbits at the finest step sizes of low-order methods exceed the sweep budget
     # and add nothing to the measured order.
-    convergence_t_end=_PERIOD_CIRCULAR,
+    convergence_t_end=CONVERGENCE_PERIODS * _PERIOD_CIRCULAR,
     description=(
         "Kepler problem r'' = -r/|r|^3 on the circular orbit of radius 4 (r = (4, 0), "
         "v = (0, 1/2), period 16 pi) over 10 orbits. Exact solution from Kepler's equation; "
@@ -147,7 +148,7 @@ KEPLER_ELLIPTIC = Problem(
     conservative=True,
     central_force=True,
     # 1 orbit, as for `kepler-circular`.
-    convergence_t_end=_PERIOD_ELLIPTIC,
+    convergence_t_end=CONVERGENCE_PERIODS * _PERIOD_ELLIPTIC,
     description=(
         "Kepler problem on an eccentric orbit, e = 0.6, a = 1 (start at pericentre r = (0.4, 0), "
         "v = (0, 2), period 2 pi), over 10 orbits; the close pericentre passage makes it much "

@@ -5,6 +5,7 @@ failures stay in their cells, and the cache stays with the submitting process.""
 from __future__ import annotations
 
 import logging
+import os
 
 import pandas as pd
 import pytest
@@ -36,8 +37,9 @@ def test_a_grid_on_a_dask_cluster_equals_the_serial_run(cluster, tmp_path):
     pd.testing.assert_frame_equal(serial.summary, on_cluster.summary)
     # the work ran on the cluster's worker processes, not here
     workers = {w.rsplit(":", 1)[1] for w in on_cluster.cells.worker}
-    cluster_pids = {str(p) for p in distributed.Client(lc).run(__import__("os").getpid).values()}
-    assert workers <= cluster_pids and len(workers) >= 1
+    with distributed.Client(lc.scheduler_address, set_as_default=False) as client:
+        cluster_pids = {str(p) for p in client.run(os.getpid).values()}
+    assert workers <= cluster_pids and str(os.getpid()) not in workers
     # the cache is the submitting process's: a rerun sends nothing to the cluster
     again = run_experiment("toy", *grid, scheduler=lc.scheduler_address, plugins=[plugin],
                            cache_dir=tmp_path, progress=False)

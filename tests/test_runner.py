@@ -258,6 +258,18 @@ def test_parallel_run_equals_serial_run(run):
     assert not parallel.cells.worker.str.endswith(f":{os.getpid()}").any()
 
 
+def test_claim_directories_of_long_killed_runs_are_removed(tmp_path, monkeypatch):
+    monkeypatch.setattr(runner.tempfile, "gettempdir", lambda: str(tmp_path))
+    old, fresh = tmp_path / "harness-claims-old", tmp_path / "harness-claims-fresh"
+    for d in (old, fresh):
+        d.mkdir()
+        (d / ("0" * 32)).write_text("1234\n")
+    stamp = time.time() - runner.STALE_CLAIMS_S - 60
+    os.utime(old, (stamp, stamp))
+    runner._clean_stale_claims()
+    assert not old.exists() and fresh.exists()
+
+
 # -- failures stay in their cell ------------------------------------------------------------------
 EXPECTED_FAILURES = {
     "toy-raise": ("error", r"RuntimeError: toy failure in run_cell"),
@@ -534,7 +546,7 @@ def test_run_experiments_shares_one_progress_and_returns_each_result(toy, tmp_pa
                           cache_dir=tmp_path, plugins=[toy], progress=bar)
     bar.close()
     assert list(out) == ["toy"] and out["toy"].n_cells == 2 and bar.total == 2
-    assert stream.getvalue().splitlines()[-1].startswith("toy: 2/2 cells")
+    assert stream.getvalue().splitlines()[-1].startswith("[1/1] toy: 2/2 cells (100%)")
     with pytest.raises(UnknownNameError, match="`configs` names experiments not being run"):
         run_experiments(["toy"], configs={"other": {}}, progress=False)
 

@@ -87,6 +87,37 @@ def fit_order(h: Sequence[float], error: Sequence[float]) -> dict[str, float]:
             "ci_high": slope + half}
 
 
+def asymptotic_window(h: np.ndarray, error: np.ndarray, usable: np.ndarray) -> tuple[int, int] | None:
+    """The asymptotic range among the usable points (ordered from large h to small h): the run
+    of consecutive usable points nearest the floor, extended from its small-h end towards
+    larger h for as long as each local slope stays within the plateau tolerance of the slopes
+    next to the floor. Anchoring at the small-h end keeps a slowly drifting pre-asymptotic
+    start out of the fit. Returns (first, last) indices, or None for fewer than two points."""
+    idx = np.flatnonzero(usable)
+    if idx.size < 2:
+        return None
+    runs: list[list[int]] = [[int(idx[0])]]
+    for i in idx[1:]:
+        if i == runs[-1][-1] + 1:
+            runs[-1].append(int(i))
+        else:
+            runs.append([int(i)])
+    long_runs = [r for r in runs if len(r) >= tol.MIN_FIT_POINTS]
+    run = long_runs[-1] if long_runs else max(runs, key=len)
+    if len(run) < 2:
+        return None
+    pts = np.array(run)
+    slopes = _local_slopes(h[pts], error[pts])
+    plateau = float(np.median(slopes[-min(3, slopes.size):]))
+    width = max(tol.PLATEAU_SLOPE_TOL, tol.PLATEAU_SLOPE_RTOL * abs(plateau))
+    first = slopes.size  # index into pts of the window's first point
+    while first > 0 and abs(slopes[first - 1] - plateau) <= width:
+        first -= 1
+    if first == slopes.size:  # even the last slope disagrees with its neighbours
+        first = slopes.size - 1
+    return int(pts[first]), int(pts[-1])
+
+
 def classify_points(
     h: np.ndarray,
     error: np.ndarray,
@@ -95,7 +126,8 @@ def classify_points(
     start_error: float | None = None,
 ) -> np.ndarray:
     """Reason each point is excluded from the fit ('' when it is kept), by the rules above.
-    Points must be ordered from the largest h to the smallest."""
+    Points must be ordered from the largest h to the smallest; `start_error` is absolute (the
+    caller scales it by the state's size)."""
     n = h.size
     reason = np.array([""] * n, dtype=object)
     for i in range(n):
@@ -107,36 +139,10 @@ def classify_points(
             reason[i] = "roundoff"
         elif start_error is not None and error[i] >= start_error:
             reason[i] = "pre-asymptotic"
-    # Candidates: the longest run of consecutive usable points whose local slopes agree.
-    usable = np.flatnonzero(reason == "")
-    best: tuple[int, int] | None = None
-    runs: list[list[int]] = []
-    for i in usable:
-        if runs and runs[-1][-1] == i - 1:
-            runs[-1].append(int(i))
-        else:
-            runs.append([int(i)])
-    for run in runs:
-        if len(run) < 2:
-            continue
-        idx = np.array(run)
-        slopes = _local_slopes(h[idx], error[idx])
-        # Largest window [a, b] of points whose local slopes all lie within the tolerance of
-        # the window's median; ties go to the window at smaller h (more asymptotic).
-        for length in range(len(idx), 1, -1):
-            found = None
-            for a in range(len(idx) - length, -1, -1):  # points run from large h to small h
-                window = slopes[a : a + length - 1]
-                med = float(np.median(window))
-                if np.all(np.abs(window - med) <= tol.PLATEAU_SLOPE_TOL):
-                    found = (int(idx[a]), int(idx[a + length - 1]))
-                    break
-            if found is not None:
-                if best is None or (found[1] - found[0]) > (best[1] - best[0]):
-                    best = found
-                break
-    for i in usable:
-        if best is None or not (best[0] <= i <= best[1]):
+    usable = reason == ""
+    window = asymptotic_window(h, error, usable)
+    for i in np.flatnonzero(usable):
+        if window is None or not (window[0] <= i <= window[1]):
             reason[i] = "pre-asymptotic"
     return reason
 
@@ -197,7 +203,9 @@ class ConvergenceExperiment(Experiment):
 
 
 def _scale(*arrays: np.ndarray) -> float:
-    return max(1.0, max(float(np.max(np.abs(a))) for a in arrays))
+    """The size of the state (max-norm over components, members and the arrays given): errors,
+    the start threshold and the rounding level are measured against it."""
+    return max(tol.SCALE_FLOOR, max(float(np.max(np.abs(a))) for a in arrays))
 
 
 def _errors(y: np.ndarray, ref: np.ndarray) -> float:
@@ -270,56 +278,49 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         records[n] = rec
         return rec
 
-    # Phase 1: coarse to fine until the error first falls below start_error.
+    start_error = float(config["start_error"]) * scale
+    target = int(config["target_points"])
+
+    def classified() -> tuple[pd.DataFrame, np.ndarray]:
+        frame = _frame(records)
+        return frame, classify_points(frame.h.values, frame.error.values,
+                                      frame.reference_error.values, frame.rounding_level.values,
+                                      start_error)
+
+    def at_floor(rec: dict) -> bool:
+        return rec["error"] < tol.ROUNDOFF_MARGIN * rec["rounding_level"] or (
+            rec["error"] < tol.REFERENCE_MARGIN * ref_err)
+
+    # Phase 1 and 2: from coarse to fine (ratio 2) until the error has fallen below the start
+    # error and either the asymptotic window holds `target` points or the floor is reached;
+    # the budget ends it in any case.
     n = int(config["n_start"])
     while spent + n <= budget:
         rec = run(n)
-        if np.isfinite(rec["error"]) and rec["error"] < float(config["start_error"]):
-            break
+        if np.isfinite(rec["error"]) and rec["error"] < start_error:
+            if at_floor(rec):
+                break
+            _, reasons = classified()
+            if int((reasons == "").sum()) >= target:
+                break
         n = int(math.ceil(n * ratio))
-    # Phase 2: refine until the roundoff floor, enough points in the asymptotic range, or the
-    # budget, whichever comes first.
-    start_error = float(config["start_error"])
-    target = int(config["target_points"])
-    while True:
-        last = records[max(records)]
-        if not np.isfinite(last["error"]) or last["error"] >= start_error:
-            break  # never reached the asymptotic range within the budget
-        if last["error"] < tol.ROUNDOFF_MARGIN * last["rounding_level"] or (
-            last["error"] < tol.REFERENCE_MARGIN * ref_err
-        ):
-            break  # at the floor: smaller steps only measure rounding
-        frame = _frame(records)
-        kept = classify_points(frame.h.values, frame.error.values, frame.reference_error.values,
-                               frame.rounding_level.values, start_error) == ""
-        if kept.sum() >= target:
-            break
-        n = int(math.ceil(max(records) * ratio))
-        if spent + n > budget:
-            break
-        run(n)
-    # Phase 3: widen when fewer than MIN_FIT_POINTS points survive.
+    # Phase 3: widen. Where the floor (or the budget) came before `target` points, fill in step
+    # sizes between the measured ones (ratio sqrt 2), twice at most.
     for _ in range(2):
-        frame = _frame(records)
-        reasons = classify_points(frame.h.values, frame.error.values,
-                                  frame.reference_error.values, frame.rounding_level.values,
-                                  start_error)
-        kept = np.flatnonzero(reasons == "")
-        if kept.size >= tol.MIN_FIT_POINTS:
+        frame, reasons = classified()
+        if int((reasons == "").sum()) >= target:
             break
-        usable = [i for i in range(len(frame)) if reasons[i] != "blow-up"
-                  and frame.error.values[i] < float(config["start_error"])]
-        if not usable:
+        below = [i for i in range(len(frame)) if np.isfinite(frame.error.values[i])
+                 and frame.error.values[i] < start_error]
+        if not below:
             break
-        lo, hi = int(frame.n_steps.values[usable[0]]), int(frame.n_steps.values[usable[-1]])
-        new = []
-        ns = sorted(records)
-        for a, b in zip(ns, ns[1:], strict=False):
-            if lo <= a and b <= hi:
-                new.append(int(round(math.sqrt(a * b))))
-        new.append(int(math.ceil(hi * ratio)))
+        ns = [int(v) for v in frame.n_steps.values[below[0]:]]
+        new = [int(round(math.sqrt(x * y))) for x, y in zip(ns, ns[1:], strict=False)]
+        new = [m for m in new if m not in records]
+        if not new:
+            break
         for m in new:
-            if m not in records and spent + m <= budget:
+            if spent + m <= budget:
                 run(m)
     frame = _frame(records)
     frame["excluded"] = classify_points(frame.h.values, frame.error.values,

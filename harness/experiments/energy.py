@@ -7,7 +7,8 @@ For one (stepper, problem) cell:
    every stepper of the problem) for `steps` steps; implicit steppers (a Newton solve per step,
    10-30 times the cost of an explicit step) take `implicit_steps`. Adaptive steppers choose
    their own steps: they run at their own tolerance with `adaptive_outputs` output steps over
-   `adaptive_periods` natural periods (each output step costs a solver call per member).
+   `adaptive_periods` natural periods and `adaptive_ensemble` members (each output step costs a
+   solver call per member).
 2. The state is saved on a log-spaced grid of step indices (`samples_per_decade`) merged with a
    uniform grid (`uniform_samples`). The relative energy error |E(t) - E0| / |E0| is taken as the
    maximum over members; for problems with an angular momentum invariant the relative error of
@@ -15,9 +16,10 @@ For one (stepper, problem) cell:
 3. The envelope is the running maximum M(n) of the error, read on the log grid. Its growth
    exponent is the Theil-Sen slope of log M against log n over the later decades: n from
    max(n_end / 10^fit_decades, FIT_MIN_PERIODS natural periods) to n_end.
-   Classes (thresholds in `harness.tolerances`): `unstable` (non-finite, an error of order one,
-   or growth faster than linear), `linear` (drift proportional to t; `drift_slope` is the
-   Theil-Sen slope of M against t), `sqrt` (random-walk growth proportional to sqrt(t), the
+   Classes (thresholds in `harness.tolerances`): `unstable` (non-finite, an error above
+   ENERGY_BLOWUP_ERROR = 10 %, growth faster than linear, or an implicit solve that broke
+   down), `linear` (drift proportional to t; `drift_slope` is the Theil-Sen slope of M
+   against t), `sqrt` (random-walk growth proportional to sqrt(t), the
    signature of rounding), `bounded` (no secular trend).
 4. Verdicts. A stepper claimed symplectic must be `bounded`, or show a secular growth within
    what rounding explains (Brouwer's law: rounding makes the energy error a random walk,
@@ -25,12 +27,13 @@ For one (stepper, problem) cell:
    must show their expected class (RK4 drifts linearly on Kepler: HLW I.2.3). Other pairs are
    measured without a claim (`no-claim`). For central-force problems, steppers whose
    structure conserves quadratic invariants (symplectic Runge-Kutta, splitting and Stormer
-   methods: HLW IV.2 and VI.4) must keep the angular momentum to rounding.
+   methods: HLW IV.2 and VI.4) must keep the angular momentum to rounding: a relative error of
+   at most ANGULAR_MOMENTUM_ROUNDING_ULPS * n * eps after n steps.
 
 References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), I.2-I.3
 (Kepler and the outer solar system), IX.3 (near-conservation of energy by symplectic methods),
-VIII.5 (rounding: Brouwer's law); course material 004_bfdbb1594143ed8b.txt (energy of the Kepler
-orbit under RK4 and symplectic integrators).
+VIII.5 (rounding: Brouwer's law); course material 004_bfdbb1594143ed8b.txt (symplectic
+integrators conserve a modified energy while RK4 drifts; the Kepler practice session).
 """
 
 from __future__ import annotations
@@ -299,6 +302,7 @@ def rounding_growth(n_steps: float) -> float:
 # -- the experiment -------------------------------------------------------------------------------
 class EnergyExperiment(Experiment):
     name = "energy"
+    finite_columns = ("step", "t", "h", "wall_s")
     description = "Long-run energy (and angular momentum) error envelope: bounded, sqrt, linear or unstable."
     default_config: Mapping[str, Any] = {
         "problems": ["harmonic", "pendulum", "kepler-circular", "kepler-elliptic", "henon-heiles",

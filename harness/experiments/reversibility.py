@@ -29,8 +29,9 @@ Adaptive steppers run at `adaptive_tol` (their truncation must show above roundi
 caps the solver's internal step) and `adaptive_ensemble` members (each output step costs a
 solver call per member).
 References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), II.3
-(symmetric methods, Phi_h^* = Phi_{-h}^{-1}), V.1 (reversibility); course material
-002_b3abae41bf42a307.txt (Verlet's time reversibility and the rounding argument).
+(the adjoint Phi_h^* = Phi_{-h}^{-1}; symmetric methods), V.1 (reversibility); course material
+004_bfdbb1594143ed8b.txt (the time-reversibility of symplectic integrators, run n steps forward
+and back to the start; the palindromic Forest-Ruth step).
 """
 
 from __future__ import annotations
@@ -95,6 +96,7 @@ def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> fl
 
 class ReversibilityExperiment(Experiment):
     name = "reversibility"
+    finite_columns = ("steps", "h", "t_span", "flow_amplification", "rounding_bound_ulps", "wall_s")
     description = "Return error of N steps forward and N back (ulps), against the symmetry claim."
     default_config: Mapping[str, Any] = {
         "problems": ["harmonic", "pendulum", "kepler-elliptic"],

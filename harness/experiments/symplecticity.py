@@ -8,8 +8,9 @@ the flow preserves dq ^ dv and Omega = [[0, I], [-I, 0]] in the state's own (q, 
    pericentre and apocentre alike.
 2. J by fourth-order central differences of the stepper's one-step map
    (`Stepper.integrate(n_steps=1)`): every base state and every perturbation y +- delta e_j,
-   y +- 2 delta e_j (delta = SYMPLECTIC_FD_DELTA of the component's largest value over the base
-   states) is one member of a single ensemble call. Complex steps are not available: steppers
+   y +- 2 delta e_j (delta = SYMPLECTIC_FD_DELTA of the largest state component; the configured
+   problems have positions and velocities of commensurate size) is one member of a single
+   ensemble call. Complex steps are not available: steppers
    and compiled right-hand sides work in real float64.
 3. deviation = max over base states of ||J^T Omega J - Omega||_F / ||J||_F^2 (the finite
    difference error E in J enters as E^T Omega J + J^T Omega E, so this ratio measures it
@@ -28,10 +29,12 @@ the method, and symplecticity of a multistep method is defined through its under
 method (HLW XV.4), so they are skipped with that reason. The exception is Stormer's two-step
 rule with its Taylor start and central-difference velocity (`SecondOrderMultistep`): in exact
 arithmetic its observed map (x_n, v_n) -> (x_{n+1}, v_{n+1}) is velocity Verlet (HLW I.1.4), a
-genuine one-step map, and that is what is measured. Adaptive steppers run at `adaptive_tol` over
-one natural period (an output step caps the solver's internal step; a shorter one would leave
-the solver's error, and with it the defect, below the finite-difference level) at
-`adaptive_states` base states (each member costs a solver call).
+genuine one-step map, and that is what is measured. Adaptive steppers run at a loose `adaptive_tol`
+(1e-4: their defect must show far above the finite-difference level; at 1e-6 Radau IIA on the
+pendulum came within a factor 1.2 of the threshold) over one natural period (an output step
+caps the solver's internal step; a shorter one would leave the solver's error, and with it the
+defect, below the finite-difference level) at `adaptive_states` base states (each member costs
+a solver call).
 
 References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), VI.2-VI.4
 (symplectic maps; symplectic Runge-Kutta and partitioned methods), VI.3 (trapezoidal rule as a
@@ -90,8 +93,11 @@ def one_step_jacobians(
     fourth-order central differences, all perturbations as one ensemble."""
     delta_rel = tol.SYMPLECTIC_FD_DELTA if delta_rel is None else delta_rel
     dim, S = states.shape
-    scale = np.max(np.abs(states), axis=1)
-    delta = delta_rel * np.where(scale > 0.0, scale, 1.0)
+    # One step size for every component: the map mixes them, so rounding in any output is
+    # relative to the largest component, and a near-zero component (a velocity at a turning
+    # point) must not shrink its difference step to the rounding level.
+    largest = float(np.max(np.abs(states)))
+    delta = np.full(dim, delta_rel * (largest if largest > 0.0 else 1.0))
     offsets = (1.0, -1.0, 2.0, -2.0)
     members = np.empty((dim, S, dim, len(offsets)))
     for j in range(dim):
@@ -110,12 +116,13 @@ def one_step_jacobians(
 
 class SymplecticityExperiment(Experiment):
     name = "symplecticity"
+    finite_columns = ("h", "wall_s")
     description = "max ||J^T Omega J - Omega|| of the one-step map's Jacobian, against the claim."
     default_config: Mapping[str, Any] = {
         "problems": ["harmonic", "pendulum", "kepler-elliptic", "henon-heiles"],
         "states": 8,
         "adaptive_states": 2,
-        "adaptive_tol": 1e-6,
+        "adaptive_tol": 1e-4,
         "adaptive_output_periods": 1.0,
     }
     quick_config: Mapping[str, Any] = {"states": 4, "adaptive_states": 1}

@@ -67,6 +67,7 @@ def pareto_front(df: pd.DataFrame, cost: str = "rhs_evals") -> pd.DataFrame:
 
 class WorkPrecisionExperiment(Experiment):
     name = "work-precision"
+    finite_columns = ("n_steps", "t_end", "rhs_evals", "wall_s")
     description = "Error at the final time against evaluations and wall time (step-size or tolerance sweep)."
     default_config: Mapping[str, Any] = {
         "problems": ["kepler-elliptic", "harmonic"],

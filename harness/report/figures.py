@@ -52,8 +52,17 @@ EXCLUSION_STYLE = {
 }
 # Lines of long runs are thinned to about this many points per line (log-spaced in steps).
 MAX_POINTS_PER_LINE = 300
-# Errors of exactly zero cannot sit on a log axis: they are drawn at this value (said in the caption).
+# Errors of exactly zero cannot sit on a log axis: they are drawn at this value (said in the
+# axis label); errors above LOG_CEILING (a blow-up, meaningless as a number) are drawn there, so
+# one exploding method cannot squash every other line into a corner.
 LOG_FLOOR = 1e-18
+LOG_CEILING = 1e20
+
+
+def _clip_log(y: Any) -> np.ndarray:
+    """Values for a log axis: non-finite -> NaN (a gap), the rest clipped to [floor, ceiling]."""
+    a = np.asarray(y, dtype=float)
+    return np.where(np.isfinite(a), np.clip(a, LOG_FLOOR, LOG_CEILING), np.nan)
 
 _RC = {
     "svg.fonttype": "none",
@@ -220,7 +229,7 @@ def _power_of_ten(value: float, _pos: Any = None) -> str:
 
 def _loglog(ax: Any, x: bool = True, y: bool = True) -> None:
     """Log scales with plain-text power-of-ten tick labels."""
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
 
     for on, axis, scale, lim in ((x, ax.xaxis, ax.set_xscale, ax.get_xlim),
                                  (y, ax.yaxis, ax.set_yscale, ax.get_ylim)):
@@ -230,8 +239,13 @@ def _loglog(ax: Any, x: bool = True, y: bool = True) -> None:
         axis.set_major_locator(LogLocator(base=10.0, numticks=12))
         axis.set_major_formatter(FuncFormatter(_power_of_ten))
         lo, hi = lim()
-        narrow = lo > 0 and hi > 0 and abs(math.log10(hi / lo)) < 1.5
-        axis.set_minor_formatter(FuncFormatter(lambda v, _p: f"{v:.2g}") if narrow else NullFormatter())
+        if lo > 0 and hi > 0 and abs(math.log10(hi) - math.log10(lo)) < 1.5:
+            # less than two powers of ten in view: label the minor ticks too
+            axis.set_minor_formatter(FuncFormatter(lambda v, _p: f"{v:.2g}"))
+        else:
+            # minor ticks cost a third of the drawing time and carry no label here
+            axis.set_minor_locator(NullLocator())
+            axis.set_minor_formatter(NullFormatter())
 
 
 def _label(text: Any) -> str:
@@ -297,7 +311,7 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
         c = palette.colour(stepper)
         err = s["error"].astype(float).to_numpy()
         h = s["h"].astype(float).to_numpy()
-        ok = np.isfinite(err) & (err > 0)
+        ok = np.isfinite(err) & (err > 0) & (err <= LOG_CEILING)
         ax.plot(h[ok], err[ok], "-", color=c, lw=0.8, alpha=0.5)
         used = s["in_fit"].astype(bool).to_numpy() & ok
         ax.plot(h[used], err[used], linestyle="none", marker=palette.marker(stepper), color=c, ms=4.5)
@@ -326,6 +340,9 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                                   linestyle="none", label=text))
     handles.append(Line2D([], [], color="0.3", ls="--", lw=1.6, label="fitted slope over the points used"))
     _loglog(ax)
+    if reference_error is not None and np.isfinite(reference_error) and reference_error > 0:
+        lo, hi = ax.get_ylim()
+        ax.set_ylim(min(lo, reference_error / 3.0), hi)  # the floor line stays in view
     ax.set_xlabel("step size h")
     ax.set_ylabel("global error (max over components and ensemble)")
     ax.set_title(f"Convergence on {_label(problem)}")
@@ -450,7 +467,7 @@ def reversibility_figure(problem: str, table: pd.DataFrame, palette: Palette,
         g = g.sort_values("steps")
         x = g["steps"].astype(float).to_numpy()
         y = g["return_error_ulps"].astype(float).to_numpy()
-        y = np.where(np.isfinite(y), np.maximum(y, 1e-1), np.nan)
+        y = np.where(np.isfinite(y), np.clip(y, 1e-1, LOG_CEILING), np.nan)
         ls = "-" if symmetric.get(stepper, False) else "--"
         ax.plot(x, y, ls, marker=palette.marker(stepper), color=palette.colour(stepper), ms=4,
                 lw=1.0, label=f"{_label(stepper)}{' (symmetric)' if symmetric.get(stepper) else ''}")
@@ -479,7 +496,7 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
         t = s["t"].astype(float).to_numpy()
         t0 = float(np.nanmin(t))
         x, y = _thin(t - t0, s["error"].astype(float).to_numpy())
-        y = np.where(np.isfinite(y), np.maximum(y, LOG_FLOOR), np.nan)
+        y = _clip_log(y)
         ls = "-" if symplectic.get(stepper, False) else "--"
         ax.plot(x, y, ls, color=palette.colour(stepper), lw=1.0,
                 label=f"{_label(stepper)}{' (symplectic)' if symplectic.get(stepper) else ''}")
@@ -497,7 +514,7 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                     lw=1.0, label="rounding bound of the fixed-step runs (1 ulp per step)")
     _loglog(ax)
     ax.set_xlabel("t")
-    ax.set_ylabel(f"relative {what} error (0 drawn at {LOG_FLOOR:g})")
+    ax.set_ylabel(f"relative {what} error (0 drawn at {LOG_FLOOR:g}; clipped at {LOG_CEILING:g})")
     ax.set_title(f"{what.capitalize()} error on {_label(problem)}")
     _legend_outside(ax)
     return to_svg(fig, f"{quantity}-{problem}", f"relative {what} error against time on {problem}")
@@ -525,8 +542,9 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
         x_all = rows["wall_s"].astype(float)
         xlabel = "wall time (s)"
     frame = rows.assign(_x=x_all.to_numpy(float))
-    frame = frame[np.isfinite(frame["_x"]) & (frame["_x"] > 0)
-                  & np.isfinite(frame[col_err].astype(float)) & (frame[col_err].astype(float) > 0)]
+    err = frame[col_err].astype(float)
+    frame = frame[np.isfinite(frame["_x"]) & (frame["_x"] > 0) & np.isfinite(err) & (err > 0)
+                  & (err <= LOG_CEILING)]
     if frame.empty:
         return None
     units = {}
@@ -565,13 +583,13 @@ def roundoff_figure(rows: pd.DataFrame, palette: Palette) -> Figure | None:
         g = rows[rows["problem"] == problem]
         for stepper, s in g.groupby("stepper", sort=False):
             s = s.sort_values("h")
-            ax.plot(s["h"], np.maximum(s["error"].astype(float), LOG_FLOOR), "-",
+            ax.plot(s["h"], _clip_log(s["error"]), "-",
                     marker=palette.marker(stepper), ms=4, color=palette.colour(stepper),
                     label=_label(stepper))
         first = g.sort_values("h").groupby("stepper").tail(1)
         if len(first):
             s = g[g["stepper"] == first["stepper"].iloc[0]].sort_values("h")
-            ax.plot(s["h"], np.maximum(s["truncation_estimate"].astype(float), LOG_FLOOR), ":",
+            ax.plot(s["h"], _clip_log(s["truncation_estimate"]), ":",
                     color="k", lw=0.9, label="truncation alone (∝ h³ at fixed N)")
         _loglog(ax)
         ax.set_xlabel("step size h")

@@ -43,6 +43,8 @@ SECTION_TITLES = (
 )
 
 FAIL, PASS, NONE = "fail", "pass", "none"
+# The scoreboard lists at most this many failing claims per stepper (the sections have them all).
+MAX_FAILURES_SHOWN = 6
 MARK = {FAIL: "✗ FAIL", PASS: "✓ pass", NONE: "– not measured"}
 
 
@@ -269,8 +271,7 @@ def _order_summary(view: RunView, stepper: str) -> tuple[str, list[str], bool]:
     if s.empty:
         return "—", [], False
     gate = gate_table(s)
-    failing = [f"order on {r['problem']}: {r['reason'] or r['verdict']}"
-               for r in gate.to_dict("records") if not bool(r["passed"])]
+    failing = [_order_failure(r) for r in gate.to_dict("records") if not bool(r["passed"])]
     info = view.infos.get(stepper)
     if info is not None and info.claimed_order is None:
         ok = int((s["verdict"] == "meets-tolerance").sum())
@@ -281,10 +282,21 @@ def _order_summary(view: RunView, stepper: str) -> tuple[str, list[str], bool]:
     extra = ", ".join(f"{v} ×{n}" for v, n in others.items())
     if m.empty:
         return f"— ({extra})" if extra else "—", failing, True
-    text = f"{m.median():.2f} (range {m.min():.2f}–{m.max():.2f}, {len(m)} problems)"
+    text = (f"{m.median():.2f} (range {m.min():.2f}–{m.max():.2f}, {len(m)} "
+            f"problem{'s' if len(m) != 1 else ''})")
     if extra:
         text += f"; {extra}"
     return text, failing, True
+
+
+def _order_failure(r: Mapping[str, Any]) -> str:
+    """One gate failure, short: the section's table has the full reason."""
+    if r.get("verdict") == "converged" and r.get("expected") == "converged":
+        return (f"order {fmt(r.get('measured_order'), 3)} on {r['problem']} "
+                f"(claimed {fmt(r.get('claimed_order'))})")
+    if r.get("verdict") == r.get("expected"):
+        return f"order on {r['problem']}: {r.get('reason') or r.get('verdict')}"
+    return f"order on {r['problem']}: {r.get('verdict')}"
 
 
 def _stability_summary(view: RunView, stepper: str) -> tuple[str, list[str], bool]:
@@ -371,6 +383,10 @@ def _evals_summary(view: RunView, stepper: str) -> str:
     measured = "—"
     if not rows.empty and {"kind", "stepper", "n_steps"} <= set(rows.columns):
         g = rows[(rows["stepper"] == stepper) & (rows["kind"] == "global")]
+        if "message" in g:  # a failed step counts no evaluations
+            g = g[g["message"].fillna("").astype(str) == ""]
+        if "error" in g:
+            g = g[np.isfinite(g["error"].astype(float))]
         if len(g):
             evals = sum(g[c].fillna(0).astype(float) for c in ("rhs_evals", "force_evals") if c in g)
             per = (evals / g["n_steps"].astype(float)).replace([np.inf, -np.inf], np.nan).dropna()
@@ -386,9 +402,10 @@ def scoreboard(view: RunView) -> tuple[Section, dict[str, str]]:
     sec.intro = ("One row per stepper of this report: each claim it makes beside what the harness "
                  "measured. Rows with a failing claim come first and are marked ✗ FAIL; the last "
                  "column says which claims failed. Details and figures are in the sections below.")
-    failed_cells: dict[str, int] = {}
+    failed_cells: dict[str, dict[str, int]] = {}
     for f in view.failures():
-        failed_cells[f.get("stepper", "")] = failed_cells.get(f.get("stepper", ""), 0) + 1
+        per = failed_cells.setdefault(f.get("stepper", ""), {})
+        per[f.get("experiment", "")] = per.get(f.get("experiment", ""), 0) + 1
     records = []
     for i, name in enumerate(view.steppers):
         info = view.infos.get(name)
@@ -398,8 +415,8 @@ def scoreboard(view: RunView) -> tuple[Section, dict[str, str]]:
         sym_text, f4, m4 = _symplectic_summary(view, name)
         en_text, f5, m5 = _energy_summary(view, name)
         failing = f1 + f2 + f3 + f4 + f5
-        if failed_cells.get(name):
-            failing.append(f"{failed_cells[name]} failed cell(s) (see Provenance)")
+        for exp, n in failed_cells.get(name, {}).items():
+            failing.append(f"{n} failed {exp} cell{'s' if n != 1 else ''} (see Provenance)")
         measured = m1 or m2 or m3 or m4 or m5
         status = FAIL if failing else (PASS if measured else NONE)
         records.append((0 if status == FAIL else (1 if status == PASS else 2), i, name, status, [
@@ -414,7 +431,9 @@ def scoreboard(view: RunView) -> tuple[Section, dict[str, str]]:
             TextCell(sym_text),
             TextCell(en_text),
             TextCell(_evals_summary(view, name)),
-            TextCell("; ".join(failing) if failing else "", cls="message"),
+            TextCell("; ".join(failing[:MAX_FAILURES_SHOWN])
+                     + (f"; and {len(failing) - MAX_FAILURES_SHOWN} more (see the sections)"
+                        if len(failing) > MAX_FAILURES_SHOWN else ""), cls="message"),
         ]))
     records.sort(key=lambda r: (r[0], r[1]))
     statuses = {r[2]: r[3] for r in records}
@@ -586,8 +605,9 @@ def work_precision(view: RunView) -> Section:
                        f"Error against evaluations on {problem}.")
             if "wall_s" in g:
                 sec.figure(F.work_precision_figure(problem, g, view.palette, adaptive, "wall_s"),
-                           f"Error against wall time on {problem} (this machine; see Provenance "
-                           "for its load-free CPU model).")
+                           f"Error against wall time on {problem}: one trajectory, compile time "
+                           "excluded; wall times depend on this machine and its load during the "
+                           "run (see Provenance).")
     if len(summ) and {"stepper", "problem", "error"} <= set(summ.columns):
         sec.table(_df_table(_work_table(summ), [
             ("stepper", "stepper"), ("problem", "problem"), ("kind", "sweep"),
@@ -792,8 +812,10 @@ def performance_history() -> Section:
     except ImportError:
         sec.note("No asv results yet (run `make nightly`).")
         return sec
+    from harness.provenance import PROJECT_ROOT
+
     try:
-        history = perf_history.load_history()
+        history = perf_history.load_history(PROJECT_ROOT / ".asv" / "results")
     except Exception as exc:
         sec.note(f"The asv results could not be read: {type(exc).__name__}: {exc}", cls="warning")
         return sec

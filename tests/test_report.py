@@ -1,0 +1,317 @@
+"""`harness report`: one self-contained HTML file with every section, one scoreboard row per
+stepper, inline SVG figures, no external resource, and names from plugins shown as text.
+
+The report is built once per module in --quick mode over a small grid (five built-in steppers, a
+plugin stepper named `<script>alert(1)</script>`, the harmonic oscillator) into temporary
+directories; `build_quick_report` is shared with the browser test, which reuses the cell cache.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import html
+import json
+import math
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from harness import registry
+from harness import tolerances as tol
+from harness.errors import InputError
+from harness.experiments.roundoff import RoundoffExperiment, step_sizes
+from harness.report import REPORT_EXPERIMENTS, build_report, write_report
+from harness.report.claims import CLAIMS
+from harness.report.figures import UnsafeFigureError, check_svg
+from harness.report.sections import SECTION_TITLES
+from harness.store import load_run
+
+HOSTILE = "<script>alert(1)</script>"
+STEPPERS = ["euler", "rk4", "velocity-verlet", "stormer-verlet", "leapfrog"]
+PROBLEMS = ["harmonic", "kepler-elliptic"]
+HOSTILE_PLUGIN = f'''"""A plugin whose stepper name and texts are markup: the midpoint rule (Runge,
+Math. Ann. 46 (1895)) under a hostile name, for the report's escaping test."""
+from harness.coefficients import ButcherTableau
+from implementations.runge_kutta import ExplicitRungeKutta
+
+STEPPERS = [ExplicitRungeKutta(
+    ButcherTableau({HOSTILE!r}, [[0, 0], [0.5, 0]], [0, 1]),
+    claimed_order=2,
+    reference="<img src=x onerror=alert(2)> C. Runge, Math. Ann. 46 (1895)",
+    description="<b>bold</b> midpoint",
+)]
+'''
+
+
+@contextlib.contextmanager
+def hostile_plugin(directory: Path) -> Iterator[Path]:
+    """The hostile plugin file, loaded; unregistered again afterwards so later tests see the
+    registry unchanged."""
+    path = directory / "hostile_plugin.py"
+    path.write_text(HOSTILE_PLUGIN)
+    names = registry.load_plugin(path)
+    try:
+        yield path
+    finally:
+        for n in names:
+            registry.steppers.unregister(n)
+        registry._plugins.pop(str(path.resolve()), None)
+
+
+def build_quick_report(shared: Path, own: Path, plugin: Path) -> Path:
+    """A --quick report of STEPPERS + the hostile plugin stepper on PROBLEMS, in process, with the
+    cell cache under `shared` (reused by every test module of the session) and results and
+    reports under `own`. Returns the index.html path."""
+    return build_report(
+        steppers=[*STEPPERS, HOSTILE], problems=PROBLEMS, quick=True, jobs=1,
+        plugins=(str(plugin),), output=own / "reports", cache_dir=shared,
+        results_root=own / "results", progress=False,
+    )
+
+
+def shared_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.getbasetemp() / "report-shared"
+    d.mkdir(exist_ok=True)
+    return d
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    shared = shared_dir(tmp_path_factory)
+    own = tmp_path_factory.mktemp("report")
+    with hostile_plugin(shared) as plugin:
+        path = build_quick_report(shared, own, plugin)
+        yield {"path": path, "html": path.read_text(encoding="utf-8"), "own": own,
+               "plugin": plugin}
+
+
+# -- the file -----------------------------------------------------------------------------------
+def test_report_is_written_under_the_output_directory_and_latest_points_at_it(report):
+    path, own = report["path"], report["own"]
+    assert path.name == "index.html" and path.parent.parent == own / "reports"
+    assert re.fullmatch(r"\d{8}T\d{6}Z-[0-9a-z]+(-\d+)?", path.parent.name)
+    latest = own / "reports" / "latest"
+    assert latest.is_dir() and (latest / "index.html").read_bytes() == path.read_bytes()
+    # no staging directory left behind
+    assert not [p for p in (own / "reports").iterdir() if p.name.startswith(".")]
+    run = load_run(None, root=own / "results")
+    assert run.run_id == path.parent.name
+    assert run.meta["config"]["run"]["quick"] is True
+    assert set(run.experiments) == set(REPORT_EXPERIMENTS)
+
+
+def test_every_section_heading_is_present_in_order(report):
+    headings = re.findall(r'<h2 id="h-([\w-]+)">(\d+) ([^<]+)</h2>', report["html"])
+    assert [(k, int(n)) for k, n, _ in headings] == [
+        (k, i + 1) for i, (k, _) in enumerate(SECTION_TITLES)]
+    for (_, _, text), (_, title) in zip(headings, SECTION_TITLES, strict=True):
+        assert html.unescape(text) == title
+    assert "could not be built" not in report["html"]
+
+
+def test_scoreboard_has_one_row_per_stepper_failing_first_and_marked_in_text(report):
+    table = report["html"].split('id="scoreboard-table"')[1].split("</table>")[0]
+    rows = re.findall(r'<tr class="stepper-row (fail|pass|none)" data-stepper="([^"]*)">', table)
+    assert sorted(html.unescape(s) for _, s in rows) == sorted([*STEPPERS, HOSTILE])
+    statuses = [s for s, _ in rows]
+    order = {"fail": 0, "pass": 1, "none": 2}
+    assert statuses == sorted(statuses, key=order.get)
+    for status, marker in (("fail", "✗ FAIL"), ("pass", "✓ pass")):
+        n = statuses.count(status)
+        assert table.count(f'<td class="status {status}">{marker}</td>') == n
+
+
+def test_figures_are_inline_svg_with_a_size(report):
+    svgs = re.findall(r"<svg\b[^>]*>", report["html"])
+    slugs = {re.search(r'data-slug="([^"]*)"', t).group(1) for t in svgs}
+    expected = {"stability-overlay", "stability-multiples", "stability-hw", "roundoff",
+                "angular_momentum-kepler-elliptic", "work-evals-kepler-elliptic",
+                "work-wall_s-kepler-elliptic"}
+    expected |= {f"{kind}-{p}" for kind in ("convergence", "reversibility", "energy")
+                 for p in PROBLEMS}
+    assert expected <= slugs
+    assert len(svgs) == report["html"].count("<figure>")
+    for tag in svgs:
+        w = re.search(r'\bwidth="([\d.]+)"', tag)
+        h = re.search(r'\bheight="([\d.]+)"', tag)
+        assert w and h and float(w.group(1)) > 0 and float(h.group(1)) > 0, tag
+    assert "<img" not in report["html"].split("<body>")[1].replace("&lt;img", "")
+
+
+def test_no_script_and_no_external_resource(report):
+    text = report["html"]
+    assert re.search(r"<script\b", text, re.IGNORECASE) is None
+    assert re.search(r"<link\b", text, re.IGNORECASE) is None
+    assert re.search(r"""(?:src|href)\s*=\s*["']?\s*(?:https?:)?//""", text, re.IGNORECASE) is None
+    assert re.search(r"url\(\s*['\"]?\s*(?:https?:)?//", text, re.IGNORECASE) is None
+    assert "@import" not in text and "@font-face" not in text
+    assert "Content-Security-Policy" in text and "default-src 'none'" in text
+
+
+def test_plugin_named_with_markup_is_shown_as_text(report):
+    text = report["html"]
+    assert HOSTILE not in text
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in text
+    assert "<img src=x" not in text and "<b>bold</b>" not in text
+    # in the figures too: matplotlib writes the legend entry as escaped SVG text
+    svg = re.findall(r"<svg\b.*?</svg>", text, re.DOTALL)
+    assert any("&lt;script&gt;alert(1)&lt;/script&gt;" in s for s in svg)
+
+
+def test_claims_section_lists_every_claim_with_its_course_source(report):
+    claims = report["html"].split('id="claims"')[1].split("</section>")[0]
+    for spec in CLAIMS:
+        assert spec.source in claims
+    verdicts = re.findall(r'<td class="status (pass|fail|none)">', claims.split("</table>")[0])
+    assert len(verdicts) == len(CLAIMS)
+
+
+def test_provenance_lists_each_experiment_with_its_time_and_the_configuration(report):
+    prov = report["html"].split('id="provenance"')[1].split("</section>")[0]
+    for name in REPORT_EXPERIMENTS:
+        assert f"<td>{name}</td>" in prov
+    assert "full configuration (JSON)" in prov
+    run = load_run(None, root=report["own"] / "results")
+    assert run.provenance["git"]["sha"] is None or run.provenance["git"]["sha"][:7] in report["html"]
+
+
+def test_rewriting_a_saved_run_gives_the_same_sections(report, tmp_path):
+    run = load_run(None, root=report["own"] / "results")
+    again = write_report(run, output=tmp_path / "reports").read_text(encoding="utf-8")
+    heads = re.compile(r'<h2 id="h-[\w-]+">[^<]+</h2>')
+    assert heads.findall(again) == heads.findall(report["html"])
+    rows = re.compile(r'<tr class="stepper-row[^"]*" data-stepper="[^"]*">')
+    assert rows.findall(again) == rows.findall(report["html"])
+
+
+# -- the roundoff experiment (the claims section's rounding claim) ------------------------------
+def test_roundoff_experiment_separates_the_two_step_form_from_leapfrog(report):
+    run = load_run(None, root=report["own"] / "results")
+    s = run.summaries["roundoff"].set_index("stepper")
+    assert set(s.index) == {"stormer-verlet", "leapfrog", "velocity-verlet"}
+    two = s.loc["stormer-verlet", "floor_error"]
+    one = max(s.loc["leapfrog", "floor_error"], s.loc["velocity-verlet", "floor_error"])
+    assert math.isfinite(two) and math.isfinite(one)
+    assert two >= tol.ROUNDOFF_CLAIM_RATIO * one
+    assert bool(s.loc["stormer-verlet", "rounding_limited"])
+    skips = pd.DataFrame(run.meta["experiments"]["roundoff"]["skips"])
+    assert "euler" in set(skips.stepper) and "rk4" in set(skips.stepper)
+
+
+BAD_SWEEPS = [
+    ((0.0, 1e-6, 2), r"`h_max` must be a positive finite number, got 0\.0"),
+    ((1e-2, float("nan"), 2), r"`h_min` must be a positive finite number"),
+    ((1e-6, 1e-2, 2), r"`h_min` must be smaller than `h_max`"),
+    ((1e-2, 1e-6, 0), r"`points_per_decade` must be a whole number >= 1, got 0"),
+]
+
+
+@pytest.mark.parametrize(("args", "message"), BAD_SWEEPS)
+def test_roundoff_sweep_rejects_bad_settings(args, message):
+    with pytest.raises(InputError, match=message):
+        step_sizes(*args)
+
+
+def test_roundoff_sweep_is_geometric_from_h_max_to_h_min():
+    hs = step_sizes(1e-2, 1e-6, 2)
+    assert len(hs) == 9 and hs[0] == pytest.approx(1e-2) and hs[-1] == pytest.approx(1e-6)
+    assert max(abs(r - 10 ** -0.5) for r in hs[1:] / hs[:-1]) < 1e-12
+
+
+def test_roundoff_cells_only_for_its_steppers_and_problems():
+    exp = RoundoffExperiment()
+    cells, skips = exp.cells(["rk4", "leapfrog", "stormer-verlet"], ["harmonic", "gaussian"],
+                             exp.config(quick=True))
+    assert [(c.stepper, c.problem) for c in cells] == [("leapfrog", "harmonic"),
+                                                      ("stormer-verlet", "harmonic")]
+    reasons = {(s.stepper, s.problem): s.reason for s in skips}
+    assert "not in this experiment's stepper set" in reasons[("rk4", "")]
+    assert "not in this experiment's problem set" in reasons[("", "gaussian")]
+
+
+# -- building blocks ----------------------------------------------------------------------------
+UNSAFE_SVG = [
+    ('<svg xmlns="http://www.w3.org/2000/svg"><script>alert(1)</script></svg>', r"<script>"),
+    ('<svg xmlns="http://www.w3.org/2000/svg"><g onload="alert(1)"/></svg>', r"event attribute"),
+    ('<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink">'
+     '<use xlink:href="http://example.com/a.svg#x"/></svg>', r"links outside itself"),
+    ('<svg xmlns="http://www.w3.org/2000/svg"><path style="fill:url(http://e.com/x)"/></svg>',
+     r"outside resource"),
+    ('<svg xmlns="http://www.w3.org/2000/svg"><foreignObject/></svg>', r"<foreignObject>"),
+    ("<svg", r"not well-formed"),
+    ('<html xmlns="http://www.w3.org/1999/xhtml"/>', r"root is <html>"),
+]
+
+
+@pytest.mark.parametrize(("svg", "message"), UNSAFE_SVG)
+def test_check_svg_rejects_anything_but_a_plain_drawing(svg, message):
+    with pytest.raises(UnsafeFigureError, match=message):
+        check_svg(svg)
+
+
+def test_check_svg_accepts_internal_references():
+    svg = ('<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink">'
+           '<defs><clipPath id="c"><rect/></clipPath><path id="m"/></defs>'
+           '<g clip-path="url(#c)"><use xlink:href="#m"/></g></svg>')
+    assert check_svg(svg) == svg
+
+
+def test_output_that_is_a_file_is_refused(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    with pytest.raises(InputError, match=r"`output` must be a directory"):
+        build_report(["euler"], ["harmonic"], quick=True, output=f, progress=False)
+
+
+def test_bad_flags_are_refused_before_anything_runs(tmp_path):
+    with pytest.raises(InputError, match=r"`quick` must be True or False, got 'yes'"):
+        build_report(["euler"], ["harmonic"], quick="yes", output=tmp_path)  # type: ignore[arg-type]
+
+
+def test_cli_report_prints_the_path(report, tmp_path, monkeypatch, capsys):
+    """The command line passes its arguments through and prints the index.html path (the cells
+    come from the module's cache, so this is quick)."""
+    from harness.cli import main
+
+    monkeypatch.setenv("HARNESS_RESULTS_DIR", str(tmp_path / "results"))
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(report["plugin"].parent))
+    code = main(["report", "--quick", "--jobs", "1", "--stepper", "euler", "--problem", "harmonic",
+                 "--output", str(tmp_path / "reports")])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert code == 0
+    path = Path(out[-1])
+    assert path.is_file() and path.parent.parent == tmp_path / "reports"
+    meta = json.loads((tmp_path / "results" / path.parent.name / "meta.json").read_text())
+    assert meta["config"]["run"]["steppers"] == ["euler"]
+    assert meta["totals"]["computed"] == 0  # every cell came from the module's cache
+
+
+def test_performance_history_is_drawn_from_asv_results_when_there_are_any(monkeypatch):
+    from harness import perf_history
+    from harness.report.sections import performance_history
+
+    monkeypatch.setattr(perf_history, "load_history",
+                        lambda *a, **k: pd.DataFrame(columns=perf_history.HISTORY_COLUMNS))
+    empty = performance_history()
+    assert [b.kind for b in empty.blocks] == ["note"]
+    assert "No asv results yet (run `make nightly`)" in empty.blocks[0].text
+
+    history = pd.DataFrame({
+        "benchmark": ["bench_steppers.Step.time_step"] * 4 + ["bench_accuracy.Order.track_order"] * 2,
+        "params": ["stepper='rk4'", "stepper='rk4'", "stepper='euler'", "stepper='euler'",
+                   "stepper='rk4'", "stepper='rk4'"],
+        "commit": ["a" * 40, "b" * 40] * 3,
+        "date": pd.to_datetime(["2026-01-01", "2026-01-02"] * 3, utc=True),
+        "value": [1e-5, 1.1e-5, 3e-6, 2.9e-6, 4.0, 4.01],
+        "unit": ["seconds"] * 4 + ["order"] * 2,
+        "machine": ["ci"] * 6,
+    })
+    monkeypatch.setattr(perf_history, "load_history", lambda *a, **k: history)
+    drawn = performance_history()
+    kinds = [b.kind for b in drawn.blocks]
+    assert kinds == ["figure", "table"]
+    assert drawn.blocks[0].figure.svg.startswith("<svg")
+    assert len(drawn.blocks[1].table.rows) == 3  # latest value per (benchmark, params)

@@ -1,0 +1,257 @@
+"""The report as a user sees it: rendered by a real browser (Debian's chromium, headless).
+
+Chromium is driven over the DevTools protocol on a pipe (`--remote-debugging-pipe`: fd 3 carries
+commands in, fd 4 replies and events out, each message JSON ending in a NUL byte), which lets the
+test
+- record every network request the page makes (`Network.requestWillBeSent`; the page's
+  Content-Security-Policy is bypassed for this, so a reference to anything outside the file would
+  show up as a request instead of being blocked silently), with `--host-resolver-rules` mapping
+  every host name to nothing as a second guard;
+- read the rendered DOM and layout (`Runtime.evaluate` of the test's own expression; the report
+  itself has no script): the section headings, the scoreboard rows, and the laid-out size and
+  visibility of every figure;
+- keep a screenshot as a test artefact (`test-artifacts/report-browser.png`, gitignored).
+
+Chromium is installed by `scripts/test-deps` (run by `make test`). Without it the test is skipped
+with the reason, except in CI (`CI` set), where a missing browser is a failure.
+"""
+
+from __future__ import annotations
+
+import base64
+import fcntl
+import json
+import os
+import select
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from test_report import HOSTILE, PROBLEMS, STEPPERS, build_quick_report, hostile_plugin, shared_dir
+
+from harness.report.sections import SECTION_TITLES
+
+ROOT = Path(__file__).resolve().parent.parent
+ARTIFACTS = ROOT / "test-artifacts"
+TIMEOUT_S = 60.0
+
+
+def chromium_binary() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+class DevTools:
+    """A headless chromium driven over --remote-debugging-pipe."""
+
+    def __init__(self, binary: str, profile: Path):
+        to_child_r, self._w = os.pipe()
+        self._r, from_child_w = os.pipe()
+        # move the child's ends above 4, so that putting them on 3 and 4 cannot overwrite one
+        # with the other
+        to_child_r, from_child_w = _above_four(to_child_r), _above_four(from_child_w)
+        args = [
+            "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+            "--disable-background-networking", "--disable-component-update", "--disable-sync",
+            "--disable-dev-shm-usage", "--disable-extensions", "--mute-audio",
+            "--host-resolver-rules=MAP * ~NOTFOUND", f"--user-data-dir={profile}",
+            "--remote-debugging-pipe", "about:blank",
+        ]
+        # a tiny Python trampoline puts the pipe ends on fds 3 and 4, where chromium expects them
+        self.proc = subprocess.Popen(
+            [sys.executable, "-S", "-c", _TRAMPOLINE, str(to_child_r), str(from_child_w), binary,
+             *args],
+            pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self._buf = b""
+        self._id = 0
+        self.events: list[dict] = []
+        self.session: str | None = None
+
+    def _read_message(self, deadline: float) -> dict:
+        while b"\0" not in self._buf:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError("chromium did not answer in time")
+            ready, _, _ = select.select([self._r], [], [], left)
+            if ready:
+                chunk = os.read(self._r, 1 << 20)
+                if not chunk:
+                    raise RuntimeError(f"chromium closed the pipe (exit {self.proc.poll()})")
+                self._buf += chunk
+        raw, self._buf = self._buf.split(b"\0", 1)
+        return json.loads(raw)
+
+    def send(self, method: str, params: dict | None = None, *, session: bool = True) -> dict:
+        self._id += 1
+        msg: dict[str, Any] = {"id": self._id, "method": method, "params": params or {}}
+        if session and self.session:
+            msg["sessionId"] = self.session
+        os.write(self._w, json.dumps(msg).encode() + b"\0")
+        deadline = time.monotonic() + TIMEOUT_S
+        while True:
+            reply = self._read_message(deadline)
+            if reply.get("id") == self._id:
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                return reply.get("result", {})
+            self.events.append(reply)
+
+    def wait_for(self, method: str) -> dict:
+        for i, ev in enumerate(self.events):
+            if ev.get("method") == method:
+                return self.events.pop(i)
+        deadline = time.monotonic() + TIMEOUT_S
+        while True:
+            ev = self._read_message(deadline)
+            if ev.get("method") == method:
+                return ev
+            self.events.append(ev)
+
+    def open(self, url: str, width: int = 1280, height: int = 1800) -> None:
+        target = self.send("Target.createTarget", {"url": "about:blank"}, session=False)
+        attached = self.send("Target.attachToTarget",
+                             {"targetId": target["targetId"], "flatten": True}, session=False)
+        self.session = attached["sessionId"]
+        self.send("Page.enable")
+        self.send("Network.enable")
+        self.send("Page.setBypassCSP", {"enabled": True})
+        self.send("Emulation.setDeviceMetricsOverride",
+                  {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False})
+        self.events.clear()
+        self.send("Page.navigate", {"url": url})
+        self.wait_for("Page.loadEventFired")
+
+    def evaluate(self, expression: str) -> Any:
+        result = self.send("Runtime.evaluate", {"expression": expression, "returnByValue": True})
+        if "exceptionDetails" in result:
+            raise RuntimeError(f"evaluation failed: {result['exceptionDetails']}")
+        return result["result"].get("value")
+
+    def screenshot(self, path: Path, clip: dict | None = None) -> None:
+        params: dict[str, Any] = {"format": "png"}
+        if clip:
+            params.update(clip=dict(clip, scale=1), captureBeyondViewport=True)
+        data = self.send("Page.captureScreenshot", params)["data"]
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(base64.b64decode(data))
+
+    def requests(self) -> list[str]:
+        return [ev["params"]["request"]["url"] for ev in self.events
+                if ev.get("method") == "Network.requestWillBeSent"]
+
+    def close(self) -> None:
+        try:
+            self.send("Browser.close", session=False)
+        except Exception:
+            pass
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        os.close(self._w)
+        os.close(self._r)
+
+
+_TRAMPOLINE = ("import os, sys; os.dup2(int(sys.argv[1]), 3); os.dup2(int(sys.argv[2]), 4); "
+               "os.execv(sys.argv[3], sys.argv[3:])")
+
+
+def _above_four(fd: int) -> int:
+    high = fcntl.fcntl(fd, fcntl.F_DUPFD, 10)
+    os.close(fd)
+    return high
+
+
+PAGE_FACTS = """(() => {
+  const svgs = Array.from(document.querySelectorAll('svg'));
+  return {
+    headings: Array.from(document.querySelectorAll('h2')).map(h => [h.id, h.textContent.trim()]),
+    rows: Array.from(document.querySelectorAll('#scoreboard-table tbody tr.stepper-row'))
+      .map(r => [r.dataset.stepper, r.cells[0].textContent.trim(), r.cells[1].textContent]),
+    figures: svgs.map(s => {
+      const b = s.getBoundingClientRect();
+      return {slug: s.dataset.slug || '', width: b.width, height: b.height,
+              visible: s.checkVisibility({checkOpacity: true, checkVisibilityCSS: true}),
+              shapes: s.querySelectorAll('path, use, text').length};
+    }),
+    scripts: document.querySelectorAll('script').length,
+    external: Array.from(document.querySelectorAll('[src], [href]'))
+      .map(e => e.getAttribute('src') || e.getAttribute('href'))
+      .filter(u => !u.startsWith('#') && !u.startsWith('data:')),
+    pageWidth: document.documentElement.scrollWidth,
+    title: document.title,
+  };
+})()"""
+
+
+@pytest.fixture(scope="module")
+def browser_report(tmp_path_factory):
+    binary = chromium_binary()
+    if binary is None:
+        if os.environ.get("CI"):
+            pytest.fail("chromium is not installed (scripts/test-deps installs it); the browser "
+                        "test must run in CI")
+        pytest.skip("chromium is not installed: run `scripts/test-deps` as root (or `make test`) "
+                    "to render the report in a real browser")
+    shared = shared_dir(tmp_path_factory)
+    own = tmp_path_factory.mktemp("browser-report")
+    with hostile_plugin(shared) as plugin:
+        path = build_quick_report(shared, own, plugin)
+    profile = Path(tempfile.mkdtemp(prefix="chromium-profile-", dir=own))
+    tools = DevTools(binary, profile)
+    try:
+        tools.open(path.resolve().as_uri())
+        facts = tools.evaluate(PAGE_FACTS)
+        requests = tools.requests()
+        ARTIFACTS.mkdir(exist_ok=True)
+        shot = ARTIFACTS / "report-browser.png"
+        tools.screenshot(shot)
+        yield {"path": path, "facts": facts, "requests": requests, "screenshot": shot}
+    finally:
+        tools.close()
+
+
+def test_page_made_no_network_request_but_loading_itself(browser_report):
+    url = browser_report["path"].resolve().as_uri()
+    assert browser_report["requests"] == [url]
+    assert browser_report["facts"]["external"] == []
+    assert browser_report["facts"]["scripts"] == 0
+
+
+def test_every_section_heading_is_rendered(browser_report):
+    headings = browser_report["facts"]["headings"]
+    assert [h[0] for h in headings] == [f"h-{key}" for key, _ in SECTION_TITLES]
+    assert [h[1] for h in headings] == [f"{i + 1} {title}" for i, (_, title) in enumerate(SECTION_TITLES)]
+
+
+def test_scoreboard_has_one_row_per_stepper_of_the_report(browser_report):
+    rows = browser_report["facts"]["rows"]
+    assert sorted(r[0] for r in rows) == sorted([*STEPPERS, HOSTILE])
+    # the plugin's name is text in the cell, not markup
+    assert [r[2] for r in rows if r[0] == HOSTILE] == [HOSTILE]
+    assert all(r[1] in ("✗ FAIL", "✓ pass", "– not measured") for r in rows)
+
+
+def test_every_figure_is_visible_with_a_size(browser_report):
+    figures = browser_report["facts"]["figures"]
+    assert len(figures) >= 2 * len(PROBLEMS) + 3
+    page = browser_report["facts"]["pageWidth"]
+    for f in figures:
+        assert f["visible"], f["slug"]
+        assert f["width"] > 100 and f["height"] > 100, f
+        assert f["width"] <= page, f  # scaled to the page, not cut off
+        assert f["shapes"] > 10, f  # drawn, not an empty frame
+
+
+def test_screenshot_is_kept_as_an_artefact(browser_report):
+    data = browser_report["screenshot"].read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000

@@ -1,0 +1,171 @@
+"""Time reversibility: every registered stepper's round trip against its symmetry claim, the
+rounding bound, and mislabelled steppers that must be caught.
+
+Expectations: a symmetric method (Phi_{-h} = Phi_h^{-1}) returns to its start up to rounding,
+a non-symmetric one misses by ~h^p T (Hairer, Lubich & Wanner, GNI II.3 and V.1).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from harness import tolerances as tol
+from harness.cli import main
+from harness.errors import InputError
+from harness.experiments import get_experiment
+from harness.experiments.energy import TIME_SCALES
+from harness.experiments.reversibility import SUMMARY_COLUMNS, flow_amplification, rounding_bound_ulps
+from harness.registry import get_problem, problems, steppers
+from harness.runner import run_experiment
+from harness.stepper import AdaptiveStepper, Stepper
+
+EXP = get_experiment("reversibility")
+STEPPERS = steppers.names()
+PROBLEMS = ["harmonic", "kepler-elliptic"]
+
+
+def run_direct(stepper_names, problem_names, **overrides):
+    """The experiment's own cells, run_cell and summarize in this process (no runner), for the
+    large registry tables: the runner's per-cell bookkeeping would dominate their time."""
+    config = EXP.config(overrides, quick=True)
+    cells, _ = EXP.cells(stepper_names, problem_names, config)
+    rows = pd.concat([EXP.run_cell(c, config) for c in cells], ignore_index=True)
+    return EXP.summarize(rows, config)
+
+
+def run(stepper_names, problem_names, **overrides):
+    """Through the runner (in this process, no cache), as `harness run` does."""
+    result = run_experiment(EXP, stepper_names, problem_names, quick=True, config=overrides,
+                            jobs=1, cache=False, progress=False)
+    assert not len(result.failures), result.failures
+    return result.summary
+
+
+def relabelled(name: str, **claims) -> Stepper:
+    original = steppers.get(name)
+    clone = copy.copy(original)
+    clone.info = dataclasses.replace(original.info, name=f"{name}-relabelled", **claims)
+    return clone
+
+
+@pytest.fixture
+def registered():
+    added = []
+
+    def add(stepper):
+        steppers.register(stepper, origin="test")
+        added.append(stepper.info.name)
+        return stepper.info.name
+
+    yield add
+    for name in added:
+        steppers.unregister(name)
+
+
+@pytest.fixture(scope="module")
+def registry_table():
+    """The whole registry: round trips of 10^2 and 10^3 steps (one period for adaptive peers)."""
+    return run_direct(STEPPERS, PROBLEMS, steps=[100, 1000], implicit_steps=[100], adaptive_steps=[1])
+
+
+# -- the registry ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", STEPPERS)
+def test_every_stepper_gets_cells_or_a_reason_on_every_problem(name):
+    cfg = EXP.config()
+    cells, skips = EXP.cells([name], problems.names(), cfg)
+    covered = {c.problem for c in cells} | {s.problem for s in skips}
+    assert covered == set(problems.names())
+    assert all(s.reason for s in skips)
+    stepper = steppers.get(name)
+    expected = (cfg["adaptive_steps"] if isinstance(stepper, AdaptiveStepper)
+                else cfg["steps"] if stepper.info.explicit else cfg["implicit_steps"])
+    for p in {c.problem for c in cells}:
+        assert sorted(c.param("steps") for c in cells if c.problem == p) == sorted(expected)
+
+
+@pytest.mark.parametrize("name", STEPPERS)
+def test_registry_round_trips_match_the_symmetry_claim(name, registry_table):
+    rows = registry_table[registry_table.stepper == name]
+    compatible = [p for p in PROBLEMS if steppers.get(name).compatible(get_problem(p))]
+    assert sorted(set(rows.problem)) == sorted(compatible)
+    for _, r in rows.iterrows():
+        assert bool(r.passed), (r.problem, r.steps, r.message)
+        if r.claimed_symmetric:
+            assert r.verdict == "reversible"
+            assert r.return_error_ulps <= r.rounding_bound_ulps
+        else:
+            assert r.verdict == "irreversible"
+            assert r.return_error_ulps > r.rounding_bound_ulps
+
+
+def test_records_carry_the_promised_fields(registry_table):
+    for field in ("stepper", "problem", "steps", "return_error", "return_error_ulps",
+                  "claimed_symmetric", "verdict", "passed"):
+        assert field in registry_table.columns
+    assert list(registry_table.columns) == SUMMARY_COLUMNS
+
+
+def test_symmetric_return_error_grows_no_faster_than_rounding_allows():
+    """Velocity Verlet on the harmonic oscillator (no amplification by the flow): the return
+    error stays within a few ulps per step over 10^2..10^4 steps."""
+    table = run(["velocity-verlet"], ["harmonic"], steps=[100, 1000, 10_000], ensemble=8)
+    assert list(table.steps) == [100, 1000, 10_000]
+    assert (table.return_error_ulps <= tol.REVERSIBILITY_ULPS_PER_STEP * 1.5 * table.steps).all()
+    assert table.growth_exponent.iloc[0] <= 1.2
+
+
+def test_rounding_bound_uses_the_flow_amplification():
+    harmonic = flow_amplification(get_problem("harmonic"), 100 * TIME_SCALES["harmonic"].h)
+    kepler = flow_amplification(get_problem("kepler-elliptic"), 1000 * TIME_SCALES["kepler-elliptic"].h)
+    # A rotation: ||J||_inf = |cos| + |sin| <= sqrt(2). Kepler shears: perturbations grow.
+    assert 1.0 - 1e-6 <= harmonic <= np.sqrt(2.0) + 1e-6
+    assert kepler > 100.0
+    assert rounding_bound_ulps(1000, kepler) == pytest.approx(
+        tol.REVERSIBILITY_ULPS_PER_STEP * 1000 * kepler)
+    assert rounding_bound_ulps(1000, 0.5) == tol.REVERSIBILITY_ULPS_PER_STEP * 1000
+
+
+# -- mislabelled steppers must fail ---------------------------------------------------------------
+@pytest.mark.parametrize("problem", PROBLEMS)
+def test_explicit_euler_labelled_symmetric_fails(problem, registered):
+    name = registered(relabelled("euler", symmetric=True))
+    table = run([name], [problem])
+    assert len(table) == len(EXP.config(quick=True)["steps"])
+    assert (table.verdict == "claim-false").all() and not table.passed.any()
+    assert table.message.str.contains("claimed symmetric").all()
+
+
+def test_velocity_verlet_labelled_not_symmetric_fails(registered):
+    name = registered(relabelled("velocity-verlet", symmetric=False))
+    table = run([name], ["harmonic"])
+    assert (table.verdict == "claim-false").all() and not table.passed.any()
+
+
+# -- settings and the command line ----------------------------------------------------------------
+@pytest.mark.parametrize("bad, match", [
+    ({"steps": []}, r"config `steps` must be a non-empty list of whole numbers >= 1"),
+    ({"steps": [100, -1]}, r"config `steps` must be a non-empty list"),
+    ({"adaptive_tol": 0.0}, r"config `adaptive_tol` must be a positive finite number"),
+    ({"ensemble": 0}, r"config `ensemble` must be a whole number >= 1, got 0"),
+])
+def test_bad_settings_are_refused_with_the_setting_named(bad, match):
+    with pytest.raises(InputError, match=match):
+        EXP.cells(["leapfrog"], ["harmonic"], EXP.config(bad, quick=True))
+
+
+def test_cli_json_records(capsys):
+    code = main(["run", "reversibility", "--quick", "--stepper", "leapfrog", "--stepper", "rk4",
+                 "--problem", "harmonic", "--jobs", "1", "--fresh", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    import json
+
+    records = pd.DataFrame(json.loads(out))
+    assert set(records.stepper) == {"leapfrog", "rk4"}
+    assert set(records.verdict) == {"reversible", "irreversible"}
+    assert records.passed.all()
