@@ -23,20 +23,33 @@ def _rk4_variant(name: str, A=None, b=None, claimed: int = 4, cls=ExplicitRungeK
     return cls(tab, claimed_order=claimed, reference="deliberately broken test method")
 
 
+class _ReuseLastStage:
+    """A view of `Dynamics` whose k-th evaluation in a step silently returns the previous one."""
+
+    def __init__(self, dyn, skip: int):
+        self._dyn, self._skip, self._calls, self._last = dyn, skip, 0, None
+
+    def __getattr__(self, name):
+        return getattr(self._dyn, name)
+
+    def f(self, t, y, out=None):
+        self._calls += 1
+        if self._calls == self._skip and self._last is not None:
+            if out is None:
+                return self._last.copy()
+            out[...] = self._last
+            return out
+        result = self._dyn.f(t, y, out=out)
+        self._last = np.array(result, copy=True)
+        return result
+
+
 class DropsLastStage(ExplicitRungeKutta):
     """Claims the rk4 tableau but silently reuses the third stage instead of evaluating the
     fourth: the coefficients are right, only a measurement can catch it."""
 
     def _step(self, dyn, c):
-        y, k, stage, t = c.y, c.k, c.stage, c.t
-        dyn.f(t, y, out=k[0])
-        for i in (1, 2):
-            np.multiply(k[i - 1], c.hA[i, i - 1], out=stage)
-            stage += y
-            dyn.f(t + c.hc[i], stage, out=k[i])
-        k[3] = k[2]
-        self._combine(stage, c.stage_flat, self._weight_terms, c.hb, k, c.k_flat)
-        y += stage
+        super()._step(_ReuseLastStage(dyn, self.coefficients.stages), c)
 
 
 @pytest.fixture
