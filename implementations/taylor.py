@@ -19,7 +19,7 @@ import numpy as np
 from harness import cache
 from harness.problem import Dynamics, Problem
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
-from harness.tolerances import EPS
+from harness.tolerances import ADAPTIVE_MAX_EVALS, EPS
 
 __all__ = ["TaylorStepper", "STEPPERS"]
 
@@ -111,12 +111,18 @@ class TaylorStepper(AdaptiveStepper):
             ta.state[:] = y[:, j]
             if has_pars:
                 ta.pars[:] = c.pars[:, j]
-            outcome, _, _, n_steps, *_ = ta.propagate_until(target)
+            outcome, _, _, n_steps, *_ = ta.propagate_until(target, max_steps=ADAPTIVE_MAX_EVALS)
             c.member_steps[j] += n_steps
             if outcome == hy.taylor_outcome.time_limit:
                 y[:, j] = ta.state
             elif outcome == hy.taylor_outcome.err_nf_state:
                 y[:, j] = np.nan  # overflow: reported by the public methods as non-finite
+            elif outcome == hy.taylor_outcome.step_limit:
+                raise StepFailure(
+                    f"stepper 'taylor': more than {ADAPTIVE_MAX_EVALS} internal steps for "
+                    f"ensemble member {j} between t={t!r} and t={target!r} (stopped at "
+                    f"t={float(ta.time)!r}); the span is too long for tol={self.tol:g}"
+                )
             else:
                 raise StepFailure(
                     f"stepper 'taylor': heyoka stopped at t={float(ta.time)!r} before "

@@ -100,7 +100,7 @@ TIME_SCALES: dict[str, TimeScale] = {
     "henon-heiles": TimeScale(_TWO_PI, 64, "linearised frequencies 1: period 2 pi"),
     "henon-heiles-chaotic": TimeScale(_TWO_PI, 64, "linearised frequencies 1: period 2 pi"),
     "outer-solar-system": TimeScale(
-        4332.59, 100, "Jupiter's period, 4332.59 days; h = 43 days (HLW I.2.4 use 10-200 days)"
+        4332.59, 100, "Jupiter's period, 4332.59 days; h = 43 days (HLW I.2.4 use steps of 10 days and more)"
     ),
     "lennard-jones": TimeScale(0.4, 64, "fastest normal mode, period ~0.4 (25 periods on [0, 10])"),
     "free-fall": TimeScale(1.0, 64, "the fall time scale of the t_span, 1"),
@@ -117,7 +117,8 @@ class Expectation:
 
 _RK_KEPLER = (
     "explicit Runge-Kutta methods are neither symplectic nor symmetric: on the Kepler orbit "
-    "the energy error accumulates linearly in time (HLW I.2.3, Fig. 2.2; course file 004)"
+    "the energy error accumulates linearly in time (HLW I.2.3; course file 004, symplectic "
+    "integrators, where RK4 is said to drift)"
 )
 EXPECTATIONS: dict[tuple[str, str], Expectation] = {
     ("rk4", "kepler-elliptic"): Expectation("linear", _RK_KEPLER),
