@@ -226,9 +226,11 @@ def _cmd_reference(args) -> int:
 
 
 def _run(args, experiment: str):
+    """Run one experiment's grid and save it under results/<run-id>/ (path on stderr)."""
     from harness.runner import run_experiment
+    from harness.store import save_run
 
-    return run_experiment(
+    result = run_experiment(
         experiment,
         _names("stepper", args.stepper),
         _names("problem", args.problem),
@@ -239,6 +241,10 @@ def _run(args, experiment: str):
         plugins=tuple(args.plugin),
         cell_timeout=args.cell_timeout,
     )
+    path = save_run({experiment: result}, config={"command": args.command, "experiment": experiment,
+                                                   "quick": args.quick, "plugins": list(args.plugin)})
+    print(f"harness: results saved in {os.fspath(path)}", file=sys.stderr)
+    return result
 
 
 def _failures_table(result) -> list[dict]:
