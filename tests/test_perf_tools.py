@@ -3,7 +3,8 @@ loader.
 
 The regression check is shown failing for real: a throwaway git repository with a one-module
 package and one asv benchmark, three commits (the second only edits a comment, the third makes
-the benchmarked function five times slower), and `asv continuous --factor 1.2` between them:
+the benchmarked function five times slower), and `asv continuous --factor 1.2
+--interleave-rounds` (as `make perf-check` runs it) between them:
 exit code 0 for the unchanged pair, 1 for the slowed one. asv's virtual environment for it is
 kept in the project's cache directory, so only the first run on a machine builds it (~30 s;
 it needs the package index that `scripts/bootstrap` uses).
@@ -281,7 +282,8 @@ def test_regression_check_fails_on_a_slowed_commit(tmp_path):
 
     def continuous(base: str, head: str) -> subprocess.CompletedProcess:
         return subprocess.run(
-            [*asv, "continuous", "--factor", "1.2", "--machine", "selftest", base, head],
+            [*asv, "continuous", "--factor", "1.2", "--machine", "selftest", "--interleave-rounds",
+             base, head],
             cwd=repo, env=env, capture_output=True, text=True, timeout=900,
         )
 

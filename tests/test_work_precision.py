@@ -141,7 +141,7 @@ def test_every_stepper_gets_a_cell_or_a_reason_on_every_problem(name):
 @pytest.mark.parametrize("bad, match", [
     ({"tolerances": []}, r"config `tolerances` must be a non-empty list of numbers in \(0, 1\)"),
     ({"tolerances": [1e-3, 2.0]}, r"config `tolerances` must be"),
-    ({"step_budget": 0}, r"config `step_budget` must be a whole number >= 1, got 0"),
+    ({"work_budget": 0}, r"config `work_budget` must be a whole number >= 1, got 0"),
 ])
 def test_bad_settings_are_refused_with_the_setting_named(bad, match):
     with pytest.raises(InputError, match=match):

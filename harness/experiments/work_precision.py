@@ -15,8 +15,9 @@ Every stepper runs on the same problem to the same final time (the problem's
   Jacobian evaluations and linear solves of implicit methods show in the wall time only.
   `wall_s` is the integration's wall time (plus one error evaluation), compile time excluded
   (heyoka caches compiled code on disk; the first call per process warms it).
-Implicit steppers get a smaller step budget (`implicit_step_budget`): a Newton solve per step
-costs 10-30 explicit steps. `pareto_front` marks the points no other point beats in both cost and
+A sweep spends at most `work_budget` right-hand-side evaluations (the convergence sweep's own
+rule, `convergence.step_budget`: implicit steps also pay for their Newton solves), so cheap and
+dear methods get comparable ranges. `pareto_front` marks the points no other point beats in both cost and
 error.
 
 References: Hairer, Norsett & Wanner, *Solving Ordinary Differential Equations I*, II.10
@@ -75,8 +76,7 @@ class WorkPrecisionExperiment(Experiment):
         "seed": 0,
         "start_error": tol.SWEEP_START_ERROR,
         "ratio": tol.SWEEP_RATIO,
-        "step_budget": 200_000,
-        "implicit_step_budget": 20_000,
+        "work_budget": tol.SWEEP_WORK_BUDGET,
         "n_start": 4,
         "target_points": tol.TARGET_FIT_POINTS,
         "tolerances": [10.0**-k for k in range(3, 15)],
@@ -84,13 +84,12 @@ class WorkPrecisionExperiment(Experiment):
     }
     quick_config: Mapping[str, Any] = {
         "problems": ["kepler-elliptic"],
-        "step_budget": 20_000,
-        "implicit_step_budget": 4_000,
+        "work_budget": tol.SWEEP_WORK_BUDGET // 8,
         "tolerances": [10.0**-k for k in range(3, 13, 2)],
     }
 
     def cells(self, steppers, problems, config):
-        check_config(config, counts=("ensemble", "step_budget", "implicit_step_budget", "n_start"),
+        check_config(config, counts=("ensemble", "work_budget", "n_start"),
                      name_lists=("problems",))
         tolerances = config.get("tolerances")
         if isinstance(tolerances, str | bytes) or not isinstance(tolerances, Sequence) or not tolerances \
@@ -115,8 +114,6 @@ class WorkPrecisionExperiment(Experiment):
             frame = _tolerance_sweep(stepper, problem, cfg)
             kind = "tolerance"
         else:
-            if not stepper.info.explicit:
-                cfg["step_budget"] = int(config["implicit_step_budget"])
             frame = _step_sweep(stepper, problem, cfg)
             kind = "step-size"
         frame = frame[frame["kind"].isin(["global", "tolerance"])].copy()

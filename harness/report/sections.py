@@ -208,6 +208,18 @@ class RunView:
     quick: bool
     palette: F.Palette
 
+    def gate(self) -> pd.DataFrame:
+        """The CI gate's judgement of every convergence cell (computed once per report)."""
+        cached = self.__dict__.get("_gate")
+        if cached is None:
+            from harness.gate import gate_table
+
+            conv = self.summary("convergence")
+            cached = gate_table(conv) if len(conv) and "stepper" in conv else pd.DataFrame(
+                columns=["stepper", "problem", "passed", "reason", "verdict", "expected"])
+            self.__dict__["_gate"] = cached
+        return cached
+
     def has(self, name: str) -> bool:
         return name in self.summaries and name in self.meta.get("experiments", {})
 
@@ -262,15 +274,14 @@ def _skip_note(section: Section, view: RunView, name: str) -> None:
 # -- 1 scoreboard ---------------------------------------------------------------------------------
 def _order_summary(view: RunView, stepper: str) -> tuple[str, list[str], bool]:
     """(measured-order text, failing claims, measured at all)."""
-    from harness.gate import gate_table
-
     conv = view.summary("convergence")
     if conv.empty or "stepper" not in conv:
         return "—", [], False
     s = conv[conv["stepper"] == stepper]
     if s.empty:
         return "—", [], False
-    gate = gate_table(s)
+    gate = view.gate()
+    gate = gate[gate["stepper"] == stepper]
     failing = [_order_failure(r) for r in gate.to_dict("records") if not bool(r["passed"])]
     info = view.infos.get(stepper)
     if info is not None and info.claimed_order is None:
@@ -455,8 +466,6 @@ def scoreboard(view: RunView) -> tuple[Section, dict[str, str]]:
 
 # -- 2 convergence --------------------------------------------------------------------------------
 def convergence(view: RunView) -> Section:
-    from harness.gate import gate_table
-
     sec = Section("convergence", 2, "Convergence")
     sec.intro = ("Global error at the final time against the step size h, per problem, for every "
                  "fixed-step stepper. Filled markers are the points the order fit used; hollow "
@@ -468,7 +477,7 @@ def convergence(view: RunView) -> Section:
         return sec
     rows = view.rowtable("convergence")
     summ = view.summary("convergence")
-    gate = gate_table(summ) if len(summ) else pd.DataFrame()
+    gate = view.gate()
     judged = summ.merge(gate[["stepper", "problem", "passed", "reason"]], on=["stepper", "problem"],
                         how="left") if len(gate) else summ.assign(passed=None, reason="")
     cols = [("stepper", "stepper"), ("claimed_order", "claimed"), ("measured_order", "measured"),
