@@ -47,6 +47,35 @@ for _name in (
 ):
     EXPECTATIONS[(_name, "free-fall")] = Expectation("exact", _SECOND_ORDER_EXACT_ON_CONSTANT_FORCE)
 
+_FIRST_ORDER_OUT_OF_BUDGET = (
+    "a first-order method's error first falls below 1e-2 of the state only after ~10^5 steps "
+    "here, so the sweep's work budget (SWEEP_WORK_BUDGET evaluations) ends before four points "
+    "lie in the asymptotic range; its order is measured on the other problems"
+)
+for _problem in ("damped-cubic", "kepler-circular", "kepler-elliptic", "pendulum", "pendulum-small"):
+    EXPECTATIONS[("euler", _problem)] = Expectation("insufficient-range", _FIRST_ORDER_OUT_OF_BUDGET)
+for _problem in ("damped-cubic", "kepler-circular", "kepler-elliptic", "pendulum", "pendulum-small",
+                 "henon-heiles", "henon-heiles-chaotic"):
+    EXPECTATIONS[("backward-euler", _problem)] = Expectation(
+        "insufficient-range",
+        _FIRST_ORDER_OUT_OF_BUDGET + "; on Kepler its numerical damping also drags large-step "
+        "orbits into the r = 0 singularity, where Newton's iteration fails",
+    )
+EXPECTATIONS[("rk4", "damped-cubic")] = Expectation(
+    "insufficient-range",
+    "the start x = 10 (local frequency sqrt(3) x 10 ~ 17) gives the h^5 error term a coefficient "
+    "~1e3 times the h^4 term's, and their signs differ in v: local slopes climb from 4.8 to 5.8 "
+    "and fall apart where the error meets the float64 floor (~1e-11), so the h^4 range lies "
+    "below what float64 resolves. rk38 and rk4 agree with order 4 on every other problem",
+)
+for _name in ("ab3", "ab4"):
+    EXPECTATIONS[(_name, "van-der-pol-stiff")] = Expectation(
+        "unstable",
+        "stiff: the Jacobian's eigenvalue reaches ~ -3000 and the method's real stability "
+        "interval is 0.55 (ab3) / 0.3 (ab4), so every step size with an error above the "
+        "roundoff floor blows up; the implicit methods converge on the same problem",
+    )
+
 GATE_COLUMNS = [
     "stepper", "problem", "claimed_order", "coefficient_order", "measured_order",
     "order_ci_low", "order_ci_high", "fit_points", "fit_h_min", "fit_h_max", "verdict",

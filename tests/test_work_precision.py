@@ -55,10 +55,15 @@ def test_pareto_front_keeps_exactly_the_undominated_points():
     assert list(by_wall.wall_s) == [0.5, 0.6]
 
 
-def test_pareto_front_is_per_problem():
+def test_pareto_front_is_per_problem_and_per_evaluation_unit():
     df = pd.DataFrame({"stepper": ["a", "b"], "problem": ["p", "q"], "rhs_evals": [10, 100],
                        "error": [1e-2, 1e-1], "wall_s": [1.0, 1.0]})
     assert len(pareto_front(df)) == 2
+    df = pd.DataFrame({"stepper": ["f", "taylor"], "problem": ["p", "p"], "rhs_evals": [100, 10],
+                       "evals_unit": ["f-or-force", "taylor-step"], "error": [1e-3, 1e-9],
+                       "wall_s": [1.0, 0.5]})
+    assert len(pareto_front(df)) == 2  # different units: neither dominates the other
+    assert list(pareto_front(df, "wall_s").stepper) == ["taylor"]
 
 
 # -- measured tables --------------------------------------------------------------------------------
@@ -106,6 +111,7 @@ def test_error_falls_as_work_grows_and_rk4_beats_euler(table):
 def test_pareto_marks_match_the_helper(table):
     front = pareto_front(table)
     marked = table[table.pareto_evals]
+    assert set(marked.evals_unit) <= {"f-or-force", "taylor-step"}
     assert sorted(zip(marked.stepper, marked.rhs_evals, strict=True)) == sorted(
         zip(front.stepper, front.rhs_evals, strict=True))
     # At the coarsest steps even Euler may be the cheapest point; wherever the error is small,

@@ -194,6 +194,7 @@ class ConvergenceExperiment(Experiment):
         return _step_sweep(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.experiments.convergence_verdicts import summarize_cell as _summarize_cell
         from harness.registry import get_stepper
 
         out = []
@@ -436,68 +437,6 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     frame["t_end"] = T
     frame["ensemble_size"] = y0.shape[1]
     return frame
-
-
-def _fit_kind(g: pd.DataFrame, kind: str) -> float:
-    sub = g[(g.kind == kind) & g.in_fit]
-    if len(sub) < tol.MIN_FIT_POINTS:
-        return float("nan")
-    return fit_order(sub.h.values, sub.error.values)["order"]
-
-
-def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
-    info = stepper.info
-    base = {
-        "stepper": info.name, "problem": problem, "claimed_order": info.claimed_order,
-        "measured_order": np.nan, "order_ci_low": np.nan, "order_ci_high": np.nan,
-        "fit_residual": np.nan, "fit_points": 0, "fit_h_min": np.nan, "fit_h_max": np.nan,
-        "fit_error_min": np.nan, "fit_error_max": np.nan, "local_exponent": np.nan,
-        "local_exponent_q": np.nan,
-        "reference_error": float(g.reference_error.max()),
-        "reference_precision": str(g["reference_precision"].dropna().iloc[0])
-        if "reference_precision" in g and g["reference_precision"].notna().any() else "",
-        "points": int((g.kind.isin(["global", "tolerance"])).sum()),
-        "total_steps": int(g.loc[g.kind == "global", "n_steps"].sum()),
-        "wall_s": float(g.wall_s.sum(skipna=True)) if "wall_s" in g else np.nan,
-        "message": "",
-    }
-    messages = [m for m in g.get("message", pd.Series(dtype=str)).fillna("") if m]
-    if (g.kind == "tolerance").any():
-        t = g[g.kind == "tolerance"]
-        ok = bool(t.within_tolerance.all()) and t.error.notna().all()
-        base["verdict"] = "meets-tolerance" if ok else "misses-tolerance"
-        fit_rows = t[t.in_fit]
-        if len(fit_rows) >= 2:
-            f = fit_order(fit_rows.tol.values, fit_rows.error.values)
-            base["measured_order"] = f["order"]  # tolerance proportionality exponent
-        if messages:
-            base["verdict"], base["message"] = "failed", messages[0]
-        return base
-    gl = g[g.kind == "global"].sort_values("h", ascending=False)
-    kept = gl[gl.in_fit]
-    finite = gl[np.isfinite(gl.error) & (gl.error <= tol.BLOWUP_ERROR)]
-    if messages and len(kept) < tol.MIN_FIT_POINTS:
-        base["verdict"], base["message"] = "failed", messages[0]
-    elif len(gl) and (gl.excluded.isin(["roundoff", "reference"]).all()):
-        base["verdict"] = "exact"
-    elif len(kept) >= tol.MIN_FIT_POINTS:
-        f = fit_order(kept.h.values, kept.error.values)
-        base.update({
-            "verdict": "converged", "measured_order": f["order"], "order_ci_low": f["ci_low"],
-            "order_ci_high": f["ci_high"], "fit_residual": f["residual"],
-            "fit_points": len(kept), "fit_h_min": float(kept.h.min()),
-            "fit_h_max": float(kept.h.max()), "fit_error_min": float(kept.error.min()),
-            "fit_error_max": float(kept.error.max()),
-        })
-    elif finite.empty or not np.isfinite(gl.error.iloc[-1]) or gl.error.iloc[-1] > tol.BLOWUP_ERROR:
-        base["verdict"] = "unstable"
-    else:
-        base["verdict"] = "insufficient-range"
-    base["local_exponent"] = _fit_kind(g, "local")
-    base["local_exponent_q"] = _fit_kind(g, "local-q")
-    if messages and not base["message"]:
-        base["message"] = messages[0]
-    return base
 
 
 register_experiment(ConvergenceExperiment())

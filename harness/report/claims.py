@@ -77,6 +77,10 @@ def _num(x: object) -> float:
     return v
 
 
+def _ulps(x: float) -> str:
+    return f"{x:g} ulp" + ("" if x == 1 else "s")
+
+
 def _fmt(x: float, digits: int = 3) -> str:
     return "n/a" if not math.isfinite(x) else f"{x:.{digits}g}"
 
@@ -170,13 +174,13 @@ def _angular_momentum_exact(tables: Tables) -> tuple[str, str, list[dict]]:
         values.append({"stepper": r["stepper"], "problem": r["problem"], "steps": str(r["steps"]),
                        "max relative error of L": _fmt(err),
                        "in ulps": _fmt(err / tol.EPS, 3),
-                       "rounding bound (1 ulp/step)": _fmt(bound),
+                       "rounding bound": _fmt(bound),
                        "conserved": "yes" if bool(r["angular_momentum_conserved"]) else "no"})
     ok = bool(s["angular_momentum_conserved"].astype(bool).all())
     worst = float(s["max_rel_angular_momentum_error"].astype(float).max())
     text = (f"largest relative change of the angular momentum over {len(s)} runs: {worst:.3g} "
             f"({worst / tol.EPS:.3g} ulps); 'exactly' is read as 'to rounding': at most "
-            f"{tol.ANGULAR_MOMENTUM_ROUNDING_ULPS:g} ulp per step")
+            f"{_ulps(tol.ANGULAR_MOMENTUM_ROUNDING_ULPS)} per step")
     return (AGREE if ok else DISAGREE), text, values
 
 

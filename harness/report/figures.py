@@ -538,7 +538,8 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             tt = first["t"].astype(float).to_numpy() - float(first["t"].astype(float).min())
             pos = n > 0
             ax.plot(tt[pos], tol.ANGULAR_MOMENTUM_ROUNDING_ULPS * n[pos] * tol.EPS, ":", color="k",
-                    lw=1.0, label="rounding bound of the fixed-step runs (1 ulp per step)")
+                    lw=1.0, label=f"rounding bound of the fixed-step runs "
+                          f"({tol.ANGULAR_MOMENTUM_ROUNDING_ULPS:g} ulp per step)")
     _loglog(ax)
     ax.set_xlabel("t")
     ax.set_ylabel(f"relative {what} error (0 drawn at {LOG_FLOOR:g}; clipped at {LOG_CEILING:g})")

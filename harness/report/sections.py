@@ -578,7 +578,8 @@ def energy(view: RunView) -> Section:
         if (g["quantity"] == "angular_momentum").any():
             sec.figure(F.angular_momentum_figure(problem, g, view.palette, symplectic),
                        f"Relative change of the angular momentum on {problem}, with the rounding "
-                       "bound of a method that conserves it exactly (one ulp per step).")
+                       f"bound of a method that conserves it exactly "
+                       f"({tol.ANGULAR_MOMENTUM_ROUNDING_ULPS:g} ulp per step).")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("h", "h"), ("steps", "steps"),
             ("claimed_symplectic", "claimed symplectic"), ("drift_class", "drift class"),
             ("drift_exponent", "growth exponent"), ("drift_slope", "drift slope (per unit t)"),
