@@ -99,3 +99,28 @@ class CompiledLoad:
 
     def track_compiled_cached_load(self, stepper):
         return self._run(_TIMED_SCRIPT, stepper)["first_call_s"]
+
+
+class CLoops:
+    """The C reference loops themselves (Kepler, `c_baseline/kepler.c`): 1000 steps of one
+    trajectory, or 10 steps of 10^5 members. Their history separates a change of the machine
+    from a change of the harness. The compile command (compiler, `-O3`, no machine-specific
+    flags) is printed to the benchmark's stderr (`asv run --show-stderr`)."""
+
+    params = (["vv", "rk4"], [1, 100_000])
+    param_names = ["method", "ensemble"]
+    timeout = 300
+
+    def setup(self, method, ensemble):
+        import sys
+
+        from harness.registry import get_problem
+
+        self.baseline = c_baseline()
+        print(f"C baseline: {self.baseline.command} ({self.baseline.version})", file=sys.stderr)
+        problem = get_problem("kepler-elliptic")
+        self.y = problem.y0.copy() if ensemble == 1 else problem.ensemble(ensemble, seed=0)
+        self.steps = 1000 if ensemble == 1 else 10
+
+    def time_c_loop(self, method, ensemble):
+        self.baseline.run(method, self.y, 1e-3, self.steps)

@@ -61,9 +61,13 @@ IMPLICIT_STEP_COST = 4.0
 MAX_ENSEMBLE_SIZE = 10_000_000
 
 # Adaptive steppers: the global error may exceed the requested tolerance by this factor (times
-# the state's scale) before the tolerance counts as missed; local error control does not bound
-# the global error, and a factor of 100 is what a user of such a solver usually tolerates.
-TOLERANCE_FACTOR = 100.0
+# the state's scale) before the tolerance counts as missed. Local error control bounds each
+# step's error, so the global error accumulates up to (number of steps) x tol; 1e4 allows ten
+# thousand steps' worth, and more means the control itself is not working.
+TOLERANCE_FACTOR = 1e4
+# ... and tightening the tolerance must pay: error ~ tol^e with e at least this (a 100-fold
+# tighter tolerance gains at least 10-fold), fitted over the points above the reference floor.
+MIN_TOLERANCE_EXPONENT = 0.5
 
 # Newton's method for implicit stages (implicit Runge-Kutta, implicit multistep): the increment,
 # componentwise scaled by 1 + |y_n|, must fall to 1e-14 (~50 ulps, just above the rounding noise

@@ -111,6 +111,30 @@ def test_setup_skips_pairs_that_do_not_apply(stepper, problem, ensemble, reason)
         StepTime().setup(stepper, problem, ensemble)
 
 
+@pytest.mark.parametrize(
+    "suite,column",
+    [("MeasuredOrder", "measured_order"), ("EnergyDriftSlope", "drift_slope"),
+     ("MaxEnergyError", "max_rel_energy_error"), ("Reversibility", "return_error_ulps")],
+)
+def test_accuracy_suites_skip_in_setup_and_track_the_column(suite, column):
+    """asv counts NotImplementedError as a skip only from `setup`; from the benchmark body it is
+    a failure. So every missing or non-finite value must stop in `setup`."""
+    from benchmarks import bench_accuracy
+
+    bench = getattr(bench_accuracy, suite)()
+    track = next(getattr(bench, n) for n in dir(bench) if n.startswith("track_"))
+    results = {"summary": [{"stepper": "a", column: 2.5, "verdict": "ok"},
+                           {"stepper": "b", column: float("nan"), "verdict": "bounded"}]}
+    bench.setup(results, "a")
+    assert track(results, "a") == 2.5
+    with pytest.raises(NotImplementedError, match="not a finite number"):
+        bench.setup(results, "b")
+    with pytest.raises(NotImplementedError, match=f"no {column} for c"):
+        bench.setup(results, "c")
+    with pytest.raises(NotImplementedError, match="older commit"):
+        bench.setup({"_error": "older commit: no such experiment"}, "a")
+
+
 def test_one_step_benchmark_advances_one_step():
     from benchmarks.bench_steppers import StepTime
 

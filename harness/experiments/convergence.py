@@ -424,12 +424,10 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
             "wall_s": time.perf_counter() - started, "message": msg,
         })
     frame = pd.DataFrame(records)
-    limit = tol.TOLERANCE_FACTOR * frame["tol"] * scale
     frame["excluded"] = np.where(~np.isfinite(frame.error), "blow-up",
                                  np.where(frame.error < tol.REFERENCE_MARGIN * frame.reference_error,
                                           "reference", ""))
     frame["in_fit"] = frame["excluded"] == ""
-    frame["within_tolerance"] = (frame.error <= limit) | (frame.excluded == "reference")
     frame["kind"] = "tolerance"
     frame["reference_precision"] = ref.precision
     frame["stepper"] = stepper.info.name

@@ -53,12 +53,20 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
     messages = [m for m in g.get("message", pd.Series(dtype=str)).fillna("") if m]
     if (g.kind == "tolerance").any():
         t = g[g.kind == "tolerance"]
-        ok = bool(t.within_tolerance.all()) and t.error.notna().all()
-        base["verdict"] = "meets-tolerance" if ok else "misses-tolerance"
+        scale = t.rounding_level / tol.EPS  # the state's size, as the sweep measured it
+        within = (t.error <= tol.TOLERANCE_FACTOR * t.tol * scale) | (t.excluded == "reference")
+        ok = bool(within.all()) and bool(t.error.notna().all())
         fit_rows = t[t.in_fit]
         if len(fit_rows) >= 2:
             f = fit_order(fit_rows.tol.values, fit_rows.error.values)
             base["measured_order"] = f["order"]  # tolerance proportionality exponent
+            ok = ok and f["order"] >= tol.MIN_TOLERANCE_EXPONENT
+        base["verdict"] = "meets-tolerance" if ok else "misses-tolerance"
+        if not ok:
+            worst = float((t.error / (t.tol * scale)).max())
+            base["message"] = (f"error up to {worst:.3g} x tol x |y| (limit {tol.TOLERANCE_FACTOR:g}); "
+                               f"tolerance exponent {base['measured_order']:.3g} "
+                               f"(minimum {tol.MIN_TOLERANCE_EXPONENT:g})")
         if messages:
             base["verdict"], base["message"] = "failed", messages[0]
         return base
