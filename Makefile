@@ -6,7 +6,7 @@ setup:
 	@scripts/bootstrap
 
 report: setup
-	.venv/bin/harness gate
+	.venv/bin/harness report
 
 gate: setup
 	.venv/bin/harness gate
