@@ -68,6 +68,10 @@ TOLERANCE_FACTOR = 1e4
 # ... and tightening the tolerance must pay: error ~ tol^e with e at least this (a 100-fold
 # tighter tolerance gains at least 10-fold), fitted over the points above the reference floor.
 MIN_TOLERANCE_EXPONENT = 0.5
+# ... fitted only over tolerances where the error is at least this fraction of tol x |y|: a
+# solver far more accurate than requested (DOP853 on y' = -y: 1e-6 of the tolerance) has
+# nothing to gain from a tighter one.
+PROPORTIONALITY_MIN_RATIO = 1e-2
 
 # Newton's method for implicit stages (implicit Runge-Kutta, implicit multistep): the increment,
 # componentwise scaled by 1 + |y_n|, must fall to 1e-14 (~50 ulps, just above the rounding noise

@@ -56,7 +56,7 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         scale = t.rounding_level / tol.EPS  # the state's size, as the sweep measured it
         within = (t.error <= tol.TOLERANCE_FACTOR * t.tol * scale) | (t.excluded == "reference")
         ok = bool(within.all()) and bool(t.error.notna().all())
-        fit_rows = t[t.in_fit]
+        fit_rows = t[t.in_fit & (t.error >= tol.PROPORTIONALITY_MIN_RATIO * t.tol * scale)]
         if len(fit_rows) >= 2:
             f = fit_order(fit_rows.tol.values, fit_rows.error.values)
             base["measured_order"] = f["order"]  # tolerance proportionality exponent
