@@ -123,7 +123,8 @@ def judge(record: Mapping, coefficient_order: float | None = None) -> tuple[bool
         # Adaptive steppers are judged by their tolerance sweep, whatever order they declare.
         ok = verdict == "meets-tolerance"
         msg = record.get("message") or ""
-        return ok, "meets-tolerance", "" if ok else f"adaptive stepper: {verdict}" + (f": {msg}" if msg else "")
+        why = "" if ok else f"adaptive stepper: {verdict}" + (f": {msg}" if msg else "")
+        return ok, "meets-tolerance", why
     if exp is not None:
         ok = verdict == exp.verdict
         if ok and exp.order is not None:
