@@ -150,7 +150,9 @@ def _expand(loaded: Any, cls: type) -> list:
         for item in loaded:
             out.extend(_expand(item, cls))
         return out
-    raise PluginError(f"expected a {cls.__name__}, a list of them, or a callable; got {type(loaded).__name__}")
+    raise PluginError(
+        f"expected a {cls.__name__}, a list of them, or a callable; got {type(loaded).__name__}"
+    )
 
 
 def _builtin_steppers() -> list[Stepper]:
