@@ -25,7 +25,7 @@ from fractions import Fraction
 import numpy as np
 
 from harness.errors import CoefficientError
-from harness.tolerances import COEFFICIENT_TOL
+from harness.tolerances import COEFFICIENT_TOL, COEFFICIENT_ULPS, EPS
 
 __all__ = [
     "ButcherTableau",
@@ -55,8 +55,12 @@ def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
     return arr
 
 
-def _close(a: float, b: float) -> bool:
-    return abs(a - b) <= COEFFICIENT_TOL * max(1.0, abs(a), abs(b))
+def _close(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
+    """a == b up to the rounding of the coefficients that produced them: `size` is the sum of
+    the magnitudes of the `terms` numbers summed (a tableau whose weights sum |b| to 2842 rounds
+    its sum to ~1e-13, and that is no defect)."""
+    scale = max(1.0, abs(a), abs(b), float(size))
+    return abs(a - b) <= max(COEFFICIENT_TOL, COEFFICIENT_ULPS * EPS * (terms + 1) * scale)
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,10 +76,12 @@ class ButcherTableau:
     A: np.ndarray
     b: np.ndarray
     c: np.ndarray
+    b_hat: np.ndarray | None = None
     stages: int = field(init=False)
     explicit: bool = field(init=False)
 
-    def __init__(self, name: str, A: Sequence, b: Sequence, c: Sequence | None = None):
+    def __init__(self, name: str, A: Sequence, b: Sequence, c: Sequence | None = None,
+                 b_hat: Sequence | None = None):
         A_arr = as_float_array(A, f"{name}.A", 2)
         b_arr = as_float_array(b, f"{name}.b", 1)
         s = b_arr.shape[0]
@@ -92,13 +98,23 @@ class ButcherTableau:
             if c_arr.shape != (s,):
                 raise CoefficientError(f"`{name}.c` must have {s} nodes, got {c_arr.shape[0]}")
             for i in range(s):
-                if not _close(row_sums[i], c_arr[i]):
+                if not _close(row_sums[i], c_arr[i], float(np.abs(A_arr[i]).sum()), s):
                     raise CoefficientError(
                         f"`{name}`: row {i} of A sums to {float(row_sums[i])!r} but node c[{i}] is "
                         f"{float(c_arr[i])!r}; the row sums of A must equal the nodes"
                     )
-        if not _close(b_arr.sum(), 1.0):
+        if not _close(b_arr.sum(), 1.0, float(np.abs(b_arr).sum()), s):
             raise CoefficientError(f"`{name}.b` must sum to 1 (consistency), sums to {float(b_arr.sum())!r}")
+        bh_arr = None
+        if b_hat is not None:
+            bh_arr = as_float_array(b_hat, f"{name}.b_hat", 1)
+            if bh_arr.shape != (s,):
+                raise CoefficientError(f"`{name}.b_hat` must have {s} weights, got {bh_arr.shape[0]}")
+            if not _close(bh_arr.sum(), 1.0, float(np.abs(bh_arr).sum()), s):
+                raise CoefficientError(
+                    f"`{name}.b_hat` must sum to 1 (consistency), sums to {float(bh_arr.sum())!r}"
+                )
+        object.__setattr__(self, "b_hat", bh_arr)
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "A", A_arr)
         object.__setattr__(self, "b", b_arr)
@@ -120,7 +136,46 @@ class ButcherTableau:
 
     def fingerprint(self) -> str:
         """A stable text form of the coefficients, for cache keys."""
-        return f"rk:{self.A.tobytes().hex()}:{self.b.tobytes().hex()}:{self.c.tobytes().hex()}"
+        embedded = "" if self.b_hat is None else ":" + self.b_hat.tobytes().hex()
+        return f"rk:{self.A.tobytes().hex()}:{self.b.tobytes().hex()}:{self.c.tobytes().hex()}{embedded}"
+
+    # -- what the coefficients say about the method (asked like a NodePy method object) -----
+    def order(self) -> int:
+        """Order from Butcher's rooted-tree conditions (`harness.theory.rk_order`)."""
+        from harness.theory import rk_order
+
+        return rk_order(self)
+
+    def embedded_order(self) -> int | None:
+        """Order of the embedded method (A, b_hat, c), or None without `b_hat`."""
+        if self.b_hat is None:
+            return None
+        from harness.theory import rk_order
+
+        return rk_order(ButcherTableau(f"{self.name}-embedded", self.A, self.b_hat, self.c))
+
+    def linear_order(self) -> int:
+        """Order on linear constant-coefficient problems: of R(z) against e^z."""
+        from harness.theory import rk_linear_order
+
+        return rk_linear_order(self)
+
+    @property
+    def symplectic(self) -> bool:
+        """b_i a_ij + b_j a_ji = b_i b_j for all i, j (HLW VI.4, Theorem 4.3)."""
+        M = self.b[:, None] * self.A + (self.b[:, None] * self.A).T - np.outer(self.b, self.b)
+        size = np.abs(self.b[:, None] * self.A).sum() + np.abs(self.b).sum() ** 2
+        return bool(np.max(np.abs(M)) <= COEFFICIENT_ULPS * EPS * max(1.0, float(size)))
+
+    @property
+    def symmetric(self) -> bool:
+        """a_{s+1-i, s+1-j} + a_ij = b_j and b_{s+1-i} = b_i (HLW V.2, Theorem 2.3), up to a
+        permutation of stages that this check does not search."""
+        P = self.A[::-1, ::-1]
+        lhs = P + self.A - self.b[None, :]
+        size = max(1.0, float(np.abs(self.A).sum() + np.abs(self.b).sum()))
+        tol_ = COEFFICIENT_ULPS * EPS * size
+        return bool(np.max(np.abs(lhs)) <= tol_ and np.max(np.abs(self.b - self.b[::-1])) <= tol_)
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,9 +215,12 @@ class SplittingScheme:
         seq = tuple((k, v) for k, v in merged if v != 0.0)
         drift = sum(v for k, v in seq if k == "D")
         kick = sum(v for k, v in seq if k == "K")
-        if not _close(drift, 1.0):
+        n_terms = len(seq)
+        drift_size = sum(abs(v) for k, v in seq if k == "D")
+        kick_size = sum(abs(v) for k, v in seq if k == "K")
+        if not _close(drift, 1.0, drift_size, n_terms):
             raise CoefficientError(f"`{name}`: drift coefficients must sum to 1, sum to {drift!r}")
-        if not _close(kick, 1.0):
+        if not _close(kick, 1.0, kick_size, n_terms):
             raise CoefficientError(f"`{name}`: kick coefficients must sum to 1, sum to {kick!r}")
         n_kicks = sum(1 for k, _ in seq if k == "K")
         fsal = len(seq) > 1 and seq[0][0] == "K" and seq[-1][0] == "K"
@@ -184,6 +242,22 @@ class SplittingScheme:
 
     def fingerprint(self) -> str:
         return "split:" + ";".join(f"{k}{v!r}" for k, v in self.sequence)
+
+    # -- what the coefficients say about the method --------------------------------------------
+    symplectic = True  # every drift and every kick is a symplectic map (HLW VI.3)
+
+    def order(self) -> int:
+        """Order from the exact local-error series (`harness.theory.splitting_order`)."""
+        from harness.theory import splitting_order
+
+        return splitting_order(self)
+
+    def linear_order(self) -> int:
+        """Order on linear problems q'' = -K q: of the one-step propagator against the exact
+        rotation (`harness.theory.splitting_linear_order`)."""
+        from harness.theory import splitting_linear_order
+
+        return splitting_linear_order(self)
 
     @classmethod
     def compose(cls, name: str, base: SplittingScheme, weights: Sequence[Number]) -> SplittingScheme:
@@ -219,9 +293,10 @@ class LinearMultistep:
         if not _close(a[-1], 1.0):
             raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {float(a[-1])!r}")
         j = np.arange(a.size)
-        if not _close(a.sum(), 0.0):
+        size = float(np.abs(a).sum() * a.size + np.abs(b).sum())
+        if not _close(a.sum(), 0.0, size, a.size):
             raise CoefficientError(f"`{name}`: sum of alpha must be 0 (consistency), got {float(a.sum())!r}")
-        if not _close(float(j @ a), float(b.sum())):
+        if not _close(float(j @ a), float(b.sum()), size, 2 * a.size):
             raise CoefficientError(
                 f"`{name}`: sum j*alpha_j must equal sum beta_j (consistency), got "
                 f"{float(j @ a)!r} and {float(b.sum())!r}"
@@ -234,6 +309,25 @@ class LinearMultistep:
 
     def fingerprint(self) -> str:
         return f"lmm:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
+
+    symplectic = False  # no linear multistep method is symplectic (HLW XV.4, Tang 1993)
+
+    def order(self) -> int:
+        from harness.theory import lmm_order
+
+        return lmm_order(self)
+
+    def linear_order(self) -> int:
+        """The same as `order`: the error constants do not depend on the problem."""
+        return self.order()
+
+    @property
+    def symmetric(self) -> bool:
+        """alpha_j = -alpha_{k-j} and beta_j = beta_{k-j} (HLW XV.1)."""
+        size = max(1.0, float(np.abs(self.alpha).sum() + np.abs(self.beta).sum()))
+        tol_ = COEFFICIENT_ULPS * EPS * size
+        return bool(np.max(np.abs(self.alpha + self.alpha[::-1])) <= tol_
+                    and np.max(np.abs(self.beta - self.beta[::-1])) <= tol_)
 
 
 @dataclass(frozen=True, eq=False)
@@ -266,8 +360,9 @@ class SecondOrderMultistep:
             ("sum j alpha_j = 0", j @ a, 0.0),
             ("sum j^2 alpha_j / 2 = sum beta_j", (j * j) @ a / 2.0, b.sum()),
         ]
+        size = float(np.abs(a).sum() * a.size**2 + np.abs(b).sum())
         for rule, lhs, rhs in checks:
-            if not _close(float(lhs), float(rhs)):
+            if not _close(float(lhs), float(rhs), size, 2 * a.size):
                 raise CoefficientError(
                     f"`{name}`: consistency needs {rule}, got {float(lhs)!r} vs {float(rhs)!r}"
                 )
@@ -279,3 +374,24 @@ class SecondOrderMultistep:
 
     def fingerprint(self) -> str:
         return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
+
+    # A multistep recurrence is not a map of phase space: symplecticity is a property of the
+    # one-step method it may be equivalent to, which the coefficients alone do not decide.
+    symplectic = None
+
+    def order(self) -> int:
+        from harness.theory import second_order_lmm_order
+
+        return second_order_lmm_order(self)
+
+    def linear_order(self) -> int:
+        """The same as `order`: the error constants do not depend on the problem."""
+        return self.order()
+
+    @property
+    def symmetric(self) -> bool:
+        """alpha_j = alpha_{k-j} and beta_j = beta_{k-j} (HNW I, III.10)."""
+        size = max(1.0, float(np.abs(self.alpha).sum() + np.abs(self.beta).sum()))
+        tol_ = COEFFICIENT_ULPS * EPS * size
+        return bool(np.max(np.abs(self.alpha - self.alpha[::-1])) <= tol_
+                    and np.max(np.abs(self.beta - self.beta[::-1])) <= tol_)

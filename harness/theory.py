@@ -74,10 +74,15 @@ __all__ = [
     "imag_stability_interval",
     "hw_stability_limit",
     "analytic_stability",
+    "rk_linear_order",
+    "rk_stability_coefficients",
+    "rk_stability_intervals",
+    "splitting_linear_order",
+    "splitting_hw_limit",
     "MAX_TREE_ORDER",
 ]
 
-MAX_TREE_ORDER = 10  # 1842 trees up to order 10; beyond that nobody's tableau is checked here
+MAX_TREE_ORDER = 12  # 7813 trees up to order 12 (4766 of order 12)
 
 
 def _check_int(value: Any, name: str, lo: int, hi: int) -> int:
@@ -152,28 +157,43 @@ class OrderCondition:
     satisfied: bool
 
 
-def _elementary_weights(tableau: ButcherTableau, max_order: int) -> list[float]:
+def _elementary_weights(tableau: ButcherTableau, max_order: int,
+                        weights: np.ndarray | None = None) -> tuple[list[float], list[float]]:
+    """Phi(t) = b^T g(t) for every tree up to `max_order`, and the same sum taken over the
+    magnitudes |b|, |A| (the size the rounding of Phi(t) scales with)."""
     trees = rooted_trees(max_order)
-    A, b = tableau.A, tableau.b
+    A, b = tableau.A, tableau.b if weights is None else weights
+    absA, absb = np.abs(A), np.abs(b)
     g: list[np.ndarray] = []
+    g_abs: list[np.ndarray] = []
     for t in trees:
-        if not t.children:
-            g.append(np.ones(tableau.stages))
-        else:
-            v = np.ones(tableau.stages)
-            for k in t.children:
-                v = v * (A @ g[k])
-            g.append(v)
-    return [float(b @ gk) for gk in g]
+        v = np.ones(tableau.stages)
+        v_abs = np.ones(tableau.stages)
+        for k in t.children:
+            v = v * (A @ g[k])
+            v_abs = v_abs * (absA @ g_abs[k])
+        g.append(v)
+        g_abs.append(v_abs)
+    return [float(b @ gk) for gk in g], [float(absb @ gk) for gk in g_abs]
+
+
+def _condition_tol(t: RootedTree, size: float) -> float:
+    """How far Phi(t) may sit from 1/gamma(t) through rounding alone: ORDER_CONDITION_ULPS
+    roundings per vertex of the sum of magnitudes, and never less than ORDER_CONDITION_TOL
+    relative to the condition's value 1/gamma(t) nor ORDER_CONDITION_FLOOR (tableaux published
+    with 13-14 digits)."""
+    return max(tol.ORDER_CONDITION_ULPS * tol.EPS * t.order * size,
+               tol.ORDER_CONDITION_TOL / t.gamma, tol.ORDER_CONDITION_FLOOR)
 
 
 def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondition]:
     """The order conditions of exactly `order` (one per rooted tree with `order` vertices),
-    with residual Phi(t) - 1/gamma(t); satisfied when |residual| <= ORDER_CONDITION_TOL."""
+    with residual Phi(t) - 1/gamma(t); satisfied when |residual| is within rounding
+    (`_condition_tol`)."""
     _check_type(tableau, ButcherTableau, "tableau")
     order = _check_int(order, "order", 1, MAX_TREE_ORDER)
     trees = rooted_trees(order)
-    phi = _elementary_weights(tableau, order)
+    phi, size = _elementary_weights(tableau, order)
     out = []
     for t in trees:
         if t.order != order:
@@ -181,20 +201,53 @@ def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondit
         expected = 1.0 / t.gamma
         r = phi[t.index] - expected
         out.append(OrderCondition(t.label, t.order, phi[t.index], expected, r,
-                                  abs(r) <= tol.ORDER_CONDITION_TOL))
+                                  abs(r) <= _condition_tol(t, size[t.index])))
     return out
 
 
-def rk_order(tableau: ButcherTableau, max_order: int = 8) -> int:
+def rk_order(tableau: ButcherTableau, max_order: int | None = None,
+             weights: np.ndarray | None = None) -> int:
     """The order of a Butcher tableau: the largest p <= `max_order` such that every order
-    condition of order <= p holds to ORDER_CONDITION_TOL. A result equal to `max_order` means
-    "at least `max_order`"."""
+    condition of order <= p holds to rounding (`_condition_tol`, scaled by the size of the
+    coefficients). By default `max_order` is the highest order the tableau could have (s for
+    an explicit s-stage method, 2s otherwise), capped at MAX_TREE_ORDER; a result equal to
+    MAX_TREE_ORDER means "at least that". `weights` replaces b (an embedded method)."""
     _check_type(tableau, ButcherTableau, "tableau")
+    if max_order is None:
+        max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
     max_order = _check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
-    phi = _elementary_weights(tableau, max_order)
+    phi, size = _elementary_weights(tableau, max_order, weights)
     failed = [t.order for t in rooted_trees(max_order)
-              if abs(phi[t.index] - 1.0 / t.gamma) > tol.ORDER_CONDITION_TOL]
+              if abs(phi[t.index] - 1.0 / t.gamma) > _condition_tol(t, size[t.index])]
     return min(failed) - 1 if failed else max_order
+
+
+def rk_stability_coefficients(tableau: ButcherTableau, degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Taylor coefficients r_k = b^T A^(k-1) e of R(z) for k = 0..degree (r_0 = 1), and the same
+    products over |b|, |A| (their rounding scale)."""
+    r, r_abs = [1.0], [1.0]
+    v, v_abs = np.ones(tableau.stages), np.ones(tableau.stages)
+    for _ in range(degree):
+        r.append(float(tableau.b @ v))
+        r_abs.append(float(np.abs(tableau.b) @ v_abs))
+        v, v_abs = tableau.A @ v, np.abs(tableau.A) @ v_abs
+    return np.array(r), np.array(r_abs)
+
+
+def rk_linear_order(tableau: ButcherTableau) -> int:
+    """The order of R(z) against e^z: the largest p with r_k = 1/k! for k <= p. It is the
+    method's order on linear constant-coefficient problems, at least its order and higher for
+    some methods (several SSP methods, Merson's). Checked up to 2s + 2 (beyond any s-stage
+    order) and capped there."""
+    _check_type(tableau, ButcherTableau, "tableau")
+    top = min(2 * tableau.stages + 2, 40)
+    r, r_abs = rk_stability_coefficients(tableau, top)
+    for k in range(1, top + 1):
+        exact = 1.0 / math.factorial(k)
+        allowed = max(tol.ORDER_CONDITION_ULPS * tol.EPS * k * r_abs[k], tol.ORDER_CONDITION_TOL * exact)
+        if abs(r[k] - exact) > allowed:
+            return k - 1
+    return top
 
 
 # =============================================================================================
@@ -645,6 +698,174 @@ def hw_stability_limit(amplification: Callable[[np.ndarray], np.ndarray], **kwar
     return stability_boundary(amplification, **kwargs)
 
 
+# -- exact intervals from polynomials ------------------------------------------------------
+# For Runge-Kutta methods R = P/Q with polynomials P, Q, and for splitting schemes the
+# propagator's trace is a polynomial in h omega: stability on a ray is the sign of a polynomial
+# (Q^2 - P^2 on the real axis, |Q|^2 - |P|^2 on the imaginary axis, 4 - tr^2 for h omega), which
+# is decided from its coefficients rather than by comparing |R| with 1 at a tolerance. Low-order
+# coefficients that theory makes zero (|R(iy)|^2 = 1 + O(y^(p+1)) for linear order p) are set to
+# zero, and the others count as zero only within the rounding of the sum of their magnitudes.
+# The search has no ceiling: the last real root bounds it, and "unbounded" (inf) is returned only
+# when the polynomial is non-negative for every positive argument.
+
+def _poly_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.convolve(a, b)
+
+
+def _poly_add(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    out = np.zeros(max(a.size, b.size), dtype=np.result_type(a, b))
+    out[: a.size] += a
+    out[: b.size] += b
+    return out
+
+
+def _rk_numerator_denominator(tableau: ButcherTableau) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Coefficients (ascending) of P and Q in R = P/Q, with magnitudes for their rounding.
+    Explicit: Q = 1 and P is the Taylor polynomial of R. Otherwise P(z) = det(I - zA + z e b^T)
+    and Q(z) = det(I - zA), interpolated at roots of unity in 40-digit arithmetic."""
+    s = tableau.stages
+    if tableau.explicit:
+        r, r_abs = rk_stability_coefficients(tableau, s)
+        return r, r_abs, np.array([1.0]), np.array([1.0])
+    import mpmath
+
+    with mpmath.workdps(40):
+        A = mpmath.matrix([[mpmath.mpf(float(x)) for x in row] for row in tableau.A])
+        E = mpmath.matrix([[mpmath.mpf(float(bj)) for bj in tableau.b] for _ in range(s)])
+        eye = mpmath.eye(s)
+        n = s + 1
+        pts = [mpmath.exp(2j * mpmath.pi * k / n) for k in range(n)]
+        Pv = [mpmath.det(eye - z * A + z * E) for z in pts]
+        Qv = [mpmath.det(eye - z * A) for z in pts]
+        P = np.array([float(mpmath.re(sum(Pv[k] * pts[k] ** (-j) for k in range(n)) / n)) for j in range(n)])
+        Q = np.array([float(mpmath.re(sum(Qv[k] * pts[k] ** (-j) for k in range(n)) / n)) for j in range(n)])
+    size = float(np.abs(tableau.A).sum(axis=1).max() + np.abs(tableau.b).sum())
+    mags = np.array([math.comb(s, j) * size**j for j in range(n)])
+    return P, mags, Q, mags
+
+
+def _square_on_ray(P: np.ndarray, P_abs: np.ndarray, imaginary: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients in x of P(-x)^2 (real ray) or |P(i x)|^2 (imaginary ray), with magnitudes."""
+    k = np.arange(P.size)
+    if imaginary:
+        re = np.where(k % 4 == 0, P, np.where(k % 4 == 2, -P, 0.0))
+        im = np.where(k % 4 == 1, P, np.where(k % 4 == 3, -P, 0.0))
+        sq = _poly_add(_poly_mul(re, re), _poly_mul(im, im))
+    else:
+        neg = P * (-1.0) ** k
+        sq = _poly_mul(neg, neg)
+    return sq, _poly_mul(P_abs, P_abs)
+
+
+def _first_sign_change(F: np.ndarray, F_abs: np.ndarray, forced_zeros: int) -> float:
+    """The largest x with F >= 0 on [0, x] for the polynomial F (ascending coefficients), F(0) = 0."""
+    from scipy.optimize import brentq
+
+    F = np.array(F, dtype=float)
+    F[: forced_zeros + 1] = 0.0
+    F_abs = np.resize(np.asarray(F_abs, dtype=float), F.size)
+    # Only the lowest coefficients decide between "zero" and "a sign": higher ones are kept as
+    # they are (they are small, not negligible, for many-stage methods).
+    significant = np.abs(F) > tol.STABILITY_POLY_ULPS * tol.EPS * np.abs(F_abs) * F.size
+    nz = np.flatnonzero(significant)
+    if nz.size == 0:
+        return math.inf
+    G = F[nz[0]:]
+    if G[0] < 0:
+        return 0.0
+    # Trailing coefficients within rounding are noise of the interpolation (an implicit
+    # method's P, Q), not a root at 1e20.
+    top_significant = int(nz[-1])
+    G = F[nz[0]: top_significant + 1]
+    if G.size == 1:
+        return math.inf
+    roots = np.polynomial.polynomial.polyroots(G)
+    real_pos = np.sort(roots.real[(np.abs(roots.imag) <= 1e-6 * np.abs(roots)) & (roots.real > 0)])
+    if real_pos.size == 0:
+        return math.inf if G[-1] > 0 else 0.0
+
+    def g(x: float) -> float:
+        return float(np.polynomial.polynomial.polyval(x, G))
+
+    # A fine scan up to just past the last real root: the first negative value brackets the end.
+    top = float(real_pos[-1]) * 1.05 + 1e-12
+    grid = np.unique(np.concatenate([np.linspace(0, top, 4001)[1:],
+                                     real_pos * (1 - 1e-9), real_pos * (1 + 1e-9)]))
+    values = np.polynomial.polynomial.polyval(grid, G)
+    bad = np.flatnonzero(values < 0)
+    if bad.size == 0:
+        return math.inf if G[-1] > 0 else top
+    i = int(bad[0])
+    lo = 0.0 if i == 0 else float(grid[i - 1])
+    if lo == 0.0:
+        return 0.0
+    return float(brentq(g, lo, float(grid[i]), xtol=tol.STABILITY_XTOL, rtol=4 * tol.EPS, maxiter=200))
+
+
+def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
+    """(real, imaginary) stability intervals of a Runge-Kutta method, decided on the polynomials
+    Q(-x)^2 - P(-x)^2 and |Q(iy)|^2 - |P(iy)|^2 (inf only when proven unbounded)."""
+    _check_type(tableau, ButcherTableau, "tableau")
+    P, P_abs, Q, Q_abs = _rk_numerator_denominator(tableau)
+    p_lin = rk_linear_order(tableau)
+    out = []
+    for imaginary in (False, True):
+        q2, q2_abs = _square_on_ray(Q, Q_abs, imaginary)
+        p2, p2_abs = _square_on_ray(P, P_abs, imaginary)
+        F = _poly_add(q2, -p2)
+        F_abs = _poly_add(q2_abs, p2_abs)
+        out.append(_first_sign_change(F, F_abs, p_lin if imaginary else 0))
+    return out[0], out[1]
+
+
+def splitting_trace_polynomial(scheme: SplittingScheme) -> tuple[np.ndarray, np.ndarray]:
+    """The trace of the propagator on x'' = -x as a polynomial in h (ascending), with magnitudes."""
+    _check_type(scheme, SplittingScheme, "scheme")
+    M = [[np.array([1.0]), np.array([0.0])], [np.array([0.0]), np.array([1.0])]]
+    Ma = [[np.array([1.0]), np.array([0.0])], [np.array([0.0]), np.array([1.0])]]
+    for kind, c in scheme.sequence:
+        if kind == "D":  # [[1, c h], [0, 1]] @ M
+            row = [_poly_add(M[0][j], _poly_mul(np.array([0.0, c]), M[1][j])) for j in range(2)]
+            row_a = [_poly_add(Ma[0][j], _poly_mul(np.array([0.0, abs(c)]), Ma[1][j])) for j in range(2)]
+            M, Ma = [row, M[1]], [row_a, Ma[1]]
+        else:  # [[1, 0], [-c h, 1]] @ M
+            row = [_poly_add(M[1][j], _poly_mul(np.array([0.0, -c]), M[0][j])) for j in range(2)]
+            row_a = [_poly_add(Ma[1][j], _poly_mul(np.array([0.0, abs(c)]), Ma[0][j])) for j in range(2)]
+            M, Ma = [M[0], row], [Ma[0], row_a]
+    return _poly_add(M[0][0], M[1][1]), _poly_add(Ma[0][0], Ma[1][1]), M, Ma
+
+
+def splitting_linear_order(scheme: SplittingScheme) -> int:
+    """The order of the propagator on x'' = -x against the exact rotation [[cos h, sin h],
+    [-sin h, cos h]]: the method's order on linear problems q'' = -K q (K diagonalisable)."""
+    _, _, M, Ma = splitting_trace_polynomial(scheme)
+    top = max(m.size for row in M for m in row)
+    exact = [[lambda k: (-1) ** (k // 2) / math.factorial(k) if k % 2 == 0 else 0.0,
+              lambda k: (-1) ** (k // 2) / math.factorial(k) if k % 2 == 1 else 0.0],
+             [lambda k: -((-1) ** (k // 2)) / math.factorial(k) if k % 2 == 1 else 0.0,
+              lambda k: (-1) ** (k // 2) / math.factorial(k) if k % 2 == 0 else 0.0]]
+    for k in range(1, top + 2):
+        for i in range(2):
+            for j in range(2):
+                m = M[i][j][k] if k < M[i][j].size else 0.0
+                ma = Ma[i][j][k] if k < Ma[i][j].size else 0.0
+                want = exact[i][j](k)
+                allowed = max(tol.ORDER_CONDITION_ULPS * tol.EPS * k * ma,
+                              tol.ORDER_CONDITION_TOL * abs(want), tol.ORDER_CONDITION_FLOOR)
+                if abs(m - want) > allowed:
+                    return k - 1
+    return top
+
+
+def splitting_hw_limit(scheme: SplittingScheme) -> float:
+    """Largest h omega with |tr M| <= 2 on (0, h omega] (det M = 1: the eigenvalues stay on the
+    unit circle), decided on the polynomial 4 - tr(h)^2."""
+    tr, tr_abs, _, _ = splitting_trace_polynomial(scheme)
+    F = _poly_add(np.array([4.0]), -_poly_mul(tr, tr))
+    F_abs = _poly_add(np.array([4.0]), _poly_mul(tr_abs, tr_abs))
+    return _first_sign_change(F, F_abs, 1)
+
+
 def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH_LIMIT) -> dict | None:
     """Stability figures from a coefficient object, or None when it has none (or an unknown
     kind). First-order families: {'kind': 'first-order', 'amplification': z -> |R|,
@@ -664,12 +885,18 @@ def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH
             return second_order_lmm_amplification(coefficients, hw)
     else:
         return None
-    if isinstance(coefficients, ButcherTableau | LinearMultistep):
+    if isinstance(coefficients, ButcherTableau):
+        real, imag = rk_stability_intervals(coefficients)
+        return {"kind": "first-order", "amplification": amp, "real_interval": real,
+                "imag_interval": imag}
+    if isinstance(coefficients, LinearMultistep):
         return {
             "kind": "first-order",
             "amplification": amp,
             "real_interval": real_stability_interval(amp, limit=limit),
             "imag_interval": imag_stability_interval(amp, limit=limit),
         }
+    if isinstance(coefficients, SplittingScheme):
+        return {"kind": "newtonian", "amplification": hw_amp, "hw_limit": splitting_hw_limit(coefficients)}
     return {"kind": "newtonian", "amplification": hw_amp,
             "hw_limit": hw_stability_limit(hw_amp, limit=limit)}

@@ -7,10 +7,18 @@ EPS = float(np.finfo(np.float64).eps)
 # Coefficient self-checks: tableaux are typed as decimals or fractions; 1e-14 allows the last
 # digits of a float64 literal and no more.
 COEFFICIENT_TOL = 1e-14
+# ... or, for coefficients of large magnitude (extrapolation methods: sum |b| up to ~3000), this
+# many units of rounding of the sum of their magnitudes, per term summed.
+COEFFICIENT_ULPS = 16.0
 
 # Order conditions from coefficients: sums of products of up to 8 float64 factors; 1e-11 is far
 # above their rounding and far below any genuine defect (the smallest condition value is 1/8!).
 ORDER_CONDITION_TOL = 1e-11
+# ... relative to the condition's value 1/gamma(t) (trees of order 12 have 1/gamma down to 2e-9);
+# and, for coefficients of large magnitude, this many roundings per vertex of the sum of the
+# magnitudes of the products (extrapolation tableaux reach sum |b| ~ 3000).
+ORDER_CONDITION_ULPS = 64.0
+ORDER_CONDITION_FLOOR = 1e-13
 
 # A method error counts only when it is at least this many times the reference's certified error.
 REFERENCE_MARGIN = 100.0
@@ -89,6 +97,9 @@ SERIES_ORDER_TOL = 1e-10
 # Linear stability intervals (harness.theory.stability_boundary): |R| <= 1 + this counts as
 # stable (a few roundings of a one-step evaluation; Euler's 1 + y^2/2 exceeds it at y ~ 1e-6) ...
 STABILITY_AMPLIFICATION_TOL = 1e-12
+# Exact intervals from polynomials (Runge-Kutta, splitting): a coefficient counts as zero when it
+# is within this many roundings (per term) of the sum of the magnitudes that produced it.
+STABILITY_POLY_ULPS = 64.0
 # ... the crossing is bracketed on a scan, linear with this step up to ...
 STABILITY_SCAN_STEP = 1e-2
 STABILITY_SCAN_LINEAR_END = 10.0
