@@ -219,7 +219,7 @@ def test_stability_boundary_on_known_functions():
 def test_bad_input_is_named():
     with pytest.raises(InputError, match="`tableau` must be a ButcherTableau"):
         theory.rk_order("rk4")
-    with pytest.raises(InputError, match=r"`max_order` must lie in \[1, 10\]"):
+    with pytest.raises(InputError, match=r"`max_order` must lie in \[1, 12\]"):
         theory.rk_order(get_stepper("rk4").coefficients, max_order=13)
     with pytest.raises(InputError, match="`order` must be a whole number"):
         theory.rk_order_conditions(get_stepper("rk4").coefficients, 2.5)
