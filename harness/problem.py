@@ -263,7 +263,8 @@ class Problem:
         return Dynamics(self, self.pars_for(size, pars))
 
     @cached_property
-    def _jacobian_exprs(self) -> list[hy.expression]:
+    def jacobian_expressions(self) -> list[hy.expression]:
+        """d rhs_i / d y_j as heyoka expressions, row by row (the derived Jacobian)."""
         return [hy.diff(f, v) for f in self.rhs for v in self.variables]
 
     def compiled(self, kind: str, constants: tuple[float, ...] | None) -> Any:
@@ -282,7 +283,7 @@ class Problem:
                 raise InputError(f"problem {self.name!r} has no Newtonian form (no acceleration)")
             exprs = list(self.newtonian.acceleration)
         elif kind == "jac":
-            exprs = self._jacobian_exprs
+            exprs = self.jacobian_expressions
         elif kind == "inv":
             exprs = [self.invariants[k] for k in sorted(self.invariants)]
         else:
@@ -315,7 +316,7 @@ class Problem:
         state = dict(self.__dict__)
         state.pop("_lock", None)
         state.pop("_compiled", None)
-        state.pop("_jacobian_exprs", None)
+        state.pop("jacobian_expressions", None)
         return state
 
     def __setstate__(self, state):

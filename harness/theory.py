@@ -719,7 +719,7 @@ def _poly_add(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def _rk_numerator_denominator(tableau: ButcherTableau) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _rk_numerator_denominator(tableau: ButcherTableau) -> tuple[np.ndarray, ...]:
     """Coefficients (ascending) of P and Q in R = P/Q, with magnitudes for their rounding.
     Explicit: Q = 1 and P is the Taylor polynomial of R. Otherwise P(z) = det(I - zA + z e b^T)
     and Q(z) = det(I - zA), interpolated at roots of unity in 40-digit arithmetic."""

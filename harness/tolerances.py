@@ -52,6 +52,11 @@ EXACT_ULPS = 1e3
 
 # Gate: a measured order may differ from the claim by at most this.
 GATE_ORDER_TOL = 0.2
+# A problem is stiff for a method when a stable step (its real stability interval over the
+# largest -Re(lambda) along the reference) needs more than this many steps over the horizon:
+# a fourth-order method's error on an O(1) problem is then ~1e-12, within a few halvings of the
+# float64 floor, so `unstable` above the floor is not evidence against its order.
+STIFF_STEP_COUNT = 1000.0
 
 # Ensemble: members and the relative size of the perturbation of the initial state.
 ENSEMBLE_SIZE = 16
@@ -64,6 +69,12 @@ SWEEP_WORK_BUDGET = 524_288
 # An implicit step also solves Newton systems (a batched Jacobian and LU per iteration, ~2
 # iterations per step): it counts as this many of its declared evaluations.
 IMPLICIT_STEP_COST = 4.0
+# When the budget ends a sweep before the asymptotic range while the error is still far above the
+# floor, the horizon is cut by this factor (a first-order method's error at fixed h falls about
+# as fast as the horizon, and its steps needed fall with its square) and the sweep runs again,
+# at most this many times.
+HORIZON_SHRINK = 4.0
+MAX_HORIZON_SHRINKS = 2
 
 # Largest ensemble accepted (memory: a 1e7-member state of dimension 12 is ~1 GB per copy).
 MAX_ENSEMBLE_SIZE = 10_000_000

@@ -1,8 +1,9 @@
 """The gate over the whole registry: every stepper on every compatible catalogue problem.
 
-This is the CI gate inside the test suite: it fails when any measured order misses its claim
-(beyond the expectations table in harness/gate.py, each entry with its reason) or any cell
-fails. Finished cells are cached in .cache/cells, so a rerun with unchanged code is fast.
+This is the CI gate inside the test suite: it fails when any cell contradicts what the method's
+and the problem's facts predict (harness.rules), when a stepper has no cell that measured its
+claim, or when any cell fails. Every cell that is `not-measurable` carries the limit that
+stopped it. Finished cells are cached in .cache/cells, so a rerun with unchanged code is fast.
 """
 
 from __future__ import annotations
@@ -21,8 +22,12 @@ def test_gate_passes_over_the_whole_registry():
     bad = table[~table["passed"]]
     assert bad.empty, bad[["stepper", "problem", "claimed_order", "measured_order", "verdict",
                            "reason"]].to_string()
-    # Every registered stepper was judged on at least one problem.
+    # Every registered stepper was judged on at least one problem, and passed at least one.
     assert set(table["stepper"]) == set(steppers.names())
+    assert set(table[table.outcome == "pass"].stepper) == set(steppers.names())
+    # Every cell that could not be measured says why.
+    unmeasured = table[table.outcome == "not-measurable"]
+    assert unmeasured.reason.str.len().gt(20).all(), unmeasured[["stepper", "problem", "reason"]]
     # The tutorial's claim that velocity Verlet is "two orders worse" than Stormer-Verlet is
     # false: both measure global order 2 on the same problems.
     for name in ("stormer-verlet", "velocity-verlet"):

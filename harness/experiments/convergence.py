@@ -246,8 +246,35 @@ def step_budget(stepper: Stepper, config: Mapping[str, Any]) -> int:
 
 
 def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
-
+    """The sweep over the problem's convergence horizon; where the work budget ends it before
+    MIN_FIT_POINTS points reach the asymptotic range while the error is still far above the
+    floor (a low-order method on a long orbit), the same sweep runs again over a horizon
+    HORIZON_SHRINK times shorter, at most MAX_HORIZON_SHRINKS times: the order does not depend
+    on the horizon, and the rows say which one was used and why."""
     T0, T = problem.t0, problem.convergence_t_end
+    notes: list[str] = []
+    for attempt in range(tol.MAX_HORIZON_SHRINKS + 1):
+        frame = _step_sweep_at(stepper, problem, config, T)
+        g = frame[frame.kind == "global"]
+        budget_bound = bool(frame.attrs.get("budget_ended"))
+        enough = int(g.in_fit.sum()) >= tol.MIN_FIT_POINTS
+        if enough or not budget_bound or attempt == tol.MAX_HORIZON_SHRINKS:
+            break
+        new_T = T0 + (T - T0) / tol.HORIZON_SHRINK
+        notes.append(f"work budget spent with {int(g.in_fit.sum())} asymptotic point(s) up to t = {T:.6g}; "
+                     f"horizon shortened to t = {new_T:.6g}")
+        T = new_T
+    if notes:
+        frame["message"] = frame["message"].fillna("").astype(str)
+        frame.loc[frame.kind == "global", "message"] = [
+            "; ".join([*notes, m] if m else notes) for m in frame.loc[frame.kind == "global", "message"]
+        ]
+    return frame
+
+
+def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
+
+    T0 = problem.t0
     span = T - T0
     y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
     ref = _best_reference(problem, T, y0)
@@ -294,17 +321,27 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         return rec["error"] < tol.ROUNDOFF_MARGIN * rec["rounding_level"] or (
             rec["error"] < tol.REFERENCE_MARGIN * ref_err)
 
+    # Phase 0: a start that is already below the start error (a high-order method on a smooth
+    # span) is coarsened first, down to one step, so the sweep sees the error fall.
+    n = int(config["n_start"])
+    rec = run(n)
+    while n > 1 and np.isfinite(rec["error"]) and rec["error"] < start_error:
+        n = max(1, n // 2)
+        rec = run(n)
+    n = int(config["n_start"])
     # Phase 1 and 2: from coarse to fine (ratio 2) until the error has fallen below the start
     # error and either the asymptotic window holds `target` points or the floor is reached;
     # the budget ends it in any case.
-    n = int(config["n_start"])
+    budget_ended = True
     while spent + n <= budget:
         rec = run(n)
         if np.isfinite(rec["error"]) and rec["error"] < start_error:
             if at_floor(rec):
+                budget_ended = False
                 break
             _, reasons = classified()
             if int((reasons == "").sum()) >= target:
+                budget_ended = False
                 break
         n = int(math.ceil(n * ratio))
     # Phase 3: widen. Where the floor (or the budget) came before `target` points, fill in step
@@ -341,6 +378,7 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
     out["problem"] = problem.name
     out["t_end"] = T
     out["ensemble_size"] = y0.shape[1]
+    out.attrs["budget_ended"] = budget_ended
     return out
 
 

@@ -34,6 +34,22 @@ def _fit_kind(g: pd.DataFrame, kind: str) -> float:
     return fit_order(sub.h.values, sub.error.values)["order"]
 
 
+def _insufficient_reason(gl: pd.DataFrame) -> str:
+    """Which limit stopped the sweep short of MIN_FIT_POINTS asymptotic points."""
+    counts = gl.excluded.replace("", "kept").value_counts().to_dict()
+    kept = int(counts.pop("kept", 0))
+    excluded = ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
+    finest = gl.iloc[-1]
+    if gl.excluded.isin(["roundoff", "reference"]).any():
+        limit = ("the float64 rounding floor (or the reference's accuracy) came first: the local "
+                 "slopes had not settled on a plateau above it")
+    else:
+        limit = (f"the work budget ended the sweep at {int(finest.n_steps)} steps with the error still "
+                 f"{float(finest.error):.3g}, above the floor")
+    need = tol.MIN_FIT_POINTS
+    return f"{kept} point(s) in the asymptotic range (need {need}; excluded: {excluded}); {limit}"
+
+
 def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
     info = stepper.info
     base = {
@@ -93,6 +109,7 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         base["verdict"] = "unstable"
     else:
         base["verdict"] = "insufficient-range"
+        base["message"] = _insufficient_reason(gl)
     base["local_exponent"] = _fit_kind(g, "local")
     base["local_exponent_q"] = _fit_kind(g, "local-q")
     if messages and not base["message"]:

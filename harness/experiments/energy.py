@@ -23,9 +23,9 @@ For one (stepper, problem) cell:
    signature of rounding), `bounded` (no secular trend).
 4. Verdicts. A stepper claimed symplectic must be `bounded`, or show a secular growth within
    what rounding explains (Brouwer's law: rounding makes the energy error a random walk,
-   ~ sqrt(n) eps; HLW VIII.5): `as-claimed`, else `claim-false`. Pairs listed in `EXPECTATIONS`
-   must show their expected class (RK4 drifts linearly on Kepler: HLW I.2.3). Other pairs are
-   measured without a claim (`no-claim`). For central-force problems, steppers whose
+   ~ sqrt(n) eps; HLW VIII.5): `as-claimed`, else `claim-false`. Whether a method is symplectic
+   comes from its coefficients (`harness.rules.energy_expectation`), never from its name; other
+   methods are measured without a claim (`no-claim`). For central-force problems, steppers whose
    structure conserves quadratic invariants (symplectic Runge-Kutta, splitting and Stormer
    methods: HLW IV.2 and VI.4) must keep the angular momentum to rounding: a relative error of
    at most ANGULAR_MOMENTUM_ROUNDING_ULPS * n * eps after n steps.
@@ -48,7 +48,6 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
@@ -56,8 +55,6 @@ __all__ = [
     "EnergyExperiment",
     "TimeScale",
     "TIME_SCALES",
-    "EXPECTATIONS",
-    "Expectation",
     "classify_drift",
     "problem_table_cells",
     "conserves_quadratic_invariants",
@@ -106,25 +103,6 @@ TIME_SCALES: dict[str, TimeScale] = {
     "free-fall": TimeScale(1.0, 64, "the fall time scale of the t_span, 1"),
 }
 
-
-@dataclass(frozen=True)
-class Expectation:
-    """The drift class a (stepper, problem) pair is expected to show, and why."""
-
-    drift_class: str
-    reason: str
-
-
-_RK_KEPLER = (
-    "explicit Runge-Kutta methods are neither symplectic nor symmetric: on the Kepler orbit "
-    "the energy error accumulates linearly in time (HLW I.2.3; course file 004, symplectic "
-    "integrators, where RK4 is said to drift)"
-)
-EXPECTATIONS: dict[tuple[str, str], Expectation] = {
-    ("rk4", "kepler-elliptic"): Expectation("linear", _RK_KEPLER),
-    ("rk4", "kepler-circular"): Expectation("linear", _RK_KEPLER),
-    ("rk38", "kepler-elliptic"): Expectation("linear", _RK_KEPLER),
-}
 
 DRIFT_CLASSES = ("bounded", "sqrt", "linear", "unstable")
 
@@ -223,17 +201,9 @@ def conserves_quadratic_invariants(stepper: Stepper) -> bool:
     momentum of a central force: symplectic Runge-Kutta methods (b_i a_ij + b_j a_ji = b_i b_j,
     HLW IV.2.1), drift/kick splittings (each drift and kick keeps q x v when a is parallel to q,
     HLW IV.2.2) and Stormer's rule (velocity Verlet in two-step form, HLW I.1.4)."""
-    info = stepper.info
-    coeffs = stepper.coefficients
-    if not info.symplectic:
-        return False
-    if isinstance(coeffs, SplittingScheme | SecondOrderMultistep):
-        return True
-    if isinstance(coeffs, ButcherTableau):
-        b, A = coeffs.b, coeffs.A
-        M = b[:, None] * A + (b[:, None] * A).T - np.outer(b, b)
-        return bool(np.max(np.abs(M)) <= tol.COEFFICIENT_TOL * 10)
-    return info.family in ("splitting", "stormer")
+    from harness.facts import method_facts
+
+    return bool(method_facts(stepper).symplectic)
 
 
 # -- classification -------------------------------------------------------------------------------
@@ -452,13 +422,17 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
                        fit_start=int(fit_start))
     if message.startswith("step failure"):
         e["drift_class"] = "unstable"  # an implicit solve broke down: the motion is destroyed
-    expected = EXPECTATIONS.get((info.name, problem))
+    from harness.facts import method_facts
+    from harness.rules import energy_expectation
+
+    facts = method_facts(stepper)
+    expected_class, expected_reason = energy_expectation(facts)
     limit = rounding_growth(n_end)
     rec = {
         "stepper": info.name, "problem": problem, "h": float(first["h"]), "tol": float(first["tol"]),
         "steps": n_end, "t_end": float(energy.t.iloc[-1]),
-        "claimed_symplectic": bool(info.symplectic),
-        "expected_class": expected.drift_class if expected else "",
+        "claimed_symplectic": bool(facts.symplectic),
+        "expected_class": expected_class,
         "max_rel_energy_error": e["max_error"], "drift_class": e["drift_class"],
         "drift_exponent": e["drift_exponent"], "drift_slope": e["drift_slope"],
         "secular_growth": e["secular_growth"], "rounding_growth": limit,
@@ -471,7 +445,7 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
     }
     reasons: list[str] = []
     passed = True
-    if info.symplectic:
+    if expected_class == "bounded":
         ok = e["drift_class"] == "bounded" or (
             e["drift_class"] in ("sqrt", "linear") and e["secular_growth"] <= limit
         )
@@ -479,16 +453,9 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
         if not ok:
             passed = False
             reasons.append(
-                f"claimed symplectic but the energy error is {e['drift_class']} (growth "
+                f"{expected_reason}, but it is {e['drift_class']} (growth "
                 f"{e['secular_growth']:.3g} over the fit window, rounding explains {limit:.3g})"
             )
-    elif expected is not None:
-        ok = e["drift_class"] == expected.drift_class
-        verdict = "as-expected" if ok else "unexpected"
-        if not ok:
-            passed = False
-            reasons.append(f"expected {expected.drift_class} ({expected.reason}), measured "
-                           f"{e['drift_class']}")
     else:
         verdict = "no-claim"
     L = g[g.quantity == "angular_momentum"].sort_values("step")

@@ -124,7 +124,8 @@ class WorkPrecisionExperiment(Experiment):
         frame = frame[frame["kind"].isin(["global", "tolerance"])].copy()
         frame["kind"] = kind
         counted = frame["rhs_evals"].fillna(0) + frame["force_evals"].fillna(0)
-        jets = stepper.info.family == "taylor" or (counted.eq(0).all() and kind == "tolerance")
+        # A Taylor integrator evaluates no right-hand side: its work is counted in internal steps.
+        jets = bool(counted.eq(0).all()) and kind == "tolerance"
         frame["evals_unit"] = "taylor-step" if jets else "f-or-force"
         frame["rhs_evals"] = np.where(jets, frame["n_steps"], counted).astype(np.int64)
         frame["claimed_order"] = float(stepper.info.claimed_order or np.nan)

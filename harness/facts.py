@@ -1,0 +1,190 @@
+"""Facts about a method and a problem, derived from their definitions; the rules read only these.
+
+A verdict never looks at a name. It follows from
+
+- `MethodFacts`: what the coefficients say (order, linear order, stability intervals, symmetric,
+  symplectic), asked of the coefficient object like a NodePy method; a method without
+  coefficients (a black box) is described by its declared claims instead, and says so
+  (`source = "claims"`);
+- `ProblemFacts`: what the symbolic (heyoka) definition says: linear (a constant Jacobian and no
+  explicit time), the degree of a polynomial solution (a nilpotent affine system), whether the
+  acceleration is velocity-free, and how stiff it is (the Jacobian's spectrum sampled along the
+  reference solution over the convergence horizon).
+
+Two steppers with the same coefficients have the same facts, whatever they are called.
+References: Hairer, Norsett & Wanner, *Solving ODEs I*, II.2 and III.2 (order), Hairer & Wanner,
+*Solving ODEs II*, IV.2 (stability functions, stiffness); Hairer, Lubich & Wanner, *Geometric
+Numerical Integration*, V-VI (symmetry, symplecticity).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from harness.problem import Problem
+from harness.stepper import AdaptiveStepper, Stepper
+
+__all__ = ["MethodFacts", "ProblemFacts", "method_facts", "problem_facts"]
+
+
+@dataclass(frozen=True)
+class MethodFacts:
+    """What is known about a method, and where it comes from (`coefficients` or `claims`)."""
+
+    source: str
+    adaptive: bool
+    explicit: bool
+    order: int | None
+    linear_order: int | None
+    embedded_order: int | None
+    symmetric: bool | None
+    symplectic: bool | None
+    real_interval: float | None
+    imag_interval: float | None
+    hw_limit: float | None
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class ProblemFacts:
+    """What the symbolic definition of a problem implies."""
+
+    linear: bool
+    polynomial_degree: int | None
+    newtonian: bool
+    velocity_free: bool
+    time_dependent: bool
+    stiffness: float
+    horizon: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def method_facts(stepper: Stepper) -> MethodFacts:
+    """Facts of `stepper`: from its coefficient object when it has one, else its claims."""
+    coeffs = getattr(stepper, "coefficients", None)
+    key = coeffs.fingerprint() if coeffs is not None and hasattr(coeffs, "fingerprint") else None
+    info = stepper.info
+    adaptive = isinstance(stepper, AdaptiveStepper) or bool(info.adaptive)
+    if key is not None and hasattr(coeffs, "order"):
+        derived = dict(_coefficient_facts(key, (coeffs,)))
+        for prop in ("symmetric", "symplectic"):  # undecided by the coefficients: the claim
+            if derived[prop] is None:
+                derived[prop] = bool(getattr(info, prop))
+        return MethodFacts(source="coefficients", adaptive=adaptive, explicit=bool(info.explicit),
+                           **derived)
+    claims = info.extra.get("stability") if isinstance(info.extra.get("stability"), dict) else {}
+    order = info.claimed_order
+    linear = info.extra.get("linear_order", order)
+    return MethodFacts(
+        source="claims", adaptive=adaptive, explicit=bool(info.explicit), order=order,
+        linear_order=linear, embedded_order=info.extra.get("embedded_order"),
+        symmetric=bool(info.symmetric), symplectic=bool(info.symplectic),
+        real_interval=claims.get("real_interval"), imag_interval=claims.get("imag_interval"),
+        hw_limit=claims.get("hw_limit"),
+    )
+
+
+@lru_cache(maxsize=512)
+def _coefficient_facts(fingerprint: str, box: tuple) -> dict[str, Any]:
+    from harness.theory import analytic_stability
+
+    coeffs = box[0]
+    stab = analytic_stability(coeffs) or {}
+    embedded = getattr(coeffs, "embedded_order", None)
+    return {
+        "order": int(coeffs.order()),
+        "linear_order": int(coeffs.linear_order()),
+        "embedded_order": embedded() if callable(embedded) else None,
+        "symmetric": None if getattr(coeffs, "symmetric", None) is None else bool(coeffs.symmetric),
+        "symplectic": None if getattr(coeffs, "symplectic", None) is None else bool(coeffs.symplectic),
+        "real_interval": stab.get("real_interval"),
+        "imag_interval": stab.get("imag_interval"),
+        "hw_limit": stab.get("hw_limit"),
+    }
+
+
+# -- problems ---------------------------------------------------------------------------------
+_STIFFNESS_SAMPLES = 9
+
+
+def problem_facts(problem: Problem) -> ProblemFacts:
+    """Facts of `problem`, derived from its symbolic definition (cached by its fingerprint)."""
+    return _problem_facts(problem.fingerprint(), (problem,))
+
+
+@lru_cache(maxsize=256)
+def _problem_facts(fingerprint: str, box: tuple) -> ProblemFacts:
+    problem = box[0]
+    J = _constant_jacobian(problem)
+    linear = J is not None and not problem.time_dependent
+    degree = _polynomial_degree(problem, J) if linear else None
+    return ProblemFacts(
+        linear=linear,
+        polynomial_degree=degree,
+        newtonian=problem.newtonian is not None,
+        velocity_free=problem.newtonian is not None and not problem.velocity_dependent,
+        time_dependent=bool(problem.time_dependent),
+        stiffness=_stiffness(problem),
+        horizon=float(problem.convergence_t_end - problem.t0),
+    )
+
+
+def _constant_jacobian(problem: Problem) -> np.ndarray | None:
+    """The Jacobian as numbers when no entry depends on a state variable, else None."""
+    import heyoka as hy
+
+    names = {str(v) for v in problem.variables}
+    for expr in problem.jacobian_expressions:
+        if set(hy.get_variables(expr)) & names:
+            return None
+    dyn = problem.dynamics()
+    return dyn.jac(problem.t0, np.zeros((problem.dim, 1)))[:, :, 0]
+
+
+def _polynomial_degree(problem: Problem, J: np.ndarray) -> int | None:
+    """For y' = J y + c (constant J, c): the solution is a polynomial in t exactly when the
+    augmented matrix [[J, c], [0, 0]] is nilpotent; its degree is the nilpotency index - 1."""
+    c = problem.dynamics().f(problem.t0, np.zeros((problem.dim, 1)))[:, 0]
+    n = problem.dim + 1
+    M = np.zeros((n, n))
+    M[:-1, :-1] = J
+    M[:-1, -1] = c
+    P = np.eye(n)
+    for k in range(1, n + 1):
+        P = P @ M
+        if not np.any(P):
+            return k - 1
+    return None
+
+
+def _stiffness(problem: Problem) -> float:
+    """The largest -Re(lambda) of the Jacobian's eigenvalues along the reference solution from
+    the problem's own start over its convergence horizon (0 when every eigenvalue has a
+    non-negative real part): the rate a stable explicit step must resolve."""
+    from harness.ground_truth import reference
+
+    t0, T = problem.t0, problem.convergence_t_end
+    times = np.linspace(t0, T, _STIFFNESS_SAMPLES)[1:]
+    try:
+        ref = reference(problem, times, problem.y0.reshape(-1, 1))
+        states = np.concatenate([problem.y0.reshape(-1, 1), *[ref.y[i] for i in range(len(times))]], axis=1)
+    except Exception:  # a reference that cannot be had: judge the start alone
+        states = problem.y0.reshape(-1, 1)
+    dyn = problem.dynamics(size=states.shape[1])
+    jac = dyn.jac(t0, np.ascontiguousarray(states))
+    worst = 0.0
+    for k in range(states.shape[1]):
+        with np.errstate(all="ignore"):
+            lam = np.linalg.eigvals(jac[:, :, k])
+        if np.all(np.isfinite(lam)):
+            worst = max(worst, float(np.max(-lam.real)))
+    return worst if math.isfinite(worst) else math.inf

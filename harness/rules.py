@@ -1,0 +1,128 @@
+"""How to judge: the verdict a (method, problem) pair should show, from facts alone.
+
+Every rule reads `harness.facts.MethodFacts` and `ProblemFacts` and says why in one sentence.
+The gate, every experiment and the report use these rules; none of them looks at a name, so a
+user's method with the same coefficients as a built-in gets the same expectation.
+
+Convergence (`convergence_expectation`), first rule that applies:
+1. adaptive method: judged by its tolerance sweep (`meets-tolerance`);
+2. the solution is a polynomial of degree d in t and the method's linear order is >= d: `exact`
+   (the one-step map is the Taylor polynomial of the exact flow up to degree d);
+3. linear constant-coefficient problem: `converged` at the linear order (R(z) against e^z),
+   which exceeds the order for some methods (several SSP methods, Merson's);
+4. otherwise `converged` at the order (from coefficients, or the claim of a black box).
+Verdicts that say "not measurable here" rather than "wrong" (`tolerated`):
+- `insufficient-range` always: the measurement states the limit that stopped it (work budget,
+  float64 floor, reference accuracy) and the order is then judged on the other problems;
+- `unstable` too, when the problem is stiff for this method: the stability interval divided
+  by the stiffness (largest -Re(lambda) along the reference) asks for more than
+  STIFF_STEP_COUNT steps over the horizon, where the error is already near the rounding floor;
+- `exact` when not predicted: the error was at the rounding floor even at the coarsest step
+  sizes the sweep tried, so no order can be read off (an order-8 method on a short smooth span).
+The gate also needs at least one cell per stepper that measures the claim: a stepper judged on
+nothing does not pass.
+
+Energy (`energy_expectation`): a method whose coefficients make it symplectic must keep the
+energy error bounded (up to rounding growth); other methods are measured without a claim.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from harness import tolerances as tol
+from harness.facts import MethodFacts, ProblemFacts
+
+__all__ = ["Expectation", "convergence_expectation", "energy_expectation", "judge_convergence"]
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """The verdict a cell should show, the order it should measure (or None), the verdicts that
+    only mean "not measurable here", and the reason for the expectation (empty when it is the
+    plain claim)."""
+
+    verdict: str
+    order: float | None
+    tolerated: tuple[str, ...]
+    reason: str
+
+
+def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
+    """Steps the method needs over the horizon before its step is inside its stability interval
+    (0 when the interval is unbounded or the problem has no decaying mode)."""
+    interval = method.real_interval
+    if interval is None or not math.isfinite(interval) or problem.stiffness <= 0:
+        return 0.0
+    if interval <= 0:
+        return math.inf
+    return problem.horizon * problem.stiffness / interval
+
+
+def convergence_expectation(method: MethodFacts, problem: ProblemFacts) -> Expectation:
+    """The expected convergence verdict of a (method, problem) pair; see the module docstring."""
+    if method.adaptive or method.order is None:
+        return Expectation("meets-tolerance", None, (), "adaptive: judged by its tolerance sweep")
+    tolerated = ["insufficient-range", "exact"]
+    notes = []
+    steps = _stiff_steps(method, problem)
+    if steps > tol.STIFF_STEP_COUNT:
+        tolerated.append("unstable")
+        notes.append(
+            f"stiff for this method: -Re(lambda) reaches {problem.stiffness:.3g} along the reference "
+            f"and the real stability interval is {method.real_interval:.3g}, so a stable step needs "
+            f"~{steps:.3g} steps over the horizon {problem.horizon:.3g}"
+        )
+    linear_order = method.linear_order if method.linear_order is not None else method.order
+    degree = problem.polynomial_degree
+    if degree is not None and linear_order >= degree:
+        reason = (f"the solution is a polynomial of degree {degree} in t, which a method of linear "
+                  f"order {linear_order} >= {degree} reproduces to rounding")
+        return Expectation("exact", None, ("insufficient-range",), "; ".join([reason, *notes]))
+    if problem.linear and linear_order != method.order:
+        reason = (f"linear problem: the error follows R(z) - e^z, which this method matches to "
+                  f"order {linear_order} (its order is {method.order})")
+        return Expectation("converged", float(linear_order), tuple(tolerated), "; ".join([reason, *notes]))
+    return Expectation("converged", float(method.order), tuple(tolerated), "; ".join(notes))
+
+
+def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]:
+    """(outcome, reason) of one convergence summary record: outcome is `pass`, `fail` or
+    `not-measurable` (a tolerated verdict: neither evidence for nor against the claim)."""
+    verdict = record["verdict"]
+    msg = str(record.get("message") or "")
+    if expectation.verdict == "meets-tolerance":
+        if verdict == "meets-tolerance":
+            return "pass", expectation.reason
+        return "fail", f"adaptive stepper: {verdict}" + (f": {msg}" if msg else "")
+    if verdict == expectation.verdict:
+        if expectation.order is None:
+            return "pass", expectation.reason
+        measured = float(record["measured_order"])
+        diff = abs(measured - expectation.order)
+        if math.isfinite(measured) and diff <= tol.GATE_ORDER_TOL:
+            return "pass", expectation.reason
+        return "fail", (f"measured order {measured:.3f} differs from the expected "
+                        f"{expectation.order:g} by {diff:.3f} > {tol.GATE_ORDER_TOL}"
+                        + (f" ({expectation.reason})" if expectation.reason else ""))
+    if verdict in expectation.tolerated:
+        why = {
+            "insufficient-range": "too few points in the asymptotic range",
+            "exact": "the error is at the rounding floor at every step size tried",
+            "unstable": "unstable at every step size above the rounding floor",
+        }[verdict]
+        detail = "; ".join(x for x in (msg, expectation.reason) if x)
+        return "not-measurable", f"{why}" + (f": {detail}" if detail else "")
+    expected = expectation.verdict + (f" at order {expectation.order:g}" if expectation.order else "")
+    return "fail", (f"expected {expected}, got {verdict}" + (f": {msg}" if msg else "")
+                    + (f" ({expectation.reason})" if expectation.reason else ""))
+
+
+def energy_expectation(method: MethodFacts) -> tuple[str, str]:
+    """(expected drift class or '', reason): a symplectic method keeps the energy error bounded
+    (HLW IX.3; rounding adds a sqrt(t) random walk, Brouwer's law, HLW VIII.5)."""
+    if method.symplectic:
+        return "bounded", ("symplectic" + (" by its coefficients" if method.source == "coefficients"
+                                          else " (declared)") + ": the energy error stays bounded")
+    return "", ""
