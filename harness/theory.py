@@ -75,6 +75,7 @@ __all__ = [
     "hw_stability_limit",
     "analytic_stability",
     "rk_linear_order",
+    "lmm_real_interval",
     "rk_stability_coefficients",
     "rk_stability_intervals",
     "splitting_linear_order",
@@ -757,54 +758,66 @@ def _square_on_ray(P: np.ndarray, P_abs: np.ndarray, imaginary: bool) -> tuple[n
     return sq, _poly_mul(P_abs, P_abs)
 
 
-def _first_sign_change(F: np.ndarray, F_abs: np.ndarray, forced_zeros: int) -> float:
-    """The largest x with F >= 0 on [0, x] for the polynomial F (ascending coefficients), F(0) = 0."""
-    from scipy.optimize import brentq
-
+def _leading_sign(F: np.ndarray, F_abs: np.ndarray, forced_zeros: int) -> tuple[int, np.ndarray]:
+    """The sign of the polynomial F (ascending coefficients, F(0) = 0) just right of 0, decided
+    on its lowest coefficient that exceeds its rounding (0: every coefficient is rounding, F is
+    zero), and F with the leading zeros removed."""
     F = np.array(F, dtype=float)
     F[: forced_zeros + 1] = 0.0
     F_abs = np.resize(np.asarray(F_abs, dtype=float), F.size)
-    # Only the lowest coefficients decide between "zero" and "a sign": higher ones are kept as
-    # they are (they are small, not negligible, for many-stage methods).
     significant = np.abs(F) > tol.STABILITY_POLY_ULPS * tol.EPS * np.abs(F_abs) * F.size
     nz = np.flatnonzero(significant)
     if nz.size == 0:
-        return math.inf
-    G = F[nz[0]:]
-    if G[0] < 0:
-        return 0.0
-    # Trailing coefficients within rounding are noise of the interpolation (an implicit
-    # method's P, Q), not a root at 1e20.
-    top_significant = int(nz[-1])
-    G = F[nz[0]: top_significant + 1]
+        return 0, np.zeros(0)
+    return (1 if F[nz[0]] > 0 else -1), F[nz[0]: int(nz[-1]) + 1]
+
+
+def _proven_nonnegative(G: np.ndarray) -> bool:
+    """True when the polynomial G (G(0) > 0) has no positive real root and a positive leading
+    coefficient, for degrees where the roots are well determined (implicit methods' P and Q)."""
     if G.size == 1:
-        return math.inf
+        return True
+    if G.size > tol.STABILITY_POLY_MAX_DEGREE + 1 or G[-1] <= 0:
+        return False
     roots = np.polynomial.polynomial.polyroots(G)
-    real_pos = np.sort(roots.real[(np.abs(roots.imag) <= 1e-6 * np.abs(roots)) & (roots.real > 0)])
-    if real_pos.size == 0:
-        return math.inf if G[-1] > 0 else 0.0
+    return not np.any((np.abs(roots.imag) <= 1e-8 * np.maximum(1.0, np.abs(roots))) & (roots.real > 0))
 
-    def g(x: float) -> float:
-        return float(np.polynomial.polynomial.polyval(x, G))
 
-    # A fine scan up to just past the last real root: the first negative value brackets the end.
-    top = float(real_pos[-1]) * 1.05 + 1e-12
-    grid = np.unique(np.concatenate([np.linspace(0, top, 4001)[1:],
-                                     real_pos * (1 - 1e-9), real_pos * (1 + 1e-9)]))
-    values = np.polynomial.polynomial.polyval(grid, G)
-    bad = np.flatnonzero(values < 0)
-    if bad.size == 0:
-        return math.inf if G[-1] > 0 else top
-    i = int(bad[0])
-    lo = 0.0 if i == 0 else float(grid[i - 1])
-    if lo == 0.0:
+def _interval_end(F: np.ndarray, F_abs: np.ndarray, forced_zeros: int,
+                  excess: Callable[[float], float]) -> float:
+    """Where stability on a ray from the origin ends. Near the origin the sign of the polynomial
+    F (> 0: stable) decides: a negative lowest coefficient means an empty interval (0), an
+    identically zero F (|R| = 1 on the ray) or one proven non-negative means unbounded. Beyond,
+    `excess(x)` (> 0: unstable), a numerically stable evaluation of the amplification, is
+    scanned with no ceiling (linear steps, then geometric) and its first positive value is
+    refined by Brent's method."""
+    from scipy.optimize import brentq
+
+    sign, G = _leading_sign(F, F_abs, forced_zeros)
+    if sign == 0:
+        return math.inf
+    if sign < 0:
         return 0.0
-    return float(brentq(g, lo, float(grid[i]), xtol=tol.STABILITY_XTOL, rtol=4 * tol.EPS, maxiter=200))
+    if _proven_nonnegative(G):
+        return math.inf
+    previous = 0.0
+    x = tol.STABILITY_SCAN_STEP
+    while x <= tol.STABILITY_SCAN_CEILING:
+        value = excess(x)
+        if not value <= 0:  # NaN (a pole) counts as unstable
+            if previous == 0.0:
+                return 0.0
+            return float(brentq(lambda u: excess(u) if np.isfinite(excess(u)) else 1.0, previous, x,
+                                xtol=tol.STABILITY_XTOL, rtol=4 * tol.EPS, maxiter=200))
+        previous = x
+        x = x + tol.STABILITY_SCAN_STEP if x < tol.STABILITY_SCAN_LINEAR_END else x * tol.STABILITY_SCAN_RATIO
+    return math.inf
 
 
 def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
-    """(real, imaginary) stability intervals of a Runge-Kutta method, decided on the polynomials
-    Q(-x)^2 - P(-x)^2 and |Q(iy)|^2 - |P(iy)|^2 (inf only when proven unbounded)."""
+    """(real, imaginary) stability intervals of a Runge-Kutta method: the sign near the origin
+    and unboundedness decided on the polynomials Q(-x)^2 - P(-x)^2 and |Q(iy)|^2 - |P(iy)|^2
+    (exact zeros from the linear order), the end located on R evaluated in stage form."""
     _check_type(tableau, ButcherTableau, "tableau")
     P, P_abs, Q, Q_abs = _rk_numerator_denominator(tableau)
     p_lin = rk_linear_order(tableau)
@@ -814,7 +827,13 @@ def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
         p2, p2_abs = _square_on_ray(P, P_abs, imaginary)
         F = _poly_add(q2, -p2)
         F_abs = _poly_add(q2_abs, p2_abs)
-        out.append(_first_sign_change(F, F_abs, p_lin if imaginary else 0))
+        direction = 1j if imaginary else -1.0
+
+        def excess(x: float, direction=direction) -> float:
+            value = abs(rk_stability_function(tableau, np.array([direction * x]))[0])
+            return value - 1.0 - tol.STABILITY_AMPLIFICATION_TOL if np.isfinite(value) else math.nan
+
+        out.append(_interval_end(F, F_abs, p_lin if imaginary else 0, excess))
     return out[0], out[1]
 
 
@@ -859,11 +878,60 @@ def splitting_linear_order(scheme: SplittingScheme) -> int:
 
 def splitting_hw_limit(scheme: SplittingScheme) -> float:
     """Largest h omega with |tr M| <= 2 on (0, h omega] (det M = 1: the eigenvalues stay on the
-    unit circle), decided on the polynomial 4 - tr(h)^2."""
+    unit circle): the sign near 0 from the polynomial 4 - tr(h)^2, the end located on the trace
+    of the propagator multiplied out numerically."""
     tr, tr_abs, _, _ = splitting_trace_polynomial(scheme)
     F = _poly_add(np.array([4.0]), -_poly_mul(tr, tr))
     F_abs = _poly_add(np.array([4.0]), _poly_mul(tr_abs, tr_abs))
-    return _first_sign_change(F, F_abs, 1)
+
+    def excess(hw: float) -> float:
+        M = splitting_propagator(scheme, np.array([hw]))[0]
+        return abs(M[0, 0] + M[1, 1]) / 2.0 - 1.0 - tol.STABILITY_AMPLIFICATION_TOL
+
+    return _interval_end(F, F_abs, 1, excess)
+
+
+def lmm_real_interval(method: LinearMultistep, scanned: float) -> float:
+    """The real stability interval of a multistep method without a search ceiling.
+
+    The boundary of the stability region lies on the root locus z(theta) = rho(e^(i theta)) /
+    sigma(e^(i theta)) (Hairer & Wanner II, V.1): the interval on the negative real axis can only
+    end where the locus crosses it. Crossings are found on a fine theta grid and refined; the
+    first crossing beyond which the method is unstable ends the interval. When the scan found
+    the method stable up to its limit (`scanned` = inf) and the locus never crosses the negative
+    real axis beyond it, while every root of sigma lies inside the unit disc (the roots as
+    z -> -inf), the whole axis is stable: inf, proven. Otherwise the scanned figure stands."""
+    from scipy.optimize import brentq
+
+    alpha, beta = method.alpha, method.beta
+
+    def z_of(theta: np.ndarray) -> np.ndarray:
+        zeta = np.exp(1j * np.asarray(theta))
+        with np.errstate(all="ignore"):
+            return np.polyval(alpha[::-1], zeta) / np.polyval(beta[::-1], zeta)
+
+    theta = np.linspace(1e-6, np.pi, 200001)
+    z = z_of(theta)
+    im = z.imag
+    crossings = []
+    for i in np.flatnonzero(np.sign(im[:-1]) * np.sign(im[1:]) < 0):
+        t = brentq(lambda x: float(z_of(x).imag), theta[i], theta[i + 1], xtol=1e-15)
+        crossings.append(float(z_of(t).real))
+    crossings.append(float(z_of(np.pi).real))
+    negative = sorted(-x for x in crossings if np.isfinite(x) and x < 0)
+
+    def amp(x: float) -> float:
+        return float(lmm_amplification(method, np.array([-x + 0j]))[0])
+
+    if math.isfinite(scanned):
+        return scanned
+    beyond = [x for x in negative if x > 0 and amp(x * (1 + 1e-6)) > 1 + tol.STABILITY_AMPLIFICATION_TOL]
+    if beyond:
+        return float(beyond[0])
+    sigma_roots = np.roots(beta[::-1]) if np.any(beta[:-1]) or beta[-1] != 0 else np.array([])
+    if sigma_roots.size and np.max(np.abs(sigma_roots)) >= 1.0:
+        return scanned
+    return math.inf
 
 
 def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH_LIMIT) -> dict | None:
@@ -893,7 +961,7 @@ def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH
         return {
             "kind": "first-order",
             "amplification": amp,
-            "real_interval": real_stability_interval(amp, limit=limit),
+            "real_interval": lmm_real_interval(coefficients, real_stability_interval(amp, limit=limit)),
             "imag_interval": imag_stability_interval(amp, limit=limit),
         }
     if isinstance(coefficients, SplittingScheme):

@@ -111,6 +111,12 @@ STABILITY_AMPLIFICATION_TOL = 1e-12
 # Exact intervals from polynomials (Runge-Kutta, splitting): a coefficient counts as zero when it
 # is within this many roundings (per term) of the sum of the magnitudes that produced it.
 STABILITY_POLY_ULPS = 64.0
+# ... and a polynomial is proven non-negative from its roots only up to this degree (beyond it
+# the monomial form is too ill-conditioned; the interval is then located by the scan) ...
+STABILITY_POLY_MAX_DEGREE = 12
+# ... while the scan itself has no search limit short of this (an explicit method's |R| grows
+# without bound, so its interval always ends; an implicit one is proven unbounded or scanned).
+STABILITY_SCAN_CEILING = 1e12
 # ... the crossing is bracketed on a scan, linear with this step up to ...
 STABILITY_SCAN_STEP = 1e-2
 STABILITY_SCAN_LINEAR_END = 10.0
