@@ -28,11 +28,13 @@ import numpy as np
 
 from harness.coefficients import ButcherTableau
 from harness.errors import InputError
+from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, StepFailure, Stepper, StepperInfo
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 
 __all__ = [
+    "METHODS",
     "STEPPERS",
     "ImplicitRungeKutta",
     "NewtonSettings",
@@ -188,10 +190,10 @@ class ImplicitRungeKutta(Stepper):
         *,
         name: str,
         claimed_order: int,
-        symplectic: bool,
-        symmetric: bool,
         reference: str,
         description: str,
+        symplectic: bool | None = None,
+        symmetric: bool | None = None,
         newton: str = "full",
         newton_tol: float = NEWTON_TOL,
         newton_max_iter: int = NEWTON_MAX_ITER,
@@ -200,10 +202,11 @@ class ImplicitRungeKutta(Stepper):
         if not isinstance(tableau, ButcherTableau):
             raise InputError(f"`tableau` must be a ButcherTableau, got {type(tableau).__name__}")
         if tableau.explicit:
-            raise InputError(
-                f"`tableau` {tableau.name!r} is explicit; use the explicit Runge-Kutta family"
-            )
+            raise InputError(f"`tableau` {tableau.name!r} is explicit; use the explicit Runge-Kutta family")
         self.coefficients = tableau
+        # Symmetry and symplecticity are asked of the coefficients unless stated.
+        symplectic = bool(tableau.symplectic) if symplectic is None else symplectic
+        symmetric = bool(tableau.symmetric) if symmetric is None else symmetric
         self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
         self._construct = dict(
             name=name,
@@ -271,9 +274,7 @@ class ImplicitRungeKutta(Stepper):
                     "by 1 + |y_n|), all ensemble members in one batched solve;",
                     f"per iteration {per_iter} f evaluation(s); {self._jac_note};",
                     "1 f evaluation per step for the explicit stage;" if explicit_evals else "",
-                    "the derivative at the step end is reused (first same as last);"
-                    if self._fsal
-                    else "",
+                    "the derivative at the step end is reused (first same as last);" if self._fsal else "",
                     "first iterate: the previous step's collocation polynomial, extrapolated;",
                     "evals_per_step is a typical figure (two Newton iterations on a smooth "
                     "solution; large stiff steps take three or more); measured counts, with "
@@ -396,9 +397,7 @@ _COURSE_ODE = (
 _A_STABLE = {"real_interval": math.inf}
 
 BACKWARD_EULER = ButcherTableau("backward-euler", A=[[1.0]], b=[1.0], c=[1.0])
-TRAPEZOID = ButcherTableau(
-    "trapezoid", A=[[0.0, 0.0], [0.5, 0.5]], b=[0.5, 0.5], c=[0.0, 1.0]
-)
+TRAPEZOID = ButcherTableau("trapezoid", A=[[0.0, 0.0], [0.5, 0.5]], b=[0.5, 0.5], c=[0.0, 1.0])
 IMPLICIT_MIDPOINT = ButcherTableau("implicit-midpoint", A=[[0.5]], b=[1.0], c=[0.5])
 GAUSS_LEGENDRE_4 = ButcherTableau(
     "gauss-legendre-4",
@@ -407,68 +406,44 @@ GAUSS_LEGENDRE_4 = ButcherTableau(
     c=[0.5 - _SQ3 / 6.0, 0.5 + _SQ3 / 6.0],
 )
 
-STEPPERS: list[Stepper] = [
-    ImplicitRungeKutta(
+METHODS: list[Method] = [
+    Method(
         BACKWARD_EULER,
-        name="backward-euler",
         claimed_order=1,
-        symplectic=False,
-        symmetric=False,
-        reference=(
-            f"{_COURSE_ODE}, the implicit (backward) Euler method and its unconditional "
-            "stability; Hairer & Wanner, Solving ODEs II, IV.3."
-        ),
+        reference=f"{_COURSE_ODE}, the implicit (backward) Euler method and its unconditional "
+        "stability; Hairer & Wanner, Solving ODEs II, IV.3.",
         description="Backward (implicit) Euler y_{n+1} = y_n + h f(t_{n+1}, y_{n+1}); L-stable.",
         stability=_A_STABLE,
     ),
-    ImplicitRungeKutta(
+    Method(
         TRAPEZOID,
-        name="trapezoid",
         claimed_order=2,
-        symplectic=False,
-        symmetric=True,
-        reference=(
-            f"{_COURSE_ODE}, the implicit Adams-Moulton (trapezoidal) rule; J. Crank & P. "
-            "Nicolson, Proc. Camb. Phil. Soc. 43 (1947) 50-67; Hairer & Wanner, Solving ODEs II, "
-            "IV.5 (Lobatto IIIA, s = 2)."
-        ),
-        description=(
-            "Trapezoidal rule (Crank-Nicolson, one-step Adams-Moulton) "
-            "y_{n+1} = y_n + h/2 (f_n + f_{n+1}), as the two-stage Lobatto IIIA tableau; A-stable."
-        ),
+        reference=f"{_COURSE_ODE}, the implicit Adams-Moulton (trapezoidal) rule; J. Crank & P. "
+        "Nicolson, Proc. Camb. Phil. Soc. 43 (1947) 50-67; Hairer & Wanner, Solving ODEs II, "
+        "IV.5 (Lobatto IIIA, s = 2).",
+        description="Trapezoidal rule (Crank-Nicolson, one-step Adams-Moulton) "
+        "y_{n+1} = y_n + h/2 (f_n + f_{n+1}), as the two-stage Lobatto IIIA tableau; A-stable.",
         stability=_A_STABLE,
     ),
-    ImplicitRungeKutta(
+    Method(
         IMPLICIT_MIDPOINT,
-        name="implicit-midpoint",
         claimed_order=2,
-        symplectic=True,
-        symmetric=True,
-        reference=(
-            "Hairer, Lubich & Wanner, Geometric Numerical Integration, I.1 and VI.3 (implicit "
-            "midpoint rule; symplectic, symmetric, preserves quadratic invariants)."
-        ),
-        description=(
-            "Implicit midpoint rule y_{n+1} = y_n + h f(t_n + h/2, (y_n + y_{n+1})/2), the "
-            "one-stage Gauss method; A-stable."
-        ),
+        reference="Hairer, Lubich & Wanner, Geometric Numerical Integration, I.1 and VI.3 (implicit "
+        "midpoint rule; symplectic, symmetric, preserves quadratic invariants).",
+        description="Implicit midpoint rule y_{n+1} = y_n + h f(t_n + h/2, (y_n + y_{n+1})/2), the "
+        "one-stage Gauss method; A-stable.",
         stability=_A_STABLE,
     ),
-    ImplicitRungeKutta(
+    Method(
         GAUSS_LEGENDRE_4,
-        name="gauss-legendre-4",
         claimed_order=4,
-        symplectic=True,
-        symmetric=True,
-        reference=(
-            "J. C. Butcher, Math. Comp. 18 (1964) 50-64 (implicit Runge-Kutta processes); Hairer "
-            "& Wanner, Solving ODEs II, IV.5, Table 5.1; Hairer, Lubich & Wanner, Geometric "
-            "Numerical Integration, II.1.3 and VI.4."
-        ),
-        description=(
-            "Two-stage Gauss-Legendre collocation method, nodes 1/2 -+ sqrt(3)/6; order 4, "
-            "A-stable, symplectic, symmetric, preserves quadratic invariants."
-        ),
+        reference="J. C. Butcher, Math. Comp. 18 (1964) 50-64 (implicit Runge-Kutta processes); Hairer "
+        "& Wanner, Solving ODEs II, IV.5, Table 5.1; Hairer, Lubich & Wanner, Geometric "
+        "Numerical Integration, II.1.3 and VI.4.",
+        description="Two-stage Gauss-Legendre collocation method, nodes 1/2 -+ sqrt(3)/6; order 4, "
+        "A-stable, symplectic, symmetric, preserves quadratic invariants.",
         stability=_A_STABLE,
     ),
 ]
+
+STEPPERS: list[Stepper] = [m.stepper() for m in METHODS]

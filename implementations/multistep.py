@@ -27,12 +27,13 @@ import numpy as np
 
 from harness.coefficients import LinearMultistep
 from harness.errors import IncompatibleError, InputError, UnknownNameError
+from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, Stepper, StepperInfo, check_compatible
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations.implicit_rk import NewtonSettings, newton_solve
 
-__all__ = ["STEPPERS", "LinearMultistepStepper", "AB2", "AB3", "AB4", "AM3", "BDF2"]
+__all__ = ["METHODS", "STEPPERS", "LinearMultistepStepper", "AB2", "AB3", "AB4", "AM3", "BDF2"]
 
 DEFAULT_STARTER = "rk4"
 
@@ -78,8 +79,7 @@ class LinearMultistepStepper(Stepper):
             starter_name = starter
         else:
             raise InputError(
-                "`starter` must be 'reference', a registered stepper name or a Stepper, "
-                f"got {starter!r}"
+                f"`starter` must be 'reference', a registered stepper name or a Stepper, got {starter!r}"
             )
         if isinstance(starter, LinearMultistepStepper):
             raise InputError(
@@ -90,8 +90,7 @@ class LinearMultistepStepper(Stepper):
         # extrapolation weights through k equally spaced states (oldest first) to the next one:
         # w_j = (-1)^(k-1-j) C(k, j)
         self._predictor = [
-            float((-1) ** (table.steps - 1 - j) * math.comb(table.steps, j))
-            for j in range(table.steps)
+            float((-1) ** (table.steps - 1 - j) * math.comb(table.steps, j)) for j in range(table.steps)
         ]
         self.starter = starter
         self.starter_name = starter_name
@@ -227,9 +226,7 @@ class LinearMultistepStepper(Stepper):
         """A carry at t0 + (k-1) h holding the given exact states (oldest first) as its history,
         so the next step applies the multistep formula itself (local error measurement)."""
         k = len(history)
-        return Carry(
-            t0 + (k - 1) * h, h, history[-1], hist_y=list(history), hist_f=[None] * k, pending=[]
-        )
+        return Carry(t0 + (k - 1) * h, h, history[-1], hist_y=list(history), hist_f=[None] * k, pending=[])
 
     def _push(self, c: Carry, y: np.ndarray, f: np.ndarray | None) -> None:
         k = self.coefficients.steps
@@ -316,9 +313,7 @@ def _fr(*values: int | str) -> list[Fraction]:
 
 AB2 = LinearMultistep("ab2", alpha=_fr(0, -1, 1), beta=_fr("-1/2", "3/2", 0))
 AB3 = LinearMultistep("ab3", alpha=_fr(0, 0, -1, 1), beta=_fr("5/12", "-16/12", "23/12", 0))
-AB4 = LinearMultistep(
-    "ab4", alpha=_fr(0, 0, 0, -1, 1), beta=_fr("-9/24", "37/24", "-59/24", "55/24", 0)
-)
+AB4 = LinearMultistep("ab4", alpha=_fr(0, 0, 0, -1, 1), beta=_fr("-9/24", "37/24", "-59/24", "55/24", 0))
 AM3 = LinearMultistep("am3", alpha=_fr(0, -1, 1), beta=_fr("-1/12", "8/12", "5/12"))
 BDF2 = LinearMultistep("bdf2", alpha=_fr("1/3", "-4/3", 1), beta=_fr(0, 0, "2/3"))
 
@@ -330,56 +325,45 @@ _HNW = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I"
 # Real stability intervals (-x, 0) claimed below: Hairer & Wanner, Solving ODEs II, V.1
 # (Adams methods: ab2 1, ab3 6/11, ab4 3/10, two-step Adams-Moulton 6; bdf2 is A-stable).
 
-STEPPERS: list[Stepper] = [
-    LinearMultistepStepper(
+METHODS: list[Method] = [
+    Method(
         AB2,
-        name="ab2",
         claimed_order=2,
         reference=f"{_COURSE_ODE}, the two-step Adams-Bashforth method; {_HNW}, III.1.",
         description="Adams-Bashforth y_{n+1} = y_n + h (3/2 f_n - 1/2 f_{n-1}).",
         stability={"real_interval": 1.0},
     ),
-    LinearMultistepStepper(
+    Method(
         AB3,
-        name="ab3",
         claimed_order=3,
         reference=f"{_HNW}, III.1, Table 1.1 (explicit Adams methods).",
         description="Adams-Bashforth y_{n+1} = y_n + h/12 (23 f_n - 16 f_{n-1} + 5 f_{n-2}).",
         stability={"real_interval": 6.0 / 11.0},
     ),
-    LinearMultistepStepper(
+    Method(
         AB4,
-        name="ab4",
         claimed_order=4,
         reference=f"{_COURSE_ODE}, the fourth-order Adams-Bashforth method; {_HNW}, III.1.",
-        description=(
-            "Adams-Bashforth y_{n+1} = y_n + h/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3})."
-        ),
+        description="Adams-Bashforth y_{n+1} = y_n + h/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3}).",
         stability={"real_interval": 0.3},
     ),
-    LinearMultistepStepper(
+    Method(
         AM3,
-        name="am3",
         claimed_order=3,
         reference=f"{_HNW}, III.1, Table 1.2 (implicit Adams methods, k = 2).",
-        description=(
-            "Implicit Adams-Moulton y_{n+1} = y_n + h/12 (5 f_{n+1} + 8 f_n - f_{n-1}), solved "
-            "by Newton's method."
-        ),
+        description="Implicit Adams-Moulton y_{n+1} = y_n + h/12 (5 f_{n+1} + 8 f_n - f_{n-1}), solved "
+        "by Newton's method.",
         stability={"real_interval": 6.0},
     ),
-    LinearMultistepStepper(
+    Method(
         BDF2,
-        name="bdf2",
         claimed_order=2,
-        reference=(
-            f"{_HNW}, III.1, eq. (1.22'); C. F. Curtiss & J. O. Hirschfelder, PNAS 38 (1952) 235 "
-            "(backward differentiation formulas)."
-        ),
-        description=(
-            "Backward differentiation formula y_{n+1} - 4/3 y_n + 1/3 y_{n-1} = 2/3 h f_{n+1}; "
-            "A-stable, solved by Newton's method."
-        ),
+        reference=f"{_HNW}, III.1, eq. (1.22'); C. F. Curtiss & J. O. Hirschfelder, PNAS 38 (1952) 235 "
+        "(backward differentiation formulas).",
+        description="Backward differentiation formula y_{n+1} - 4/3 y_n + 1/3 y_{n-1} = 2/3 h f_{n+1}; "
+        "A-stable, solved by Newton's method.",
         stability={"real_interval": math.inf},
     ),
 ]
+
+STEPPERS: list[Stepper] = [m.stepper() for m in METHODS]

@@ -18,10 +18,11 @@ from scipy.linalg.blas import daxpy as _axpy
 
 from harness.coefficients import ButcherTableau
 from harness.errors import CoefficientError
+from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, Stepper, StepperInfo
 
-__all__ = ["ExplicitRungeKutta", "TABLEAUX", "STEPPERS"]
+__all__ = ["ExplicitRungeKutta", "METHODS", "STEPPERS"]
 
 
 class ExplicitRungeKutta(Stepper):
@@ -42,9 +43,7 @@ class ExplicitRungeKutta(Stepper):
         description: str = "",
     ):
         if not isinstance(tableau, ButcherTableau):
-            raise CoefficientError(
-                f"`tableau` must be a ButcherTableau, got {type(tableau).__name__}"
-            )
+            raise CoefficientError(f"`tableau` must be a ButcherTableau, got {type(tableau).__name__}")
         if not tableau.explicit:
             raise CoefficientError(
                 f"`{tableau.name}`: an explicit Runge-Kutta stepper needs a strictly lower "
@@ -124,68 +123,64 @@ class ExplicitRungeKutta(Stepper):
 _HNW = "Hairer, Norsett & Wanner, Solving ODEs I, 2nd ed., Sect. II.1"
 _COURSE = "course-material file 004 (ODE initial value problems)"
 
-TABLEAUX: dict[str, tuple[ButcherTableau, int, str, str]] = {
-    "euler": (
+METHODS: list[Method] = [
+    Method(
         ButcherTableau("euler", [[0]], [1], [0]),
-        1,
-        f"L. Euler, Institutionum calculi integralis (1768); {_HNW}; {_COURSE}",
-        "explicit (forward) Euler: one evaluation at the start of the step",
+        claimed_order=1,
+        reference=f"L. Euler, Institutionum calculi integralis (1768); {_HNW}; {_COURSE}",
+        description="explicit (forward) Euler: one evaluation at the start of the step",
     ),
-    "midpoint": (
+    Method(
         ButcherTableau("midpoint", [[0, 0], [F(1, 2), 0]], [0, 1], [0, F(1, 2)]),
-        2,
-        f"C. Runge, Math. Ann. 46 (1895) 167-178; {_HNW}; {_COURSE} (RK midpoint)",
-        "explicit midpoint rule: an Euler half step predicts the midpoint slope",
+        claimed_order=2,
+        reference=f"C. Runge, Math. Ann. 46 (1895) 167-178; {_HNW}; {_COURSE} (RK midpoint)",
+        description="explicit midpoint rule: an Euler half step predicts the midpoint slope",
     ),
-    "heun": (
+    Method(
         ButcherTableau("heun", [[0, 0], [1, 0]], [F(1, 2), F(1, 2)], [0, 1]),
-        2,
-        f"K. Heun, Z. Math. Phys. 45 (1900) 23-38; {_HNW}; {_COURSE} (modified Euler)",
-        "Heun's method: Euler predictor, trapezoidal corrector",
+        claimed_order=2,
+        reference=f"K. Heun, Z. Math. Phys. 45 (1900) 23-38; {_HNW}; {_COURSE} (modified Euler)",
+        description="Heun's method: Euler predictor, trapezoidal corrector",
     ),
-    "ralston": (
+    Method(
         ButcherTableau("ralston", [[0, 0], [F(2, 3), 0]], [F(1, 4), F(3, 4)], [0, F(2, 3)]),
-        2,
-        "A. Ralston, Runge-Kutta methods with minimum error bounds, Math. Comp. 16 (1962) "
-        "431-437",
-        "Ralston's second-order method (c2 = 2/3, minimal truncation-error bound)",
+        claimed_order=2,
+        reference="A. Ralston, Runge-Kutta methods with minimum error bounds, Math. Comp. 16 (1962) 431-437",
+        description="Ralston's second-order method (c2 = 2/3, minimal truncation-error bound)",
     ),
-    "rk3": (
+    Method(
         ButcherTableau(
             "rk3",
             [[0, 0, 0], [F(1, 2), 0, 0], [-1, 2, 0]],
             [F(1, 6), F(2, 3), F(1, 6)],
             [0, F(1, 2), 1],
         ),
-        3,
-        f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.1",
-        "Kutta's third-order method (Simpson weights)",
+        claimed_order=3,
+        reference=f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.1",
+        description="Kutta's third-order method (Simpson weights)",
     ),
-    "rk4": (
+    Method(
         ButcherTableau(
             "rk4",
             [[0, 0, 0, 0], [F(1, 2), 0, 0, 0], [0, F(1, 2), 0, 0], [0, 0, 1, 0]],
             [F(1, 6), F(1, 3), F(1, 3), F(1, 6)],
             [0, F(1, 2), F(1, 2), 1],
         ),
-        4,
-        f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.2; {_COURSE}",
-        "the classical fourth-order Runge-Kutta method",
+        claimed_order=4,
+        reference=f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.2; {_COURSE}",
+        description="the classical fourth-order Runge-Kutta method",
     ),
-    "rk38": (
+    Method(
         ButcherTableau(
             "rk38",
             [[0, 0, 0, 0], [F(1, 3), 0, 0, 0], [F(-1, 3), 1, 0, 0], [1, -1, 1, 0]],
             [F(1, 8), F(3, 8), F(3, 8), F(1, 8)],
             [0, F(1, 3), F(2, 3), 1],
         ),
-        4,
-        f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.2",
-        "Kutta's 3/8 rule, fourth order",
+        claimed_order=4,
+        reference=f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.2",
+        description="Kutta's 3/8 rule, fourth order",
     ),
-}
-
-STEPPERS: list[Stepper] = [
-    ExplicitRungeKutta(tab, claimed_order=order, reference=ref, description=desc)
-    for tab, order, ref, desc in TABLEAUX.values()
 ]
+
+STEPPERS: list[Stepper] = [m.stepper() for m in METHODS]

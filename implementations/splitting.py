@@ -22,10 +22,11 @@ from scipy.linalg.blas import daxpy as _axpy
 
 from harness.coefficients import SplittingScheme
 from harness.errors import CoefficientError
+from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, Stepper, StepperInfo
 
-__all__ = ["SplittingStepper", "StaggeredLeapfrog", "SCHEMES", "STEPPERS"]
+__all__ = ["SplittingStepper", "StaggeredLeapfrog", "METHODS", "STEPPERS"]
 
 _HLW = "Hairer, Lubich & Wanner, Geometric Numerical Integration, 2nd ed. (2006)"
 
@@ -79,7 +80,7 @@ class SplittingStepper(Stepper):
             family="splitting",
             claimed_order=claimed_order,
             explicit=True,
-            symplectic=True,
+            symplectic=scheme.symplectic,
             symmetric=scheme.symmetric,
             evals_per_step=float(scheme.force_evals),
             form="newtonian",
@@ -134,11 +135,7 @@ class StaggeredLeapfrog(Stepper):
 
     def __init__(self, name: str, scheme: SplittingScheme, *, reference: str, description: str = ""):
         seq = scheme.sequence
-        if (
-            len(seq) != 3
-            or [k for k, _ in seq] != ["K", "D", "K"]
-            or not scheme.symmetric
-        ):
+        if len(seq) != 3 or [k for k, _ in seq] != ["K", "D", "K"] or not scheme.symmetric:
             raise CoefficientError(
                 f"`{scheme.name}`: the staggered leapfrog needs a symmetric kick-drift-kick "
                 f"scheme K(b) D(1) K(b), got {seq}"
@@ -152,7 +149,7 @@ class StaggeredLeapfrog(Stepper):
             family="splitting",
             claimed_order=2,
             explicit=True,
-            symplectic=True,
+            symplectic=scheme.symplectic,
             symmetric=scheme.symmetric,
             evals_per_step=float(scheme.force_evals),
             form="newtonian",
@@ -189,8 +186,15 @@ def _forest_ruth() -> SplittingScheme:
     g = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
     return SplittingScheme(
         "forest-ruth",
-        [("K", g / 2), ("D", g), ("K", (1 - g) / 2), ("D", 1 - 2 * g),
-         ("K", (1 - g) / 2), ("D", g), ("K", g / 2)],
+        [
+            ("K", g / 2),
+            ("D", g),
+            ("K", (1 - g) / 2),
+            ("D", 1 - 2 * g),
+            ("K", (1 - g) / 2),
+            ("D", g),
+            ("K", g / 2),
+        ],
     )
 
 
@@ -201,8 +205,17 @@ def _pefrl() -> SplittingScheme:
     chi = -0.06626458266981849
     return SplittingScheme(
         "pefrl",
-        [("D", xi), ("K", (1 - 2 * lam) / 2), ("D", chi), ("K", lam),
-         ("D", 1 - 2 * (chi + xi)), ("K", lam), ("D", chi), ("K", (1 - 2 * lam) / 2), ("D", xi)],
+        [
+            ("D", xi),
+            ("K", (1 - 2 * lam) / 2),
+            ("D", chi),
+            ("K", lam),
+            ("D", 1 - 2 * (chi + xi)),
+            ("K", lam),
+            ("D", chi),
+            ("K", (1 - 2 * lam) / 2),
+            ("D", xi),
+        ],
     )
 
 
@@ -218,88 +231,80 @@ VELOCITY_VERLET = SplittingScheme("velocity-verlet", [("K", 0.5), ("D", 1.0), ("
 # Yoshida (1990), Table 1 (sixth order) and Table 2 (eighth order), solution A: w_1 ... w_m.
 _YOSHIDA6_A = [-1.17767998417887, 0.235573213359357, 0.784513610477560]
 _YOSHIDA8_A = [
-    -1.61582374150097, -2.44699182370524, -0.716989419708120e-2, 2.44002732616735,
-    0.157739928123617, 1.82020630970714, 1.04242620869991,
+    -1.61582374150097,
+    -2.44699182370524,
+    -0.716989419708120e-2,
+    2.44002732616735,
+    0.157739928123617,
+    1.82020630970714,
+    1.04242620869991,
 ]
 
-_YOSHIDA = (
-    "H. Yoshida, Construction of higher order symplectic integrators, Phys. Lett. A 150 (1990) "
-    "262-268"
-)
+_YOSHIDA = "H. Yoshida, Construction of higher order symplectic integrators, Phys. Lett. A 150 (1990) 262-268"
 
-SCHEMES: dict[str, tuple[SplittingScheme, int, str, str]] = {
-    "velocity-verlet": (
+METHODS: list[Method] = [
+    Method(
         VELOCITY_VERLET,
-        2,
-        "W.C. Swope, H.C. Andersen, P.H. Berens & K.R. Wilson, J. Chem. Phys. 76 (1982) 637; "
+        claimed_order=2,
+        reference="W.C. Swope, H.C. Andersen, P.H. Berens & K.R. Wilson, J. Chem. Phys. 76 (1982) 637; "
         f"{_HLW}, I.1.4; course-material files 001 and 004",
-        "velocity Verlet, kick-drift-kick; one force evaluation per step (first same as last)",
+        description="velocity Verlet, kick-drift-kick; one force evaluation per step (first same as last)",
     ),
-    "position-verlet": (
+    Method(
         SplittingScheme("position-verlet", [("D", 0.5), ("K", 1.0), ("D", 0.5)]),
-        2,
-        f"M. Tuckerman, B.J. Berne & G.J. Martyna, J. Chem. Phys. 97 (1992) 1990; {_HLW}, I.1.4; "
+        claimed_order=2,
+        reference=f"M. Tuckerman, B.J. Berne & G.J. Martyna, J. Chem. Phys. 97 (1992) 1990; {_HLW}, I.1.4; "
         "course-material file 004",
-        "position Verlet, drift-kick-drift",
+        description="position Verlet, drift-kick-drift",
     ),
-    "symplectic-euler-a": (
+    Method(
         SplittingScheme("symplectic-euler-a", [("K", 1.0), ("D", 1.0)]),
-        1,
-        f"{_HLW}, I.1.2 (the symplectic Euler method implicit in p, explicit for separable H)",
-        "symplectic Euler, variant A: kick with a(q_n), then drift with the new velocity",
+        claimed_order=1,
+        reference=f"{_HLW}, I.1.2 (the symplectic Euler method implicit in p, explicit for separable H)",
+        description="symplectic Euler, variant A: kick with a(q_n), then drift with the new velocity",
     ),
-    "symplectic-euler-b": (
+    Method(
         SplittingScheme("symplectic-euler-b", [("D", 1.0), ("K", 1.0)]),
-        1,
-        f"{_HLW}, I.1.2 (the adjoint symplectic Euler method, implicit in q)",
-        "symplectic Euler, variant B: drift with v_n, then kick with a(q_{n+1})",
+        claimed_order=1,
+        reference=f"{_HLW}, I.1.2 (the adjoint symplectic Euler method, implicit in q)",
+        description="symplectic Euler, variant B: drift with v_n, then kick with a(q_{n+1})",
     ),
-    "forest-ruth": (
+    Method(
         _forest_ruth(),
-        4,
-        "E. Forest & R.D. Ruth, Fourth-order symplectic integration, Physica D 43 (1990) "
+        claimed_order=4,
+        reference="E. Forest & R.D. Ruth, Fourth-order symplectic integration, Physica D 43 (1990) "
         "105-117; course-material file 004 (gamma = 1/(2 - 2^(1/3)))",
-        "Forest-Ruth fourth-order scheme; three force evaluations per step",
+        description="Forest-Ruth fourth-order scheme; three force evaluations per step",
     ),
-    "pefrl": (
+    Method(
         _pefrl(),
-        4,
-        "I.P. Omelyan, I.M. Mryglod & R. Folk, Optimized Forest-Ruth- and Suzuki-like "
+        claimed_order=4,
+        reference="I.P. Omelyan, I.M. Mryglod & R. Folk, Optimized Forest-Ruth- and Suzuki-like "
         "algorithms for integration of motion in many-body systems, Comput. Phys. Commun. 146 "
         "(2002) 188-202, eq. (20)",
-        "position-extended Forest-Ruth-like fourth-order scheme (PEFRL), four forces per step",
+        description="position-extended Forest-Ruth-like fourth-order scheme (PEFRL), four forces per step",
     ),
-    "yoshida6": (
+    Method(
         SplittingScheme.compose("yoshida6", VELOCITY_VERLET, _symmetric_weights(_YOSHIDA6_A)),
-        6,
-        f"{_YOSHIDA}, Table 1, solution A",
-        "Yoshida's sixth-order symmetric composition of seven velocity-Verlet steps",
+        claimed_order=6,
+        reference=f"{_YOSHIDA}, Table 1, solution A",
+        description="Yoshida's sixth-order symmetric composition of seven velocity-Verlet steps",
     ),
-    "yoshida8": (
+    Method(
         SplittingScheme.compose("yoshida8", VELOCITY_VERLET, _symmetric_weights(_YOSHIDA8_A)),
-        8,
-        f"{_YOSHIDA}, Table 2, solution A",
-        "Yoshida's eighth-order symmetric composition of fifteen velocity-Verlet steps",
+        claimed_order=8,
+        reference=f"{_YOSHIDA}, Table 2, solution A",
+        description="Yoshida's eighth-order symmetric composition of fifteen velocity-Verlet steps",
     ),
-}
-
-LEAPFROG = StaggeredLeapfrog(
-    "leapfrog",
-    VELOCITY_VERLET,
-    reference=(
-        "L. Verlet, Phys. Rev. 159 (1967) 98; course-material files 002 and 004 (leapfrog); "
-        f"{_HLW}, I.1.4"
+    Method(
+        SplittingScheme("leapfrog", VELOCITY_VERLET.sequence),
+        claimed_order=2,
+        reference="L. Verlet, Phys. Rev. 159 (1967) 98; course-material files 002 and 004 (leapfrog); "
+        f"{_HLW}, I.1.4",
+        description="staggered leapfrog: velocities at half steps (start v_1/2 = v_0 + h a_0 / 2), "
+        "synchronised only for output",
+        options={"loop": "staggered"},
     ),
-    description=(
-        "staggered leapfrog: velocities at half steps (start v_1/2 = v_0 + h a_0 / 2), "
-        "synchronised only for output"
-    ),
-)
-
-STEPPERS: list[Stepper] = [
-    *(
-        SplittingStepper(scheme, claimed_order=order, reference=ref, description=desc)
-        for scheme, order, ref, desc in SCHEMES.values()
-    ),
-    LEAPFROG,
 ]
+
+STEPPERS: list[Stepper] = [m.stepper() for m in METHODS]

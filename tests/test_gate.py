@@ -15,14 +15,14 @@ from harness.facts import method_facts, problem_facts
 from harness.gate import gate_table
 from harness.registry import get_problem, steppers
 from harness.rules import convergence_expectation, judge_convergence
-from implementations.runge_kutta import TABLEAUX, ExplicitRungeKutta
+from implementations.runge_kutta import ExplicitRungeKutta
 
 # A nonlinear, time-dependent problem: linear test problems cannot see every order condition.
 PROBLEM = "forced-duffing"
 
 
 def _rk4_variant(name: str, A=None, b=None, claimed: int = 4, cls=ExplicitRungeKutta):
-    rk4 = TABLEAUX["rk4"][0]
+    rk4 = steppers.get("rk4").coefficients
     tab = ButcherTableau(name, rk4.A.tolist() if A is None else A, rk4.b.tolist() if b is None else b)
     return cls(tab, claimed_order=claimed, reference="deliberately broken test method")
 
@@ -78,7 +78,7 @@ def _measure(name: str, problem: str = PROBLEM) -> pd.DataFrame:
 
 
 def _perturbed_a21():
-    A = TABLEAUX["rk4"][0].A.tolist()
+    A = steppers.get("rk4").coefficients.A.tolist()
     A[2][1] += 1e-2  # nodes follow the row sums, so the tableau still passes its self-checks
     return A
 
@@ -88,7 +88,8 @@ MUTANTS = {
     "mutant-perturbed-coefficient": (lambda n: _rk4_variant(n, A=_perturbed_a21()), True),
     "mutant-wrong-claim": (
         lambda n: ExplicitRungeKutta(
-            ButcherTableau(n, TABLEAUX["heun"][0].A.tolist(), TABLEAUX["heun"][0].b.tolist()),
+            ButcherTableau(n, steppers.get("heun").coefficients.A.tolist(),
+                           steppers.get("heun").coefficients.b.tolist()),
             claimed_order=3, reference="Heun's method relabelled as third order"),
         True,
     ),

@@ -1,0 +1,133 @@
+"""A method declared as one record of data, built into a stepper of its family.
+
+`Method` is the single source of truth for a method: its coefficient object (frozen and
+self-checking), its claims (order, stability figures where declared), its literature reference
+and, rarely, options of its family's step loop. Every built-in method is one `Method` entry in
+its family module's `METHODS` list; `Method.stepper()` picks the family's one step loop
+(`implementations.build_stepper`), and the registry, gate, experiments, compiled loops,
+benchmarks and report all start from there. Symmetry and symplecticity are never typed: they
+are asked of the coefficients.
+
+A plugin may give the same record as a plain mapping (`from_record`):
+
+A record is a mapping with the method's `name`, `claimed_order`, `reference` (and optionally
+`description`, `stability` claims) and its coefficients; the keys of the coefficients decide the
+family and so the step loop:
+
+- `A`, `b` (optional `c`, `b_hat`): a Runge-Kutta method, explicit when A is strictly lower
+  triangular (`implementations.runge_kutta`), implicit otherwise (`implementations.implicit_rk`);
+- `sequence` of ("D", a) drifts and ("K", b) kicks: a splitting scheme (`implementations.splitting`);
+- `alpha`, `beta`: a linear multistep method (`implementations.multistep`).
+
+The coefficient object checks itself when the record is built, so a plugin file that lists its
+methods as records (`METHODS = [...]`) loads every good record and reports each bad one by name
+(`harness.registry.load_plugin`), instead of failing to import as a whole.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from harness.errors import InputError
+from harness.stepper import Stepper
+
+__all__ = ["Method", "from_record", "RECORD_KEYS"]
+
+
+@dataclass(frozen=True)
+class Method:
+    """One method: coefficients, claims, reference.
+
+    Parameters
+    ----------
+    coefficients : a coefficient object of `harness.coefficients` (its `name` is the method's)
+    claimed_order : the order the literature claims (checked against the coefficients' order)
+    reference : the literature source
+    description : one line on what the method is
+    stability : declared stability figures ({'real_interval': ..., 'imag_interval': ...} or
+        {'hw_limit': ...}), checked by the stability experiment; optional
+    options : options of the family's step loop (e.g. `starter` of a multistep method,
+        `loop='staggered'` for the leapfrog form of a kick-drift-kick scheme)
+    """
+
+    coefficients: Any
+    claimed_order: int
+    reference: str
+    description: str = ""
+    stability: Mapping[str, float] | None = None
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not hasattr(self.coefficients, "fingerprint") or not hasattr(self.coefficients, "name"):
+            kind = type(self.coefficients).__name__
+            raise InputError(f"`coefficients` must be a coefficient object, got {kind}")
+        object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
+        if self.stability is not None:
+            object.__setattr__(self, "stability", MappingProxyType(dict(self.stability)))
+
+    @property
+    def name(self) -> str:
+        return self.coefficients.name
+
+    def stepper(self) -> Stepper:
+        """The stepper running this method with its family's step loop."""
+        from implementations import build_stepper
+
+        return build_stepper(self)
+
+_COMMON = {"name", "claimed_order", "reference", "description", "stability"}
+RECORD_KEYS = {
+    "runge-kutta": {"A", "b", "c", "b_hat"},
+    "splitting": {"sequence"},
+    "multistep": {"alpha", "beta", "starter"},
+}
+
+
+def _family(record: Mapping[str, Any]) -> str:
+    keys = set(record) - _COMMON
+    for family, allowed in RECORD_KEYS.items():
+        if keys and keys <= allowed and keys & allowed:
+            return family
+    raise InputError(
+        f"method record {record.get('name')!r}: its coefficient keys {sorted(keys)} match no family "
+        f"(one of {', '.join(f'{k}: {sorted(v)}' for k, v in RECORD_KEYS.items())})"
+    )
+
+
+def from_record(record: Mapping[str, Any]) -> Stepper:
+    """Build the stepper a method record declares (see the module docstring).
+
+    Raises `InputError` (or `CoefficientError`) naming the record and the rule it breaks."""
+    if not isinstance(record, Mapping):
+        raise InputError(f"a method record must be a mapping, got {type(record).__name__}")
+    name = record.get("name")
+    if not isinstance(name, str) or not name.strip():
+        raise InputError(f"method record: `name` must be a non-empty string, got {name!r}")
+    for key in ("claimed_order", "reference"):
+        if key not in record:
+            raise InputError(f"method record {name!r}: `{key}` is required")
+    family = _family(record)
+    try:
+        if family == "runge-kutta":
+            from harness.coefficients import ButcherTableau
+
+            coeffs = ButcherTableau(name, record["A"], record["b"], record.get("c"),
+                                    b_hat=record.get("b_hat"))
+        elif family == "splitting":
+            from harness.coefficients import SplittingScheme
+
+            coeffs = SplittingScheme(name, record["sequence"])
+        else:
+            from harness.coefficients import LinearMultistep
+
+            coeffs = LinearMultistep(name, record["alpha"], record["beta"])
+    except KeyError as exc:
+        raise InputError(
+            f"method record {name!r}: `{exc.args[0]}` is required for a {family} method"
+        ) from None
+    options = {"starter": record["starter"]} if "starter" in record else {}
+    return Method(coeffs, record["claimed_order"], record["reference"], record.get("description", ""),
+                  record.get("stability"), options).stepper()
