@@ -187,6 +187,26 @@ def plugin_errors() -> list[str]:
     return [*steppers.errors, *problems.errors, *_plugin_errors]
 
 
+def _build_records(records: Any, path: str | Path) -> list[Stepper]:
+    """Steppers from a plugin's `METHODS` (method records, `harness.methods`): each record is
+    built on its own, and one that fails its checks is reported by name in `plugin_errors()`
+    while the others load."""
+    from harness.methods import Method, from_record
+
+    if records is None:
+        return []
+    if isinstance(records, str | bytes) or not hasattr(records, "__iter__"):
+        raise PluginError(f"plugin {str(path)!r}: `METHODS` must be a list of method records")
+    out = []
+    for i, record in enumerate(records):
+        label = record.get("name", f"#{i}") if isinstance(record, dict) else getattr(record, "name", f"#{i}")
+        try:
+            out.append(record.stepper() if isinstance(record, Method) else from_record(record))
+        except (InputError, ValueError, TypeError) as exc:
+            _plugin_errors.append(f"plugin {str(path)!r}: method {label!r} not loaded: {exc}")
+    return out
+
+
 def load_plugin(path: str | Path, *, strict: bool = True) -> list[str]:
     """Import a user's plugin file and register its steppers and problems; return their names.
 
@@ -220,11 +240,13 @@ def load_plugin(path: str | Path, *, strict: bool = True) -> list[str]:
         names: list[str] = []
         listed_s = getattr(module, "STEPPERS", None)
         listed_p = getattr(module, "PROBLEMS", None)
+        records = getattr(module, "METHODS", None)
         objs = []
         if listed_s is not None or listed_p is not None:
             objs = list(listed_s or []) + list(listed_p or [])
-        else:
+        elif records is None:
             objs = [v for v in vars(module).values() if isinstance(v, Stepper | Problem)]
+        objs += _build_records(records, path)
         if not objs:
             raise PluginError(f"plugin {str(path)!r} defines no Stepper or Problem objects")
         for obj in objs:
