@@ -12,8 +12,11 @@ Correct methods are random members of parametric families, each with a correct c
   |a| < 1 (HNW I, III.2).
 Each is checked on creation against its family's order from its coefficients (a sample the
 formulas make degenerate is redrawn). Mutants of each: one coefficient perturbed so an order
-condition breaks (`perturbed`), and the correct coefficients with a claim one too high
-(`overclaimed`).
+condition breaks (`perturbed`, typically down to order 1), a subtle mutant that keeps every
+condition below the claimed order and breaks only the top ones (`subtle`: Runge-Kutta weights
+moved within the null space of the lower-order conditions, which are linear in b; a symmetric
+composition moved symmetrically, which keeps order 2 and loses 4), and the correct
+coefficients with a claim one too high (`overclaimed`).
 
 `error_rates` runs the gate over a population: a false alarm is a correct method that fails,
 a miss a mutant that passes. It reports both for the full gate (coefficients and measurement)
@@ -53,7 +56,7 @@ class Member:
     """One generated method: its family, the stepper, and whether its claim is correct."""
 
     family: str
-    kind: str  # correct | perturbed | overclaimed
+    kind: str  # correct | perturbed | subtle | overclaimed
     stepper: object
 
     @property
@@ -180,6 +183,41 @@ def _perturb(family: str, coeffs, rng: np.random.Generator):
     return alpha, beta
 
 
+def _subtle(family: str, coeffs, claimed: int):
+    """Coefficients of order exactly claimed - 1 (Runge-Kutta) or claimed - 2 (a symmetric
+    composition), or None where the family leaves no such freedom."""
+    if family.startswith("rk-"):
+        from harness.theory import rooted_trees
+
+        A, b = np.array(coeffs[0], dtype=float), np.array(coeffs[1], dtype=float)
+        g: list[np.ndarray] = []
+        for t in rooted_trees(claimed - 1):
+            v = np.ones(len(b))
+            for k in t.children:
+                v = v * (A @ g[k])
+            g.append(v)
+        _, sv, vt = np.linalg.svd(np.array(g))
+        rank = int(np.sum(sv > 1e-10 * sv[0]))
+        if rank >= len(b):
+            return None
+        d = vt[rank]
+        return A.tolist(), (b + _PERTURBATION * d / np.linalg.norm(d)).tolist()
+    if family == "split-p4":
+        seq = [list(x) for x in coeffs]
+        n = len(seq)
+        block = n // 5  # five compositions of velocity Verlet, three entries each
+        for i in range(block):  # w1 -> w1 + delta at both ends, w0 -> w0 - 2 delta in the middle
+            seq[i][1] *= 1 + _PERTURBATION
+            seq[n - 1 - i][1] *= 1 + _PERTURBATION
+        w1 = sum(v for k, v in coeffs[:block] if k == "D")
+        mid = 2 * block
+        for i in range(mid, mid + block):
+            seq[i][1] -= 2 * _PERTURBATION * w1 * (coeffs[i][1] / sum(v for k, v in coeffs[mid:mid + block]
+                                                                     if k == coeffs[i][0]))
+        return [tuple(x) for x in seq]
+    return None
+
+
 def generate(size_per_family: int, *, seed: int = 0, families: Sequence[str] = FAMILIES) -> list[Member]:
     """`size_per_family` correct members of each family, and a perturbed and an overclaimed
     mutant of each. Every correct member's order from its coefficients equals its claim."""
@@ -209,6 +247,14 @@ def generate(size_per_family: int, *, seed: int = 0, families: Sequence[str] = F
             over = _stepper(family, f"{tag}-overclaimed", coeffs, claimed + 1)
             out += [Member(family, "correct", good), Member(family, "perturbed", bad),
                     Member(family, "overclaimed", over)]
+            subtle = _subtle(family, coeffs, claimed)
+            if subtle is not None:
+                try:
+                    sub = _stepper(family, f"{tag}-subtle", subtle, claimed)
+                except Exception:  # the move broke a consistency check: no subtle mutant here
+                    sub = None
+                if sub is not None and 0 < sub.coefficients.order() < claimed:
+                    out.append(Member(family, "subtle", sub))
             made += 1
     return out
 

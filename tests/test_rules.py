@@ -148,10 +148,11 @@ def test_population_has_no_false_alarm_and_no_miss():
     from harness.populations import error_rates, generate
 
     members = generate(2, seed=11)
-    assert len(members) == 2 * 6 * 3
+    kinds = {m.kind for m in members}
+    assert kinds == {"correct", "perturbed", "subtle", "overclaimed"}
     table, rates = error_rates(members)
     overall = rates[rates.family == "all"].iloc[0]
-    assert overall.correct_methods == 12 and overall.mutants == 24
+    assert overall.correct_methods == 12 and overall.mutants >= 24 + 6
     wrong = table[(table.kind == "correct") != table.gate_passed]
     assert wrong.empty, wrong[["stepper", "kind", "detail"]].to_string()
     assert overall.gate_false_alarms == 0 and overall.gate_misses == 0
