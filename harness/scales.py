@@ -51,6 +51,8 @@ __all__ = [
     "orbit_rates",
     "component_scales",
     "draw_noise",
+    "states_at",
+    "fastest_times",
 ]
 
 
@@ -170,6 +172,39 @@ def _eigenvalues(problem, jac: np.ndarray) -> np.ndarray:
         root = np.sqrt(np.linalg.eigvals(mats[:, nq:, :nq]).astype(complex))
         return np.concatenate([root, -root], axis=1)
     return np.linalg.eigvals(mats)
+
+
+def states_at(problem, times: np.ndarray) -> np.ndarray:
+    """States (dim, len(times)) of the float64 Taylor orbit from y0 at increasing `times` >= t0:
+    points on the orbit (for probing a map there), not a certified reference."""
+    lock, ta = _integrator(problem)
+    times = np.asarray(times, dtype=np.float64)
+    with lock:
+        ta.time = problem.t0
+        ta.state[:] = problem.y0
+        if problem.parameters:
+            ta.pars[:] = problem.parameter_values
+        out = ta.propagate_grid(times)
+    return np.ascontiguousarray(out[-1].T)
+
+
+def fastest_times(problem, n: int) -> np.ndarray:
+    """Up to n times along the orbit over the span where the Jacobian's spectral radius is
+    largest, at least 1 % of the span apart (the close approaches), increasing."""
+    orbit = sample_orbit(problem)
+    rate = orbit_rates(problem, orbit)["spectral"]
+    idx = np.arange(orbit.t.size)
+    if idx.size > tol.ORBIT_MAX_SAMPLES:
+        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
+    t = orbit.t[idx]
+    gap = 0.01 * (problem.t_end - problem.t0)
+    chosen: list[float] = []
+    for k in np.argsort(rate)[::-1]:
+        if all(abs(t[k] - c) > gap for c in chosen):
+            chosen.append(float(t[k]))
+        if len(chosen) == n:
+            break
+    return np.sort(np.array(chosen))
 
 
 def orbit_rates(problem, orbit: Orbit, *, candidates: int | None = None) -> dict[str, np.ndarray]:
