@@ -163,6 +163,8 @@ class ConvergenceExperiment(Experiment):
         # scipy peers make tighter ones cost minutes per cell for little information.
         "tolerances": [10.0**-k for k in range(3, 12, 2)],
         "local": True,
+        "t_end": None,  # None: the problem's convergence horizon
+        "perturbation": None,  # None: the problem's ensemble perturbation
     }
     quick_config: Mapping[str, Any] = {"ensemble": 8, "work_budget": tol.SWEEP_WORK_BUDGET // 4}
 
@@ -247,9 +249,9 @@ def step_budget(stepper: Stepper, config: Mapping[str, Any]) -> int:
 
 def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
 
-    T0, T = problem.t0, problem.convergence_t_end
+    T0, T = problem.t0, config.get("t_end") or problem.convergence_t_end
     span = T - T0
-    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
+    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]), scale=config.get("perturbation"))
     ref = _best_reference(problem, T, y0)
     y_ref = ref.y[-1]
     ref_err = float(np.max(ref.error[-1]))
@@ -401,8 +403,8 @@ def _local_sweep(stepper: Stepper, problem, y0: np.ndarray, global_frame: pd.Dat
 
 
 def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
-    T0, T = problem.t0, problem.convergence_t_end
-    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
+    T0, T = problem.t0, config.get("t_end") or problem.convergence_t_end
+    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]), scale=config.get("perturbation"))
     ref = _best_reference(problem, T, y0)
     y_ref = ref.y[-1]
     scale = _scale(y0, y_ref)

@@ -78,6 +78,8 @@ class WorkPrecisionExperiment(Experiment):
     finite_columns = ("n_steps", "t_end", "rhs_evals", "wall_s")
     description = "Error at the final time against evaluations and wall time (step-size or tolerance sweep)."
     default_config: Mapping[str, Any] = {
+        "t_end": None,  # None: the problem's convergence horizon
+        "perturbation": None,  # None: the problem's (used when `ensemble` > 1)
         "ensemble": 1,
         "seed": 0,
         "start_error": tol.SWEEP_START_ERROR,
@@ -96,7 +98,8 @@ class WorkPrecisionExperiment(Experiment):
     }
 
     def cells(self, steppers, problems, config):
-        check_config(config, counts=("ensemble", "work_budget", "n_start"))
+        check_config(config, counts=("ensemble", "work_budget", "n_start"),
+                     optional_positives=("t_end", "perturbation"))
         tolerances = config.get("tolerances")
         listed = not isinstance(tolerances, str | bytes) and isinstance(tolerances, Sequence)
         if not listed or not tolerances or not all(
