@@ -198,3 +198,20 @@ def test_cli_overrides_are_validated_in_one_line(capsys, argv, match):
                  "--jobs", "1", *argv])
     _, err = capsys.readouterr()
     assert code == 2 and len(err.strip().splitlines()) == 1 and re.search(match, err), err
+
+
+def test_within_rounding_on_a_slow_stretch_passes_when_shown_elsewhere():
+    """A problem whose h resolves a close encounter leaves a non-symmetric method's truncation
+    below rounding over short slow stretches: that cell is `reversible-here` when the method is
+    irreversible in another cell of the run, and `claim-false` when it never is."""
+    def row(steps, ulps):
+        return {"stepper": "rk4", "problem": "harmonic", "steps": steps, "h": 0.1, "tol": np.nan,
+                "t_span": 0.1 * steps, "return_error": ulps * tol.EPS, "return_error_ulps": ulps,
+                "flow_amplification": 1.0, "rounding_bound_ulps": 2.0 * steps, "perturbation": 0.01,
+                "ensemble_size": 4, "wall_s": 0.0, "message": ""}
+
+    both = EXP.summarize(pd.DataFrame([row(100, 10.0), row(1000, 1e9)]), EXP.config(quick=True))
+    assert list(both.verdict) == ["reversible-here", "irreversible"] and both.passed.all()
+    assert "irreversible in another cell" in both.message.iloc[0]
+    never = EXP.summarize(pd.DataFrame([row(100, 10.0)]), EXP.config(quick=True))
+    assert list(never.verdict) == ["claim-false"] and not never.passed.any()
