@@ -62,6 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("experiment", help="convergence, stability, reversibility, energy, "
                                       "symplecticity or work-precision")
     _common(p)
+    for flag, meta, what in (("--h", "H", "fixed step size (default: from the problem's time scale)"),
+                             ("--steps", "N[,N...]", "step count(s) of a fixed-step run"),
+                             ("--t-end", "T", "final time of a fixed-step run (sets the step count)"),
+                             ("--perturbation", "P", "relative size of the ensemble perturbation "
+                                                     "(default: derived per problem)")):
+        p.add_argument(flag, default=None, metavar=meta, help=what)
 
     p = sub.add_parser("reference", help="certified ground-truth state of a problem at time T")
     p.add_argument("problem")
@@ -227,9 +233,13 @@ def _cmd_reference(args) -> int:
 
 def _run(args, experiment: str):
     """Run one experiment's grid and save it under results/<run-id>/ (path on stderr)."""
+    from harness.experiments import get_experiment
+    from harness.experiments.common import OVERRIDE_KEYS, check_overrides
     from harness.runner import run_experiment
     from harness.store import save_run
 
+    overrides = check_overrides(get_experiment(experiment),
+                                {k: getattr(args, k, None) for k in OVERRIDE_KEYS})
     result = run_experiment(
         experiment,
         _names("stepper", args.stepper),
@@ -240,9 +250,11 @@ def _run(args, experiment: str):
         fresh=args.fresh,
         plugins=tuple(args.plugin),
         cell_timeout=args.cell_timeout,
+        config=overrides or None,
     )
     path = save_run({experiment: result}, config={"command": args.command, "experiment": experiment,
-                                                   "quick": args.quick, "plugins": list(args.plugin)})
+                                                   "quick": args.quick, "plugins": list(args.plugin),
+                                                   "overrides": overrides})
     print(f"harness: results saved in {os.fspath(path)}", file=sys.stderr)
     return result
 

@@ -83,6 +83,7 @@ class Problem:
         central_force: bool = False,
         convergence_t_end: float | None = None,
         perturbation: float | None = None,
+        period: float | None = None,
         tags: Sequence[str] = (),
     ):
         if not isinstance(name, str) or not name.strip():
@@ -134,6 +135,8 @@ class Problem:
             raise InputError(f"problem {name!r}: `t_span` must be two real numbers, got {t_span!r}") from None
         if not (math.isfinite(t0) and math.isfinite(t_end)) or t_end <= t0:
             raise InputError(f"problem {name!r}: `t_span` must be finite with t_end > t0, got {t_span}")
+        period = _check_optional_positive(name, "period", period)
+        perturbation = _check_optional_positive(name, "perturbation", perturbation)
         y0_arr.setflags(write=False)
         self.name = name
         self.variables = variables
@@ -150,8 +153,9 @@ class Problem:
         self.reference = reference
         self.conservative = conservative
         self.central_force = central_force
-        self.convergence_t_end = float(convergence_t_end) if convergence_t_end else t_end
+        self.declared_convergence_t_end = float(convergence_t_end) if convergence_t_end else None
         self.perturbation = perturbation
+        self.period = period
         self.tags = tuple(tags)
         self._lock = threading.Lock()
 
@@ -174,6 +178,16 @@ class Problem:
         return bool(self.compiled("rhs", None).is_time_dependent)
 
     @property
+    def convergence_t_end(self) -> float:
+        """The convergence horizon: declared, else the span cut to HORIZON_PERIODS natural
+        periods (`time_scale`; order does not depend on the horizon, a long span only costs)."""
+        if self.declared_convergence_t_end is not None:
+            return self.declared_convergence_t_end
+        from harness.tolerances import HORIZON_PERIODS
+
+        return min(self.t_end, self.t0 + HORIZON_PERIODS * self.time_scale.period)
+
+    @property
     def parameter_values(self) -> np.ndarray:
         return np.array(list(self.parameters.values()), dtype=np.float64)
 
@@ -187,7 +201,9 @@ class Problem:
             "rhs": [str(e) for e in self.rhs],
             "y0": self.y0.tolist(),
             "t_span": [self.t0, self.t_end],
-            "convergence_t_end": self.convergence_t_end,
+            "convergence_t_end": self.declared_convergence_t_end,
+            "period": self.period,
+            "perturbation": self.perturbation,
             "parameters": dict(self.parameters),
             "invariants": sorted(self.invariants),
             "exact_solution": self.exact is not None,
@@ -202,7 +218,10 @@ class Problem:
     def fingerprint(self) -> str:
         """A text form of the whole definition: changes whenever the problem changes."""
         parts = [self.name, *map(str, self.variables), *map(str, self.rhs), self.y0.tobytes().hex()]
-        parts += [repr((self.t0, self.t_end, self.convergence_t_end))]
+        horizon = self.declared_convergence_t_end
+        parts += [repr((self.t0, self.t_end, self.t_end if horizon is None else horizon))]
+        parts += [f"{k}={v!r}" for k, v in (("period", self.period), ("perturbation", self.perturbation))
+                  if v is not None]
         parts += [f"{k}={v!r}" for k, v in self.parameters.items()]
         parts += [f"{k}:{e}" for k, e in sorted(self.invariants.items())]
         return "|".join(parts)
@@ -211,20 +230,23 @@ class Problem:
     def ensemble(self, size: int, *, seed: int = 0, scale: float | None = None) -> np.ndarray:
         """`size` initial states shaped (dim, size): member 0 is `y0`, the others perturbed.
 
-        Each component is moved by a relative amount drawn uniformly from [-scale, scale]
-        (absolute where the component is zero), so an order is never the artefact of one start.
+        Component i moves by u * scale * s_i, u uniform in [-1, 1] and s_i the component's scale
+        along the orbit (`ensemble_perturbation`), so an order is never the artefact of one
+        start. `scale` defaults to the problem's size (declared, or derived so that every
+        member stays in the start's dynamical regime: `harness.scales`).
         """
-        from harness.tolerances import ENSEMBLE_PERTURBATION
+        from harness.scales import draw_noise
 
         size = check_ensemble_size(size)
+        if size == 1:
+            return self.y0[:, None].copy()
+        pert = self.ensemble_perturbation
         if scale is None:
-            scale = self.perturbation if self.perturbation is not None else ENSEMBLE_PERTURBATION
-        rng = np.random.default_rng(seed)
-        base = np.repeat(self.y0[:, None], size, axis=1)
-        magnitude = np.where(self.y0 != 0.0, np.abs(self.y0), 1.0)[:, None]
-        noise = rng.uniform(-scale, scale, size=(self.dim, size)) * magnitude
-        noise[:, 0] = 0.0
-        return base + noise
+            scale = pert.size
+        else:
+            scale = _check_optional_positive(self.name, "perturbation", scale)
+        noise = draw_noise(self.dim, size, int(seed)) * (scale * pert.component_scale)[:, None]
+        return self.y0[:, None] + noise
 
     def pars_for(self, size: int, pars: np.ndarray | Mapping[str, float] | None = None) -> np.ndarray:
         """Parameter values shaped (P, size), from defaults, a mapping, or an array."""
@@ -256,6 +278,21 @@ class Problem:
         if not np.all(np.isfinite(arr)):
             raise InputError("`pars` must be finite")
         return arr
+
+    # -- derived time scale and perturbation (harness.scales) -------------------------------------
+    @cached_property
+    def time_scale(self):
+        """Natural period, fastest rate and the long-run step size (`harness.scales.TimeScale`)."""
+        from harness.scales import derive_time_scale
+
+        return derive_time_scale(self)
+
+    @cached_property
+    def ensemble_perturbation(self):
+        """Relative size and component scales of the ensemble (`harness.scales.Perturbation`)."""
+        from harness.scales import derive_perturbation
+
+        return derive_perturbation(self)
 
     # -- derived numerical functions --------------------------------------------------------------
     def dynamics(self, pars: np.ndarray | None = None, size: int = 1) -> Dynamics:
@@ -322,6 +359,18 @@ class Problem:
     def __setstate__(self, state):
         self.__dict__.update(state)
         self._lock = threading.Lock()
+
+
+def _check_optional_positive(problem: str, name: str, value: Any) -> float | None:
+    if value is None:
+        return None
+    try:
+        x = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"problem {problem!r}: `{name}` must be a positive number, got {value!r}") from None
+    if not (math.isfinite(x) and x > 0.0):
+        raise InputError(f"problem {problem!r}: `{name}` must be a positive finite number, got {value!r}")
+    return x
 
 
 def _subs_pars(e: hy.expression, mapping: dict[str, hy.expression]) -> hy.expression:

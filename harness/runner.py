@@ -136,6 +136,8 @@ FAILURE_KINDS = ("error", "invalid", "timeout", "crash", "lookup", "version", "s
 # Modules whose source counts in every cell's code version: they compute what cells measure.
 MEASURING_MODULES = (
     "harness.problem",
+    "harness.scales",
+    "harness.experiments.common",
     "harness.stepper",
     "harness.coefficients",
     "harness.ground_truth",

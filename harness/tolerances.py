@@ -217,6 +217,10 @@ SYMPLECTIC_FD_DELTA = 2e-4
 # 1e-10 leaves a tenfold margin, and the least non-symplectic map measured (rk4, h omega = 0.1:
 # (h omega)^6 / 72 ~ 1e-8) is a hundred times above it ...
 SYMPLECTIC_FD_TOL = 1e-10
+# ... refined by factors of 4 this many times where the state has a length scale far below its
+# overall size (a close encounter: at r = 0.034 of a 4-wide Pleiades the first step gave 1.4e-8
+# for every symplectic method alike) ...
+SYMPLECTIC_FD_REFINEMENTS = 2
 # ... and a method claimed not symplectic must exceed it tenfold to count as clearly above it.
 SYMPLECTIC_CLEAR_FACTOR = 10.0
 # Report, ground truth: an exact solution evaluated in float64 (trigonometric functions, Kepler's
@@ -238,3 +242,29 @@ ADAPTIVE_MAX_EVALS = 100_000
 # number: at a whole period a periodic error term returns to zero, and conjugate-symplectic
 # methods (symplectic Euler, conjugate to velocity Verlet) then measure one order too high.
 CONVERGENCE_PERIODS = 1.3
+
+# Derived time scales and perturbations (harness.scales). The long-run experiments step with
+# h = STEP_RATE_PRODUCT / max|lambda(J)| along the orbit: h omega = 0.12 resolves the fastest
+# motion for every stable method (the old per-problem table had h omega 0.09-0.14) ...
+STEP_RATE_PRODUCT = 0.12
+# ... the orbit is sampled at every Taylor step and this many dense-output points inside each,
+# so a close approach (where the steps shrink) is seen near its minimum ...
+ORBIT_DENSE_POINTS = 3
+# ... a run stops after this many Taylor steps (a span of 10^5 orbital periods or more) ...
+ORBIT_MAX_STEPS = 200_000
+# ... and at most this many samples enter the Jacobian's spectrum (evenly over the steps, which
+# cluster where the motion is fast).
+ORBIT_MAX_SAMPLES = 4000
+# An ensemble member is in the unperturbed start's dynamical regime when its fastest rate along
+# its orbit is within this factor of the unperturbed one (for gravity rate ~ r^-3/2: a closest
+# approach within a factor 2^(2/3) = 1.6) ...
+REGIME_RATE_FACTOR = 2.0
+# ... and the derived perturbation is never made smaller than this (1e-8 of a component's scale
+# is still ~5e7 ulps, far above rounding).
+MIN_ENSEMBLE_PERTURBATION = 1e-8
+# Convergence horizon of a problem that declares none: at most this many natural periods of its
+# span (order does not depend on the horizon; a long span only costs steps).
+HORIZON_PERIODS = 10.0
+# A probe member's fastest rate is read from the spectra at this many samples of its orbit where
+# ||J|| (a bound on the spectral radius) is largest: the fastest motion is among them.
+REGIME_CANDIDATES = 64

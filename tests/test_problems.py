@@ -193,3 +193,184 @@ def _make(**overrides):
 def test_invalid_definitions_raise(overrides, match):
     with pytest.raises(InputError, match=match):
         _make(**overrides)
+
+
+# -- derived time scales and ensemble perturbations (harness.scales) ------------------------------
+import importlib.util  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from harness import scales  # noqa: E402
+from harness import tolerances as tol  # noqa: E402
+
+PLUGINS = Path(__file__).parent / "plugins"
+
+# The step sizes of the hand-kept table the derived time scale replaced (period / steps per
+# period, chosen per problem for h omega ~ 0.1): the derivation must land near them unaided.
+HAND_TUNED_H = {
+    "harmonic": 2 * math.pi / 64, "pendulum": 6.534 / 64, "pendulum-small": 6.286 / 64,
+    "kepler-circular": 16 * math.pi / 64, "kepler-elliptic": 2 * math.pi / 256,
+    "henon-heiles": 2 * math.pi / 64, "henon-heiles-chaotic": 2 * math.pi / 64,
+    "outer-solar-system": 4332.59 / 100, "lennard-jones": 0.4 / 64,
+}  # (free-fall's entry, span / 64, was no dynamical scale: its Jacobian is nilpotent)
+
+
+def _plugin_problem(file: str, name: str):
+    """The problem `name` of a plugin file, imported as a user's file would be, unregistered."""
+    spec = importlib.util.spec_from_file_location(f"test_plugin_{Path(file).stem}", PLUGINS / file)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return next(p for p in module.PROBLEMS if p.name == name)
+
+
+@pytest.fixture(scope="module")
+def pleiades():
+    return _plugin_problem("pleiades.py", "pleiades")
+
+
+@pytest.fixture(scope="module")
+def quartic():
+    return _plugin_problem("quartic.py", "quartic-oscillator")
+
+
+@pytest.fixture
+def plugin_problems(pleiades, quartic):
+    """The two plugin problems registered for one test, then removed again."""
+    for p in (pleiades, quartic):
+        problems.register(p, origin="test")
+    yield [pleiades.name, quartic.name]
+    for p in (pleiades, quartic):
+        problems.unregister(p.name)
+
+
+def _undeclared(problem: Problem, **changes) -> Problem:
+    """The same definition without its declared period (or with other keyword changes)."""
+    kw = dict(variables=problem.variables, newtonian=problem.newtonian, y0=problem.y0,
+              t_span=(problem.t0, problem.t_end), parameters=problem.parameters,
+              invariants=problem.invariants, conservative=problem.conservative)
+    if problem.newtonian is None:
+        kw["rhs"] = problem.rhs
+    kw.update(changes)
+    return Problem(problem.name + "-undeclared", **kw)
+
+
+@pytest.mark.parametrize("problem", ALL, ids=IDS)
+def test_time_scale_is_derived_from_the_dynamics(problem: Problem):
+    ts = problem.time_scale
+    assert ts.period > 0 and ts.h > 0 and ts.reason
+    if problem.period is not None:
+        assert ts.source == "declared" and ts.period == problem.period
+    if ts.fastest_rate > 0:
+        assert ts.h * ts.fastest_rate == pytest.approx(tol.STEP_RATE_PRODUCT)
+
+
+@pytest.mark.parametrize("name", sorted(HAND_TUNED_H))
+def test_derived_step_lands_near_the_hand_tuned_table_it_replaced(name):
+    h = problems.get(name).time_scale.h
+    assert HAND_TUNED_H[name] / 1.5 <= h <= HAND_TUNED_H[name] * 1.5, (name, h)
+
+
+def test_derived_period_is_the_orbital_period_where_the_linearisation_knows_it():
+    """Without its declared period, the circular Kepler orbit (2 pi / a^(-3/2) = 16 pi) and the
+    harmonic oscillator (2 pi) get their exact periods from max|Im lambda(J)| along the orbit;
+    the outer solar system gets Jupiter's, 4332.59 days, to within 10 %."""
+    circular = _undeclared(problems.get("kepler-circular"))
+    assert circular.time_scale.period == pytest.approx(16 * math.pi, rel=1e-9)
+    assert _undeclared(problems.get("harmonic")).time_scale.period == pytest.approx(2 * math.pi, rel=1e-12)
+    assert problems.get("outer-solar-system").time_scale.period == pytest.approx(4332.59, rel=0.1)
+
+
+def test_a_horizon_not_declared_is_cut_to_natural_periods(quartic):
+    assert quartic.declared_convergence_t_end is None
+    assert quartic.convergence_t_end == pytest.approx(
+        min(quartic.t_end, quartic.t0 + tol.HORIZON_PERIODS * quartic.time_scale.period))
+
+
+def test_ensemble_members_do_not_depend_on_the_ensemble_size():
+    p = problems.get("kepler-elliptic")
+    assert np.array_equal(p.ensemble(4, seed=3), p.ensemble(9, seed=3)[:, :4])
+    big = p.ensemble(9, seed=3, scale=1e-3)
+    assert np.array_equal(big[:, 0], p.y0)
+    # zero components (y, vx) move relative to their block's scale, never by an absolute 1e-2
+    scale = p.ensemble_perturbation.component_scale
+    assert np.all(scale > 0) and np.all(np.abs(big - p.y0[:, None]) <= 1e-3 * scale[:, None] + 1e-300)
+
+
+def test_bad_perturbation_is_refused_with_the_argument_named():
+    with pytest.raises(InputError, match=r"`perturbation` must be a positive finite number"):
+        problems.get("harmonic").ensemble(4, scale=-0.1)
+    with pytest.raises(InputError, match=r"`period` must be a positive finite number"):
+        _undeclared(problems.get("harmonic"), period=float("inf"))
+
+
+def _closest_approach(problem: Problem, y0: np.ndarray) -> float:
+    """Smallest pair distance of the seven bodies along the float64 orbit from y0 over [0, 3]."""
+    y = scales.sample_orbit(problem, y0).y
+    x, yy = y[:7], y[7:14]
+    return min(float(np.min(np.hypot(x[a] - x[b], yy[a] - yy[b])))
+               for a in range(7) for b in range(a + 1, 7))
+
+
+def test_pleiades_members_keep_the_closest_approach_of_the_unperturbed_start(pleiades):
+    """The derived perturbation keeps every member of a 16-member ensemble within a factor 2 of
+    the unperturbed closest approach (3.4e-2); the old default, 1 % of each component and an
+    absolute 1e-2 on zero components, sent members within 2e-3 of a collision."""
+    base = _closest_approach(pleiades, pleiades.y0)
+    assert base == pytest.approx(3.4e-2, rel=0.05)
+    members = pleiades.ensemble(tol.ENSEMBLE_SIZE)
+    closest = [_closest_approach(pleiades, members[:, j]) for j in range(1, members.shape[1])]
+    assert base / 2 <= min(closest) and max(closest) <= 2 * base, closest
+    assert pleiades.ensemble_perturbation.size < tol.ENSEMBLE_PERTURBATION
+    # The old ensemble, drawn as it was (seed 0, shape (dim, 16)): several members leave the regime.
+    magnitude = np.where(pleiades.y0 != 0.0, np.abs(pleiades.y0), 1.0)
+    noise = np.random.default_rng(0).uniform(-1e-2, 1e-2, size=(pleiades.dim, tol.ENSEMBLE_SIZE))
+    old = pleiades.y0[:, None] + noise * magnitude[:, None]
+    old_closest = [_closest_approach(pleiades, old[:, j]) for j in range(1, tol.ENSEMBLE_SIZE)]
+    assert sum(c < base / 10 for c in old_closest) >= 3, old_closest
+
+
+def test_plugin_problems_get_every_experiment_that_applies(plugin_problems):
+    """A user's problems, named nowhere in the harness: the quartic oscillator (an invariant,
+    q'' = a(q)) and the Pleiades (an invariant, q'' = a(q) with masses) get energy,
+    reversibility, symplecticity and work-precision cells, with no skip."""
+    from harness.experiments import get_experiment
+
+    for exp_name in ("energy", "reversibility", "symplecticity", "work-precision"):
+        exp = get_experiment(exp_name)
+        cells, skips = exp.cells(["velocity-verlet", "rk4"], plugin_problems, exp.config(quick=True))
+        assert not skips, (exp_name, skips)
+        assert {c.problem for c in cells} == set(plugin_problems), exp_name
+
+
+def test_plugin_problems_verdicts(plugin_problems):
+    """The plugin problems measured: velocity Verlet keeps the quartic oscillator's energy
+    bounded and its maps are symplectic on both (the Pleiades' in the mass-weighted form, probed
+    at its closest encounter), while rk4's are clearly not; the perturbation is stated."""
+    from harness.runner import run_experiment
+
+    def run(name, probs, **cfg):
+        result = run_experiment(name, ["velocity-verlet", "rk4"], probs, quick=True, config=cfg,
+                                jobs=1, cache=False, progress=False)
+        assert not len(result.failures), result.failures
+        return result.summary.set_index(["stepper", "problem"])
+
+    energy = run("energy", ["quartic-oscillator"], ensemble=2, steps=4000)
+    vv = energy.loc[("velocity-verlet", "quartic-oscillator")]
+    assert vv.verdict == "as-claimed" and vv.perturbation == pytest.approx(
+        problems.get("quartic-oscillator").ensemble_perturbation.size)
+    sym = run("symplecticity", plugin_problems)
+    for p in plugin_problems:
+        assert sym.loc[("velocity-verlet", p)].verdict == "symplectic", p
+        assert sym.loc[("rk4", p)].verdict == "non-symplectic", p
+
+
+def test_applicability_follows_facts_and_says_why():
+    from harness.experiments.common import hamiltonian_reason, hamiltonian_weights, reversible_reason
+
+    assert "velocity-dependent" in reversible_reason(problems.get("damped-cubic"))
+    assert "time-dependent" in hamiltonian_reason(problems.get("forced-duffing"))
+    assert "first-order" in hamiltonian_reason(problems.get("van-der-pol-stiff"))
+    oss = problems.get("outer-solar-system")
+    w = hamiltonian_weights(oss)
+    masses = np.repeat([1.00000597682, 0.000954786104043, 0.000285583733151, 0.0000437273164546,
+                        0.0000517759138449, 1.0 / 1.3e8], 3)
+    assert w == pytest.approx(masses / masses.max(), rel=1e-6)

@@ -18,7 +18,6 @@ from harness import tolerances as tol
 from harness.cli import main
 from harness.errors import InputError
 from harness.experiments import get_experiment
-from harness.experiments.energy import TIME_SCALES
 from harness.experiments.reversibility import SUMMARY_COLUMNS, flow_amplification, rounding_bound_ulps
 from harness.registry import get_problem, problems, steppers
 from harness.runner import run_experiment
@@ -120,8 +119,9 @@ def test_symmetric_return_error_grows_no_faster_than_rounding_allows():
 
 
 def test_rounding_bound_uses_the_flow_amplification():
-    harmonic = flow_amplification(get_problem("harmonic"), 100 * TIME_SCALES["harmonic"].h)
-    kepler = flow_amplification(get_problem("kepler-elliptic"), 1000 * TIME_SCALES["kepler-elliptic"].h)
+    harmonic = flow_amplification(get_problem("harmonic"), 100 * get_problem("harmonic").time_scale.h)
+    kepler_problem = get_problem("kepler-elliptic")
+    kepler = flow_amplification(kepler_problem, 1000 * kepler_problem.time_scale.h)
     # A rotation: ||J||_inf = |cos| + |sin| <= sqrt(2). Kepler shears: perturbations grow.
     assert 1.0 - 1e-6 <= harmonic <= np.sqrt(2.0) + 1e-6
     assert kepler > 100.0
@@ -169,3 +169,49 @@ def test_cli_json_records(capsys):
     assert set(records.stepper) == {"leapfrog", "rk4"}
     assert set(records.verdict) == {"reversible", "irreversible"}
     assert records.passed.all()
+
+
+def test_cli_overrides_set_the_step_size_and_the_span(capsys):
+    """`--h` and `--t-end` replace the problem's derived step and the list of step counts: one
+    round trip of exactly the span asked for, recorded with the h used."""
+    code = main(["run", "reversibility", "--quick", "--stepper", "leapfrog", "--problem", "harmonic",
+                 "--h", "0.05", "--t-end", "10", "--jobs", "1", "--fresh", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    import json
+
+    records = pd.DataFrame(json.loads(out))
+    assert list(records.steps) == [200] and records.h.iloc[0] == pytest.approx(0.05)
+    assert records.verdict.iloc[0] == "reversible"
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--h", "-1"], r"`--h` must be a positive finite number, got '-1'"),
+    (["--steps", "10,x"], r"`--steps` must be whole numbers >= 1"),
+    (["--steps", "100", "--t-end", "5"], r"give `--steps` or `--t-end`, not both"),
+    (["--perturbation", "nan"], r"`--perturbation` must be a positive finite number"),
+])
+def test_cli_overrides_are_validated_in_one_line(capsys, argv, match):
+    import re
+
+    code = main(["run", "reversibility", "--quick", "--stepper", "leapfrog", "--problem", "harmonic",
+                 "--jobs", "1", *argv])
+    _, err = capsys.readouterr()
+    assert code == 2 and len(err.strip().splitlines()) == 1 and re.search(match, err), err
+
+
+def test_within_rounding_on_a_slow_stretch_passes_when_shown_elsewhere():
+    """A problem whose h resolves a close encounter leaves a non-symmetric method's truncation
+    below rounding over short slow stretches: that cell is `reversible-here` when the method is
+    irreversible in another cell of the run, and `claim-false` when it never is."""
+    def row(steps, ulps):
+        return {"stepper": "rk4", "problem": "harmonic", "steps": steps, "h": 0.1, "tol": np.nan,
+                "t_span": 0.1 * steps, "return_error": ulps * tol.EPS, "return_error_ulps": ulps,
+                "flow_amplification": 1.0, "rounding_bound_ulps": 2.0 * steps, "perturbation": 0.01,
+                "ensemble_size": 4, "wall_s": 0.0, "message": ""}
+
+    both = EXP.summarize(pd.DataFrame([row(100, 10.0), row(1000, 1e9)]), EXP.config(quick=True))
+    assert list(both.verdict) == ["reversible-here", "irreversible"] and both.passed.all()
+    assert "irreversible in another cell" in both.message.iloc[0]
+    never = EXP.summarize(pd.DataFrame([row(100, 10.0)]), EXP.config(quick=True))
+    assert list(never.verdict) == ["claim-false"] and not never.passed.any()

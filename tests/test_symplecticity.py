@@ -194,7 +194,7 @@ def test_velocity_verlet_labelled_not_symplectic_fails(registered):
 @pytest.mark.parametrize("bad, match", [
     ({"states": 0}, r"config `states` must be a whole number >= 1, got 0"),
     ({"adaptive_tol": -1e-6}, r"config `adaptive_tol` must be a positive finite number"),
-    ({"problems": [3]}, r"config `problems` must be a list of names"),
+    ({"h": 0.0}, r"config `h` must be a positive finite number \(or unset\)"),
 ])
 def test_bad_settings_are_refused_with_the_setting_named(bad, match):
     with pytest.raises(InputError, match=match):

@@ -163,6 +163,8 @@ class ConvergenceExperiment(Experiment):
         # scipy peers make tighter ones cost minutes per cell for little information.
         "tolerances": [10.0**-k for k in range(3, 12, 2)],
         "local": True,
+        "t_end": None,  # None: the problem's convergence horizon
+        "perturbation": None,  # None: the problem's ensemble perturbation
     }
     quick_config: Mapping[str, Any] = {"ensemble": 8, "work_budget": tol.SWEEP_WORK_BUDGET // 4}
 
@@ -191,7 +193,7 @@ class ConvergenceExperiment(Experiment):
         problem = get_problem(cell.problem)
         if isinstance(stepper, AdaptiveStepper):
             return _tolerance_sweep(stepper, problem, config)
-        return _step_sweep(stepper, problem, config)
+        return _shrinking_sweep(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
         from harness.experiments.convergence_verdicts import summarize_cell as _summarize_cell
@@ -246,11 +248,20 @@ def step_budget(stepper: Stepper, config: Mapping[str, Any]) -> int:
 
 
 def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
-    """The sweep over the problem's convergence horizon; where the work budget ends it before
+    """The sweep over the configured horizon (`t_end`, else the problem's convergence horizon),
+    the same for every stepper (work-precision compares them at one final time)."""
+    return _step_sweep_at(stepper, problem, config, config.get("t_end") or problem.convergence_t_end)
+
+
+def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
+    """The convergence sweep over the problem's convergence horizon; where the work budget ends it before
     MIN_FIT_POINTS points reach the asymptotic range while the error is still far above the
     floor (a low-order method on a long orbit), the same sweep runs again over a horizon
     HORIZON_SHRINK times shorter, at most MAX_HORIZON_SHRINKS times: the order does not depend
-    on the horizon, and the rows say which one was used and why."""
+    on the horizon, and the rows say which one was used and why. A horizon the user set
+    (`t_end`) is kept as it is."""
+    if config.get("t_end"):
+        return _step_sweep(stepper, problem, config)
     T0, T = problem.t0, problem.convergence_t_end
     notes: list[str] = []
     for attempt in range(tol.MAX_HORIZON_SHRINKS + 1):
@@ -276,7 +287,7 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
 
     T0 = problem.t0
     span = T - T0
-    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
+    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]), scale=config.get("perturbation"))
     ref = _best_reference(problem, T, y0)
     y_ref = ref.y[-1]
     ref_err = float(np.max(ref.error[-1]))
@@ -439,8 +450,8 @@ def _local_sweep(stepper: Stepper, problem, y0: np.ndarray, global_frame: pd.Dat
 
 
 def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
-    T0, T = problem.t0, problem.convergence_t_end
-    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
+    T0, T = problem.t0, config.get("t_end") or problem.convergence_t_end
+    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]), scale=config.get("perturbation"))
     ref = _best_reference(problem, T, y0)
     y_ref = ref.y[-1]
     scale = _scale(y0, y_ref)

@@ -24,7 +24,7 @@ from harness import tolerances as tol
 from harness.experiments.convergence import fit_order
 from harness.stepper import Stepper
 
-__all__ = ["summarize_cell"]
+__all__ = ["summarize_cell", "insufficient_range_reason"]
 
 
 def _fit_kind(g: pd.DataFrame, kind: str) -> float:
@@ -32,22 +32,6 @@ def _fit_kind(g: pd.DataFrame, kind: str) -> float:
     if len(sub) < tol.MIN_FIT_POINTS:
         return float("nan")
     return fit_order(sub.h.values, sub.error.values)["order"]
-
-
-def _insufficient_reason(gl: pd.DataFrame) -> str:
-    """Which limit stopped the sweep short of MIN_FIT_POINTS asymptotic points."""
-    counts = gl.excluded.replace("", "kept").value_counts().to_dict()
-    kept = int(counts.pop("kept", 0))
-    excluded = ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
-    finest = gl.iloc[-1]
-    if gl.excluded.isin(["roundoff", "reference"]).any():
-        limit = ("the float64 rounding floor (or the reference's accuracy) came first: the local "
-                 "slopes had not settled on a plateau above it")
-    else:
-        limit = (f"the work budget ended the sweep at {int(finest.n_steps)} steps with the error still "
-                 f"{float(finest.error):.3g}, above the floor")
-    need = tol.MIN_FIT_POINTS
-    return f"{kept} point(s) in the asymptotic range (need {need}; excluded: {excluded}); {limit}"
 
 
 def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
@@ -109,7 +93,7 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         base["verdict"] = "unstable"
     else:
         base["verdict"] = "insufficient-range"
-        base["message"] = _insufficient_reason(gl)
+        base["message"] = insufficient_range_reason(gl, len(kept))
     base["local_exponent"] = _fit_kind(g, "local")
     base["local_exponent_q"] = _fit_kind(g, "local-q")
     if messages and not base["message"]:
@@ -117,3 +101,20 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
     return base
 
 
+
+
+def insufficient_range_reason(gl: pd.DataFrame, fit_points: int) -> str:
+    """Which limit ended a sweep with fewer than MIN_FIT_POINTS asymptotic points: the float64
+    floor or the reference's accuracy (the finest step's error is judged there), else the work
+    budget (the sweep ran out of steps while the errors were still pre-asymptotic); with the
+    horizon and the errors the sweep reached, so a user can decide what to change."""
+    finest = gl.iloc[-1]
+    horizon = float(gl["t_end"].iloc[0]) if "t_end" in gl else float("nan")
+    limit = {
+        "roundoff": "the float64 rounding floor",
+        "reference": "the reference's certified accuracy",
+    }.get(str(finest.excluded), "the work budget")
+    return (f"{fit_points} of {tol.MIN_FIT_POINTS} asymptotic points before {limit} stopped the "
+            f"sweep: {len(gl)} step sizes down to h = {float(finest.h):.3g} "
+            f"({int(gl.n_steps.sum())} steps in all), errors {float(gl.error.max()):.3g} to "
+            f"{float(gl.error.min()):.3g}, horizon t_end = {horizon:.6g}")

@@ -2,13 +2,15 @@
 
 For one (stepper, problem) cell:
 
-1. A small ensemble (member 0 is the problem's own start) is integrated with the problem's step
-   size from `TIME_SCALES` (a fixed fraction of the problem's natural period, the same h for
-   every stepper of the problem) for `steps` steps; implicit steppers (a Newton solve per step,
-   10-30 times the cost of an explicit step) take `implicit_steps`. Adaptive steppers choose
-   their own steps: they run at their own tolerance with `adaptive_outputs` output steps over
-   `adaptive_periods` natural periods and `adaptive_ensemble` members (each output step costs a
-   solver call per member).
+1. Every problem that declares an invariant applies (the `energy` invariant where declared, else
+   the first one). A small ensemble (member 0 is the problem's own start, the others perturbed
+   by the problem's `ensemble_perturbation`, or `perturbation`) is integrated with the problem's
+   step size (`Problem.time_scale`: h |lambda| = 0.12 for the fastest rate along its orbit, the
+   same h for every stepper of the problem; or `h`) for `steps` steps (or up to `t_end`);
+   implicit steppers (a Newton solve per step, 10-30 times the cost of an explicit step) take
+   `implicit_steps`. Adaptive steppers choose their own steps: they run at their own tolerance
+   with `adaptive_outputs` output steps over `adaptive_periods` natural periods (or up to
+   `t_end`) and `adaptive_ensemble` members (each output step costs a solver call per member).
 2. The state is saved on a log-spaced grid of step indices (`samples_per_decade`) merged with a
    uniform grid (`uniform_samples`). The relative energy error |E(t) - E0| / |E0| is taken as the
    maximum over members; for problems with an angular momentum invariant the relative error of
@@ -40,160 +42,48 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.experiments.base import Cell, Experiment, register_experiment
+from harness.experiments.common import (
+    check_config,
+    fixed_plan,
+    initial_ensemble,
+    invariant_reason,
+    perturbation_used,
+    primary_invariant,
+    problem_cells,
+)
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = [
     "EnergyExperiment",
-    "TimeScale",
-    "TIME_SCALES",
     "classify_drift",
-    "problem_table_cells",
     "conserves_quadratic_invariants",
-    "check_config",
     "ROW_COLUMNS",
     "SUMMARY_COLUMNS",
 ]
 
 
-@dataclass(frozen=True)
-class TimeScale:
-    """A problem's natural period and the number of fixed steps per period the experiments use."""
-
-    period: float
-    steps_per_period: int
-    reason: str
-
-    @property
-    def h(self) -> float:
-        return self.period / self.steps_per_period
-
-
-_TWO_PI = 2.0 * math.pi
-# Natural periods, and steps per period chosen so that every stable method resolves the motion
-# (h * frequency ~ 0.1) and its drift class shows within 10^4-10^5 steps.
-TIME_SCALES: dict[str, TimeScale] = {
-    "harmonic": TimeScale(_TWO_PI, 64, "period 2 pi (omega = 1); h omega = 0.098"),
-    "pendulum": TimeScale(
-        326.717261 / 50.0, 64, "true period 4K(sin^2(pi/8)) = 6.534 of the pi/4 swing"
-    ),
-    "pendulum-small": TimeScale(
-        314.280426 / 50.0, 64, "true period 6.286 of the pi/40 swing (~2 pi)"
-    ),
-    "kepler-circular": TimeScale(16.0 * math.pi, 64, "orbital period 16 pi (a = 4); h n = 0.098"),
-    "kepler-elliptic": TimeScale(
-        _TWO_PI, 256,
-        "orbital period 2 pi (a = 1, e = 0.6); 256 steps so the pericentre passage "
-        "(r = 0.4, speed 2: time scale 0.2) gets h v / r = 0.12",
-    ),
-    "henon-heiles": TimeScale(_TWO_PI, 64, "linearised frequencies 1: period 2 pi"),
-    "henon-heiles-chaotic": TimeScale(_TWO_PI, 64, "linearised frequencies 1: period 2 pi"),
-    "outer-solar-system": TimeScale(
-        4332.59, 100, "Jupiter's period, 4332.59 days; h = 43 days (HLW I.2.4 use steps of 10 days and more)"
-    ),
-    "lennard-jones": TimeScale(0.4, 64, "fastest normal mode, period ~0.4 (25 periods on [0, 10])"),
-    "free-fall": TimeScale(1.0, 64, "the fall time scale of the t_span, 1"),
-}
-
-
 DRIFT_CLASSES = ("bounded", "sqrt", "linear", "unstable")
 
 ROW_COLUMNS = [
-    "stepper", "problem", "quantity", "step", "t", "error", "running_max", "h", "tol",
-    "ensemble_size", "wall_s", "message",
+    "stepper", "problem", "quantity", "invariant", "step", "t", "error", "running_max", "h", "tol",
+    "period", "perturbation", "ensemble_size", "wall_s", "message",
 ]
 SUMMARY_COLUMNS = [
-    "stepper", "problem", "h", "tol", "steps", "t_end", "claimed_symplectic", "expected_class",
+    "stepper", "problem", "invariant", "h", "tol", "steps", "t_end", "period", "perturbation",
+    "claimed_symplectic", "expected_class",
     "max_rel_energy_error", "drift_class", "drift_exponent", "drift_slope", "secular_growth",
     "rounding_growth", "fit_start", "max_rel_angular_momentum_error", "angular_momentum_class",
     "angular_momentum_rounding", "angular_momentum_expected", "angular_momentum_conserved",
     "verdict", "passed", "ensemble_size", "wall_s", "message",
 ]
-
-
-# -- settings and cells shared by the long-run experiments -----------------------------------------
-def _is_count(v: Any, minimum: int) -> bool:
-    return not isinstance(v, bool) and isinstance(v, int | np.integer) and v >= minimum
-
-
-def check_config(
-    config: Mapping[str, Any],
-    *,
-    counts: Sequence[str] = (),
-    count_lists: Sequence[str] = (),
-    positives: Sequence[str] = (),
-    name_lists: Sequence[str] = (),
-) -> None:
-    """Raise `InputError` naming the first setting that breaks its rule: `counts` are whole
-    numbers >= 1, `count_lists` non-empty lists of them, `positives` finite numbers > 0,
-    `name_lists` lists of strings."""
-    from harness.errors import InputError
-
-    for key in counts:
-        v = config.get(key)
-        if not _is_count(v, 1):
-            raise InputError(f"config `{key}` must be a whole number >= 1, got {v!r}")
-    for key in count_lists:
-        v = config.get(key)
-        if (isinstance(v, str | bytes) or not isinstance(v, Sequence) or not v
-                or not all(_is_count(x, 1) for x in v)):
-            raise InputError(f"config `{key}` must be a non-empty list of whole numbers >= 1, got {v!r}")
-    for key in positives:
-        v = config.get(key)
-        ok = not isinstance(v, bool) and isinstance(v, int | float | np.number)
-        if not ok or not (math.isfinite(float(v)) and float(v) > 0.0):
-            raise InputError(f"config `{key}` must be a positive finite number, got {v!r}")
-    for key in name_lists:
-        v = config.get(key)
-        if isinstance(v, str | bytes) or not isinstance(v, Sequence) or not all(
-            isinstance(x, str) and x for x in v
-        ):
-            raise InputError(f"config `{key}` must be a list of names, got {v!r}")
-
-
-def problem_table_cells(
-    experiment: str,
-    steppers: Sequence[str],
-    problems: Sequence[str],
-    configured: Sequence[str],
-    applicable,
-) -> tuple[list[Cell], list[Skip]]:
-    """Cells for the (stepper, problem) pairs whose problem is in `configured` and passes
-    `applicable(problem) -> reason or None`; every other pair becomes a `Skip` with its reason."""
-    from harness.errors import IncompatibleError
-    from harness.registry import get_problem, get_stepper
-    from harness.stepper import check_compatible
-
-    cells: list[Cell] = []
-    skips: list[Skip] = []
-    for p in problems:
-        problem = get_problem(p)
-        reason = applicable(problem)
-        if reason is None and p not in configured:
-            reason = (
-                f"problem {p!r} is not in this experiment's problem set "
-                f"({', '.join(configured)}; config `problems`)"
-            )
-        for s in steppers:
-            stepper = get_stepper(s)
-            if reason is not None:
-                skips.append(Skip(experiment, s, p, reason))
-                continue
-            try:
-                check_compatible(stepper, problem)
-            except IncompatibleError as exc:
-                skips.append(Skip(experiment, s, p, str(exc)))
-                continue
-            cells.append(Cell(experiment, s, p))
-    return cells, skips
 
 
 def conserves_quadratic_invariants(stepper: Stepper) -> bool:
@@ -276,8 +166,9 @@ class EnergyExperiment(Experiment):
     finite_columns = ("step", "t", "h", "wall_s")
     description = "Long-run energy (and angular momentum) error envelope: bounded, sqrt, linear or unstable."
     default_config: Mapping[str, Any] = {
-        "problems": ["harmonic", "pendulum", "kepler-circular", "kepler-elliptic", "henon-heiles",
-                     "outer-solar-system"],
+        "h": None,
+        "t_end": None,
+        "perturbation": None,
         "steps": 100_000,
         "implicit_steps": 10_000,
         "adaptive_outputs": 200,
@@ -290,7 +181,6 @@ class EnergyExperiment(Experiment):
         "uniform_samples": 2000,
     }
     quick_config: Mapping[str, Any] = {
-        "problems": ["harmonic", "kepler-elliptic"],
         "steps": 10_000,
         "implicit_steps": 2_000,
         "adaptive_outputs": 50,
@@ -301,16 +191,9 @@ class EnergyExperiment(Experiment):
     def cells(self, steppers, problems, config):
         check_config(config, counts=("steps", "implicit_steps", "adaptive_outputs", "ensemble",
                                      "adaptive_ensemble", "samples_per_decade", "uniform_samples"),
-                     positives=("fit_decades", "adaptive_periods"), name_lists=("problems",))
-
-        def applicable(problem) -> str | None:
-            if not problem.conservative or "energy" not in problem.invariants:
-                return f"problem {problem.name!r} is not conservative (no conserved energy to follow)"
-            if problem.name not in TIME_SCALES:
-                return f"problem {problem.name!r} has no natural time scale in energy.TIME_SCALES"
-            return None
-
-        return problem_table_cells(self.name, steppers, problems, list(config["problems"]), applicable)
+                     positives=("fit_decades", "adaptive_periods"),
+                     optional_positives=("h", "t_end", "perturbation"))
+        return problem_cells(self.name, steppers, problems, invariant_reason)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
         from harness.registry import get_problem, get_stepper
@@ -329,13 +212,16 @@ class EnergyExperiment(Experiment):
         return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
 
 
-def _plan(stepper: Stepper, scale: TimeScale, config: Mapping[str, Any]) -> tuple[float, int, float]:
-    """(h, n_steps, tolerance or NaN) for this stepper on a problem of this time scale."""
+def _plan(stepper: Stepper, problem, config: Mapping[str, Any]) -> tuple[float, int, float]:
+    """(h, n_steps, tolerance or NaN) for this stepper on this problem."""
     if isinstance(stepper, AdaptiveStepper):
         n = int(config["adaptive_outputs"])
-        return float(config["adaptive_periods"]) * scale.period / n, n, float(stepper.tol)
-    n = int(config["steps"]) if stepper.info.explicit else int(config["implicit_steps"])
-    return scale.h, n, float("nan")
+        t_end = config.get("t_end")
+        span = (float(t_end) - problem.t0 if t_end is not None
+                else float(config["adaptive_periods"]) * problem.time_scale.period)
+        return span / n, n, float(stepper.tol)
+    return (*fixed_plan(problem, config, int(config["steps" if stepper.info.explicit
+                                                       else "implicit_steps"])), float("nan"))
 
 
 def save_grid(n: int, per_decade: int, uniform: int) -> np.ndarray:
@@ -346,13 +232,14 @@ def save_grid(n: int, per_decade: int, uniform: int) -> np.ndarray:
 
 
 def _invariant_errors(problem, y: np.ndarray) -> dict[str, np.ndarray]:
-    """Relative errors (nt,) of energy and, where declared, angular momentum, max over members."""
+    """Relative errors (nt,) of the primary invariant (as "energy") and, where declared, angular
+    momentum, max over members."""
     nt, dim, N = y.shape
     flat = np.ascontiguousarray(np.transpose(y, (1, 0, 2)).reshape(dim, nt * N))
     values = problem.invariant_values(flat)
     out: dict[str, np.ndarray] = {}
     with np.errstate(all="ignore"):
-        E = values["energy"].reshape(nt, N)
+        E = values[primary_invariant(problem)].reshape(nt, N)
         E0 = E[0]
         rel = np.abs(E - E0) / np.maximum(np.abs(E0), tol.EPS)
         out["energy"] = _max_members(rel)
@@ -373,10 +260,10 @@ def _max_members(rel: np.ndarray) -> np.ndarray:
 
 
 def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
-    scale = TIME_SCALES[problem.name]
-    h, n, tolerance = _plan(stepper, scale, config)
+    h, n, tolerance = _plan(stepper, problem, config)
     size = int(config["adaptive_ensemble" if isinstance(stepper, AdaptiveStepper) else "ensemble"])
-    y0 = problem.ensemble(size, seed=int(config["seed"]))
+    y0 = initial_ensemble(problem, config, size)
+    period = problem.time_scale.period
     save = save_grid(n, int(config["samples_per_decade"]), int(config["uniform_samples"]))
     started = time.perf_counter()
     message = ""
@@ -402,10 +289,13 @@ def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
     out["problem"] = problem.name
     out["h"] = h
     out["tol"] = tolerance
+    out["invariant"] = primary_invariant(problem)
+    out["period"] = period
+    out["perturbation"] = perturbation_used(problem, config) if size > 1 else 0.0
     out["ensemble_size"] = size
     out["wall_s"] = wall
     out["message"] = message
-    out["steps_per_period"] = scale.period / h
+    out["steps_per_period"] = period / h
     return out[ROW_COLUMNS + ["steps_per_period"]]
 
 
@@ -426,11 +316,13 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
     from harness.rules import energy_expectation
 
     facts = method_facts(stepper)
-    expected_class, expected_reason = energy_expectation(facts)
+    expected_class, expected_reason = energy_expectation(facts, bool(info.symplectic))
     limit = rounding_growth(n_end)
     rec = {
-        "stepper": info.name, "problem": problem, "h": float(first["h"]), "tol": float(first["tol"]),
-        "steps": n_end, "t_end": float(energy.t.iloc[-1]),
+        "stepper": info.name, "problem": problem, "invariant": str(first["invariant"]),
+        "h": float(first["h"]), "tol": float(first["tol"]),
+        "steps": n_end, "t_end": float(energy.t.iloc[-1]), "period": float(first["period"]),
+        "perturbation": float(first["perturbation"]),
         "claimed_symplectic": bool(facts.symplectic),
         "expected_class": expected_class,
         "max_rel_energy_error": e["max_error"], "drift_class": e["drift_class"],

@@ -1,18 +1,26 @@
 """Symplecticity: is the one-step map's Jacobian J symplectic, J^T Omega J = Omega?
 
-For one (stepper, problem) cell, on a Newtonian problem with unit masses (q'' = -grad V(q), so
-the flow preserves dq ^ dv and Omega = [[0, I], [-I, 0]] in the state's own (q, v) order):
+Every problem q'' = a(q) whose force is a weighted gradient, a = -W^-1 grad V(q) with W diagonal
+(masses; derived from da/dq, `harness.experiments.common.hamiltonian_weights`), applies: its flow
+preserves dq ^ W dv, i.e. S J S^-1 is symplectic for Omega = [[0, I], [-I, 0]] in the state's own
+(q, v) order, with S = diag(sqrt(W) / s_q, sqrt(W) / s_v) (s_q, s_v: the largest position and
+velocity over the base states; a uniform scaling of q and of v keeps a map symplectic).
+For one (stepper, problem) cell:
 
-1. Base states: `states` points along the problem's exact orbit from its start, a natural period
-   apart divided evenly (`harness.ground_truth.reference`), so a Kepler orbit is probed at
-   pericentre and apocentre alike.
+1. Base states: `states` points along the problem's orbit: the start and points over one
+   natural period (`Problem.time_scale`; or from t0 to `t_end`) divided evenly, and half of them
+   where the motion is fastest along the span (largest Jacobian spectral radius: a pericentre, a
+   close encounter), so a Kepler orbit is probed at pericentre and apocentre alike
+   (`harness.experiments.common.period_states`). The step is the problem's h
+   (`Problem.time_scale`; or `h`).
 2. J by fourth-order central differences of the stepper's one-step map
    (`Stepper.integrate(n_steps=1)`): every base state and every perturbation y +- delta e_j,
-   y +- 2 delta e_j (delta = SYMPLECTIC_FD_DELTA of the largest state component; the configured
-   problems have positions and velocities of commensurate size) is one member of a single
-   ensemble call. Complex steps are not available: steppers
+   y +- 2 delta e_j (delta = SYMPLECTIC_FD_DELTA of s_q for a position, of s_v for a velocity,
+   and delta / 4, delta / 16: per state the finer of the two neighbouring steps that agree
+   best, so a close encounter gets a step below its own length scale) is one member of a
+   single ensemble call. Complex steps are not available: steppers
    and compiled right-hand sides work in real float64.
-3. deviation = max over base states of ||J^T Omega J - Omega||_F / ||J||_F^2 (the finite
+3. deviation = max over base states of ||J^T Omega J - Omega||_F / ||J||_F^2 for J = S J S^-1 (the finite
    difference error E in J enters as E^T Omega J + J^T Omega E, so this ratio measures it
    relative to J); `raw_deviation` is max ||J^T Omega J - Omega||_max.
 4. Verdicts (thresholds in `harness.tolerances`): claimed symplectic must stay at the finite
@@ -54,7 +62,14 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.coefficients import SecondOrderMultistep
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
-from harness.experiments.energy import TIME_SCALES, check_config, problem_table_cells
+from harness.experiments.common import (
+    check_config,
+    fixed_plan,
+    hamiltonian_reason,
+    hamiltonian_weights,
+    period_states,
+    problem_cells,
+)
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["SymplecticityExperiment", "one_step_jacobians", "symplectic_deviation",
@@ -87,17 +102,20 @@ def symplectic_deviation(J: np.ndarray) -> tuple[float, float]:
 
 
 def one_step_jacobians(
-    stepper: Stepper, problem, states: np.ndarray, h: float, *, delta_rel: float | None = None
+    stepper: Stepper, problem, states: np.ndarray, h: float, *, delta_rel: float | None = None,
+    delta: np.ndarray | None = None,
 ) -> np.ndarray:
     """Jacobians (S, dim, dim) of the stepper's one-step map at the states (dim, S), by
-    fourth-order central differences, all perturbations as one ensemble."""
+    fourth-order central differences, all perturbations as one ensemble. `delta` (dim,) gives
+    each component's difference step; by default one step for every component."""
     delta_rel = tol.SYMPLECTIC_FD_DELTA if delta_rel is None else delta_rel
     dim, S = states.shape
-    # One step size for every component: the map mixes them, so rounding in any output is
-    # relative to the largest component, and a near-zero component (a velocity at a turning
-    # point) must not shrink its difference step to the rounding level.
-    largest = float(np.max(np.abs(states)))
-    delta = np.full(dim, delta_rel * (largest if largest > 0.0 else 1.0))
+    if delta is None:
+        # One step size for every component: the map mixes them, so rounding in any output is
+        # relative to the largest component, and a near-zero component (a velocity at a turning
+        # point) must not shrink its difference step to the rounding level.
+        largest = float(np.max(np.abs(states)))
+        delta = np.full(dim, delta_rel * (largest if largest > 0.0 else 1.0))
     offsets = (1.0, -1.0, 2.0, -2.0)
     members = np.empty((dim, S, dim, len(offsets)))
     for j in range(dim):
@@ -119,7 +137,8 @@ class SymplecticityExperiment(Experiment):
     finite_columns = ("h", "wall_s")
     description = "max ||J^T Omega J - Omega|| of the one-step map's Jacobian, against the claim."
     default_config: Mapping[str, Any] = {
-        "problems": ["harmonic", "pendulum", "kepler-elliptic", "henon-heiles"],
+        "h": None,
+        "t_end": None,
         "states": 8,
         "adaptive_states": 2,
         "adaptive_tol": 1e-4,
@@ -131,18 +150,9 @@ class SymplecticityExperiment(Experiment):
         from harness.registry import get_stepper
 
         check_config(config, counts=("states", "adaptive_states"),
-                     positives=("adaptive_tol", "adaptive_output_periods"), name_lists=("problems",))
-
-        def applicable(problem) -> str | None:
-            if problem.newtonian is None or problem.velocity_dependent or not problem.conservative:
-                return (f"problem {problem.name!r} is not a conservative Newtonian problem "
-                        "q'' = a(q): its flow preserves no symplectic form to test against")
-            if problem.name not in TIME_SCALES:
-                return f"problem {problem.name!r} has no natural time scale in energy.TIME_SCALES"
-            return None
-
-        cells, skips = problem_table_cells(self.name, steppers, problems, list(config["problems"]),
-                                           applicable)
+                     positives=("adaptive_tol", "adaptive_output_periods"),
+                     optional_positives=("h", "t_end"))
+        cells, skips = problem_cells(self.name, steppers, problems, hamiltonian_reason)
         kept = []
         for c in cells:
             reason = _not_one_step(get_stepper(c.stepper))
@@ -212,31 +222,42 @@ def _not_one_step(stepper: Stepper) -> str | None:
     return None
 
 
-def _base_states(problem, n: int) -> np.ndarray:
-    from harness.ground_truth import reference
-
-    period = TIME_SCALES[problem.name].period
-    times = problem.t0 + period * np.arange(1, n) / n
-    states = [problem.y0[:, None]]
-    if n > 1:
-        ref = reference(problem, times)
-        states.extend(ref.y[k] for k in range(n - 1))
-    return np.concatenate(states, axis=1)
+def _base_states(problem, n: int, config: Mapping[str, Any]) -> np.ndarray:
+    """The start and n - 1 states along the orbit (`common.period_states`)."""
+    return period_states(problem, n, config.get("t_end"))
 
 
 def _measure(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
-    scale = TIME_SCALES[problem.name]
-    h, tolerance, n_states = scale.h, float("nan"), int(config["states"])
+    h = fixed_plan(problem, {"h": config.get("h")}, 1)[0]
+    tolerance, n_states = float("nan"), int(config["states"])
     if isinstance(stepper, AdaptiveStepper):
         tolerance = float(config["adaptive_tol"])
         stepper = stepper.with_tolerance(tolerance)
-        h = float(config["adaptive_output_periods"]) * scale.period
+        h = float(config["adaptive_output_periods"]) * problem.time_scale.period
         n_states = int(config["adaptive_states"])
-    states = _base_states(problem, n_states)
+    states = _base_states(problem, n_states, config)
+    nq = len(problem.newtonian.positions)
+    block = [float(np.max(np.abs(states[:nq]))), float(np.max(np.abs(states[nq:])))]
+    block = [b if b > 0.0 else 1.0 for b in block]
+    delta = tol.SYMPLECTIC_FD_DELTA * np.repeat(block, nq)
+    weights = hamiltonian_weights(problem, states)
+    if weights is None:  # checked when the cells were listed, at fewer states
+        weights = np.ones(nq)
+    S = np.concatenate([np.sqrt(weights) / block[0], np.sqrt(weights) / block[1]])
     started = time.perf_counter()
     message = ""
     try:
-        Js = one_step_jacobians(stepper, problem, states, h)
+        # Difference steps delta, delta/4, delta/16: per state, the finer of the two neighbours
+        # that agree best (truncation falls as delta^4 until rounding takes over). A close
+        # approach needs a step far below the state's overall scale.
+        tries = [one_step_jacobians(stepper, problem, states, h, delta=delta / 4.0**k)
+                 for k in range(tol.SYMPLECTIC_FD_REFINEMENTS + 1)]
+        tries = [S[None, :, None] * J / S[None, None, :] for J in tries]
+        with np.errstate(all="ignore"):
+            gaps = np.stack([np.linalg.norm(tries[k + 1] - tries[k], axis=(1, 2))
+                             for k in range(len(tries) - 1)])
+        best = np.argmin(np.where(np.isfinite(gaps), gaps, np.inf), axis=0) + 1
+        Js = np.stack([tries[best[i]][i] for i in range(states.shape[1])])
     except StepFailure as exc:
         Js = np.full((states.shape[1], problem.dim, problem.dim), np.nan)
         message = f"step failure: {exc}"

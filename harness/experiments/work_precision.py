@@ -3,10 +3,10 @@
 Every stepper runs on the same problem to the same final time (the problem's
 `convergence_t_end`) against the same certified ground truth:
 
-- fixed-step steppers by a step-size sweep, and adaptive steppers by a tolerance sweep
-  (`AdaptiveStepper.with_tolerance`), both the convergence experiment's own sweeps
-  (`harness.experiments.convergence._step_sweep` and `_tolerance_sweep`, reused, with the local
-  error sweep turned off), so the two experiments measure identical points;
+- every problem applies; fixed-step steppers by a step-size sweep, and adaptive steppers by a
+  tolerance sweep (`AdaptiveStepper.with_tolerance`), both the convergence experiment's own
+  sweeps (`harness.experiments.common.step_sweep` and `tolerance_sweep`, with the local error
+  sweep turned off), so the two experiments measure identical points;
 - one trajectory (`ensemble` = 1): the step count differs from point to point, so the ensemble
   axis cannot batch a sweep, and one member keeps wall times comparable between NumPy steppers
   (whose cost barely depends on the ensemble size) and per-member solvers (scipy, heyoka);
@@ -35,8 +35,13 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.base import Cell, Experiment, register_experiment
-from harness.experiments.convergence import ConvergenceExperiment, _step_sweep, _tolerance_sweep
-from harness.experiments.energy import check_config, problem_table_cells
+from harness.experiments.common import (
+    check_config,
+    perturbation_used,
+    problem_cells,
+    step_sweep,
+    tolerance_sweep,
+)
 from harness.stepper import AdaptiveStepper
 
 __all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS"]
@@ -44,7 +49,7 @@ __all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS"]
 COLUMNS = [
     "stepper", "problem", "kind", "h", "tol", "n_steps", "t_end", "error", "reference_error",
     "rhs_evals", "force_evals", "evals_unit", "wall_s", "claimed_order", "explicit", "adaptive",
-    "ensemble_size", "pareto_evals", "pareto_wall", "message",
+    "ensemble_size", "perturbation", "pareto_evals", "pareto_wall", "message",
 ]
 
 
@@ -73,7 +78,8 @@ class WorkPrecisionExperiment(Experiment):
     finite_columns = ("n_steps", "t_end", "rhs_evals", "wall_s")
     description = "Error at the final time against evaluations and wall time (step-size or tolerance sweep)."
     default_config: Mapping[str, Any] = {
-        "problems": ["kepler-elliptic", "harmonic"],
+        "t_end": None,  # None: the problem's convergence horizon
+        "perturbation": None,  # None: the problem's (used when `ensemble` > 1)
         "ensemble": 1,
         "seed": 0,
         "start_error": tol.SWEEP_START_ERROR,
@@ -87,14 +93,13 @@ class WorkPrecisionExperiment(Experiment):
         "local": False,
     }
     quick_config: Mapping[str, Any] = {
-        "problems": ["kepler-elliptic"],
         "work_budget": tol.SWEEP_WORK_BUDGET // 16,
         "tolerances": [10.0**-k for k in range(3, 13, 2)],
     }
 
     def cells(self, steppers, problems, config):
         check_config(config, counts=("ensemble", "work_budget", "n_start"),
-                     name_lists=("problems",))
+                     optional_positives=("t_end", "perturbation"))
         tolerances = config.get("tolerances")
         listed = not isinstance(tolerances, str | bytes) and isinstance(tolerances, Sequence)
         if not listed or not tolerances or not all(
@@ -103,10 +108,7 @@ class WorkPrecisionExperiment(Experiment):
             raise InputError(f"config `tolerances` must be a non-empty list of numbers in (0, 1), "
                              f"got {tolerances!r}")
 
-        def applicable(problem) -> str | None:
-            return None
-
-        return problem_table_cells(self.name, steppers, problems, list(config["problems"]), applicable)
+        return problem_cells(self.name, steppers, problems, lambda problem: None)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
         from harness.registry import get_problem, get_stepper
@@ -114,12 +116,14 @@ class WorkPrecisionExperiment(Experiment):
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         # The convergence sweeps read their own settings: start from theirs, then this config.
-        cfg = {**ConvergenceExperiment.default_config, **config, "local": False}
+        from harness.experiments.base import get_experiment
+
+        cfg = {**get_experiment("convergence").default_config, **config, "local": False}
         if isinstance(stepper, AdaptiveStepper):
-            frame = _tolerance_sweep(stepper, problem, cfg)
+            frame = tolerance_sweep(stepper, problem, cfg)
             kind = "tolerance"
         else:
-            frame = _step_sweep(stepper, problem, cfg)
+            frame = step_sweep(stepper, problem, cfg)
             kind = "step-size"
         frame = frame[frame["kind"].isin(["global", "tolerance"])].copy()
         frame["kind"] = kind
@@ -131,6 +135,7 @@ class WorkPrecisionExperiment(Experiment):
         frame["claimed_order"] = float(stepper.info.claimed_order or np.nan)
         frame["explicit"] = bool(stepper.info.explicit)
         frame["adaptive"] = isinstance(stepper, AdaptiveStepper)
+        frame["perturbation"] = perturbation_used(problem, cfg) if int(cfg["ensemble"]) > 1 else 0.0
         if "message" not in frame:
             frame["message"] = ""
         frame["message"] = frame["message"].fillna("").astype(str)

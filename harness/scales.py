@@ -1,0 +1,339 @@
+"""Time scales and ensemble perturbations derived from a problem's own dynamics.
+
+Every experiment that runs a problem for a while needs a natural period (how long is "one
+orbit"), a step size that resolves the fastest motion, and an ensemble whose members all stay
+in the unperturbed start's dynamical regime. None of these is typed per problem: they follow
+from the symbolic definition and a short float64 Taylor run along its span.
+
+- The reference orbit: heyoka's Taylor integrator (float64, tolerance eps) from y0 over
+  [t0, t_end], sampled at each of its adaptive steps and at `ORBIT_DENSE_POINTS` points inside
+  each (dense output), so close approaches, where the steps shrink, are sampled densely.
+- The fastest rate rho = max over the orbit of the Jacobian's spectral radius max|lambda(J)|.
+  The long-run experiments step with h = STEP_RATE_PRODUCT / rho (h |lambda| = 0.12 resolves the
+  fastest motion for every stable method; Hairer, Lubich & Wanner, GNI I.2 and I.3 use
+  h omega ~ 0.1-0.2 on Kepler and Henon-Heiles).
+- The natural period: declared on the problem where its definition states one; otherwise
+  2 pi / max|Im lambda(J)| along the orbit (the period of the fastest linearised oscillation:
+  the orbital period exactly for a circular Kepler orbit, Jupiter's for the outer solar
+  system); for motion without oscillation, the shortest time in which the state changes by its
+  own size, min ||y|| / ||f(y)|| along the orbit (for a stiff problem on its slow manifold this
+  is the slow time, not the stiff one).
+- Component scales: max |y_i(t)| along the orbit; a component that stays zero takes the scale of
+  its block (positions or velocities of a Newtonian problem; the whole state otherwise).
+- Perturbation size: the declared one if the problem declares it; otherwise the largest of
+  ENSEMBLE_PERTURBATION, /10, /100, ... (down to MIN_ENSEMBLE_PERTURBATION) at which each of
+  ENSEMBLE_SIZE probe members (the members `Problem.ensemble(size, seed=0)` draws for every
+  size up to it) keeps its fastest rate along its own orbit within REGIME_RATE_FACTOR of the
+  unperturbed orbit's. The fastest rate is set by the closest approach (for gravity
+  rho ~ sqrt(2 G m / r^3)), so this bounds how much closer any member comes to a collision.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import heyoka as hy
+import numpy as np
+
+from harness import cache
+from harness import tolerances as tol
+
+__all__ = [
+    "TimeScale",
+    "Perturbation",
+    "Orbit",
+    "derive_time_scale",
+    "derive_perturbation",
+    "sample_orbit",
+    "orbit_rates",
+    "component_scales",
+    "draw_noise",
+    "states_at",
+    "fastest_times",
+]
+
+
+@dataclass(frozen=True)
+class TimeScale:
+    """A problem's natural period, fastest rate and the fixed step the long-run experiments use."""
+
+    period: float
+    fastest_rate: float
+    h: float
+    source: str  # "declared" or "derived"
+    reason: str
+
+    @property
+    def steps_per_period(self) -> float:
+        return self.period / self.h
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"period": self.period, "fastest_rate": self.fastest_rate, "h": self.h,
+                "steps_per_period": self.steps_per_period, "source": self.source,
+                "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """The ensemble perturbation of a problem: relative size and per-component scale."""
+
+    size: float
+    component_scale: np.ndarray = field(repr=False)
+    source: str  # "declared" or "derived"
+    reason: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"size": self.size, "component_scale": self.component_scale.tolist(),
+                "source": self.source, "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class Orbit:
+    """A float64 Taylor orbit sampled at times t (n,), states y (dim, n); `complete` is False
+    when the run stopped early (non-finite state or the step cap)."""
+
+    t: np.ndarray
+    y: np.ndarray
+    complete: bool
+
+
+# -- the reference orbit --------------------------------------------------------------------------
+_integrators: dict[str, tuple[threading.Lock, Any]] = {}
+_integrators_lock = threading.Lock()
+
+
+def _integrator(problem) -> tuple[threading.Lock, Any]:
+    key = problem.fingerprint()
+    with _integrators_lock:
+        found = _integrators.get(key)
+    if found is not None:
+        return found
+    cache.configure_heyoka_cache()
+    sys = list(zip(problem.variables, problem.rhs, strict=True))
+    # The float64 ground truth's settings (harness.ground_truth): heyoka's disk cache then holds
+    # one compiled integrator for both.
+    kwargs: dict[str, Any] = {"tol": tol.EPS, "high_accuracy": True,
+                              "compact_mode": sum(len(str(e)) for e in problem.rhs) > 1000}
+    if problem.parameters:
+        kwargs["pars"] = problem.parameter_values
+    ta = hy.taylor_adaptive(sys, np.array(problem.y0, dtype=np.float64), **kwargs)
+    entry = (threading.Lock(), ta)
+    with _integrators_lock:
+        return _integrators.setdefault(key, entry)
+
+
+def sample_orbit(problem, y0: np.ndarray | None = None, t_end: float | None = None) -> Orbit:
+    """The orbit from y0 (default: the problem's start) over [t0, t_end] (default: its span),
+    sampled at every Taylor step and ORBIT_DENSE_POINTS points inside each step."""
+    lock, ta = _integrator(problem)
+    start = np.array(problem.y0 if y0 is None else y0, dtype=np.float64).reshape(problem.dim)
+    end = float(problem.t_end if t_end is None else t_end)
+    ts, ys = [problem.t0], [start.copy()]
+    complete = True
+    fractions = np.arange(1, tol.ORBIT_DENSE_POINTS + 1) / (tol.ORBIT_DENSE_POINTS + 1)
+    with lock:
+        ta.time = problem.t0
+        ta.state[:] = start
+        if problem.parameters:
+            ta.pars[:] = problem.parameter_values
+        for _ in range(tol.ORBIT_MAX_STEPS):
+            before = ta.time
+            outcome, h = ta.step(max_delta_t=end - before, write_tc=True)
+            if h != 0.0:
+                for frac in fractions:
+                    ts.append(before + frac * h)
+                    ys.append(np.array(ta.update_d_output(before + frac * h), copy=True))
+            ts.append(ta.time)
+            ys.append(ta.state.copy())
+            if not np.all(np.isfinite(ta.state)) or outcome not in (
+                hy.taylor_outcome.success, hy.taylor_outcome.time_limit
+            ):
+                complete = False
+                break
+            if ta.time >= end:
+                break
+        else:
+            complete = False
+    t = np.array(ts)
+    y = np.stack(ys, axis=1)
+    finite = np.all(np.isfinite(y), axis=0)
+    return Orbit(t[finite], y[:, finite], complete and bool(finite.all()))
+
+
+def _eigenvalues(problem, jac: np.ndarray) -> np.ndarray:
+    """Eigenvalues (n, dim) of Jacobians shaped (dim, dim, n). For q'' = a(q) the Jacobian is
+    [[0, I], [A, 0]], whose eigenvalues are the square roots +-sqrt(mu) of A's: half the size."""
+    mats = np.transpose(jac, (2, 0, 1))
+    if problem.newtonian is not None and not problem.velocity_dependent:
+        nq = len(problem.newtonian.positions)
+        root = np.sqrt(np.linalg.eigvals(mats[:, nq:, :nq]).astype(complex))
+        return np.concatenate([root, -root], axis=1)
+    return np.linalg.eigvals(mats)
+
+
+def states_at(problem, times: np.ndarray) -> np.ndarray:
+    """States (dim, len(times)) of the float64 Taylor orbit from y0 at increasing `times` >= t0:
+    points on the orbit (for probing a map there), not a certified reference."""
+    lock, ta = _integrator(problem)
+    times = np.asarray(times, dtype=np.float64)
+    with lock:
+        ta.time = problem.t0
+        ta.state[:] = problem.y0
+        if problem.parameters:
+            ta.pars[:] = problem.parameter_values
+        out = ta.propagate_grid(times)
+    return np.ascontiguousarray(out[-1].T)
+
+
+def fastest_times(problem, n: int) -> np.ndarray:
+    """Up to n times along the orbit over the span where the Jacobian's spectral radius is
+    largest, at least 1 % of the span apart (the close approaches), increasing."""
+    orbit = sample_orbit(problem)
+    rate = orbit_rates(problem, orbit)["spectral"]
+    idx = np.arange(orbit.t.size)
+    if idx.size > tol.ORBIT_MAX_SAMPLES:
+        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
+    t = orbit.t[idx]
+    gap = 0.01 * (problem.t_end - problem.t0)
+    chosen: list[float] = []
+    for k in np.argsort(rate)[::-1]:
+        if all(abs(t[k] - c) > gap for c in chosen):
+            chosen.append(float(t[k]))
+        if len(chosen) == n:
+            break
+    return np.sort(np.array(chosen))
+
+
+def orbit_rates(problem, orbit: Orbit, *, candidates: int | None = None) -> dict[str, np.ndarray]:
+    """Along an orbit: spectral radius max|lambda(J)| and max|Im lambda(J)| of the Jacobian, and
+    the rate ||f(y)|| / ||y|| at which the state changes relative to its size (each shaped (n,)).
+    With `candidates`, the spectrum is taken only at that many samples of largest ||J||_F (an
+    upper bound of the spectral radius, so the fastest samples are among them); the others
+    read 0."""
+    idx = np.arange(orbit.t.size)
+    if idx.size > tol.ORBIT_MAX_SAMPLES:
+        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
+    t, y = orbit.t[idx], np.ascontiguousarray(orbit.y[:, idx])
+    n = t.size
+    pars = problem.pars_for(n)
+    jac = problem.compiled("jac", None)(y, pars=pars, time=t).reshape(problem.dim, problem.dim, n)
+    f = problem.compiled("rhs", None)(y, pars=pars, time=t)
+    with np.errstate(all="ignore"):
+        change = np.linalg.norm(f, axis=0) / np.linalg.norm(y, axis=0)
+    spectral, oscillation = np.zeros(n), np.zeros(n)
+    pick = np.arange(n)
+    if candidates is not None and n > candidates:
+        pick = np.argsort(np.sqrt(np.sum(jac * jac, axis=(0, 1))))[-candidates:]
+    lam = _eigenvalues(problem, jac[:, :, pick])
+    spectral[pick] = np.max(np.abs(lam), axis=1)
+    oscillation[pick] = np.max(np.abs(lam.imag), axis=1)
+    return {"spectral": spectral, "oscillation": oscillation,
+            "change": np.where(np.isfinite(change), change, 0.0)}
+
+
+# -- time scale -------------------------------------------------------------------------------------
+def derive_time_scale(problem) -> TimeScale:
+    """The time scale of `problem` (see the module docstring for the rules)."""
+    orbit = sample_orbit(problem)
+    rates = orbit_rates(problem, orbit)
+    rho = float(np.max(rates["spectral"]))
+    omega = float(np.max(rates["oscillation"]))
+    change = float(np.max(rates["change"]))
+    span = problem.t_end - problem.t0
+    if problem.period is not None:
+        period, source = float(problem.period), "declared"
+        why = f"declared period {period:.6g}"
+    elif omega > 0.0:
+        period, source = 2.0 * math.pi / omega, "derived"
+        why = (f"2 pi / max|Im lambda(J)| = 2 pi / {omega:.4g} along the orbit (the fastest "
+               "linearised oscillation)")
+    elif change > 0.0:
+        period, source = 1.0 / change, "derived"
+        why = f"min ||y|| / ||f(y)|| = {period:.4g} along the orbit (no oscillation)"
+    else:
+        period, source = span, "derived"
+        why = "the state does not move: the span"
+    if rho > 0.0:
+        h = tol.STEP_RATE_PRODUCT / rho
+        why += f"; h = {tol.STEP_RATE_PRODUCT:g} / max|lambda(J)| = {tol.STEP_RATE_PRODUCT:g} / {rho:.4g}"
+    else:
+        h = tol.STEP_RATE_PRODUCT * period
+        why += f"; J is nilpotent along the orbit: h = {tol.STEP_RATE_PRODUCT:g} x that time"
+    if not orbit.complete:
+        why += f"; the orbit sample stopped at t = {orbit.t[-1]:.6g} before the span's end"
+    return TimeScale(period=period, fastest_rate=rho, h=h, source=source, reason=why)
+
+
+# -- perturbation -----------------------------------------------------------------------------------
+def component_scales(problem, orbit: Orbit) -> np.ndarray:
+    """max |y_i(t)| along the orbit; a component that stays zero takes its block's scale
+    (positions or velocities of a Newtonian problem, the whole state otherwise), then 1."""
+    scale = np.max(np.abs(orbit.y), axis=1)
+    if problem.newtonian is not None:
+        nq = len(problem.newtonian.positions)
+        blocks = [slice(0, nq), slice(nq, problem.dim)]
+    else:
+        blocks = [slice(0, problem.dim)]
+    for b in blocks:
+        part = scale[b]
+        fill = float(np.max(part)) if part.size and np.max(part) > 0.0 else 1.0
+        scale[b] = np.where(part > 0.0, part, fill)
+    return scale
+
+
+def draw_noise(dim: int, size: int, seed: int) -> np.ndarray:
+    """Uniform draws in [-1, 1] shaped (dim, size), member 0 zero; member j's draws do not depend
+    on `size`, so a smaller ensemble is the start of a larger one."""
+    rng = np.random.default_rng(seed)
+    noise = rng.uniform(-1.0, 1.0, size=(size, dim)).T.copy()
+    noise[:, 0] = 0.0
+    return noise
+
+
+def _fastest_rate(problem, y0: np.ndarray) -> float:
+    orbit = sample_orbit(problem, y0)
+    if not orbit.complete:
+        return math.inf
+    return float(np.max(orbit_rates(problem, orbit, candidates=tol.REGIME_CANDIDATES)["spectral"]))
+
+
+def _ratio(rate: float, base: float) -> float:
+    if rate == base:
+        return 1.0
+    if base > 0.0 and rate > 0.0 and math.isfinite(rate):
+        return max(rate / base, base / rate)
+    return math.inf
+
+
+def derive_perturbation(problem) -> Perturbation:
+    """The ensemble perturbation of `problem` (see the module docstring for the rules)."""
+    orbit = sample_orbit(problem)
+    scale = component_scales(problem, orbit)
+    if problem.perturbation is not None:
+        return Perturbation(float(problem.perturbation), scale, "declared",
+                            f"declared relative size {problem.perturbation:g}")
+    base = float(np.max(orbit_rates(problem, orbit)["spectral"]))
+    noise = draw_noise(problem.dim, tol.ENSEMBLE_SIZE, seed=0)[:, 1:]
+    size = tol.ENSEMBLE_PERTURBATION
+    while True:
+        worst = 1.0
+        for j in range(noise.shape[1]):  # stop at the first member outside the regime
+            worst = max(worst, _ratio(_fastest_rate(problem, problem.y0 + size * noise[:, j] * scale), base))
+            if worst > tol.REGIME_RATE_FACTOR:
+                break
+        if worst <= tol.REGIME_RATE_FACTOR or size / 10.0 < tol.MIN_ENSEMBLE_PERTURBATION:
+            break
+        size /= 10.0
+    held = worst <= tol.REGIME_RATE_FACTOR
+    reason = (f"relative size {size:g} of each component's scale along the orbit: "
+              f"{tol.ENSEMBLE_SIZE - 1} probe members keep their fastest rate within a factor "
+              f"{worst:.3g} of the unperturbed orbit's {base:.4g}")
+    if size < tol.ENSEMBLE_PERTURBATION:
+        reason += f" (a larger size left a member outside a factor {tol.REGIME_RATE_FACTOR:g})"
+    if not held:
+        reason += (f"; even the smallest size tried leaves a member outside a factor "
+                   f"{tol.REGIME_RATE_FACTOR:g}: members may not share one dynamical regime")
+    return Perturbation(size, scale, "derived", reason)
