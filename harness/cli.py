@@ -7,12 +7,23 @@
     harness report [--quick] [--fresh]
 
 Errors a user can fix exit 2 with one line on stderr naming the argument and the rule; the
-gate exits 1 when a claim fails.
+gate exits 1 when a claim fails; a run or gate over zero applicable cells exits 2 and prints why
+each requested pair does not apply (a table on stdout, or JSON records with `--json`).
+
+One output layer serves every command. While a command runs, `sys.stdout` points at stderr (a
+plugin's `print()` cannot corrupt `--json`); the command's output is collected and written to
+stdout at the end, then flushed. Ordinary OS conditions become one line naming the path and the
+problem, no traceback, with a sysexits-style status: the reader closed the pipe (141, as a
+SIGPIPE death would give), a full disk or another I/O error (74), no permission (77), a file
+where a directory belongs or the reverse (73).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
+import io
 import json
 import math
 import os
@@ -23,6 +34,16 @@ from typing import Any
 __all__ = ["main", "build_parser"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_CANTCREAT, EXIT_IOERR, EXIT_NOPERM, EXIT_PIPE = 73, 74, 77, 141
+
+# The command's stdout while it runs (see the module docstring); `print(..., file=_out())`.
+_OUTPUT: list[io.StringIO] = []
+
+
+def _out() -> io.StringIO:
+    if not _OUTPUT:
+        _OUTPUT.append(io.StringIO())
+    return _OUTPUT[-1]
 
 
 class _Parser(argparse.ArgumentParser):
@@ -59,8 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p, grid=False)
 
     p = sub.add_parser("run", help="run one experiment over steppers x problems")
-    p.add_argument("experiment", help="convergence, stability, reversibility, energy, "
-                                      "symplecticity or work-precision")
+    p.add_argument("experiment", help="the experiment's name (see `harness list experiments`)")
     _common(p)
 
     p = sub.add_parser("reference", help="certified ground-truth state of a problem at time T")
@@ -81,16 +101,92 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    from harness.errors import HarnessError
+    from harness.errors import HarnessError, NoApplicableCellsError
 
+    _OUTPUT.append(io.StringIO())
     try:
-        return _dispatch(args)
+        with contextlib.redirect_stdout(sys.stderr):
+            code = _dispatch(args)
+    except NoApplicableCellsError as exc:
+        _explain_skips(exc.skips, getattr(args, "json", False))
+        code = _error(str(exc), EXIT_USAGE)
     except HarnessError as exc:
-        print(f"harness: error: {_one_line(str(exc))}", file=sys.stderr)
-        return EXIT_USAGE
+        code = _error(str(exc), EXIT_USAGE)
+    except OSError as exc:
+        code = _error(*_describe_os_error(exc))
     except KeyboardInterrupt:
         print("harness: interrupted", file=sys.stderr)
-        return 130
+        code = 130
+    finally:
+        text = _OUTPUT.pop().getvalue()
+    written = _write_stdout(text)
+    return code if written == EXIT_OK else written
+
+
+def _error(message: str, code: int) -> int:
+    print(f"harness: error: {_one_line(message)}", file=sys.stderr)
+    return code
+
+
+def _describe_os_error(exc: OSError, what: str = "") -> tuple[str, int]:
+    """(one line naming the path and the problem, exit status) for an OS error."""
+    path = exc.filename or what or "a file"
+    reason = exc.strerror or type(exc).__name__
+    if exc.errno in (errno.EEXIST, errno.ENOTDIR):
+        return f"{str(path)!r}: a file stands where a directory belongs ({reason})", EXIT_CANTCREAT
+    if exc.errno == errno.EISDIR:
+        return f"{str(path)!r}: a directory stands where a file belongs ({reason})", EXIT_CANTCREAT
+    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        return f"{str(path)!r}: no permission to write there ({reason})", EXIT_NOPERM
+    if exc.errno == errno.ENOSPC:
+        return f"{str(path)!r}: no space left on the device", EXIT_IOERR
+    if isinstance(exc, BrokenPipeError):
+        return f"{str(path)}: the reader closed the pipe; output cut short", EXIT_PIPE
+    return f"{str(path)!r}: {reason}", EXIT_IOERR
+
+
+def _stdout_name() -> str:
+    try:
+        target = os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        return "stdout"
+    return f"stdout ({target})" if target.startswith("/") else "stdout"
+
+
+def _write_stdout(text: str) -> int:
+    """Write the command's output and flush it; an OS error becomes one line on stderr."""
+    try:
+        if text:
+            sys.stdout.write(text)
+        sys.stdout.flush()
+    except OSError as exc:
+        exc.filename = _stdout_name()
+        _silence_stdout()
+        return _error(*_describe_os_error(exc))
+    return EXIT_OK
+
+
+def _silence_stdout() -> None:
+    """After a failed write, point the real stdout at /dev/null so the interpreter's own flush
+    at exit does not print a second error (only for the process's real stdout)."""
+    if sys.stdout is not sys.__stdout__:
+        return
+    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
+def _explain_skips(skips: Sequence[dict], as_json: bool) -> None:
+    """Why each requested pair does not apply: JSON records or a table, on stdout."""
+    if as_json:
+        _print_json([dict(r, verdict="not-applicable", passed=False) for r in skips])
+        return
+    import pandas as pd
+
+    print("not applicable:", file=_out())
+    _print_table(pd.DataFrame(list(skips), columns=["experiment", "stepper", "problem", "reason"]),
+                 ["experiment", "stepper", "problem", "reason"])
 
 
 def _one_line(text: str) -> str:
@@ -148,19 +244,19 @@ def _jsonable(value: Any) -> Any:
 
 
 def _print_json(records: Any) -> None:
-    print(json.dumps(_jsonable(records), indent=2))
+    print(json.dumps(_jsonable(records), indent=2), file=_out())
 
 
 def _print_table(frame, columns: Sequence[str]) -> None:
     import pandas as pd
 
     if frame.empty:
-        print("(none)")
+        print("(none)", file=_out())
         return
     cols = [c for c in columns if c in frame.columns]
     with pd.option_context("display.max_rows", None, "display.max_columns", None,
                            "display.width", 200, "display.max_colwidth", 70):
-        print(frame[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+        print(frame[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"), file=_out())
 
 
 def _cmd_list(args) -> int:
@@ -221,7 +317,7 @@ def _cmd_reference(args) -> int:
         _print_json([record])
     else:
         for k, v in record.items():
-            print(f"{k:>18}: {v}")
+            print(f"{k:>18}: {v}", file=_out())
     return EXIT_OK
 
 
@@ -272,10 +368,15 @@ def _cmd_run(args) -> int:
 
 
 def _print_footer(result, failures) -> None:
+    out = _out()
     print(f"\n{len(result.summary)} cells, {len(failures)} failed, "
-          f"{getattr(result, 'cached_cells', 0)} from cache, {result.wall_s:.1f} s")
+          f"{getattr(result, 'cached_cells', 0)} from cache, {result.wall_s:.1f} s", file=out)
     for f in failures:
-        print(f"FAILED {f.get('stepper')} x {f.get('problem')}: {_one_line(str(f.get('message', '')))}")
+        print(f"FAILED {f.get('stepper')} x {f.get('problem')}: {_one_line(str(f.get('message', '')))}",
+              file=out)
+    for r in result.skips.to_dict("records") if hasattr(result.skips, "to_dict") else []:
+        print(f"not applicable: {r.get('stepper')} x {r.get('problem')}: {_one_line(str(r.get('reason')))}",
+              file=out)
 
 
 def _cmd_gate(args) -> int:
@@ -293,7 +394,8 @@ def _cmd_gate(args) -> int:
         _print_table(table, GATE_COLUMNS)
         _print_footer(result, failures)
         n_bad = int((~table["passed"]).sum()) + len(failures)
-        print(f"gate: {'PASSED' if passed else 'FAILED'} ({len(table)} cells, {n_bad} failing)")
+        print(f"gate: {'PASSED' if passed else 'FAILED'} ({len(table)} cells, {n_bad} failing)",
+              file=_out())
     return EXIT_OK if passed else EXIT_FAILED
 
 
@@ -310,7 +412,7 @@ def _cmd_report(args) -> int:
         plugins=tuple(args.plugin),
         output=args.output,
     )
-    print(os.fspath(path))
+    print(os.fspath(path), file=_out())
     return EXIT_OK
 
 

@@ -8,6 +8,10 @@ __all__ = [
     "IncompatibleError",
     "PluginError",
     "ReferenceError_",
+    "NoApplicableCellsError",
+    "StepperOutputError",
+    "WorkLimitError",
+    "OutputError",
 ]
 
 
@@ -40,3 +44,27 @@ class PluginError(HarnessError):
 
 class ReferenceError_(HarnessError):
     """The ground truth could not be certified accurate enough for the comparison asked of it."""
+
+
+class NoApplicableCellsError(HarnessError):
+    """A run or gate over zero applicable cells: nothing was measured, so nothing may pass.
+    `skips` holds one record per requested pair (experiment, stepper, problem, reason)."""
+
+    def __init__(self, message: str, skips: list[dict] | None = None):
+        super().__init__(message)
+        self.skips = list(skips or [])
+
+
+class StepperOutputError(HarnessError):
+    """A stepper returned a state that is not a state: the wrong shape, or NaN made in one step
+    from a finite, moderate state (a blow-up passes through large values and inf first)."""
+
+
+class WorkLimitError(HarnessError):
+    """A computation would exceed a stated work or time bound; the message names the bound and
+    how to raise it."""
+
+
+class OutputError(HarnessError):
+    """Writing output failed for an ordinary OS reason (full disk, no permission, a file where a
+    directory belongs, a closed pipe); the message names the path and the problem."""

@@ -98,7 +98,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.errors import HarnessError, InputError, UnknownNameError
+from harness.errors import HarnessError, InputError, NoApplicableCellsError, UnknownNameError
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
 from harness.progress import Progress
 from harness.provenance import to_jsonable
@@ -127,6 +127,8 @@ __all__ = [
     "CellTimeout",
     "CellOutputError",
     "ExperimentError",
+    "NoApplicableCellsError",
+    "no_cells_error",
     "FAILURE_KINDS",
     "MEASURING_MODULES",
 ]
@@ -908,6 +910,32 @@ def _run_dask(tasks: Sequence[_Task], client: Any, accept) -> None:
 
 
 # -- the runner -------------------------------------------------------------------------------------
+def _skip_records(skips: Iterable[Skip]) -> list[dict]:
+    return [{"experiment": s.experiment, "stepper": s.stepper, "problem": s.problem,
+             "reason": s.reason} for s in skips]
+
+
+def no_cells_error(experiments: Sequence[str], skips: Sequence[Skip] | pd.DataFrame,
+                   steppers: Sequence[str], problems: Sequence[str]) -> NoApplicableCellsError:
+    """The error for a run over zero applicable cells: one line saying why each requested pair
+    does not apply (the experiments' skip reasons); every record is kept in `.skips`."""
+    records = (skips.to_dict("records") if isinstance(skips, pd.DataFrame)
+               else _skip_records(skips))
+    what = ", ".join(map(repr, experiments))
+    head = (f"no cell of {what} applies to the requested stepper(s) "
+            f"{_few(steppers)} x problem(s) {_few(problems)}")
+    if not records:
+        return NoApplicableCellsError(head + " (the experiment lists no pairs for them)", records)
+    reasons = [f"{r['stepper'] or '-'} x {r['problem'] or '-'}: {r['reason']}" for r in records[:4]]
+    more = f"; and {len(records) - 4} more pairs" if len(records) > 4 else ""
+    return NoApplicableCellsError(f"{head}: " + "; ".join(reasons) + more, records)
+
+
+def _few(names: Sequence[str], n: int = 4) -> str:
+    shown = ", ".join(names[:n]) if names else "(none)"
+    return shown + (f" (+{len(names) - n} more)" if len(names) > n else "")
+
+
 def _params_json(cell: Cell) -> str:
     return json.dumps({str(k): v for k, v in cell.params}, sort_keys=True, default=repr)
 
@@ -951,6 +979,7 @@ def run_experiment(
     plugins: Sequence[str | os.PathLike] = (),
     cell_timeout: float | None = None,
     progress: Progress | bool | str | None = None,
+    allow_empty: bool = False,
     _client: Any = None,
     _counted: bool = False,
 ) -> RunResult:
@@ -963,10 +992,12 @@ def run_experiment(
     `cache_dir` the cache root (default `harness.cache.cache_dir()`); `plugins` .py files loaded
     here and on every worker before names are looked up; `cell_timeout` seconds per cell;
     `progress` None/True (bar on a terminal, plain lines otherwise), False (silent), a mode
-    ('bar', 'lines', 'off') or a shared `Progress`.
+    ('bar', 'lines', 'off') or a shared `Progress`; `allow_empty=True` returns an empty result
+    instead of raising when no cell applies.
 
     Raises `InputError` / `UnknownNameError` / `PluginError` (all `HarnessError`) for bad
-    arguments before any cell runs, `ExperimentError` when the experiment cannot list its
+    arguments before any cell runs, `NoApplicableCellsError` (with every skip reason) when no
+    requested pair applies, `ExperimentError` when the experiment cannot list its
     cells, `CorruptResultsError` for a damaged cache file. Failures of single cells never raise:
     they are in `RunResult.failures`.
     """
@@ -1004,6 +1035,8 @@ def run_experiment(
     if bad:
         raise ExperimentError(f"experiment {exp.name!r} listed {type(bad[0]).__name__} objects "
                               "where Cell and Skip objects belong")
+    if not cells and not allow_empty:
+        raise no_cells_error([exp.name], skips, stepper_names, problem_names)
     if sched is None and _client is None:
         _guard_memory(exp, cells, cfg, jobs_n)
 
@@ -1132,9 +1165,7 @@ def run_experiment(
             rec["cell"] = f"{exp.name}:summarize"
             failures[len(cells)] = rec
     fail_df = pd.DataFrame([failures[i] for i in sorted(failures)], columns=FAILURE_COLUMNS)
-    skip_df = pd.DataFrame([{"experiment": s.experiment, "stepper": s.stepper,
-                             "problem": s.problem, "reason": s.reason} for s in skips],
-                           columns=SKIP_COLUMNS)
+    skip_df = pd.DataFrame(_skip_records(skips), columns=SKIP_COLUMNS)
     cell_df = pd.DataFrame([records[i] for i in sorted(records)], columns=CELL_COLUMNS)
     return RunResult(
         experiment=exp.name,
@@ -1218,7 +1249,7 @@ def run_experiments(
                 exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
                 quick=quick, jobs=jobs, fresh=fresh, cache=cache, cache_dir=cache_dir,
                 plugins=plugins, cell_timeout=cell_timeout, progress=bar, _client=client,
-                _counted=counted,
+                _counted=counted, allow_empty=True,
             )
             if sched is not None:
                 out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None
@@ -1227,4 +1258,7 @@ def run_experiments(
             client.close()
         if own_bar:
             bar.close()
+    if out and not any(r.n_cells for r in out.values()):
+        raise no_cells_error(list(out), pd.concat([r.skips for r in out.values()], ignore_index=True),
+                             stepper_names, problem_names)
     return out
