@@ -35,6 +35,8 @@ __all__ = ["main", "build_parser"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 EXIT_CANTCREAT, EXIT_IOERR, EXIT_NOPERM, EXIT_PIPE = 73, 74, 77, 141
+# A run's footer lists at most this many pairs that do not apply (all are in the saved run).
+SHOWN_SKIPS = 10
 
 # The command's stdout while it runs (see the module docstring); `print(..., file=_out())`.
 _OUTPUT: list[io.StringIO] = []
@@ -374,9 +376,13 @@ def _print_footer(result, failures) -> None:
     for f in failures:
         print(f"FAILED {f.get('stepper')} x {f.get('problem')}: {_one_line(str(f.get('message', '')))}",
               file=out)
-    for r in result.skips.to_dict("records") if hasattr(result.skips, "to_dict") else []:
+    skips = result.skips.to_dict("records") if hasattr(result.skips, "to_dict") else []
+    for r in skips[:SHOWN_SKIPS]:
         print(f"not applicable: {r.get('stepper')} x {r.get('problem')}: {_one_line(str(r.get('reason')))}",
               file=out)
+    if len(skips) > SHOWN_SKIPS:
+        print(f"not applicable: {len(skips) - SHOWN_SKIPS} more pairs (every reason: "
+              "`harness.results.load(table='skips')`)", file=out)
 
 
 def _cmd_gate(args) -> int:

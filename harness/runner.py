@@ -30,7 +30,8 @@ cluster) records the cell as failed instead of mixing results from other code in
 Failures stay in their cell. Each cell ends in rows or in a failure record
 (`harness.experiments.base.failed_record`) of one of these kinds:
 `error` (run_cell raised), `invalid` (not a DataFrame, no rows, non-scalar or complex columns,
-declared dtypes or finite columns violated, not storable as Parquet), `timeout`, `crash` (the
+declared dtypes or finite columns violated, not storable as Parquet; or a stepper returned a
+state of the wrong shape or made NaN from a finite state: `StepperOutputError`), `timeout`, `crash` (the
 worker process died: segfault, `os._exit`, out-of-memory kill), `lookup` (the stepper or problem
 cannot be found or fingerprinted), `version` (a worker runs other code), `summarize` (the
 experiment's summary raised; the rows are kept).
@@ -98,7 +99,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.errors import HarnessError, InputError, NoApplicableCellsError, UnknownNameError
+from harness.errors import (
+    HarnessError,
+    InputError,
+    NoApplicableCellsError,
+    StepperOutputError,
+    UnknownNameError,
+)
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
 from harness.progress import Progress
 from harness.provenance import to_jsonable
@@ -564,7 +571,7 @@ def _execute(task: Mapping[str, Any]) -> dict:
         out.update(ok=True, kind="", rows=rows)
     except CellTimeout:
         out.update(kind="timeout", message=f"timeout after {timeout:g} s")
-    except CellOutputError as exc:
+    except (CellOutputError, StepperOutputError) as exc:
         out.update(kind="invalid", message=_one_line(str(exc)))
     except KeyboardInterrupt:
         raise
