@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import errno
 import io
 import json
 import math
@@ -113,7 +112,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _explain_skips(exc.skips, getattr(args, "json", False))
         code = _error(str(exc), EXIT_USAGE)
     except HarnessError as exc:
-        code = _error(str(exc), EXIT_USAGE)
+        code = _error(str(exc), getattr(exc, "exit_status", EXIT_USAGE))
     except OSError as exc:
         code = _error(*_describe_os_error(exc))
     except KeyboardInterrupt:
@@ -130,21 +129,10 @@ def _error(message: str, code: int) -> int:
     return code
 
 
-def _describe_os_error(exc: OSError, what: str = "") -> tuple[str, int]:
-    """(one line naming the path and the problem, exit status) for an OS error."""
-    path = exc.filename or what or "a file"
-    reason = exc.strerror or type(exc).__name__
-    if exc.errno in (errno.EEXIST, errno.ENOTDIR):
-        return f"{str(path)!r}: a file stands where a directory belongs ({reason})", EXIT_CANTCREAT
-    if exc.errno == errno.EISDIR:
-        return f"{str(path)!r}: a directory stands where a file belongs ({reason})", EXIT_CANTCREAT
-    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        return f"{str(path)!r}: no permission to write there ({reason})", EXIT_NOPERM
-    if exc.errno == errno.ENOSPC:
-        return f"{str(path)!r}: no space left on the device", EXIT_IOERR
-    if isinstance(exc, BrokenPipeError):
-        return f"{str(path)}: the reader closed the pipe; output cut short", EXIT_PIPE
-    return f"{str(path)!r}: {reason}", EXIT_IOERR
+def _describe_os_error(exc: OSError) -> tuple[str, int]:
+    from harness.errors import describe_os_error
+
+    return describe_os_error(exc)
 
 
 def _stdout_name() -> str:

@@ -5,13 +5,14 @@ already in the cache, runs the others, and returns a `RunResult` (rows, summary,
 per-cell records, counts, wall time). `run_experiments(...)` does the same for several
 experiments with one progress display and one Dask connection.
 
-Cache. A cell's key (`cell_key`) hashes the cell, the experiment's resolved configuration and a
-code version: the fingerprints of its stepper and problem (coefficients and class source), the
-source of the experiment's module and of the measuring core (`MEASURING_MODULES`), and the
-harness version. A finished cell is written to the cache (`harness.store.CellCache`) the moment
-its result reaches this process, so a `kill -9` loses only the cells in flight; the next run
-reuses the rest. A changed method changes only its own cells' keys. `fresh=True` recomputes
-every cell and overwrites its cache entry. Failed cells are not cached: they run again.
+Cache. A cell's key (`cell_key`, harness/keys.py) hashes the cell, the experiment's resolved
+configuration and a code version: the fingerprints of its stepper and problem (coefficients and
+class source), the measuring source of the experiment found from its import graph (judging code
+and judging thresholds left out), and the harness version. A finished cell is written to the
+cache (`harness.store.CellCache`, with a checksum and its schema) the moment its result reaches
+this process, so a `kill -9` loses only the cells in flight; the next run reuses the rest. A
+changed method changes only its own cells' keys. `fresh=True` recomputes every cell and
+overwrites its cache entry. Failed cells are not cached: they run again.
 
 Where cells run.
 - `jobs=1`: in this process, one after another.
@@ -76,7 +77,6 @@ from __future__ import annotations
 import contextlib
 import faulthandler
 import hashlib
-import importlib.util
 import json
 import math
 import os
@@ -84,7 +84,6 @@ import re
 import shutil
 import signal
 import socket
-import sys
 import tempfile
 import threading
 import time
@@ -107,15 +106,12 @@ from harness.errors import (
     UnknownNameError,
 )
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
+from harness.keys import MEASURING_MODULES, cell_key, code_version, experiment_fingerprint
 from harness.progress import Progress
-from harness.provenance import to_jsonable
 from harness.store import (
-    CELL_SCHEMA,
     CellCache,
-    ResultsError,
     atomic_write_bytes,
-    decode_parquet,
-    encode_parquet,
+    encode_cell,
 )
 
 __all__ = [
@@ -142,14 +138,6 @@ __all__ = [
 
 FAILURE_KINDS = ("error", "invalid", "timeout", "crash", "lookup", "version", "summarize")
 
-# Modules whose source counts in every cell's code version: they compute what cells measure.
-MEASURING_MODULES = (
-    "harness.problem",
-    "harness.stepper",
-    "harness.coefficients",
-    "harness.ground_truth",
-    "harness.tolerances",
-)
 # After a soft time limit fails to stop a cell (stuck in compiled code), a loky worker is ended
 # this many seconds later (at least), or a fifth of the limit when that is longer.
 HARD_TIMEOUT_GRACE_S = 5.0
@@ -241,61 +229,7 @@ def _call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
     return box.get("value")
 
 
-# -- code versions and keys -------------------------------------------------------------------------
-def _module_source(name: str) -> str:
-    mod = sys.modules.get(name)
-    path = getattr(mod, "__file__", None)
-    if path is None:
-        try:
-            spec = importlib.util.find_spec(name)
-        except (ImportError, ValueError):
-            spec = None
-        path = spec.origin if spec is not None else None
-    if path and os.path.isfile(path):
-        with open(path, "rb") as fh:
-            return hashlib.sha256(fh.read()).hexdigest()
-    return f"<no source: {name}>"
-
-
-def experiment_fingerprint(experiment: Experiment) -> str:
-    """The experiment's code version: its own `fingerprint()` when it defines one, else the
-    source of the modules defining its classes, plus the measuring core and harness version."""
-    from harness import __version__
-
-    parts = [__version__, type(experiment).__qualname__, str(experiment.name)]
-    own = getattr(experiment, "fingerprint", None)
-    if callable(own):
-        parts.append(str(own()))
-    else:
-        for cls in type(experiment).__mro__:
-            if cls in (object, Experiment) or cls.__module__ in ("abc", "builtins"):
-                continue
-            parts.append(_module_source(cls.__module__))
-    parts += [_module_source(m) for m in MEASURING_MODULES]
-    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
-
-
-def code_version(stepper: str, problem: str) -> str:
-    """Hash of the fingerprints of a stepper and a problem (looked up in the registry); an
-    empty name stands for 'none' (a cell that uses no stepper, or no problem)."""
-    from harness.registry import get_problem, get_stepper
-
-    s = get_stepper(stepper).fingerprint() if stepper else ""
-    p = get_problem(problem).fingerprint() if problem else ""
-    if not isinstance(s, str) or not isinstance(p, str):
-        raise HarnessError(
-            f"`fingerprint()` must return a string (stepper {stepper!r}, problem {problem!r})"
-        )
-    return hashlib.sha256(f"stepper\n{s}\nproblem\n{p}".encode()).hexdigest()[:32]
-
-
-def cell_key(cell: Cell, config: Mapping[str, Any], experiment_version: str, sp_version: str) -> str:
-    """The cache key of `cell`: `Cell.key` over the experiment's resolved configuration and a
-    code version combining the stepper/problem version and the experiment's fingerprint."""
-    code = hashlib.sha256(f"{sp_version}\n{experiment_version}".encode()).hexdigest()[:32]
-    return cell.key(code, to_jsonable(dict(config)))
-
-
+# -- code versions and keys: harness/keys.py (re-exported here) ------------------------------------
 # -- validating a cell's rows -----------------------------------------------------------------------
 _KINDS = {
     "float": pd.api.types.is_float_dtype,
@@ -961,14 +895,13 @@ def _with_ids(rows: pd.DataFrame, cell: Cell) -> pd.DataFrame:
     return pd.concat([ids, rows], axis=1)
 
 
-def _roundtrip(rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
-    """Rows as they come back from Parquet (so fresh and cached cells are identical), and the
-    Parquet bytes for the cache."""
+def _roundtrip(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
+    """Rows as they come back from the cell file (so fresh and cached cells are identical), and
+    the file's bytes for the cache (`harness.store.encode_cell`)."""
     try:
-        data = encode_parquet(rows, {**info, "schema": CELL_SCHEMA})
+        return encode_cell(key, rows, info)
     except InputError as exc:
         raise CellOutputError(f"rows {exc}") from None
-    return decode_parquet(data)[0], data
 
 
 def run_experiment(
@@ -1112,20 +1045,14 @@ def run_experiment(
                     rows = _with_ids(out["rows"], t.cell)
                     info = {"key": t.key, "experiment": exp.name, "cell": t.cell.label,
                             "wall_s": out["wall_s"], "worker": out["worker"]}
-                    rows, data = _roundtrip(rows, info)
+                    rows, data = _roundtrip(t.key, rows, info)
                 except CellOutputError as exc:
                     fail(t.index, t.cell, t.key, "invalid", str(exc), wall=out["wall_s"],
                          worker=out["worker"])
                     bar.update(1, failed=1)
                     return
                 if store is not None:
-                    path = store.path(t.key)
-                    try:
-                        atomic_write_bytes(path, data)
-                    except OSError as exc:
-                        raise ResultsError(
-                            f"cannot write the cell cache file {str(path)!r}: {exc.strerror or exc}"
-                        ) from None
+                    store.put_encoded(t.key, data)  # atomic; OutputError names the file
                 frames[t.index] = rows
                 record(t.index, t.cell, t.key, "ok", False, out["wall_s"], len(rows), out["worker"])
                 bar.update(1)
