@@ -284,6 +284,8 @@ def _read_json(path: Path) -> Any:
         return json.loads(text)
     except ValueError as exc:
         raise CorruptResultsError(path, f"not valid JSON ({exc})") from None
+    except RecursionError:
+        raise CorruptResultsError(path, "JSON nested too deeply to be a harness file") from None
 
 
 # -- run ids --------------------------------------------------------------------------------------
@@ -409,8 +411,18 @@ def save_run(
     `config` is the run's own configuration (command, jobs, steppers, problems, plugins, ...);
     each experiment's resolved configuration is taken from its result. The directory appears
     complete or not at all (assembled in `.staging-...` and renamed). An existing run is never
-    overwritten: an explicit `run_id` that exists raises `ResultsError`.
+    overwritten: an explicit `run_id` that exists raises `ResultsError`; an OS error (read-only
+    or full disk, a file where the directory belongs) raises `OutputError` naming the path.
     """
+    try:
+        return _save_run(results, root=root, run_id=run_id, config=config)
+    except OutputError:
+        raise
+    except OSError as exc:  # a results root that is a file, read-only, full, ...
+        raise OutputError(*describe_os_error(exc)) from None
+
+
+def _save_run(results, *, root, run_id, config) -> Path:
     items = list(results.values()) if isinstance(results, Mapping) else list(results)
     names = [_check_experiment_name(getattr(r, "experiment", None)) for r in items]
     if len(set(names)) != len(names):
@@ -568,6 +580,27 @@ class StoredRun:
         return self.table("cells")
 
 
+_KIND_NAMES = {str: "a string", dict: "an object", list: "a list"}
+
+
+def _describe(value: Any) -> str:
+    return type(value).__name__ if not isinstance(value, list) else "a list holding " + ", ".join(
+        sorted({type(v).__name__ for v in value}))
+
+
+def _depth(value: Any) -> int:
+    """Nesting depth of parsed JSON, without recursion (a hostile file may nest very deep)."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, dict | list):
+            deepest = max(deepest, d)
+            if d > MAX_META_DEPTH:
+                return d
+            stack.extend((c, d + 1) for c in (v.values() if isinstance(v, dict) else v))
+    return deepest
+
+
 def _check_meta(path: Path, meta: Any) -> dict:
     if not isinstance(meta, dict):
         raise CorruptResultsError(path, f"expected a JSON object, got {type(meta).__name__}")
@@ -580,20 +613,49 @@ def _check_meta(path: Path, meta: Any) -> dict:
     missing = [k for k in META_KEYS if k not in meta]
     if missing:
         raise CorruptResultsError(path, f"missing keys {missing}")
-    if not isinstance(meta["experiments"], dict):
-        raise CorruptResultsError(path, "`experiments` is not an object")
+    depth = _depth(meta)
+    if depth > MAX_META_DEPTH:
+        raise CorruptResultsError(path, f"nested {depth} levels deep; a harness meta.json nests "
+                                        f"at most {MAX_META_DEPTH}")
+    for key, kind in (("run_id", str), ("created_utc", str), ("provenance", dict),
+                      ("config", dict), ("experiments", dict), ("totals", dict)):
+        if not isinstance(meta[key], kind):
+            raise CorruptResultsError(path, f"`{key}` must be {_KIND_NAMES[kind]}, got "
+                                            f"{type(meta[key]).__name__}")
+    for key, value in meta["totals"].items():
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise CorruptResultsError(path, f"`totals.{key}` must be a number, got {type(value).__name__}")
     for name, exp in meta["experiments"].items():
         if not isinstance(exp, dict):
             raise CorruptResultsError(path, f"experiment {name!r} is not an object")
         miss = [k for k in EXPERIMENT_KEYS if k not in exp]
         if miss:
             raise CorruptResultsError(path, f"experiment {name!r} is missing keys {miss}")
+        for key in ("wall_s", "n_cells", "computed_cells", "cached_cells", "failed_cells"):
+            v = exp[key]
+            if isinstance(v, bool) or not isinstance(v, int | float) or (key != "wall_s" and v != int(v)):
+                raise CorruptResultsError(path, f"experiment {name!r}: `{key}` must be a number, "
+                                                f"got {type(v).__name__}")
+        for key in ("failures", "skips", "cells"):
+            records = exp[key]
+            if not isinstance(records, list) or not all(isinstance(r, dict) for r in records):
+                raise CorruptResultsError(path, f"experiment {name!r}: `{key}` must be a list of "
+                                                f"records (objects), got {_describe(records)}")
+        if not isinstance(exp["tables"], dict):
+            raise CorruptResultsError(path, f"experiment {name!r}: `tables` must be an object")
         if not isinstance(name, str) or not _SAFE_NAME.match(name):
             raise CorruptResultsError(path, f"experiment name {name!r} is not a valid file name")
         for table in TABLES:
             spec = exp["tables"].get(table) if isinstance(exp["tables"], dict) else None
             if not isinstance(spec, dict) or any(k not in spec for k in ("file", "columns", "n_rows")):
                 raise CorruptResultsError(path, f"experiment {name!r} lacks a valid {table!r} table entry")
+            if (not isinstance(spec["columns"], list) or not all(isinstance(c, str) for c in spec["columns"])
+                    or isinstance(spec["n_rows"], bool) or not isinstance(spec["n_rows"], int)
+                    or spec["n_rows"] < 0 or not isinstance(spec["file"], str)
+                    or not isinstance(spec.get("sha256", ""), str)):
+                raise CorruptResultsError(path, f"experiment {name!r}: the {table!r} table entry has "
+                                                "wrong types (columns: list of names, n_rows: count, "
+                                                "file and sha256: strings)")
             if spec["file"] != f"{name}.{table}.parquet":
                 raise CorruptResultsError(path, f"experiment {name!r}: unexpected file name {spec['file']!r}")
     return meta
