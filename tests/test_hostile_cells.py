@@ -172,10 +172,9 @@ def test_a_genuine_blow_up_is_a_measurement_not_an_error(h, n_steps, members):
 
 
 @pytest.fixture
-def bad_plugin(tmp_path):
+def bad_plugin(plugin_file):
     """Two plugin steppers: one makes NaN from a finite state, one collapses it to a scalar."""
-    path = tmp_path / "bad_steppers.py"
-    path.write_text(
+    return plugin_file("bad_steppers.py",
         "import numpy as np\n"
         "from harness.stepper import Carry, Stepper, StepperInfo\n\n\n"
         "def _info(name):\n"
@@ -195,10 +194,6 @@ def bad_plugin(tmp_path):
         "        c.y = np.float64(np.mean(c.y + c.h * dyn.f(c.t, c.y)))\n\n\n"
         "STEPPERS = [NaNStep(), ScalarStep()]\n"
     )
-    yield str(path)
-    for name in ("plugin-nan", "plugin-scalar"):
-        registry.steppers.unregister(name)
-    registry._plugins.pop(str(path.resolve()), None)
 
 
 @pytest.mark.parametrize("experiment", ["stability", "energy", "reversibility", "convergence"])

@@ -265,26 +265,19 @@ def test_output_error_is_an_os_error_naming_the_file(tmp_path):
     assert isinstance(e.value, OSError) and e.value.exit_status == 73
 
 
-def test_plugin_print_does_not_corrupt_json_stdout(tmp_path):
-    plugin = tmp_path / "chatty.py"
-    plugin.write_text(
+def test_plugin_print_does_not_corrupt_json_stdout(plugin_file):
+    plugin = plugin_file("chatty.py",
         "print('hello from the plugin')\n"
         "from harness.coefficients import ButcherTableau\n"
         "from implementations.runge_kutta import ExplicitRungeKutta\n"
         "STEPPERS = [ExplicitRungeKutta(ButcherTableau('chatty-euler', A=[[0]], b=[1]),"
         " claimed_order=1, reference='Euler (1768)')]\n")
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-        code = main(["list", "steppers", "--json", "--plugin", str(plugin)])
-    try:
-        assert code == 0
-        names = [r["name"] for r in json.loads(out.getvalue())]
-        assert "chatty-euler" in names
-    finally:
-        from harness import registry
-
-        registry.steppers.unregister("chatty-euler")
-        registry._plugins.pop(str(plugin.resolve()), None)
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["list", "steppers", "--json", "--plugin", plugin])
+    assert code == 0
+    assert "chatty-euler" in [r["name"] for r in json.loads(out.getvalue())]
+    assert "hello from the plugin" in err.getvalue()
 
 
 def test_numbers_survive_the_cell_file_exactly(tmp_path):
