@@ -84,6 +84,7 @@ import re
 import shutil
 import signal
 import socket
+import sys
 import tempfile
 import threading
 import time
@@ -412,7 +413,7 @@ def _ensure_plugins(specs: Sequence[dict]) -> None:
             path = Path(tempfile.gettempdir()) / "harness-plugins" / spec["sha256"][:16] / spec["name"]
             if not path.is_file():
                 atomic_write_bytes(path, spec["source"])
-        load_plugin(path)
+        load_plugin(path, probe=False)  # the submitting process probed it
 
 
 def _worker_id() -> str:
@@ -488,7 +489,8 @@ def _execute(task: Mapping[str, Any]) -> dict:
                 faulthandler.enable(file=claim_fh)
             except OSError:
                 claim_fh, claim = None, None
-        problem = _prepare_worker(task)
+        with contextlib.redirect_stdout(sys.stderr):  # a plugin's print() stays off stdout
+            problem = _prepare_worker(task)
         if problem is not None:
             out.update(kind=problem[0], message=_one_line(problem[1]))
             return out
@@ -499,9 +501,10 @@ def _execute(task: Mapping[str, Any]) -> dict:
             watchdog.start()
         experiment = task["experiment"]
         started = time.perf_counter()
-        rows = _call_limited(
-            lambda: validate_rows(experiment, experiment.run_cell(cell, task["config"])), timeout
-        )
+        with contextlib.redirect_stdout(sys.stderr):
+            rows = _call_limited(
+                lambda: validate_rows(experiment, experiment.run_cell(cell, task["config"])), timeout
+            )
         out.update(ok=True, kind="", rows=rows)
     except CellTimeout:
         out.update(kind="timeout", message=f"timeout after {timeout:g} s")
