@@ -61,9 +61,10 @@ class StepperOutputError(HarnessError):
     from a finite, moderate state (a blow-up passes through large values and inf first)."""
 
 
-class WorkLimitError(HarnessError):
-    """A computation would exceed a stated work or time bound; the message names the bound and
-    how to raise it."""
+class WorkLimitError(ReferenceError_):
+    """A computation (a reference integration) would exceed a stated work or time bound; the
+    message names the bound and how to raise it. A reference that cannot be computed within
+    its bounds is a `ReferenceError_`."""
 
 
 class OutputError(HarnessError, OSError):
