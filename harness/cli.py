@@ -99,10 +99,51 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# Options whose value may look like an option ("-inf", "-1"): `--t -inf` is read as `--t=-inf`,
+# so the value reaches the check that states the rule.
+_VALUE_OPTIONS = ("--t", "--jobs", "--cell-timeout")
+
+
+def _join_values(argv: Sequence[str]) -> list[str]:
+    out: list[str] = []
+    items = list(argv)
+    i = 0
+    while i < len(items):
+        a = items[i]
+        if a in _VALUE_OPTIONS and i + 1 < len(items) and items[i + 1].startswith("-") \
+                and not items[i + 1].startswith("--"):
+            out.append(f"{a}={items[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
+
+
+def _on_sigterm(signum, frame):
+    from harness.errors import Terminated
+
+    raise Terminated()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
-    from harness.errors import HarnessError, NoApplicableCellsError
+    args = parser.parse_args(_join_values(sys.argv[1:] if argv is None else argv))
+    import signal
+    import threading
+
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        return _main(args)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(args: argparse.Namespace) -> int:
+    from harness.errors import HarnessError, NoApplicableCellsError, Terminated
 
     _OUTPUT.append(io.StringIO())
     try:
@@ -118,6 +159,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("harness: interrupted", file=sys.stderr)
         code = 130
+    except Terminated:
+        print("harness: terminated", file=sys.stderr)
+        code = 143
     finally:
         text = _OUTPUT.pop().getvalue()
     written = _write_stdout(text)

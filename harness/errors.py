@@ -13,6 +13,7 @@ __all__ = [
     "WorkLimitError",
     "OutputError",
     "describe_os_error",
+    "Terminated",
 ]
 
 
@@ -114,3 +115,8 @@ def _first_non_directory(path: str) -> str:
         if os.path.lexists(head) and not os.path.isdir(head):
             return head
     return path
+
+
+class Terminated(BaseException):  # noqa: N818 - a signal, like KeyboardInterrupt
+    """SIGTERM, raised by the CLI's handler so that every `finally` runs (claim directories,
+    worker pools, staging directories); never swallowed by a cell's failure handling."""

@@ -104,6 +104,7 @@ from harness.errors import (
     InputError,
     NoApplicableCellsError,
     StepperOutputError,
+    Terminated,
     UnknownNameError,
 )
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
@@ -146,8 +147,12 @@ HARD_TIMEOUT_GRACE_S = 5.0
 MAX_JOBS_PER_CORE = 8
 # Seconds to wait for a Dask scheduler to answer.
 DASK_CONNECT_TIMEOUT_S = 10
-# Seconds an idle loky worker waits for work before it exits.
-LOKY_IDLE_TIMEOUT_S = 300
+# Seconds an idle loky worker waits for work before it exits (short: a worker is cheap to start,
+# and the workers of a run killed with SIGKILL should not linger).
+LOKY_IDLE_TIMEOUT_S = 30
+# A worker process whose parent died (kill -9 of the run) notices within this many seconds and
+# exits (its parent pid changes when it is re-parented).
+ORPHAN_CHECK_S = 1.0
 # A cell whose worker died in this many pool breakdowns is recorded as crashed, whatever the
 # claim files say (guarantees the run ends).
 MAX_CRASH_ROUNDS = 3
@@ -463,6 +468,25 @@ def _prepare_worker(task: Mapping[str, Any]) -> tuple[str, str] | None:
     return None
 
 
+_orphan_watch: list[int] = []
+
+
+def _watch_for_orphaning(parent: int) -> None:
+    """In a worker process: exit when the process that started it is gone (re-parented), so the
+    workers of a run killed with SIGKILL do not linger. Started once per process."""
+    if _orphan_watch or parent == os.getpid():
+        return
+    _orphan_watch.append(parent)
+
+    def watch():  # pragma: no cover - ends the process
+        while True:
+            time.sleep(ORPHAN_CHECK_S)
+            if os.getppid() != parent:
+                os._exit(75)
+
+    threading.Thread(target=watch, name="harness-orphan-watch", daemon=True).start()
+
+
 def _execute(task: Mapping[str, Any]) -> dict:
     """Run one cell and return its outcome; never raises (a worker's entry point). The time
     limit and `wall_s` cover `run_cell` and the check of its rows, not the worker's set-up."""
@@ -471,6 +495,8 @@ def _execute(task: Mapping[str, Any]) -> dict:
     out: dict[str, Any] = {"key": task["key"], "ok": False, "kind": "error", "message": "",
                            "traceback": "", "rows": None, "wall_s": 0.0, "worker": _worker_id()}
     claim = os.path.join(task["claim_dir"], task["key"]) if task.get("claim_dir") else None
+    if task.get("parent_pid") is not None:
+        _watch_for_orphaning(task["parent_pid"])
     watchdog = None
     claim_fh = None
     faults_were_on = faulthandler.is_enabled()
@@ -510,7 +536,7 @@ def _execute(task: Mapping[str, Any]) -> dict:
         out.update(kind="timeout", message=f"timeout after {timeout:g} s")
     except (CellOutputError, StepperOutputError) as exc:
         out.update(kind="invalid", message=_one_line(str(exc)))
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Terminated):
         raise
     except BaseException as exc:  # the cell's own failure, whatever it is
         out.update(kind="error", message=_one_line(f"{type(exc).__name__}: {exc}"),
@@ -746,7 +772,7 @@ def _loky_batch(batch: Sequence[_Task], n: int, accept) -> tuple[BaseException |
                                                 f"{type(exc).__name__}: {exc}", kind="error"))
                 else:
                     accept(t, fut.result())
-    except KeyboardInterrupt:
+    except BaseException:  # Ctrl-C, SIGTERM (the CLI raises SystemExit), anything unexpected
         executor.shutdown(wait=False, kill_workers=True)
         raise
     if broken is None:
@@ -779,6 +805,7 @@ def _run_loky(tasks: Sequence[_Task], jobs: int, accept) -> None:
     try:
         for t in tasks:
             t.payload["claim_dir"] = claim_dir
+            t.payload["parent_pid"] = os.getpid()
             t.payload["hard_kill"] = True
             t.payload["hard_grace"] = max(HARD_TIMEOUT_GRACE_S, 0.2 * (t.payload["timeout"] or 0))
         normal: list[_Task] = list(tasks)
@@ -820,13 +847,24 @@ def _dask_client(scheduler: Any) -> tuple[Any, bool]:
 
     if isinstance(scheduler, Client):
         return scheduler, False
+    failure = None
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: None  # a half-built Client's destructor complains
     try:
-        client = Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s", set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as exc:
+        try:
+            client = Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s", set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            failure = f"{type(exc).__name__}: {_one_line(str(exc), 200)}"
+        if failure is not None:
+            import gc
+
+            gc.collect()  # the half-built client goes now, while its complaint is silenced
+    finally:
+        sys.unraisablehook = hook
+    if failure is not None:
         raise InputError(
-            f"`scheduler` {scheduler!r}: cannot connect within {DASK_CONNECT_TIMEOUT_S} s "
-            f"({type(exc).__name__}: {_one_line(str(exc), 200)})"
-        ) from None
+            f"`scheduler` {scheduler!r}: cannot connect within {DASK_CONNECT_TIMEOUT_S} s ({failure})"
+        )
     return client, True
 
 
@@ -982,6 +1020,11 @@ def run_experiment(
         raise no_cells_error([exp.name], skips, stepper_names, problem_names)
     if sched is None and _client is None:
         _guard_memory(exp, cells, cfg, jobs_n)
+    own_client = None
+    if sched is not None and _client is None:
+        # connect before looking at the cache: a bad address is an error even when every cell
+        # is cached
+        _client, own_client = _dask_client(sched)
 
     exp_version = experiment_fingerprint(exp)
     versions: dict[tuple[str, str], Any] = {}
@@ -1065,18 +1108,15 @@ def run_experiment(
                 bar.update(1, failed=1)
 
         if tasks:
-            if sched is not None or _client is not None:
-                client, own = (_client, False) if _client is not None else _dask_client(sched)
-                try:
-                    _run_dask(tasks, client, accept)
-                finally:
-                    if own:
-                        client.close()
+            if _client is not None:
+                _run_dask(tasks, _client, accept)
             elif jobs_n == 1:
                 _run_serial(tasks, accept)
             else:
                 _run_loky(tasks, jobs_n, accept)
     finally:
+        if own_client:
+            _client.close()
         if own_bar:
             bar.close()
 
