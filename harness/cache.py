@@ -16,13 +16,20 @@ _configured: Path | None = None
 
 
 def cache_dir() -> Path:
+    """The harness's cache root, created when missing (`OutputError` naming the path when it
+    cannot be)."""
     env = os.environ.get("HARNESS_CACHE_DIR")
     if env:
         root = Path(env)
     else:
         project = Path(__file__).resolve().parent.parent
         root = project / ".cache" if (project / "pyproject.toml").exists() else Path.cwd() / ".cache"
-    root.mkdir(parents=True, exist_ok=True)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file where the directory belongs, no permission, ...
+        from harness.errors import OutputError, describe_os_error
+
+        raise OutputError(*describe_os_error(exc, root)) from None
     return root
 
 

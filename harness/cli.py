@@ -7,12 +7,22 @@
     harness report [--quick] [--fresh]
 
 Errors a user can fix exit 2 with one line on stderr naming the argument and the rule; the
-gate exits 1 when a claim fails.
+gate exits 1 when a claim fails; a run or gate over zero applicable cells exits 2 and prints why
+each requested pair does not apply (a table on stdout, or JSON records with `--json`).
+
+One output layer serves every command. While a command runs, `sys.stdout` points at stderr (a
+plugin's `print()` cannot corrupt `--json`); the command's output is collected and written to
+stdout at the end, then flushed. Ordinary OS conditions become one line naming the path and the
+problem, no traceback, with a sysexits-style status: the reader closed the pipe (141, as a
+SIGPIPE death would give), a full disk or another I/O error (74), no permission (77), a file
+where a directory belongs or the reverse (73).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import math
 import os
@@ -23,6 +33,18 @@ from typing import Any
 __all__ = ["main", "build_parser"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_CANTCREAT, EXIT_IOERR, EXIT_NOPERM, EXIT_PIPE = 73, 74, 77, 141
+# A run's footer lists at most this many pairs that do not apply (all are in the saved run).
+SHOWN_SKIPS = 10
+
+# The command's stdout while it runs (see the module docstring); `print(..., file=_out())`.
+_OUTPUT: list[io.StringIO] = []
+
+
+def _out() -> io.StringIO:
+    if not _OUTPUT:
+        _OUTPUT.append(io.StringIO())
+    return _OUTPUT[-1]
 
 
 class _Parser(argparse.ArgumentParser):
@@ -59,8 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p, grid=False)
 
     p = sub.add_parser("run", help="run one experiment over steppers x problems")
-    p.add_argument("experiment", help="convergence, stability, reversibility, energy, "
-                                      "symplecticity or work-precision")
+    p.add_argument("experiment", help="the experiment's name (see `harness list experiments`)")
     _common(p)
     for flag, meta, what in (("--h", "H", "fixed step size (default: from the problem's time scale)"),
                              ("--steps", "N[,N...]", "step count(s) of a fixed-step run"),
@@ -84,19 +105,128 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# Options whose value may look like an option ("-inf", "-1"): `--t -inf` is read as `--t=-inf`,
+# so the value reaches the check that states the rule.
+_VALUE_OPTIONS = ("--t", "--jobs", "--cell-timeout")
+
+
+def _join_values(argv: Sequence[str]) -> list[str]:
+    out: list[str] = []
+    items = list(argv)
+    i = 0
+    while i < len(items):
+        a = items[i]
+        if a in _VALUE_OPTIONS and i + 1 < len(items) and items[i + 1].startswith("-") \
+                and not items[i + 1].startswith("--"):
+            out.append(f"{a}={items[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
+
+
+def _on_sigterm(signum, frame):
+    from harness.errors import Terminated
+
+    raise Terminated()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
-    from harness.errors import HarnessError
+    args = parser.parse_args(_join_values(sys.argv[1:] if argv is None else argv))
+    import signal
+    import threading
 
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        return _dispatch(args)
+        return _main(args)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(args: argparse.Namespace) -> int:
+    from harness.errors import HarnessError, NoApplicableCellsError, Terminated
+
+    _OUTPUT.append(io.StringIO())
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            code = _dispatch(args)
+    except NoApplicableCellsError as exc:
+        _explain_skips(exc.skips, getattr(args, "json", False))
+        code = _error(str(exc), EXIT_USAGE)
     except HarnessError as exc:
-        print(f"harness: error: {_one_line(str(exc))}", file=sys.stderr)
-        return EXIT_USAGE
+        code = _error(str(exc), getattr(exc, "exit_status", EXIT_USAGE))
+    except OSError as exc:
+        code = _error(*_describe_os_error(exc))
     except KeyboardInterrupt:
         print("harness: interrupted", file=sys.stderr)
-        return 130
+        code = 130
+    except Terminated:
+        print("harness: terminated", file=sys.stderr)
+        code = 143
+    finally:
+        text = _OUTPUT.pop().getvalue()
+    written = _write_stdout(text)
+    return code if written == EXIT_OK else written
+
+
+def _error(message: str, code: int) -> int:
+    print(f"harness: error: {_one_line(message)}", file=sys.stderr)
+    return code
+
+
+def _describe_os_error(exc: OSError) -> tuple[str, int]:
+    from harness.errors import describe_os_error
+
+    return describe_os_error(exc)
+
+
+def _stdout_name() -> str:
+    try:
+        target = os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        return "stdout"
+    return f"stdout ({target})" if target.startswith("/") else "stdout"
+
+
+def _write_stdout(text: str) -> int:
+    """Write the command's output and flush it; an OS error becomes one line on stderr."""
+    try:
+        if text:
+            sys.stdout.write(text)
+        sys.stdout.flush()
+    except OSError as exc:
+        exc.filename = _stdout_name()
+        _silence_stdout()
+        return _error(*_describe_os_error(exc))
+    return EXIT_OK
+
+
+def _silence_stdout() -> None:
+    """After a failed write, point the real stdout at /dev/null so the interpreter's own flush
+    at exit does not print a second error (only for the process's real stdout)."""
+    if sys.stdout is not sys.__stdout__:
+        return
+    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
+def _explain_skips(skips: Sequence[dict], as_json: bool) -> None:
+    """Why each requested pair does not apply: JSON records or a table, on stdout."""
+    if as_json:
+        _print_json([dict(r, verdict="not-applicable", passed=False) for r in skips])
+        return
+    import pandas as pd
+
+    print("not applicable:", file=_out())
+    _print_table(pd.DataFrame(list(skips), columns=["experiment", "stepper", "problem", "reason"]),
+                 ["experiment", "stepper", "problem", "reason"])
 
 
 def _one_line(text: str) -> str:
@@ -154,19 +284,19 @@ def _jsonable(value: Any) -> Any:
 
 
 def _print_json(records: Any) -> None:
-    print(json.dumps(_jsonable(records), indent=2))
+    print(json.dumps(_jsonable(records), indent=2), file=_out())
 
 
 def _print_table(frame, columns: Sequence[str]) -> None:
     import pandas as pd
 
     if frame.empty:
-        print("(none)")
+        print("(none)", file=_out())
         return
     cols = [c for c in columns if c in frame.columns]
     with pd.option_context("display.max_rows", None, "display.max_columns", None,
                            "display.width", 200, "display.max_colwidth", 70):
-        print(frame[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"))
+        print(frame[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"), file=_out())
 
 
 def _cmd_list(args) -> int:
@@ -227,7 +357,7 @@ def _cmd_reference(args) -> int:
         _print_json([record])
     else:
         for k, v in record.items():
-            print(f"{k:>18}: {v}")
+            print(f"{k:>18}: {v}", file=_out())
     return EXIT_OK
 
 
@@ -284,10 +414,19 @@ def _cmd_run(args) -> int:
 
 
 def _print_footer(result, failures) -> None:
+    out = _out()
     print(f"\n{len(result.summary)} cells, {len(failures)} failed, "
-          f"{getattr(result, 'cached_cells', 0)} from cache, {result.wall_s:.1f} s")
+          f"{getattr(result, 'cached_cells', 0)} from cache, {result.wall_s:.1f} s", file=out)
     for f in failures:
-        print(f"FAILED {f.get('stepper')} x {f.get('problem')}: {_one_line(str(f.get('message', '')))}")
+        print(f"FAILED {f.get('stepper')} x {f.get('problem')}: {_one_line(str(f.get('message', '')))}",
+              file=out)
+    skips = result.skips.to_dict("records") if hasattr(result.skips, "to_dict") else []
+    for r in skips[:SHOWN_SKIPS]:
+        print(f"not applicable: {r.get('stepper')} x {r.get('problem')}: {_one_line(str(r.get('reason')))}",
+              file=out)
+    if len(skips) > SHOWN_SKIPS:
+        print(f"not applicable: {len(skips) - SHOWN_SKIPS} more pairs (every reason: "
+              "`harness.results.load(table='skips')`)", file=out)
 
 
 def _cmd_gate(args) -> int:
@@ -305,7 +444,8 @@ def _cmd_gate(args) -> int:
         _print_table(table, GATE_COLUMNS)
         _print_footer(result, failures)
         n_bad = int((~table["passed"]).sum()) + len(failures)
-        print(f"gate: {'PASSED' if passed else 'FAILED'} ({len(table)} cells, {n_bad} failing)")
+        print(f"gate: {'PASSED' if passed else 'FAILED'} ({len(table)} cells, {n_bad} failing)",
+              file=_out())
     return EXIT_OK if passed else EXIT_FAILED
 
 
@@ -322,7 +462,7 @@ def _cmd_report(args) -> int:
         plugins=tuple(args.plugin),
         output=args.output,
     )
-    print(os.fspath(path))
+    print(os.fspath(path), file=_out())
     return EXIT_OK
 
 

@@ -9,14 +9,27 @@
   module-level Stepper or Problem it defines (or those listed in `STEPPERS` / `PROBLEMS`).
 A file or entry point that fails to import is reported by name (`PluginError`); the rest of the
 registry still loads.
+
+Plugin files are first imported in a guarded child process (`probe_plugin`), because a file can
+hurt the process that imports it in ways no `try` catches: `os._exit` or a fatal signal ends it
+at once, a non-daemon thread keeps it alive forever, an endless loop hangs it. The probe runs the
+import with a time limit (`PLUGIN_PROBE_TIMEOUT_S`) and reports such a file by name as a
+`PluginError`; only a file that imports cleanly there is imported here (once per process and
+content; worker processes of a run skip the probe, the submitting process made it). While a
+plugin imports, `print()` goes to stderr, so `--json` output on stdout stays valid.
 """
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import hashlib
 import importlib.util
+import os
+import signal
+import subprocess
 import sys
+import tempfile
 import threading
 from collections.abc import Callable, Iterable
 from importlib import metadata
@@ -38,6 +51,32 @@ __all__ = [
 ]
 
 T = TypeVar("T")
+
+# Seconds a plugin file may take to import in the probe (it imports the harness, numpy, heyoka
+# first: ~1-3 s on a loaded machine).
+PLUGIN_PROBE_TIMEOUT_S = 120.0
+_PROBE = r"""
+import contextlib, importlib.util, os, sys, threading
+path, result = sys.argv[1], sys.argv[2]
+outcome = "ok"
+try:
+    with contextlib.redirect_stdout(sys.stderr):
+        spec = importlib.util.spec_from_file_location("harness_plugin_probe", path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules["harness_plugin_probe"] = module
+        spec.loader.exec_module(module)
+except BaseException as exc:
+    outcome = "raised " + type(exc).__name__
+threads = [t.name for t in threading.enumerate()
+           if t is not threading.main_thread() and not t.daemon and t.is_alive()]
+if threads:
+    outcome = "threads " + ", ".join(threads)
+with open(result, "w") as fh:
+    fh.write(outcome)
+    fh.flush()
+os._exit(0)
+"""
+_probed: dict[str, str | None] = {}
 
 
 class Registry(Generic[T]):
@@ -207,11 +246,62 @@ def _build_records(records: Any, path: str | Path) -> list[Stepper]:
     return out
 
 
-def load_plugin(path: str | Path, *, strict: bool = True) -> list[str]:
+def probe_plugin(path: str | Path) -> None:
+    """Import the plugin file in a child process first; raise `PluginError` naming the file when
+    the import ends that process (`os._exit`, a fatal signal), leaves a non-daemon thread
+    running, or takes longer than PLUGIN_PROBE_TIMEOUT_S. An ordinary exception is left to the
+    real import, which reports it. Results are kept per file content for this process."""
+    p = Path(path)
+    try:
+        digest = hashlib.sha256(p.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise PluginError(f"plugin {str(path)!r}: cannot be read ({exc.strerror or exc})") from None
+    key = f"{p.resolve()}:{digest}"
+    if key not in _probed:
+        _probed[key] = _probe(p)
+    if _probed[key] is not None:
+        raise PluginError(f"plugin {str(path)!r} {_probed[key]}")
+
+
+def _probe(p: Path) -> str | None:
+    root = str(Path(__file__).resolve().parent.parent)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        x for x in (root, os.environ.get("PYTHONPATH", "")) if x))
+    fd, result = tempfile.mkstemp(prefix="harness-probe-", suffix=".txt")
+    os.close(fd)
+    try:
+        try:
+            proc = subprocess.run([sys.executable, "-c", _PROBE, str(p), result], env=env,
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL, timeout=PLUGIN_PROBE_TIMEOUT_S,
+                                  start_new_session=True)
+        except subprocess.TimeoutExpired:
+            return (f"did not finish importing within {PLUGIN_PROBE_TIMEOUT_S:g} s (an endless "
+                    "loop or a wait at import?)")
+        outcome = ""
+        with contextlib.suppress(OSError):
+            outcome = Path(result).read_text()
+        if proc.returncode < 0:
+            name = signal.Signals(-proc.returncode).name if -proc.returncode in signal.valid_signals() else ""
+            return f"crashed the process importing it (signal {name or -proc.returncode})"
+        if not outcome:
+            return f"ended the process importing it (exit status {proc.returncode}, e.g. os._exit)"
+        if outcome.startswith("threads "):
+            return (f"starts non-daemon thread(s) at import ({outcome[8:][:100]}): the run could "
+                    "never exit; make them daemon threads or start them later")
+        return None
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(result)
+
+
+def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) -> list[str]:
     """Import a user's plugin file and register its steppers and problems; return their names.
 
     A file that does not exist or does not import raises `PluginError` naming the file (or, with
-    `strict=False`, records the error in `plugin_errors()` and returns []).
+    `strict=False`, records the error in `plugin_errors()` and returns []). With `probe` (the
+    default) the file is first imported in a guarded child process (`probe_plugin`); worker
+    processes pass `probe=False`.
     """
     p = Path(path)
     key = str(p.resolve()) if p.exists() else str(p)
@@ -222,6 +312,8 @@ def load_plugin(path: str | Path, *, strict: bool = True) -> list[str]:
             raise PluginError(f"plugin {str(path)!r}: `--plugin` must name a .py file")
         if not p.is_file():
             raise PluginError(f"plugin {str(path)!r}: no such file")
+        if probe:
+            probe_plugin(p)
         mod_name = "harness_plugin_" + hashlib.sha1(key.encode()).hexdigest()[:12]
         spec = importlib.util.spec_from_file_location(mod_name, p)
         if spec is None or spec.loader is None:
@@ -229,7 +321,8 @@ def load_plugin(path: str | Path, *, strict: bool = True) -> list[str]:
         module = importlib.util.module_from_spec(spec)
         sys.modules[mod_name] = module
         try:
-            spec.loader.exec_module(module)
+            with contextlib.redirect_stdout(sys.stderr):
+                spec.loader.exec_module(module)
         except BaseException as exc:  # SyntaxError, ImportError, anything the file raises
             sys.modules.pop(mod_name, None)
             if isinstance(exc, KeyboardInterrupt | SystemExit):
@@ -243,7 +336,14 @@ def load_plugin(path: str | Path, *, strict: bool = True) -> list[str]:
         records = getattr(module, "METHODS", None)
         objs = []
         if listed_s is not None or listed_p is not None:
-            objs = list(listed_s or []) + list(listed_p or [])
+            for label, listed in (("STEPPERS", listed_s), ("PROBLEMS", listed_p)):
+                try:
+                    with contextlib.redirect_stdout(sys.stderr):
+                        objs += list(listed or [])
+                except Exception as exc:  # a generator or iterable that raises
+                    raise PluginError(
+                        f"plugin {str(path)!r}: listing {label} failed: {type(exc).__name__}: {exc}"
+                    ) from None
         elif records is None:
             objs = [v for v in vars(module).values() if isinstance(v, Stepper | Problem)]
         objs += _build_records(records, path)

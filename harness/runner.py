@@ -5,13 +5,14 @@ already in the cache, runs the others, and returns a `RunResult` (rows, summary,
 per-cell records, counts, wall time). `run_experiments(...)` does the same for several
 experiments with one progress display and one Dask connection.
 
-Cache. A cell's key (`cell_key`) hashes the cell, the experiment's resolved configuration and a
-code version: the fingerprints of its stepper and problem (coefficients and class source), the
-source of the experiment's module and of the measuring core (`MEASURING_MODULES`), and the
-harness version. A finished cell is written to the cache (`harness.store.CellCache`) the moment
-its result reaches this process, so a `kill -9` loses only the cells in flight; the next run
-reuses the rest. A changed method changes only its own cells' keys. `fresh=True` recomputes
-every cell and overwrites its cache entry. Failed cells are not cached: they run again.
+Cache. A cell's key (`cell_key`, harness/keys.py) hashes the cell, the experiment's resolved
+configuration and a code version: the fingerprints of its stepper and problem (coefficients and
+class source), the measuring source of the experiment found from its import graph (judging code
+and judging thresholds left out), and the harness version. A finished cell is written to the
+cache (`harness.store.CellCache`, with a checksum and its schema) the moment its result reaches
+this process, so a `kill -9` loses only the cells in flight; the next run reuses the rest. A
+changed method changes only its own cells' keys. `fresh=True` recomputes every cell and
+overwrites its cache entry. Failed cells are not cached: they run again.
 
 Where cells run.
 - `jobs=1`: in this process, one after another.
@@ -30,7 +31,8 @@ cluster) records the cell as failed instead of mixing results from other code in
 Failures stay in their cell. Each cell ends in rows or in a failure record
 (`harness.experiments.base.failed_record`) of one of these kinds:
 `error` (run_cell raised), `invalid` (not a DataFrame, no rows, non-scalar or complex columns,
-declared dtypes or finite columns violated, not storable as Parquet), `timeout`, `crash` (the
+declared dtypes or finite columns violated, not storable as Parquet; or a stepper returned a
+state of the wrong shape or made NaN from a finite state: `StepperOutputError`), `timeout`, `crash` (the
 worker process died: segfault, `os._exit`, out-of-memory kill), `lookup` (the stepper or problem
 cannot be found or fingerprinted), `version` (a worker runs other code), `summarize` (the
 experiment's summary raised; the rows are kept).
@@ -75,7 +77,6 @@ from __future__ import annotations
 import contextlib
 import faulthandler
 import hashlib
-import importlib.util
 import json
 import math
 import os
@@ -98,17 +99,21 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.errors import HarnessError, InputError, UnknownNameError
+from harness.errors import (
+    HarnessError,
+    InputError,
+    NoApplicableCellsError,
+    StepperOutputError,
+    Terminated,
+    UnknownNameError,
+)
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
+from harness.keys import MEASURING_MODULES, cell_key, code_version, experiment_fingerprint
 from harness.progress import Progress
-from harness.provenance import to_jsonable
 from harness.store import (
-    CELL_SCHEMA,
     CellCache,
-    ResultsError,
     atomic_write_bytes,
-    decode_parquet,
-    encode_parquet,
+    encode_cell,
 )
 
 __all__ = [
@@ -127,22 +132,14 @@ __all__ = [
     "CellTimeout",
     "CellOutputError",
     "ExperimentError",
+    "NoApplicableCellsError",
+    "no_cells_error",
     "FAILURE_KINDS",
     "MEASURING_MODULES",
 ]
 
 FAILURE_KINDS = ("error", "invalid", "timeout", "crash", "lookup", "version", "summarize")
 
-# Modules whose source counts in every cell's code version: they compute what cells measure.
-MEASURING_MODULES = (
-    "harness.problem",
-    "harness.scales",
-    "harness.experiments.common",
-    "harness.stepper",
-    "harness.coefficients",
-    "harness.ground_truth",
-    "harness.tolerances",
-)
 # After a soft time limit fails to stop a cell (stuck in compiled code), a loky worker is ended
 # this many seconds later (at least), or a fifth of the limit when that is longer.
 HARD_TIMEOUT_GRACE_S = 5.0
@@ -150,8 +147,12 @@ HARD_TIMEOUT_GRACE_S = 5.0
 MAX_JOBS_PER_CORE = 8
 # Seconds to wait for a Dask scheduler to answer.
 DASK_CONNECT_TIMEOUT_S = 10
-# Seconds an idle loky worker waits for work before it exits.
-LOKY_IDLE_TIMEOUT_S = 300
+# Seconds an idle loky worker waits for work before it exits (short: a worker is cheap to start,
+# and the workers of a run killed with SIGKILL should not linger).
+LOKY_IDLE_TIMEOUT_S = 30
+# A worker process whose parent died (kill -9 of the run) notices within this many seconds and
+# exits (its parent pid changes when it is re-parented).
+ORPHAN_CHECK_S = 1.0
 # A cell whose worker died in this many pool breakdowns is recorded as crashed, whatever the
 # claim files say (guarantees the run ends).
 MAX_CRASH_ROUNDS = 3
@@ -234,61 +235,7 @@ def _call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
     return box.get("value")
 
 
-# -- code versions and keys -------------------------------------------------------------------------
-def _module_source(name: str) -> str:
-    mod = sys.modules.get(name)
-    path = getattr(mod, "__file__", None)
-    if path is None:
-        try:
-            spec = importlib.util.find_spec(name)
-        except (ImportError, ValueError):
-            spec = None
-        path = spec.origin if spec is not None else None
-    if path and os.path.isfile(path):
-        with open(path, "rb") as fh:
-            return hashlib.sha256(fh.read()).hexdigest()
-    return f"<no source: {name}>"
-
-
-def experiment_fingerprint(experiment: Experiment) -> str:
-    """The experiment's code version: its own `fingerprint()` when it defines one, else the
-    source of the modules defining its classes, plus the measuring core and harness version."""
-    from harness import __version__
-
-    parts = [__version__, type(experiment).__qualname__, str(experiment.name)]
-    own = getattr(experiment, "fingerprint", None)
-    if callable(own):
-        parts.append(str(own()))
-    else:
-        for cls in type(experiment).__mro__:
-            if cls in (object, Experiment) or cls.__module__ in ("abc", "builtins"):
-                continue
-            parts.append(_module_source(cls.__module__))
-    parts += [_module_source(m) for m in MEASURING_MODULES]
-    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
-
-
-def code_version(stepper: str, problem: str) -> str:
-    """Hash of the fingerprints of a stepper and a problem (looked up in the registry); an
-    empty name stands for 'none' (a cell that uses no stepper, or no problem)."""
-    from harness.registry import get_problem, get_stepper
-
-    s = get_stepper(stepper).fingerprint() if stepper else ""
-    p = get_problem(problem).fingerprint() if problem else ""
-    if not isinstance(s, str) or not isinstance(p, str):
-        raise HarnessError(
-            f"`fingerprint()` must return a string (stepper {stepper!r}, problem {problem!r})"
-        )
-    return hashlib.sha256(f"stepper\n{s}\nproblem\n{p}".encode()).hexdigest()[:32]
-
-
-def cell_key(cell: Cell, config: Mapping[str, Any], experiment_version: str, sp_version: str) -> str:
-    """The cache key of `cell`: `Cell.key` over the experiment's resolved configuration and a
-    code version combining the stepper/problem version and the experiment's fingerprint."""
-    code = hashlib.sha256(f"{sp_version}\n{experiment_version}".encode()).hexdigest()[:32]
-    return cell.key(code, to_jsonable(dict(config)))
-
-
+# -- code versions and keys: harness/keys.py (re-exported here) ------------------------------------
 # -- validating a cell's rows -----------------------------------------------------------------------
 _KINDS = {
     "float": pd.api.types.is_float_dtype,
@@ -471,7 +418,7 @@ def _ensure_plugins(specs: Sequence[dict]) -> None:
             path = Path(tempfile.gettempdir()) / "harness-plugins" / spec["sha256"][:16] / spec["name"]
             if not path.is_file():
                 atomic_write_bytes(path, spec["source"])
-        load_plugin(path)
+        load_plugin(path, probe=False)  # the submitting process probed it
 
 
 def _worker_id() -> str:
@@ -521,6 +468,25 @@ def _prepare_worker(task: Mapping[str, Any]) -> tuple[str, str] | None:
     return None
 
 
+_orphan_watch: list[int] = []
+
+
+def _watch_for_orphaning(parent: int) -> None:
+    """In a worker process: exit when the process that started it is gone (re-parented), so the
+    workers of a run killed with SIGKILL do not linger. Started once per process."""
+    if _orphan_watch or parent == os.getpid():
+        return
+    _orphan_watch.append(parent)
+
+    def watch():  # pragma: no cover - ends the process
+        while True:
+            time.sleep(ORPHAN_CHECK_S)
+            if os.getppid() != parent:
+                os._exit(75)
+
+    threading.Thread(target=watch, name="harness-orphan-watch", daemon=True).start()
+
+
 def _execute(task: Mapping[str, Any]) -> dict:
     """Run one cell and return its outcome; never raises (a worker's entry point). The time
     limit and `wall_s` cover `run_cell` and the check of its rows, not the worker's set-up."""
@@ -529,6 +495,8 @@ def _execute(task: Mapping[str, Any]) -> dict:
     out: dict[str, Any] = {"key": task["key"], "ok": False, "kind": "error", "message": "",
                            "traceback": "", "rows": None, "wall_s": 0.0, "worker": _worker_id()}
     claim = os.path.join(task["claim_dir"], task["key"]) if task.get("claim_dir") else None
+    if task.get("parent_pid") is not None:
+        _watch_for_orphaning(task["parent_pid"])
     watchdog = None
     claim_fh = None
     faults_were_on = faulthandler.is_enabled()
@@ -547,7 +515,8 @@ def _execute(task: Mapping[str, Any]) -> dict:
                 faulthandler.enable(file=claim_fh)
             except OSError:
                 claim_fh, claim = None, None
-        problem = _prepare_worker(task)
+        with contextlib.redirect_stdout(sys.stderr):  # a plugin's print() stays off stdout
+            problem = _prepare_worker(task)
         if problem is not None:
             out.update(kind=problem[0], message=_one_line(problem[1]))
             return out
@@ -558,15 +527,16 @@ def _execute(task: Mapping[str, Any]) -> dict:
             watchdog.start()
         experiment = task["experiment"]
         started = time.perf_counter()
-        rows = _call_limited(
-            lambda: validate_rows(experiment, experiment.run_cell(cell, task["config"])), timeout
-        )
+        with contextlib.redirect_stdout(sys.stderr):
+            rows = _call_limited(
+                lambda: validate_rows(experiment, experiment.run_cell(cell, task["config"])), timeout
+            )
         out.update(ok=True, kind="", rows=rows)
     except CellTimeout:
         out.update(kind="timeout", message=f"timeout after {timeout:g} s")
-    except CellOutputError as exc:
+    except (CellOutputError, StepperOutputError) as exc:
         out.update(kind="invalid", message=_one_line(str(exc)))
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, Terminated):
         raise
     except BaseException as exc:  # the cell's own failure, whatever it is
         out.update(kind="error", message=_one_line(f"{type(exc).__name__}: {exc}"),
@@ -802,7 +772,7 @@ def _loky_batch(batch: Sequence[_Task], n: int, accept) -> tuple[BaseException |
                                                 f"{type(exc).__name__}: {exc}", kind="error"))
                 else:
                     accept(t, fut.result())
-    except KeyboardInterrupt:
+    except BaseException:  # Ctrl-C, SIGTERM (the CLI raises SystemExit), anything unexpected
         executor.shutdown(wait=False, kill_workers=True)
         raise
     if broken is None:
@@ -835,6 +805,7 @@ def _run_loky(tasks: Sequence[_Task], jobs: int, accept) -> None:
     try:
         for t in tasks:
             t.payload["claim_dir"] = claim_dir
+            t.payload["parent_pid"] = os.getpid()
             t.payload["hard_kill"] = True
             t.payload["hard_grace"] = max(HARD_TIMEOUT_GRACE_S, 0.2 * (t.payload["timeout"] or 0))
         normal: list[_Task] = list(tasks)
@@ -876,13 +847,24 @@ def _dask_client(scheduler: Any) -> tuple[Any, bool]:
 
     if isinstance(scheduler, Client):
         return scheduler, False
+    failure = None
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: None  # a half-built Client's destructor complains
     try:
-        client = Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s", set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as exc:
+        try:
+            client = Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s", set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            failure = f"{type(exc).__name__}: {_one_line(str(exc), 200)}"
+        if failure is not None:
+            import gc
+
+            gc.collect()  # the half-built client goes now, while its complaint is silenced
+    finally:
+        sys.unraisablehook = hook
+    if failure is not None:
         raise InputError(
-            f"`scheduler` {scheduler!r}: cannot connect within {DASK_CONNECT_TIMEOUT_S} s "
-            f"({type(exc).__name__}: {_one_line(str(exc), 200)})"
-        ) from None
+            f"`scheduler` {scheduler!r}: cannot connect within {DASK_CONNECT_TIMEOUT_S} s ({failure})"
+        )
     return client, True
 
 
@@ -910,6 +892,32 @@ def _run_dask(tasks: Sequence[_Task], client: Any, accept) -> None:
 
 
 # -- the runner -------------------------------------------------------------------------------------
+def _skip_records(skips: Iterable[Skip]) -> list[dict]:
+    return [{"experiment": s.experiment, "stepper": s.stepper, "problem": s.problem,
+             "reason": s.reason} for s in skips]
+
+
+def no_cells_error(experiments: Sequence[str], skips: Sequence[Skip] | pd.DataFrame,
+                   steppers: Sequence[str], problems: Sequence[str]) -> NoApplicableCellsError:
+    """The error for a run over zero applicable cells: one line saying why each requested pair
+    does not apply (the experiments' skip reasons); every record is kept in `.skips`."""
+    records = (skips.to_dict("records") if isinstance(skips, pd.DataFrame)
+               else _skip_records(skips))
+    what = ", ".join(map(repr, experiments))
+    head = (f"no cell of {what} applies to the requested stepper(s) "
+            f"{_few(steppers)} x problem(s) {_few(problems)}")
+    if not records:
+        return NoApplicableCellsError(head + " (the experiment lists no pairs for them)", records)
+    reasons = [f"{r['stepper'] or '-'} x {r['problem'] or '-'}: {r['reason']}" for r in records[:4]]
+    more = f"; and {len(records) - 4} more pairs" if len(records) > 4 else ""
+    return NoApplicableCellsError(f"{head}: " + "; ".join(reasons) + more, records)
+
+
+def _few(names: Sequence[str], n: int = 4) -> str:
+    shown = ", ".join(names[:n]) if names else "(none)"
+    return shown + (f" (+{len(names) - n} more)" if len(names) > n else "")
+
+
 def _params_json(cell: Cell) -> str:
     return json.dumps({str(k): v for k, v in cell.params}, sort_keys=True, default=repr)
 
@@ -928,14 +936,13 @@ def _with_ids(rows: pd.DataFrame, cell: Cell) -> pd.DataFrame:
     return pd.concat([ids, rows], axis=1)
 
 
-def _roundtrip(rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
-    """Rows as they come back from Parquet (so fresh and cached cells are identical), and the
-    Parquet bytes for the cache."""
+def _roundtrip(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
+    """Rows as they come back from the cell file (so fresh and cached cells are identical), and
+    the file's bytes for the cache (`harness.store.encode_cell`)."""
     try:
-        data = encode_parquet(rows, {**info, "schema": CELL_SCHEMA})
+        return encode_cell(key, rows, info)
     except InputError as exc:
         raise CellOutputError(f"rows {exc}") from None
-    return decode_parquet(data)[0], data
 
 
 def run_experiment(
@@ -953,6 +960,7 @@ def run_experiment(
     plugins: Sequence[str | os.PathLike] = (),
     cell_timeout: float | None = None,
     progress: Progress | bool | str | None = None,
+    allow_empty: bool = False,
     _client: Any = None,
     _counted: bool = False,
 ) -> RunResult:
@@ -965,10 +973,12 @@ def run_experiment(
     `cache_dir` the cache root (default `harness.cache.cache_dir()`); `plugins` .py files loaded
     here and on every worker before names are looked up; `cell_timeout` seconds per cell;
     `progress` None/True (bar on a terminal, plain lines otherwise), False (silent), a mode
-    ('bar', 'lines', 'off') or a shared `Progress`.
+    ('bar', 'lines', 'off') or a shared `Progress`; `allow_empty=True` returns an empty result
+    instead of raising when no cell applies.
 
     Raises `InputError` / `UnknownNameError` / `PluginError` (all `HarnessError`) for bad
-    arguments before any cell runs, `ExperimentError` when the experiment cannot list its
+    arguments before any cell runs, `NoApplicableCellsError` (with every skip reason) when no
+    requested pair applies, `ExperimentError` when the experiment cannot list its
     cells, `CorruptResultsError` for a damaged cache file. Failures of single cells never raise:
     they are in `RunResult.failures`.
     """
@@ -1006,8 +1016,15 @@ def run_experiment(
     if bad:
         raise ExperimentError(f"experiment {exp.name!r} listed {type(bad[0]).__name__} objects "
                               "where Cell and Skip objects belong")
+    if not cells and not allow_empty:
+        raise no_cells_error([exp.name], skips, stepper_names, problem_names)
     if sched is None and _client is None:
         _guard_memory(exp, cells, cfg, jobs_n)
+    own_client = None
+    if sched is not None and _client is None:
+        # connect before looking at the cache: a bad address is an error even when every cell
+        # is cached
+        _client, own_client = _dask_client(sched)
 
     exp_version = experiment_fingerprint(exp)
     versions: dict[tuple[str, str], Any] = {}
@@ -1074,20 +1091,14 @@ def run_experiment(
                     rows = _with_ids(out["rows"], t.cell)
                     info = {"key": t.key, "experiment": exp.name, "cell": t.cell.label,
                             "wall_s": out["wall_s"], "worker": out["worker"]}
-                    rows, data = _roundtrip(rows, info)
+                    rows, data = _roundtrip(t.key, rows, info)
                 except CellOutputError as exc:
                     fail(t.index, t.cell, t.key, "invalid", str(exc), wall=out["wall_s"],
                          worker=out["worker"])
                     bar.update(1, failed=1)
                     return
                 if store is not None:
-                    path = store.path(t.key)
-                    try:
-                        atomic_write_bytes(path, data)
-                    except OSError as exc:
-                        raise ResultsError(
-                            f"cannot write the cell cache file {str(path)!r}: {exc.strerror or exc}"
-                        ) from None
+                    store.put_encoded(t.key, data)  # atomic; OutputError names the file
                 frames[t.index] = rows
                 record(t.index, t.cell, t.key, "ok", False, out["wall_s"], len(rows), out["worker"])
                 bar.update(1)
@@ -1097,18 +1108,15 @@ def run_experiment(
                 bar.update(1, failed=1)
 
         if tasks:
-            if sched is not None or _client is not None:
-                client, own = (_client, False) if _client is not None else _dask_client(sched)
-                try:
-                    _run_dask(tasks, client, accept)
-                finally:
-                    if own:
-                        client.close()
+            if _client is not None:
+                _run_dask(tasks, _client, accept)
             elif jobs_n == 1:
                 _run_serial(tasks, accept)
             else:
                 _run_loky(tasks, jobs_n, accept)
     finally:
+        if own_client:
+            _client.close()
         if own_bar:
             bar.close()
 
@@ -1134,9 +1142,7 @@ def run_experiment(
             rec["cell"] = f"{exp.name}:summarize"
             failures[len(cells)] = rec
     fail_df = pd.DataFrame([failures[i] for i in sorted(failures)], columns=FAILURE_COLUMNS)
-    skip_df = pd.DataFrame([{"experiment": s.experiment, "stepper": s.stepper,
-                             "problem": s.problem, "reason": s.reason} for s in skips],
-                           columns=SKIP_COLUMNS)
+    skip_df = pd.DataFrame(_skip_records(skips), columns=SKIP_COLUMNS)
     cell_df = pd.DataFrame([records[i] for i in sorted(records)], columns=CELL_COLUMNS)
     return RunResult(
         experiment=exp.name,
@@ -1220,7 +1226,7 @@ def run_experiments(
                 exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
                 quick=quick, jobs=jobs, fresh=fresh, cache=cache, cache_dir=cache_dir,
                 plugins=plugins, cell_timeout=cell_timeout, progress=bar, _client=client,
-                _counted=counted,
+                _counted=counted, allow_empty=True,
             )
             if sched is not None:
                 out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None
@@ -1229,4 +1235,7 @@ def run_experiments(
             client.close()
         if own_bar:
             bar.close()
+    if out and not any(r.n_cells for r in out.values()):
+        raise no_cells_error(list(out), pd.concat([r.skips for r in out.values()], ignore_index=True),
+                             stepper_names, problem_names)
     return out

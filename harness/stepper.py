@@ -16,7 +16,10 @@ Contract for a stepper (a subclass of `Stepper`):
    right-hand-side, force and Jacobian evaluations.
 5. It signals a failed step (an implicit solve that does not converge) by raising `StepFailure`;
    it never returns an unconverged state silently. Overflow produces inf/NaN, which the public
-   methods detect and report.
+   methods detect and report (a blow-up is a measurement). `_observe` returns a real array
+   shaped (dim, N); anything else, or NaN made in one step from a finite state far from overflow
+   (a blow-up passes through large values and inf first), raises `StepperOutputError`: the cell
+   fails instead of reading as "unstable" or being broadcast into a state.
 6. It is registered in `implementations/__init__.py` (or through the `harness.steppers` entry
    point); `coefficients` holds its data object when it has one.
 Public methods (`integrate`, `round_trip`) check their input and keep the books.
@@ -33,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.errors import HarnessError, IncompatibleError, InputError
+from harness.errors import HarnessError, IncompatibleError, InputError, StepperOutputError
 from harness.problem import Dynamics, Problem, check_state, check_time
 
 __all__ = [
@@ -47,10 +50,29 @@ __all__ = [
     "check_steps",
     "FORMS",
     "AdaptiveStepper",
+    "StepperOutputError",
 ]
 
 FORMS = ("first-order", "newtonian")
 MAX_STEPS = 100_000_000
+# A step that turns a finite state no larger than this into NaN (with no inf anywhere) is the
+# stepper's fault, not a blow-up: overflow gives inf first, and NaN needs inf - inf, 0 * inf or
+# 0 / 0; from |y| <= 1e100 one step of any sane size cannot reach the 1e308 overflow.
+NAN_FROM_FINITE_LIMIT = 1e100
+# A non-finite trajectory is replayed to find its first non-finite step: the run is cut into
+# this many chunks first, then the failing chunk is stepped one step at a time.
+_REPLAY_CHUNKS = 64
+
+
+def _made_nan(before: np.ndarray, after: np.ndarray) -> bool:
+    """True when one step turned the finite, moderate state `before` into NaN in every member
+    (at least one NaN per column) with no inf anywhere: not a blow-up (see
+    NAN_FROM_FINITE_LIMIT)."""
+    if not np.all(np.isfinite(before)) or np.any(np.isinf(after)):
+        return False
+    if before.size and np.max(np.abs(before)) > NAN_FROM_FINITE_LIMIT:
+        return False
+    return bool(after.size) and bool(np.all(np.any(np.isnan(after), axis=0)))
 
 
 class StepFailure(HarnessError):
@@ -237,6 +259,73 @@ class Stepper(ABC):
             step(dyn, c)
             c.n += 1
 
+    # -- checking what the private math returns --------------------------------------------------
+    def _checked_observe(self, dyn: Dynamics, c: Carry, shape: tuple[int, int], when: str) -> np.ndarray:
+        """`_observe` checked: a real array of `shape` (dim, N), never a scalar to broadcast."""
+        y = self._observe(dyn, c)
+        if not isinstance(y, np.ndarray) or y.shape != shape:
+            got = f"shape {y.shape}" if isinstance(y, np.ndarray) else type(y).__name__
+            raise StepperOutputError(
+                f"stepper {self.info.name!r} returned a state of {got} {when}; expected an array "
+                f"of shape {shape} (dim, ensemble)"
+            )
+        if not (np.issubdtype(y.dtype, np.floating) or np.issubdtype(y.dtype, np.integer)):
+            raise StepperOutputError(
+                f"stepper {self.info.name!r} returned a state of dtype {y.dtype} {when}; expected "
+                "real numbers"
+            )
+        return y
+
+    def _nan_error(self, step: int, before: np.ndarray) -> StepperOutputError:
+        return StepperOutputError(
+            f"stepper {self.info.name!r} turned a finite state (max |y| = "
+            f"{float(np.max(np.abs(before), initial=0.0)):.3g}) into NaN in one step (step {step}); "
+            "a blow-up passes through large values and inf first, so this is the stepper's fault"
+        )
+
+    def _explain_nonfinite(self, problem: Problem, h: float, t0: float, y: np.ndarray, pars,
+                           upto: int, prefix=None) -> None:
+        """Replay a run that ended non-finite within `upto` steps (after `prefix(dyn, c)` when
+        given) and raise `StepperOutputError` when its first non-finite step made NaN from a
+        finite, moderate state; return quietly for a genuine blow-up."""
+        shape = (problem.dim, y.shape[1])
+
+        def fresh():
+            dyn = problem.dynamics(pars, y.shape[1])
+            c = self._start(dyn, t0, y.copy(), h)
+            if prefix is not None:
+                prefix(dyn, c)
+            return dyn, c
+
+        with np.errstate(all="ignore"):
+            dyn, c = fresh()
+            before = self._checked_observe(dyn, c, shape, "at the start")
+            if prefix is None and _made_nan(y, before):
+                raise self._nan_error(0, y)
+            chunk = max(1, -(-upto // _REPLAY_CHUNKS))
+            done, start = 0, 0
+            while done < upto:  # coarse pass: the first chunk that ends non-finite
+                n = min(chunk, upto - done)
+                self._advance(dyn, c, n)
+                done += n
+                if not np.all(np.isfinite(self._checked_observe(dyn, c, shape, f"after step {done}"))):
+                    break
+                start = done
+            else:
+                return
+            dyn, c = fresh()
+            if start:
+                self._advance(dyn, c, start)
+            before = self._checked_observe(dyn, c, shape, f"after step {start}")
+            for k in range(start + 1, done + 1):  # fine pass through that chunk
+                self._advance(dyn, c, 1)
+                after = self._checked_observe(dyn, c, shape, f"after step {k}")
+                if not np.all(np.isfinite(after)):
+                    if _made_nan(before, after):
+                        raise self._nan_error(k, before)
+                    return
+                before = after
+
     # -- public API ------------------------------------------------------------------------------
     def _prepare(self, problem, h, y0, t0, pars):
         if not isinstance(problem, Problem):
@@ -274,7 +363,8 @@ class Stepper(ABC):
                 ) from None
             if save.size == 0 or save[0] < 0 or save[-1] > n_steps:
                 raise InputError(f"`save_steps` must lie in [0, {n_steps}], got {save_steps!r}")
-        out = np.empty((save.size, problem.dim, y.shape[1]))
+        shape = (problem.dim, y.shape[1])
+        out = np.empty((save.size, *shape))
         finite = True
         started = time.perf_counter()
         with np.errstate(all="ignore"):
@@ -284,12 +374,14 @@ class Stepper(ABC):
                 if target > done:
                     self._advance(dyn, c, int(target - done))
                     done = int(target)
-                out[k] = self._observe(dyn, c)
+                out[k] = self._checked_observe(dyn, c, shape, f"after step {done}")
                 if not np.all(np.isfinite(out[k])):
                     finite = False
                     out[k + 1 :] = np.nan
                     break
         wall = time.perf_counter() - started
+        if not finite:
+            self._explain_nonfinite(problem, h, t0, y, pars, done)
         return Trajectory(
             stepper=self.info.name,
             problem=problem.name,
@@ -315,13 +407,22 @@ class Stepper(ABC):
         """`n_steps` forward, time reversed (h -> -h), `n_steps` back. Returns (start, returned)."""
         h, t0, y, dyn = self._prepare(problem, h, y0, t0, pars)
         n_steps = check_steps(n_steps)
+        shape = (problem.dim, y.shape[1])
         with np.errstate(all="ignore"):
             c = self._start(dyn, t0, y.copy(), h)
-            start = self._observe(dyn, c)
+            start = self._checked_observe(dyn, c, shape, "at the start")
             self._advance(dyn, c, n_steps)
             self._reverse(dyn, c)
             self._advance(dyn, c, n_steps)
-            back = self._observe(dyn, c)
+            back = self._checked_observe(dyn, c, shape, "after the round trip")
+        if not (np.all(np.isfinite(start)) and np.all(np.isfinite(back))):
+            self._explain_nonfinite(problem, h, t0, y, pars, n_steps)
+
+            def forward(dyn, c):
+                self._advance(dyn, c, n_steps)
+                self._reverse(dyn, c)
+
+            self._explain_nonfinite(problem, h, t0, y, pars, n_steps, prefix=forward)
         return start, back
 
     def step_from_history(
@@ -352,7 +453,10 @@ class Stepper(ABC):
             c = self._start_from_history(dyn, t0, h, [y.copy() for y in states])
             self._step(dyn, c)
             c.n += 1
-            return self._observe(dyn, c)
+            after = self._checked_observe(dyn, c, states[-1].shape, "after one step from history")
+        if _made_nan(np.stack(states), after):
+            raise self._nan_error(1, np.stack(states))
+        return after
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.info.name!r}>"

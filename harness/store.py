@@ -12,7 +12,14 @@ in the same second, so they sort by time.
 
 Cell cache (`CellCache`): one Parquet file per finished cell, `<cache root>/cells/<k[:2]>/<k>.parquet`
 where `k` is the cell's key (`harness.runner.cell_key`); the cache root is `harness.cache.cache_dir()`
-(`.cache/`, or `HARNESS_CACHE_DIR`) unless given.
+(`.cache/`, or `HARNESS_CACHE_DIR`) unless given. A cell file's metadata records its schema
+(`CELL_SCHEMA`), its key, its columns with their dtypes, its row count and a sha256 of its
+content (`content_sha256`, over column names, dtypes and values); every read checks all of them,
+so a flipped bit, a dropped column or a column rewritten as strings is `CorruptResultsError`
+naming the file, never a silently different measurement. A damaged cell file is an error, not a
+cache miss: the run stops before using it and says to delete it or rerun with `--fresh` (a
+damaged cache usually means a damaged disk, which a user should hear about). Cell files are
+read and written only here (`encode_cell`, `decode_cell`, `CellCache`).
 
 Guarantees:
 - Every file is written atomically: a temporary file in the same directory, flushed and fsynced,
@@ -42,7 +49,7 @@ from typing import IO, Any
 
 import pandas as pd
 
-from harness.errors import HarnessError, InputError, UnknownNameError
+from harness.errors import HarnessError, InputError, OutputError, UnknownNameError, describe_os_error
 from harness.provenance import PROJECT_ROOT, collect, to_jsonable, utc_now
 
 __all__ = [
@@ -65,11 +72,15 @@ __all__ = [
     "load_run",
     "StoredRun",
     "CellCache",
+    "encode_cell",
+    "decode_cell",
     "TABLES",
 ]
 
 SCHEMA = "harness-results/1"
-CELL_SCHEMA = "harness-cell/1"
+CELL_SCHEMA = "harness-cell/2"
+# meta.json nested deeper than this is not one the harness wrote (it nests about 6 deep)
+MAX_META_DEPTH = 64
 TABLES = ("rows", "summary")
 META_KEYS = ("schema", "run_id", "created_utc", "provenance", "config", "experiments", "totals")
 EXPERIMENT_KEYS = ("wall_s", "n_cells", "computed_cells", "cached_cells", "failed_cells", "tables",
@@ -135,19 +146,32 @@ def atomic_writer(path: str | os.PathLike) -> Iterator[IO[bytes]]:
     over `path`. On any error (or a crash) `path` keeps its previous content; the temporary file
     is removed when Python still runs, and is hidden (`.name.*.tmp`) otherwise."""
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise _output_error(exc, target) from None
     try:
         with os.fdopen(fd, "wb") as fh:
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise _output_error(exc, target) from None
         raise
     _fsync_dir(target.parent)
+
+
+def _output_error(exc: OSError, target: Path) -> OutputError:
+    """`OutputError` naming the file being written and the OS problem (see
+    `harness.errors.describe_os_error`)."""
+    exc.filename = str(target)  # a temporary file's or a parent's name would only confuse
+    message, status = describe_os_error(exc)
+    return OutputError(message, status)
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
@@ -260,6 +284,8 @@ def _read_json(path: Path) -> Any:
         return json.loads(text)
     except ValueError as exc:
         raise CorruptResultsError(path, f"not valid JSON ({exc})") from None
+    except RecursionError:
+        raise CorruptResultsError(path, "JSON nested too deeply to be a harness file") from None
 
 
 # -- run ids --------------------------------------------------------------------------------------
@@ -385,8 +411,18 @@ def save_run(
     `config` is the run's own configuration (command, jobs, steppers, problems, plugins, ...);
     each experiment's resolved configuration is taken from its result. The directory appears
     complete or not at all (assembled in `.staging-...` and renamed). An existing run is never
-    overwritten: an explicit `run_id` that exists raises `ResultsError`.
+    overwritten: an explicit `run_id` that exists raises `ResultsError`; an OS error (read-only
+    or full disk, a file where the directory belongs) raises `OutputError` naming the path.
     """
+    try:
+        return _save_run(results, root=root, run_id=run_id, config=config)
+    except OutputError:
+        raise
+    except OSError as exc:  # a results root that is a file, read-only, full, ...
+        raise OutputError(*describe_os_error(exc)) from None
+
+
+def _save_run(results, *, root, run_id, config) -> Path:
     items = list(results.values()) if isinstance(results, Mapping) else list(results)
     names = [_check_experiment_name(getattr(r, "experiment", None)) for r in items]
     if len(set(names)) != len(names):
@@ -544,6 +580,27 @@ class StoredRun:
         return self.table("cells")
 
 
+_KIND_NAMES = {str: "a string", dict: "an object", list: "a list"}
+
+
+def _describe(value: Any) -> str:
+    return type(value).__name__ if not isinstance(value, list) else "a list holding " + ", ".join(
+        sorted({type(v).__name__ for v in value}))
+
+
+def _depth(value: Any) -> int:
+    """Nesting depth of parsed JSON, without recursion (a hostile file may nest very deep)."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, dict | list):
+            deepest = max(deepest, d)
+            if d > MAX_META_DEPTH:
+                return d
+            stack.extend((c, d + 1) for c in (v.values() if isinstance(v, dict) else v))
+    return deepest
+
+
 def _check_meta(path: Path, meta: Any) -> dict:
     if not isinstance(meta, dict):
         raise CorruptResultsError(path, f"expected a JSON object, got {type(meta).__name__}")
@@ -556,20 +613,49 @@ def _check_meta(path: Path, meta: Any) -> dict:
     missing = [k for k in META_KEYS if k not in meta]
     if missing:
         raise CorruptResultsError(path, f"missing keys {missing}")
-    if not isinstance(meta["experiments"], dict):
-        raise CorruptResultsError(path, "`experiments` is not an object")
+    depth = _depth(meta)
+    if depth > MAX_META_DEPTH:
+        raise CorruptResultsError(path, f"nested {depth} levels deep; a harness meta.json nests "
+                                        f"at most {MAX_META_DEPTH}")
+    for key, kind in (("run_id", str), ("created_utc", str), ("provenance", dict),
+                      ("config", dict), ("experiments", dict), ("totals", dict)):
+        if not isinstance(meta[key], kind):
+            raise CorruptResultsError(path, f"`{key}` must be {_KIND_NAMES[kind]}, got "
+                                            f"{type(meta[key]).__name__}")
+    for key, value in meta["totals"].items():
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise CorruptResultsError(path, f"`totals.{key}` must be a number, got {type(value).__name__}")
     for name, exp in meta["experiments"].items():
         if not isinstance(exp, dict):
             raise CorruptResultsError(path, f"experiment {name!r} is not an object")
         miss = [k for k in EXPERIMENT_KEYS if k not in exp]
         if miss:
             raise CorruptResultsError(path, f"experiment {name!r} is missing keys {miss}")
+        for key in ("wall_s", "n_cells", "computed_cells", "cached_cells", "failed_cells"):
+            v = exp[key]
+            if isinstance(v, bool) or not isinstance(v, int | float) or (key != "wall_s" and v != int(v)):
+                raise CorruptResultsError(path, f"experiment {name!r}: `{key}` must be a number, "
+                                                f"got {type(v).__name__}")
+        for key in ("failures", "skips", "cells"):
+            records = exp[key]
+            if not isinstance(records, list) or not all(isinstance(r, dict) for r in records):
+                raise CorruptResultsError(path, f"experiment {name!r}: `{key}` must be a list of "
+                                                f"records (objects), got {_describe(records)}")
+        if not isinstance(exp["tables"], dict):
+            raise CorruptResultsError(path, f"experiment {name!r}: `tables` must be an object")
         if not isinstance(name, str) or not _SAFE_NAME.match(name):
             raise CorruptResultsError(path, f"experiment name {name!r} is not a valid file name")
         for table in TABLES:
             spec = exp["tables"].get(table) if isinstance(exp["tables"], dict) else None
             if not isinstance(spec, dict) or any(k not in spec for k in ("file", "columns", "n_rows")):
                 raise CorruptResultsError(path, f"experiment {name!r} lacks a valid {table!r} table entry")
+            if (not isinstance(spec["columns"], list) or not all(isinstance(c, str) for c in spec["columns"])
+                    or isinstance(spec["n_rows"], bool) or not isinstance(spec["n_rows"], int)
+                    or spec["n_rows"] < 0 or not isinstance(spec["file"], str)
+                    or not isinstance(spec.get("sha256", ""), str)):
+                raise CorruptResultsError(path, f"experiment {name!r}: the {table!r} table entry has "
+                                                "wrong types (columns: list of names, n_rows: count, "
+                                                "file and sha256: strings)")
             if spec["file"] != f"{name}.{table}.parquet":
                 raise CorruptResultsError(path, f"experiment {name!r}: unexpected file name {spec['file']!r}")
     return meta
@@ -598,11 +684,74 @@ def load_run(run: str | os.PathLike | None = None, *, root: str | os.PathLike | 
 
 
 # -- the cell cache -------------------------------------------------------------------------------
+def _content_sha256(df: pd.DataFrame) -> str:
+    """sha256 over a table's column names, dtypes and values (independent of Parquet's bytes,
+    so it can live inside the file it checks)."""
+    import numpy as np
+
+    h = hashlib.sha256()
+    h.update(json.dumps([[str(c), str(df[c].dtype)] for c in df.columns]).encode())
+    h.update(str(len(df)).encode())
+    for c in df.columns:
+        col = df[c]
+        if pd.api.types.is_numeric_dtype(col) and not pd.api.types.is_object_dtype(col):
+            h.update(np.ascontiguousarray(col.to_numpy()).tobytes())
+        else:
+            h.update(json.dumps([None if v is None else repr(v) for v in col.tolist()]).encode())
+    return h.hexdigest()
+
+
+def _cell_schema(df: pd.DataFrame) -> dict[str, str]:
+    return {str(c): str(df[c].dtype) for c in df.columns}
+
+
+def encode_cell(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
+    """A finished cell as (its rows as they read back from the file, the file's bytes). The
+    metadata holds `info`, the key, the schema, the column dtypes, the row count and the content
+    checksum. Raises `InputError` when the rows cannot be stored as Parquet."""
+    plain = {**to_jsonable(dict(info)), "schema": CELL_SCHEMA, "key": key}
+    back, _ = decode_parquet(encode_parquet(rows, plain))
+    meta = {**plain, "columns": _cell_schema(back), "n_rows": int(len(back)),
+            "content_sha256": _content_sha256(back)}
+    return back, encode_parquet(rows, meta)
+
+
+def decode_cell(data: bytes, path: str | os.PathLike, key: str | None = None) -> tuple[pd.DataFrame, dict]:
+    """(rows, info) of a cell file's bytes, after checking its schema, key, columns, dtypes,
+    row count and content checksum; `CorruptResultsError` naming `path` otherwise."""
+    df, info = decode_parquet(data, path)
+    if info.get("schema") != CELL_SCHEMA:
+        raise CorruptResultsError(path, f"not a harness cell file of schema {CELL_SCHEMA!r} "
+                                        f"(schema {str(info.get('schema'))[:60]!r})")
+    if key is not None and info.get("key") != key:
+        raise CorruptResultsError(path, f"holds cell {str(info.get('key'))[:40]!r}, not {key!r}")
+    columns, n_rows, digest = info.get("columns"), info.get("n_rows"), info.get("content_sha256")
+    if not isinstance(columns, dict) or not isinstance(n_rows, int) or not isinstance(digest, str):
+        raise CorruptResultsError(path, "cell metadata lacks its columns, row count or checksum")
+    found = _cell_schema(df)
+    if found != columns:
+        lost = [c for c in columns if c not in found]
+        changed = [f"{c} ({columns[c]} -> {found[c]})" for c in columns
+                   if c in found and found[c] != columns[c]]
+        extra = [c for c in found if c not in columns]
+        raise CorruptResultsError(path, "columns differ from the recorded schema: "
+                                        f"missing {lost}, retyped {changed}, unexpected {extra}")
+    if len(df) != n_rows:
+        raise CorruptResultsError(path, f"has {len(df)} rows, its metadata records {n_rows}")
+    if _content_sha256(df) != digest:
+        raise CorruptResultsError(path, "content differs from its checksum (the file was changed "
+                                        "or damaged after it was written)")
+    return df, info
+
+
 class CellCache:
     """Finished cells, one Parquet file each, keyed by `harness.runner.cell_key`.
 
-    `get` returns a cell's rows or None; a file that exists but is corrupt or belongs to another
-    key raises `CorruptResultsError` (delete it, or run with `fresh=True`, which overwrites)."""
+    `get` returns a cell's rows or None; a file that exists but is damaged, of another schema
+    or of another key raises `CorruptResultsError` naming it (delete it, or run with
+    `fresh=True`, which overwrites). `put` writes atomically."""
+
+    HINT = "; delete it, or recompute with fresh=True (--fresh), which overwrites it"
 
     def __init__(self, root: str | os.PathLike | None = None):
         if root is None:
@@ -621,22 +770,29 @@ class CellCache:
     def get(self, key: str) -> tuple[pd.DataFrame, dict] | None:
         """(rows, info) of a finished cell, or None when it is not cached."""
         p = self.path(key)
-        if not p.exists():
-            return None
-        hint = "; delete it, or recompute with fresh=True (--fresh), which overwrites it"
         try:
-            df, info = read_parquet(p)
+            if not p.is_file():
+                if p.exists() or p.is_symlink():
+                    raise CorruptResultsError(p, "is not a regular file" + self.HINT)
+                return None
+            data = p.read_bytes()
+        except OSError as exc:
+            message, _ = describe_os_error(exc, p)
+            raise CorruptResultsError(p, f"cannot be read: {message}{self.HINT}") from None
+        try:
+            return decode_cell(data, p, key)
         except CorruptResultsError as exc:
-            raise CorruptResultsError(p, exc.problem + hint) from None
-        if info.get("schema") != CELL_SCHEMA:
-            raise CorruptResultsError(p, f"not a harness cell file (schema {info.get('schema')!r}){hint}")
-        if info.get("key") != key:
-            raise CorruptResultsError(p, f"holds cell {info.get('key')!r}, not {key!r}{hint}")
-        return df, info
+            raise CorruptResultsError(p, exc.problem + self.HINT) from None
 
     def put(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> Path:
+        """Write a finished cell (encoded by `encode_cell`) atomically; return its path."""
+        _, data = encode_cell(key, rows, info)
+        return self.put_encoded(key, data)
+
+    def put_encoded(self, key: str, data: bytes) -> Path:
+        """Write the bytes `encode_cell` made for `key` atomically; return the path."""
         p = self.path(key)
-        write_parquet(p, rows, {**to_jsonable(dict(info)), "schema": CELL_SCHEMA, "key": key})
+        atomic_write_bytes(p, data)
         return p
 
     def __contains__(self, key: object) -> bool:

@@ -1,6 +1,13 @@
-"""Test-wide settings: saved runs go to a temporary directory, never into the repository's
-results/. The compiled-code and reference caches stay in the project's .cache/ so one test run
-warms them for the next (they are keyed by code and inputs, so sharing them is safe)."""
+"""Test-wide settings and shared fixtures.
+
+Saved runs go to a temporary directory, never into the repository's results/. The compiled-code
+and reference caches stay in the project's .cache/ so one test run warms them for the next (they
+are keyed by code and inputs, so sharing them is safe).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
 
 import pytest
 
@@ -11,3 +18,27 @@ def _results_in_tmp(tmp_path_factory, monkeypatch):
 
     if "HARNESS_RESULTS_DIR" not in os.environ:
         monkeypatch.setenv("HARNESS_RESULTS_DIR", str(tmp_path_factory.mktemp("results")))
+
+
+@pytest.fixture
+def plugin_file(tmp_path):
+    """Write a user's plugin file: `plugin_file(name, source) -> path`. Whatever it registers
+    (once loaded, by the test or the CLI) is unregistered afterwards, so later tests see the
+    registry unchanged."""
+    from harness import registry
+
+    before = (set(registry.steppers.names()), set(registry.problems.names()))
+    written: list[Path] = []
+
+    def write(name: str, source: str) -> str:
+        path = tmp_path / name
+        path.write_text(source)
+        written.append(path)
+        return str(path)
+
+    yield write
+    for reg, names in zip((registry.steppers, registry.problems), before, strict=True):
+        for n in set(reg.names()) - names:
+            reg.unregister(n)
+    for path in written:
+        registry._plugins.pop(str(path.resolve()), None)

@@ -189,7 +189,8 @@ def test_serial_run_returns_rows_summary_skips_and_cell_records(run):
     assert r.cells.key.str.fullmatch(r"[0-9a-f]{32}").all() and r.cells.key.is_unique
     # rows follow the experiment's cell order
     assert list(dict.fromkeys(r.rows.cell)) == list(r.cells.cell)
-    assert r.config["n"] == 3 and r.wall_s > 0
+    # the run's wall time covers its cells' (both measured in this process with jobs=1)
+    assert r.config["n"] == 3 and r.wall_s >= r.cells.wall_s.sum()
 
 
 def test_second_run_reuses_every_cell_and_equals_the_first(run):
@@ -225,13 +226,13 @@ def test_changed_configuration_or_experiment_code_recomputes(run, monkeypatch):
 def test_fresh_recomputes_every_cell_and_overwrites_the_cache(run, tmp_path):
     run()
     cache = CellCache(tmp_path / "cache")
-    before = {p: p.stat().st_mtime_ns for p in cache.root.glob("*/*.parquet")}
-    time.sleep(0.01)
+    before = {p: p.stat().st_ino for p in cache.root.glob("*/*.parquet")}
     CALLS.clear()
     r = run(fresh=True)
     assert (r.computed_cells, r.cached_cells, sum(CALLS.values())) == (9, 0, 9)
-    after = {p: p.stat().st_mtime_ns for p in cache.root.glob("*/*.parquet")}
-    assert set(after) == set(before) and all(after[p] > before[p] for p in before)
+    # each file was replaced (atomic rename of a new file: a new inode), not left in place
+    after = {p: p.stat().st_ino for p in cache.root.glob("*/*.parquet")}
+    assert set(after) == set(before) and all(after[p] != before[p] for p in before)
 
 
 def test_cache_false_neither_reads_nor_writes(run, tmp_path):
@@ -292,8 +293,8 @@ def test_each_failure_is_recorded_in_its_cell_and_the_others_complete(run, jobs)
     assert "run_cell" in failures.loc["toy-raise", "traceback"]
     assert "\n" not in "".join(r.failures.message)
     assert (r.cells.set_index("stepper").status == "failed").sum() == 4
-    timed = r.cells.set_index("stepper").loc["toy-sleep", "wall_s"]
-    assert 1.0 <= timed < 5.0
+    timed = r.cells.set_index("stepper").loc["toy-sleep"]
+    assert timed.status == "failed" and timed.n_rows == 0 and not timed.cached
     # failed cells are not cached: a rerun tries them again and reuses the good one
     again = run(steppers=["toy-ok", "toy-raise"], problems=["toy-decay"], config={"n": 1})
     assert (again.cached_cells, again.computed_cells, again.n_failed) == (1, 1, 1)
@@ -487,12 +488,12 @@ def test_validate_rows_accepts_plain_tidy_rows_and_undeclared_nan():
 
 # -- time limit -----------------------------------------------------------------------------------
 def test_time_limit_interrupts_and_restores_an_outer_limit():
-    with runner.time_limit(5.0):
+    with runner.time_limit(600.0):
         with pytest.raises(runner.CellTimeout, match="timeout after 0.2 s"):
             with runner.time_limit(0.2):
-                time.sleep(2)
+                time.sleep(60)
         remaining = signal.getitimer(signal.ITIMER_REAL)[0]
-        assert 3.0 < remaining <= 5.0
+        assert 0.0 < remaining <= 600.0  # the outer limit is running again, never extended
     assert signal.getitimer(signal.ITIMER_REAL)[0] == 0.0
 
 

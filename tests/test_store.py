@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from harness import provenance, results, store
-from harness.errors import HarnessError, InputError, UnknownNameError
+from harness.errors import HarnessError, InputError, OutputError, UnknownNameError
 from harness.runner import RunResult
 from harness.store import (
     CellCache,
@@ -74,8 +74,9 @@ def test_a_failed_write_leaves_the_previous_file_intact(tmp_path, monkeypatch):
         raise OSError("disk vanished between write and rename")
 
     monkeypatch.setattr(os, "replace", crash)
-    with pytest.raises(OSError, match="disk vanished"):
+    with pytest.raises(OutputError, match=r"table.bin': disk vanished") as info:
         atomic_write_bytes(target, b"new content that never lands")
+    assert isinstance(info.value, OSError) and "\n" not in str(info.value)
     assert target.read_bytes() == b"old content"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["table.bin"]  # temp file removed
 

@@ -1,24 +1,35 @@
-"""Experiments: one module each; importing this package registers them in `EXPERIMENTS`."""
+"""Experiments: the one list of them, in report order; importing this package registers them.
+
+`EXPERIMENT_MODULES` maps each experiment's CLI name to its module in this package. The CLI
+(`harness run NAME`, `harness list experiments`), the runner (`run_experiments()` with no names)
+and the report (its sections, in this order) are all built from it: adding an experiment is one
+entry here plus its module. A listed module that fails to import raises (a deleted or broken
+experiment is never silently dropped).
+"""
 
 from importlib import import_module
 
 from harness.experiments.base import EXPERIMENTS, Cell, Experiment, Skip, get_experiment
 
-__all__ = ["EXPERIMENTS", "Cell", "Experiment", "Skip", "get_experiment"]
+__all__ = ["EXPERIMENTS", "EXPERIMENT_MODULES", "EXPERIMENT_NAMES", "Cell", "Experiment", "Skip",
+           "get_experiment"]
 
-# Each module registers its experiment with `register_experiment` on import.
-_MODULES = (
-    "convergence",
-    "stability",
-    "reversibility",
-    "energy",
-    "symplecticity",
-    "work_precision",
-)
+# CLI name -> module under harness/experiments/, in the order of the report's sections.
+EXPERIMENT_MODULES = {
+    "convergence": "convergence",
+    "stability": "stability",
+    "reversibility": "reversibility",
+    "energy": "energy",
+    "symplecticity": "symplecticity",
+    "work-precision": "work_precision",
+    "roundoff": "roundoff",
+}
+EXPERIMENT_NAMES = tuple(EXPERIMENT_MODULES)
 
-for _name in _MODULES:
-    try:
-        import_module(f"harness.experiments.{_name}")
-    except ModuleNotFoundError as exc:  # a module not written yet; never hides other errors
-        if exc.name != f"harness.experiments.{_name}":
-            raise
+for _name, _module in EXPERIMENT_MODULES.items():
+    import_module(f"harness.experiments.{_module}")
+    if _name not in EXPERIMENTS:
+        raise ImportError(f"harness.experiments.{_module} did not register experiment {_name!r}")
+# registration order follows imports between modules; the list's order is the one users see
+for _name in [*EXPERIMENT_NAMES, *[n for n in EXPERIMENTS if n not in EXPERIMENT_MODULES]]:
+    EXPERIMENTS[_name] = EXPERIMENTS.pop(_name)

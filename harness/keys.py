@@ -1,0 +1,297 @@
+"""Cache keys: which code a cell's measurement depends on, computed from the import graph.
+
+A cell's key (`cell_key`) hashes the cell, the experiment's resolved configuration, the cell
+file schema and two code versions:
+- `code_version(stepper, problem)`: the fingerprints of the cell's stepper and problem
+  (coefficients, class source, symbolic definition): a changed method changes only its cells;
+- `experiment_fingerprint(experiment)`: the measuring code of the experiment, found by reading
+  the source (never by importing anything new):
+  1. the experiment's own module, minus the top-level functions and methods that only its
+     `summarize` reaches (judging code: verdicts are recomputed from cached rows, never the
+     other way round);
+  2. the source of every project module (`harness`, `problems`, `implementations`) that the
+     measuring part imports, directly or through other project modules (imports inside
+     functions count), except judging-only modules (`JUDGING_MODULES`), the registry (a name
+     lookup: what it returns is covered by `code_version`) and the experiment list;
+  3. for `harness.tolerances`, which holds measuring and judging thresholds side by side, the
+     values of only the names that the measuring code reads (`tol.NAME`, `from
+     harness.tolerances import NAME`), so changing a verdict threshold recomputes nothing;
+  4. `MEASURING_MODULES`, reached through objects rather than imports, and the harness version.
+Forgetting a module in `JUDGING_MODULES` costs recomputation, never a stale cell.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+import hashlib
+import importlib.util
+import json
+import os
+import sys
+from collections.abc import Mapping
+from typing import Any
+
+from harness.errors import HarnessError
+from harness.experiments.base import Cell, Experiment
+from harness.provenance import to_jsonable
+
+__all__ = ["cell_key", "code_version", "experiment_fingerprint", "measuring_modules",
+           "MEASURING_MODULES", "JUDGING_MODULES", "PROJECT_PACKAGES"]
+
+PROJECT_PACKAGES = ("harness", "problems", "implementations")
+# Modules every cell steps through via objects (a stepper's carry, a problem's dynamics and
+# coefficient objects), which an experiment's imports need not name.
+MEASURING_MODULES = ("harness.problem", "harness.stepper", "harness.coefficients")
+# Modules that only judge measurements (verdict rules, the gate), or only list or look up other
+# code (the registry: its entries are keyed by `code_version`; the experiment list): never part of
+# a cell's key, and not followed in the import graph.
+JUDGING_MODULES = (
+    "harness.gate",
+    "harness.rules",
+    "harness.facts",
+    "harness.populations",
+    "harness.experiments.convergence_verdicts",
+    "harness.report",
+    "harness.registry",
+    "harness.experiments",
+    "harness.runner",
+    "harness.keys",
+    "harness.store",
+    "harness.cli",
+    "harness.progress",
+)
+TOLERANCES = "harness.tolerances"
+
+
+def _excluded(name: str) -> bool:
+    """A judging-only or listing module (a package in JUDGING_MODULES excludes its submodules,
+    except `harness.experiments`, whose experiment modules are measuring code)."""
+    if name == "harness.experiments":
+        return True
+    return any(name == m or name.startswith(m + ".") for m in JUDGING_MODULES
+               if m != "harness.experiments")
+
+
+def _is_project(name: str) -> bool:
+    return name.split(".")[0] in PROJECT_PACKAGES
+
+
+def _module_path(name: str) -> str | None:
+    mod = sys.modules.get(name)
+    path = getattr(mod, "__file__", None)
+    if path is None:
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError):
+            spec = None
+        path = spec.origin if spec is not None else None
+    return path if path and os.path.isfile(path) else None
+
+
+def _source(name: str) -> str | None:
+    """The module's source text (None when it has no source file)."""
+    path = _module_path(name)
+    if path is None:
+        return None
+    st = os.stat(path)
+    return _read(path, st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=512)
+def _read(path: str, mtime_ns: int, size: int) -> str:
+    with open(path, "rb") as fh:
+        return fh.read().decode("utf-8", errors="replace")
+
+
+@functools.lru_cache(maxsize=512)
+def _parse(text: str) -> ast.Module | None:
+    try:
+        return ast.parse(text)
+    except SyntaxError:
+        return None
+
+
+def _is_package(name: str) -> bool:
+    path = _module_path(name)
+    return bool(path) and os.path.basename(path) == "__init__.py"
+
+
+def _imports(name: str, nodes: list[ast.AST]) -> tuple[set[str], set[str]]:
+    """(project modules imported in `nodes`, tolerances names read there) for module `name`."""
+    modules: set[str] = set()
+    tol_names: set[str] = set()
+    tol_aliases: set[str] = set()
+    package = name if _is_package(name) else name.rpartition(".")[0]
+    for root in nodes:
+        for node in ast.walk(root):
+            if isinstance(node, ast.Import):
+                for a in node.names:
+                    if _is_project(a.name):
+                        modules.add(a.name)
+                        if a.name == TOLERANCES:
+                            tol_aliases.add(a.asname or a.name)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")
+                    parent = ".".join(parts[: len(parts) - node.level + 1])
+                    base = f"{parent}.{base}" if base else parent
+                if not _is_project(base):
+                    continue
+                for a in node.names:
+                    sub = f"{base}.{a.name}"
+                    if importlib.util.find_spec(base) and _module_path(sub):
+                        modules.add(sub)  # `from harness import tolerances as tol`
+                        if sub == TOLERANCES:
+                            tol_aliases.add(a.asname or a.name)
+                    else:
+                        modules.add(base)
+                        if base == TOLERANCES:
+                            tol_names.add(a.name)
+    for root in nodes:
+        for node in ast.walk(root):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                    and node.value.id in tol_aliases):
+                tol_names.add(node.attr)
+    return modules, tol_names
+
+
+def _measuring_nodes(tree: ast.Module, judging_roots: set[str]) -> list[ast.AST]:
+    """The top-level statements and methods of a module minus the functions reached only from
+    `judging_roots` (method or function names, e.g. `summarize`)."""
+    defs: dict[str, list[ast.AST]] = {}
+    others: list[ast.AST] = []
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            defs.setdefault(node.name, []).append(node)
+        elif isinstance(node, ast.ClassDef):
+            head = ast.ClassDef(name=node.name, bases=node.bases, keywords=node.keywords,
+                                body=[], decorator_list=node.decorator_list)
+            others.append(head)
+            for item in node.body:
+                if isinstance(item, ast.FunctionDef | ast.AsyncFunctionDef):
+                    defs.setdefault(item.name, []).append(item)
+                else:
+                    others.append(item)
+        else:
+            others.append(node)
+
+    def referenced(nodes: list[ast.AST]) -> set[str]:
+        out = set()
+        for root in nodes:
+            for n in ast.walk(root):
+                if isinstance(n, ast.Name):
+                    out.add(n.id)
+                elif isinstance(n, ast.Attribute):
+                    out.add(n.attr)
+        return out
+
+    def reach(start: set[str], seed_nodes: list[ast.AST]) -> set[str]:
+        seen: set[str] = set()
+        todo = (set(start) | referenced(seed_nodes)) & set(defs)
+        while todo:
+            name = todo.pop()
+            seen.add(name)
+            todo |= (referenced(defs[name]) & set(defs)) - seen
+        return seen
+
+    judging = reach(judging_roots & set(defs), [])
+    # measuring: what top-level statements reach, and every def summarize does not reach (it may
+    # be called from anywhere), with everything those reach
+    measuring = reach(set(defs) - judging, others)
+    keep = [d for name in sorted(measuring) for d in defs[name]]
+    return others + keep
+
+
+def measuring_modules(experiment: Experiment) -> tuple[dict[str, str], set[str]]:
+    """({module: the measuring source counted for it}, tolerances names the measuring code reads)
+    for an experiment (see the module docstring)."""
+    own = [c.__module__ for c in type(experiment).__mro__
+           if c not in (object, Experiment) and c.__module__ not in ("abc", "builtins")]
+    counted: dict[str, str] = {}
+    tol_names: set[str] = set()
+    todo = [(m, True) for m in dict.fromkeys(own)]
+    seen: set[str] = set()
+    while todo:
+        name, is_own = todo.pop()
+        if name in seen or name == TOLERANCES:
+            continue
+        seen.add(name)
+        text = _source(name)
+        if text is None:
+            counted[name] = f"<no source: {name}>"
+            continue
+        tree = _parse(text)
+        if tree is None:
+            counted[name] = text
+            continue
+        if is_own:
+            nodes = _measuring_nodes(tree, {"summarize"})
+            counted[name] = "\n".join(ast.unparse(n) for n in nodes)
+        else:
+            nodes = [tree]
+            counted[name] = text
+        modules, names = _imports(name, nodes)
+        tol_names |= names
+        for m in sorted(modules):
+            if m == TOLERANCES:
+                continue
+            if _is_project(m) and not _excluded(m) and m not in seen:
+                todo.append((m, False))
+    for m in MEASURING_MODULES:
+        if m not in counted:
+            text = _source(m)
+            counted[m] = text if text is not None else f"<no source: {m}>"
+            modules, names = _imports(m, [_parse(text)] if text and _parse(text) else [])
+            tol_names |= names
+    return counted, tol_names
+
+
+def _tolerance_values(names: set[str]) -> str:
+    import importlib
+
+    tol = importlib.import_module(TOLERANCES)
+    return json.dumps({n: repr(getattr(tol, n, "<missing>")) for n in sorted(names)})
+
+
+def experiment_fingerprint(experiment: Experiment) -> str:
+    """The experiment's measuring-code version: its own `fingerprint()` when it defines one,
+    else the measuring source found from its import graph (module docstring), plus the values
+    of the thresholds it reads and the harness version."""
+    from harness import __version__
+
+    parts = [__version__, type(experiment).__qualname__, str(experiment.name)]
+    own = getattr(experiment, "fingerprint", None)
+    if callable(own):
+        parts.append(str(own()))
+    else:
+        counted, tol_names = measuring_modules(experiment)
+        for name in sorted(counted):
+            parts.append(name + "\n" + hashlib.sha256(counted[name].encode()).hexdigest())
+        parts.append(_tolerance_values(tol_names))
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
+def code_version(stepper: str, problem: str) -> str:
+    """Hash of the fingerprints of a stepper and a problem (looked up in the registry); an
+    empty name stands for 'none' (a cell that uses no stepper, or no problem)."""
+    from harness.registry import get_problem, get_stepper
+
+    s = get_stepper(stepper).fingerprint() if stepper else ""
+    p = get_problem(problem).fingerprint() if problem else ""
+    if not isinstance(s, str) or not isinstance(p, str):
+        raise HarnessError(
+            f"`fingerprint()` must return a string (stepper {stepper!r}, problem {problem!r})"
+        )
+    return hashlib.sha256(f"stepper\n{s}\nproblem\n{p}".encode()).hexdigest()[:32]
+
+
+def cell_key(cell: Cell, config: Mapping[str, Any], experiment_version: str, sp_version: str) -> str:
+    """The cache key of `cell`: `Cell.key` over the experiment's resolved configuration and a
+    code version combining the stepper/problem version, the experiment's fingerprint and the
+    cell file schema."""
+    from harness.store import CELL_SCHEMA
+
+    code = hashlib.sha256(f"{sp_version}\n{experiment_version}\n{CELL_SCHEMA}".encode()).hexdigest()[:32]
+    return cell.key(code, to_jsonable(dict(config)))

@@ -1,0 +1,150 @@
+"""Cache keys come from the import graph: editing measuring code recomputes exactly the cells that
+depend on it; editing judging code or a judging threshold recomputes nothing and changes verdicts.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import textwrap
+
+import pytest
+
+from harness import keys
+from harness import tolerances as tol
+from harness.experiments import EXPERIMENTS
+from harness.runner import run_experiment
+
+
+def _fingerprints() -> dict[str, str]:
+    return {name: keys.experiment_fingerprint(exp) for name, exp in EXPERIMENTS.items()}
+
+
+def _edited(monkeypatch, module: str, edit):
+    real = keys._source
+
+    def source(name):
+        text = real(name)
+        return edit(text) if name == module else text
+
+    monkeypatch.setattr(keys, "_source", source)
+
+
+def _importers(module: str) -> set[str]:
+    return {n for n, e in EXPERIMENTS.items() if module in keys.measuring_modules(e)[0]}
+
+
+@pytest.mark.parametrize("module", ["harness.theory", "harness.experiments.energy",
+                                    "harness.ground_truth", "harness.experiments.convergence"])
+def test_editing_an_imported_helper_changes_only_the_experiments_that_import_it(module, monkeypatch):
+    importers = _importers(module)
+    assert importers and importers != set(EXPERIMENTS)  # the case separates experiments
+    before = _fingerprints()
+    _edited(monkeypatch, module, lambda text: text + "\n\ndef _helper_added_in_a_test():\n    return 1\n")
+    after = _fingerprints()
+    assert {n for n in EXPERIMENTS if before[n] != after[n]} == importers
+
+
+def test_the_stale_cache_cases_of_the_issue_are_covered():
+    """The shared sweep and time-scale helpers (once in energy.py, now in experiments/common.py
+    and harness/scales.py) are in the keys of every experiment that uses them, and the
+    stability measurement's theory.py is in its key."""
+    for name in ("symplecticity", "reversibility", "energy"):
+        counted = keys.measuring_modules(EXPERIMENTS[name])[0]
+        assert "harness.experiments.common" in counted, name
+        assert "harness.scales" in counted, name
+    assert "harness.theory" in keys.measuring_modules(EXPERIMENTS["stability"])[0]
+
+
+def test_judging_modules_and_thresholds_are_not_in_any_key(monkeypatch):
+    before = _fingerprints()
+    for name, exp in EXPERIMENTS.items():
+        counted, names = keys.measuring_modules(exp)
+        assert not {"harness.gate", "harness.experiments.convergence_verdicts"} & set(counted), name
+        assert "GATE_ORDER_TOL" not in names, name
+    monkeypatch.setattr(tol, "GATE_ORDER_TOL", tol.GATE_ORDER_TOL * 3)
+    _edited(monkeypatch, "harness.gate", lambda text: text + "\n# a new verdict rule\n")
+    assert _fingerprints() == before
+
+
+def test_editing_only_summarize_leaves_the_key_alone(monkeypatch):
+    exp = EXPERIMENTS["energy"]
+    before = keys.experiment_fingerprint(exp)
+    marker = "    def summarize(self, rows"
+    assert marker in keys._source("harness.experiments.energy")
+    _edited(monkeypatch, "harness.experiments.energy",
+            lambda text: text.replace(marker, "    def summarize(self, rows_renamed=None, *, rows", 1))
+    assert keys.experiment_fingerprint(exp) == before
+    _edited(monkeypatch, "harness.experiments.energy",
+            lambda text: text.replace("    def run_cell(self, cell", "    def run_cell(self, cell_", 1))
+    assert keys.experiment_fingerprint(exp) != before
+
+
+TOY = '''
+"""A toy experiment for the cache-key test: it measures with one threshold and judges with
+another (Hairer, Norsett & Wanner, Solving ODEs I, I.7 for the Euler step it takes)."""
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.experiments.base import Cell, Experiment
+
+
+def _measure(k):
+    return (1.0 + tol.SWEEP_RATIO) ** k
+
+
+def _judge(value):
+    return "good" if value < 10 * tol.GATE_ORDER_TOL else "bad"
+
+
+class KeyToy(Experiment):
+    name = "key-toy"
+    default_config = {"n": 3}
+
+    def cells(self, steppers, problems, config):
+        return [Cell(self.name, "", "", (("k", k),)) for k in range(config["n"])], []
+
+    def run_cell(self, cell, config):
+        return pd.DataFrame({"value": [_measure(cell.param("k"))]})
+
+    def summarize(self, rows, config):
+        return rows.assign(verdict=[_judge(v) for v in rows.value])
+'''
+
+
+@pytest.fixture
+def key_toy(tmp_path):
+    path = tmp_path / "key_toy_experiment.py"
+    path.write_text(textwrap.dedent(TOY))
+    spec = importlib.util.spec_from_file_location("key_toy_experiment", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["key_toy_experiment"] = module
+    spec.loader.exec_module(module)
+    yield module.KeyToy(), path
+    sys.modules.pop("key_toy_experiment", None)
+
+
+def test_a_judging_threshold_changes_verdicts_without_recomputing(key_toy, tmp_path, monkeypatch):
+    exp, path = key_toy
+    run = lambda: run_experiment(exp, [], [], jobs=1, cache_dir=tmp_path / "cache",  # noqa: E731
+                                 progress=False)
+    first = run()
+    assert first.computed_cells == 3
+    monkeypatch.setattr(tol, "GATE_ORDER_TOL", 10.0)  # judging only
+    second = run()
+    assert (second.computed_cells, second.cached_cells) == (0, 3)
+    assert list(first.summary.verdict) != list(second.summary.verdict)
+    monkeypatch.setattr(tol, "SWEEP_RATIO", 3.0)  # measuring
+    third = run()
+    assert third.computed_cells == 3
+    monkeypatch.undo()
+    # a comment in the experiment's module is not code; editing the measuring helper recomputes;
+    # editing the judging helper does not
+    path.write_text(path.read_text().replace("return (1.0 + tol.SWEEP_RATIO) ** k",
+                                             "return (1.0 + tol.SWEEP_RATIO) ** k  # a comment"))
+    assert run().computed_cells == 0
+    path.write_text(path.read_text().replace("return (1.0 + tol.SWEEP_RATIO) ** k",
+                                             "return (1.0 + tol.SWEEP_RATIO) ** k + 0.0"))
+    assert run().computed_cells == 3
+    path.write_text(path.read_text().replace('"good" if', '"fine" if'))
+    assert run().computed_cells == 0
