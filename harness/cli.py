@@ -410,7 +410,14 @@ def _cmd_run(args) -> int:
     else:
         _print_table(result.summary, list(result.summary.columns))
         _print_footer(result, failures)
-    return EXIT_FAILED if failures else EXIT_OK
+    # A claim an experiment checks (stability figures, bounded energy, reversibility, ...) that
+    # does not hold fails the run like a failed cell does.
+    failed_claims = 0
+    if "passed" in result.summary.columns:
+        failed_claims = int((result.summary["passed"] == False).sum())  # noqa: E712 (object column)
+        if failed_claims and not args.json:
+            print(f"{args.experiment}: {failed_claims} cell(s) whose claim does not hold", file=_out())
+    return EXIT_FAILED if failures or failed_claims else EXIT_OK
 
 
 def _print_footer(result, failures) -> None:
@@ -444,8 +451,9 @@ def _cmd_gate(args) -> int:
         _print_table(table, GATE_COLUMNS)
         _print_footer(result, failures)
         n_bad = int((~table["passed"]).sum()) + len(failures)
-        print(f"gate: {'PASSED' if passed else 'FAILED'} ({len(table)} cells, {n_bad} failing)",
-              file=_out())
+        n_unmeasured = int((table["outcome"] == "not-measurable").sum())
+        print(f"gate: {'PASSED' if passed else 'FAILED'} ({len(table)} cells, {n_bad} failing, "
+              f"{n_unmeasured} not measurable: see their reasons)", file=_out())
     return EXIT_OK if passed else EXIT_FAILED
 
 
