@@ -99,6 +99,13 @@ def build_parser() -> argparse.ArgumentParser:
                                     "exit 1 when a measured order misses its claim")
     _common(p)
 
+    p = sub.add_parser("population", help="the gate's own error rates: run it over generated correct "
+                                          "methods and mutants; exit 1 on a false alarm or a miss")
+    p.add_argument("--size", type=int, default=5, metavar="N",
+                   help="correct methods per family (each with 2-3 mutants; default 5)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed of the population")
+    _common(p, grid=False)
+
     p = sub.add_parser("report", help="run every experiment and write the HTML report")
     _common(p)
     p.add_argument("--output", default=None, metavar="DIR", help="reports directory (default: reports/)")
@@ -264,7 +271,47 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _cmd_gate(args)
     if args.command == "report":
         return _cmd_report(args)
+    if args.command == "population":
+        return _cmd_population(args)
     raise AssertionError(args.command)
+
+
+def _cmd_population(args) -> int:
+    """Generate a population (harness.populations), judge it, save the per-method table and the
+    rates under results/<run-id>/ as `gate-population`, and exit 1 on any false alarm or miss."""
+    import time
+
+    import pandas as pd
+
+    from harness.errors import InputError
+    from harness.populations import error_rates, generate
+    from harness.runner import RunResult
+    from harness.store import save_run
+
+    if not 1 <= args.size <= 1000:
+        raise InputError(f"`--size` must lie in [1, 1000], got {args.size}")
+    started = time.perf_counter()
+    table, rates = error_rates(generate(args.size, seed=args.seed))
+    empty = pd.DataFrame()
+    result = RunResult(experiment="gate-population",
+                       description="the gate's error rates on generated methods",
+                       config={"size": args.size, "seed": args.seed}, rows=table, summary=rates,
+                       failures=empty, skips=empty, cells=empty, wall_s=time.perf_counter() - started,
+                       cached_cells=0, computed_cells=len(table))
+    path = save_run({"gate-population": result}, config={"command": "population", "size": args.size,
+                                                          "seed": args.seed})
+    print(f"harness: results saved in {os.fspath(path)}", file=sys.stderr)
+    overall = rates[rates.family == "all"].iloc[0]
+    bad = int(overall.gate_false_alarms + overall.gate_misses)
+    if args.json:
+        _print_json(rates.to_dict("records"))
+    else:
+        _print_table(rates, list(rates.columns))
+        print(f"population: {int(overall.correct_methods)} correct methods, {int(overall.mutants)} mutants; "
+              f"gate false alarms {int(overall.gate_false_alarms)}, misses {int(overall.gate_misses)}; "
+              f"measurement alone: false alarms {int(overall.measurement_false_alarms)}, "
+              f"misses {int(overall.measurement_misses)}", file=_out())
+    return EXIT_FAILED if bad else EXIT_OK
 
 
 def _jsonable(value: Any) -> Any:

@@ -145,15 +145,18 @@ def test_large_weights_pass_the_scaled_self_check_and_order_conditions():
 
 
 def test_population_has_no_false_alarm_and_no_miss():
-    from harness.populations import error_rates, generate
+    """`harness population`: generated correct methods pass, every mutant fails, for the gate
+    and for the measurement alone; the rates are saved with the run."""
+    from harness import results
+    from harness.cli import main
 
-    members = generate(2, seed=11)
-    kinds = {m.kind for m in members}
-    assert kinds == {"correct", "perturbed", "subtle", "overclaimed"}
-    table, rates = error_rates(members)
+    assert main(["population", "--size", "2", "--seed", "11"]) == 0
+    rates = results.load("latest", "gate-population", table="summary")
     overall = rates[rates.family == "all"].iloc[0]
     assert overall.correct_methods == 12 and overall.mutants >= 24 + 6
-    wrong = table[(table.kind == "correct") != table.gate_passed]
-    assert wrong.empty, wrong[["stepper", "kind", "detail"]].to_string()
     assert overall.gate_false_alarms == 0 and overall.gate_misses == 0
     assert overall.measurement_false_alarms == 0 and overall.measurement_misses == 0
+    rows = results.load("latest", "gate-population")
+    assert set(rows.kind) == {"correct", "perturbed", "subtle", "overclaimed"}
+    wrong = rows[(rows.kind == "correct") != rows.gate_passed]
+    assert wrong.empty, wrong[["stepper", "kind", "detail"]].to_string()
