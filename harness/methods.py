@@ -34,7 +34,7 @@ from typing import Any
 from harness.errors import InputError
 from harness.stepper import Stepper
 
-__all__ = ["Method", "from_record", "RECORD_KEYS"]
+__all__ = ["Method", "from_record", "method_from_record", "RECORD_KEYS"]
 
 
 @dataclass(frozen=True)
@@ -51,6 +51,9 @@ class Method:
         {'hw_limit': ...}), checked by the stability experiment; optional
     options : options of the family's step loop (e.g. `starter` of a multistep method,
         `loop='staggered'` for the leapfrog form of a kick-drift-kick scheme)
+    claimed_embedded_order : for a Runge-Kutta pair (a tableau with `b_hat`), the order claimed
+        for the embedded method; the pair then also registers `<name>@embedded`, the method
+        (A, b_hat, c), so every experiment measures the embedded order too
     """
 
     coefficients: Any
@@ -59,6 +62,7 @@ class Method:
     description: str = ""
     stability: Mapping[str, float] | None = None
     options: Mapping[str, Any] = field(default_factory=dict)
+    claimed_embedded_order: int | None = None
 
     def __post_init__(self):
         if not hasattr(self.coefficients, "fingerprint") or not hasattr(self.coefficients, "name"):
@@ -78,7 +82,22 @@ class Method:
 
         return build_stepper(self)
 
-_COMMON = {"name", "claimed_order", "reference", "description", "stability"}
+    def steppers(self) -> list[Stepper]:
+        """This method's stepper and, for a Runge-Kutta pair, its embedded method's."""
+        out = [self.stepper()]
+        b_hat = getattr(self.coefficients, "b_hat", None)
+        if b_hat is not None:
+            from harness.coefficients import ButcherTableau
+
+            c = self.coefficients
+            embedded = ButcherTableau(f"{c.name}@embedded", c.A, b_hat, c.c)
+            claimed = self.claimed_embedded_order or embedded.order()
+            out.append(Method(embedded, claimed, self.reference,
+                              f"embedded method (weights b_hat) of {c.name}").stepper())
+        return out
+
+_COMMON = {"name", "claimed_order", "reference", "description", "stability",
+           "claimed_embedded_order"}
 RECORD_KEYS = {
     "runge-kutta": {"A", "b", "c", "b_hat"},
     "splitting": {"sequence"},
@@ -98,7 +117,12 @@ def _family(record: Mapping[str, Any]) -> str:
 
 
 def from_record(record: Mapping[str, Any]) -> Stepper:
-    """Build the stepper a method record declares (see the module docstring).
+    """The stepper a method record declares (`method_from_record(record).stepper()`)."""
+    return method_from_record(record).stepper()
+
+
+def method_from_record(record: Mapping[str, Any]) -> Method:
+    """The `Method` a plain mapping declares (see the module docstring).
 
     Raises `InputError` (or `CoefficientError`) naming the record and the rule it breaks."""
     if not isinstance(record, Mapping):
@@ -130,4 +154,4 @@ def from_record(record: Mapping[str, Any]) -> Stepper:
         ) from None
     options = {"starter": record["starter"]} if "starter" in record else {}
     return Method(coeffs, record["claimed_order"], record["reference"], record.get("description", ""),
-                  record.get("stability"), options).stepper()
+                  record.get("stability"), options, record.get("claimed_embedded_order"))

@@ -230,7 +230,7 @@ def _build_records(records: Any, path: str | Path) -> list[Stepper]:
     """Steppers from a plugin's `METHODS` (method records, `harness.methods`): each record is
     built on its own, and one that fails its checks is reported by name in `plugin_errors()`
     while the others load."""
-    from harness.methods import Method, from_record
+    from harness.methods import Method, method_from_record
 
     if records is None:
         return []
@@ -240,7 +240,8 @@ def _build_records(records: Any, path: str | Path) -> list[Stepper]:
     for i, record in enumerate(records):
         label = record.get("name", f"#{i}") if isinstance(record, dict) else getattr(record, "name", f"#{i}")
         try:
-            out.append(record.stepper() if isinstance(record, Method) else from_record(record))
+            method = record if isinstance(record, Method) else method_from_record(record)
+            out.extend(method.steppers())
         except (InputError, ValueError, TypeError) as exc:
             _plugin_errors.append(f"plugin {str(path)!r}: method {label!r} not loaded: {exc}")
     return out

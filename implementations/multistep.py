@@ -366,4 +366,4 @@ METHODS: list[Method] = [
     ),
 ]
 
-STEPPERS: list[Stepper] = [m.stepper() for m in METHODS]
+STEPPERS: list[Stepper] = [s for m in METHODS for s in m.steppers()]

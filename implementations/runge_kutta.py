@@ -6,7 +6,8 @@ every problem through its first-order right-hand side y' = f(t, y).
 
 Tableaux (Hairer, Norsett & Wanner, *Solving Ordinary Differential Equations I*, 2nd ed.,
 Sect. II.1, Tables 1.1-1.2; the course's ODE lecture notes, course-material file 004):
-`euler`, `midpoint`, `heun`, `ralston`, `rk3` (Kutta's third order), `rk4`, `rk38`.
+`euler`, `midpoint`, `heun`, `ralston`, `rk3` (Kutta's third order), `rk4`, `rk38`, and the
+Bogacki-Shampine 3(2) pair with its embedded method.
 """
 
 from __future__ import annotations
@@ -181,6 +182,21 @@ METHODS: list[Method] = [
         reference=f"W. Kutta, Z. Math. Phys. 46 (1901) 435-453; {_HNW}, Table 1.2",
         description="Kutta's 3/8 rule, fourth order",
     ),
+    Method(
+        ButcherTableau(
+            "bogacki-shampine",
+            [[0, 0, 0, 0], [F(1, 2), 0, 0, 0], [0, F(3, 4), 0, 0], [F(2, 9), F(1, 3), F(4, 9), 0]],
+            [F(2, 9), F(1, 3), F(4, 9), 0],
+            [0, F(1, 2), F(3, 4), 1],
+            b_hat=[F(7, 24), F(1, 4), F(1, 3), F(1, 8)],
+        ),
+        claimed_order=3,
+        claimed_embedded_order=2,
+        reference="P. Bogacki & L.F. Shampine, A 3(2) pair of Runge-Kutta formulas, Appl. Math. "
+        "Lett. 2 (1989) 321-325 (scipy's RK23)",
+        description="Bogacki-Shampine 3(2) pair run at fixed steps; its embedded second-order "
+        "method is registered as bogacki-shampine@embedded",
+    ),
 ]
 
-STEPPERS: list[Stepper] = [m.stepper() for m in METHODS]
+STEPPERS: list[Stepper] = [s for m in METHODS for s in m.steppers()]

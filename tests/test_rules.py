@@ -160,3 +160,18 @@ def test_population_has_no_false_alarm_and_no_miss():
     assert set(rows.kind) == {"correct", "perturbed", "subtle", "overclaimed"}
     wrong = rows[(rows.kind == "correct") != rows.gate_passed]
     assert wrong.empty, wrong[["stepper", "kind", "detail"]].to_string()
+
+
+def test_embedded_method_of_a_pair_is_registered_and_measured():
+    from harness.gate import gate_table
+    from harness.runner import run_experiment
+
+    pair = steppers.get("bogacki-shampine")
+    embedded = steppers.get("bogacki-shampine@embedded")
+    assert pair.coefficients.embedded_order() == 2
+    assert embedded.info.claimed_order == 2 and embedded.coefficients.order() == 2
+    result = run_experiment("convergence", ["bogacki-shampine@embedded"], ["forced-duffing"], jobs=1,
+                            progress=False)
+    table = gate_table(result.summary)
+    row = table[table.problem == "forced-duffing"].iloc[0]
+    assert row.outcome == "pass" and abs(row.measured_order - 2) <= 0.2, row.to_dict()
