@@ -140,3 +140,46 @@ def c_seconds_per_step(method: str, ensemble: int) -> float:
     h = STEP["kepler-elliptic"]
     per_call, _ = seconds_per_call(lambda n: base.run(method, y, h, n))
     return per_call / ensemble
+
+
+#: Per family: the representative method (a registered stepper; its `@compiled` variant is timed)
+#: and the C loop of the same method in `c_baseline/kepler.c`.
+FAMILY_C_LOOPS = {
+    "explicit-rk": ("rk4", "rk4"),
+    "splitting": ("velocity-verlet", "vv"),
+    "staggered-leapfrog": ("leapfrog", "leapfrog"),
+    "stormer": ("stormer-verlet", "stormer"),
+    "multistep": ("ab4", "ab4"),
+    "implicit-rk": ("implicit-midpoint", "midpoint"),
+}
+
+
+def c_family_state(method: str) -> np.ndarray:
+    """The C loop's input for one Kepler trajectory from the problem's start: the state, the
+    staggered state (x_0, v_1/2), two positions (x_0, x_1), or four exact states."""
+    from harness.registry import get_problem
+
+    problem = get_problem("kepler-elliptic")
+    h = STEP["kepler-elliptic"]
+    y0 = problem.y0.copy()
+    if method in ("vv", "rk4", "midpoint"):
+        return y0
+    if method == "leapfrog":
+        r3 = float(np.hypot(y0[0], y0[1])) ** 3
+        return np.concatenate([y0[:2], y0[2:] - 0.5 * h * y0[:2] / r3])
+    if method == "stormer":
+        x1 = problem.exact(problem.t0 + h, y0[:, None], problem.t0, None)[:2, 0]
+        return np.concatenate([y0[:2], x1])
+    if method == "ab4":
+        states = [problem.exact(problem.t0 + j * h, y0[:, None], problem.t0, None)[:, 0] for j in range(4)]
+        return np.concatenate(states)
+    raise ValueError(f"`method` {method!r} has no C loop")
+
+
+def c_family_seconds_per_step(method: str) -> float:
+    """Wall seconds per step of the single-trajectory C loop `method` on Kepler (h = 1e-3)."""
+    base = c_baseline()
+    s = c_family_state(method)
+    h = STEP["kepler-elliptic"]
+    per_call, _ = seconds_per_call(lambda n: base.run(method, s, h, n))
+    return per_call
