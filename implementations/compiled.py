@@ -42,6 +42,7 @@ from implementations.compiled_kernels import (
     COMPILE_LOG,
     TEMPLATES,
     UnsupportedExpression,
+    address,
     call_kernel,
     module_source,
     problem_module,
@@ -67,9 +68,13 @@ __all__ = [
     "SUFFIX",
     "STEPPERS",
     "NOT_COMPILED",
+    "COLUMN_MIN",
 ]
 
 SUFFIX = "@compiled"
+#: Ensembles of at least this many members run the explicit one-step families by their column
+#: kernels (members advanced together in blocks, vectorisable); smaller ones member by member.
+COLUMN_MIN = 8
 
 
 def _pars(dyn: Dynamics) -> np.ndarray:
@@ -103,7 +108,7 @@ class _Compiled(Stepper):
     templates, and `_advance` as one kernel call (`_run`) for many steps."""
 
     kind = ""
-    part = "explicit"
+    part = "functions"
 
     def __init__(self, base: Stepper):
         if not isinstance(base, Stepper):
@@ -159,10 +164,16 @@ class CompiledRungeKutta(_Compiled):
 
     def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
         tab = self.coefficients
-        evals = call_kernel(
-            dyn.problem, "rk_advance", tab.A, tab.b, tab.c, float(c.t0), int(c.n), float(c.h), int(n),
-            c.y, _pars(dyn),
-        )
+        args = (tab.A, tab.b, tab.c, float(c.t0), int(c.n), float(c.h), int(n), c.y)
+        if c.y.shape[1] >= COLUMN_MIN:
+            if getattr(c, "k", None) is None:
+                c.k = np.empty((tab.stages, *c.y.shape))
+                c.stage = np.empty_like(c.y)
+            evals = call_kernel(
+                "rk_advance_cols", address(dyn.problem, "rhs_cols"), *args, c.k, c.stage, _pars(dyn)
+            )
+        else:
+            evals = call_kernel("rk_advance", address(dyn.problem, "rhs"), *args, _pars(dyn))
         dyn.counts["rhs"] += int(evals)
 
 
@@ -174,7 +185,9 @@ def _newtonian_carry(t0: float, h: float, y0: np.ndarray, dyn: Dynamics) -> Carr
 
 
 def _accel_all(dyn: Dynamics, t: float, q: np.ndarray, out: np.ndarray) -> None:
-    call_kernel(dyn.problem, "accel_all", float(t), np.ascontiguousarray(q), _pars(dyn), out)
+    call_kernel(
+        "accel_all", address(dyn.problem, "accel"), float(t), np.ascontiguousarray(q), _pars(dyn), out
+    )
     dyn.counts["accel"] += 1
 
 
@@ -215,8 +228,11 @@ class CompiledSplitting(_Compiled):
     def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
         hcoef = np.array([coeff * c.h for coeff in self.op_coefficients])
         htau = np.array([frac * c.h for frac in self.op_fractions])
+        columns = c.y.shape[1] >= COLUMN_MIN
         evals = call_kernel(
-            dyn.problem, "split_advance", self.kicks, hcoef, htau, bool(self.fsal), bool(c.force_valid),
+            "split_advance_cols" if columns else "split_advance",
+            address(dyn.problem, "accel_cols" if columns else "accel"), self.kicks, hcoef, htau,
+            bool(self.fsal), bool(c.force_valid),
             float(c.t0), int(c.n), float(c.h), int(n), c.y, c.a, _pars(dyn),
         )
         dyn.counts["accel"] += int(evals)
@@ -258,8 +274,11 @@ class CompiledLeapfrog(_Compiled):
         daxpy(c.a.reshape(-1), v_flat, a=coef)
 
     def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
+        columns = c.y.shape[1] >= COLUMN_MIN
         evals = call_kernel(
-            dyn.problem, "leapfrog_advance", float(self.drift * c.h), float(self.kick * c.h),
+            "leapfrog_advance_cols" if columns else "leapfrog_advance",
+            address(dyn.problem, "accel_cols" if columns else "accel"), float(self.drift * c.h),
+            float(self.kick * c.h),
             float(c.t0), int(c.n), float(c.h), int(n), c.y, c.a, _pars(dyn),
         )
         dyn.counts["accel"] += int(evals)
@@ -337,7 +356,8 @@ class CompiledStormer(_Compiled):
 
     def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
         evals = call_kernel(
-            dyn.problem, "stormer_advance", self.alpha0, self.alpha1, float(self.beta1 * c.h * c.h),
+            "stormer_advance", address(dyn.problem, "accel"), self.alpha0, self.alpha1,
+            float(self.beta1 * c.h * c.h),
             float(c.t0), int(c.n), float(c.h), int(n), c.prev, c.cur, c.nxt, c.a, _pars(dyn),
         )
         dyn.counts["accel"] += int(evals)
@@ -408,7 +428,7 @@ class CompiledMultistep(_Compiled):
         super().__init__(base)
         self.history_length = table.steps
         self.implicit = not bool(table.explicit)
-        self.part = "implicit" if self.implicit else "explicit"
+        self.part = "jacobian" if self.implicit else "functions"
         self.kind = "implicit linear multistep" if self.implicit else "explicit linear multistep"
         self.newton = _newton_settings(base)
         self.starter = getattr(base, "starter", "rk4")
@@ -491,7 +511,8 @@ class CompiledMultistep(_Compiled):
             stats = np.zeros(9)
             settings = self.newton
             call_kernel(
-                dyn.problem, "lmm_implicit_advance", table.alpha, table.beta, self.predictor,
+                "lmm_implicit_advance", address(dyn.problem, "rhs"), address(dyn.problem, "jac"),
+                table.alpha, table.beta, self.predictor,
                 settings.mode == "full", float(settings.tol), int(settings.max_iter), float(c.t0), n0,
                 float(c.h), steps, H, F, fvalid, _pars(dyn), stats,
             )
@@ -502,7 +523,7 @@ class CompiledMultistep(_Compiled):
                 )
         else:
             evals = call_kernel(
-                dyn.problem, "lmm_explicit_advance", table.alpha, table.beta, float(c.t0), n0,
+                "lmm_explicit_advance", address(dyn.problem, "rhs"), table.alpha, table.beta, float(c.t0), n0,
                 float(c.h), steps, H, F, fvalid, _pars(dyn),
             )
             dyn.counts["rhs"] += int(evals)
@@ -554,7 +575,7 @@ class CompiledImplicitRungeKutta(_Compiled):
     iteration cap, full or simplified) from the wrapped stepper."""
 
     kind = "implicit Runge-Kutta"
-    part = "implicit"
+    part = "jacobian"
 
     def __init__(self, base: Stepper):
         tab = base.coefficients
@@ -603,7 +624,8 @@ class CompiledImplicitRungeKutta(_Compiled):
         settings = self.newton
         stats = np.zeros(9)
         call_kernel(
-            dyn.problem, "irk_advance", self.A_ii, self.aie_sum, self.c_impl, self.d, self.w_sum,
+            "irk_advance", address(dyn.problem, "rhs"), address(dyn.problem, "jac"), self.A_ii,
+            self.aie_sum, self.c_impl, self.d, self.w_sum,
             self.last_row_inv, self.E, self.has_predictor, self.has_explicit, self.fsal,
             settings.mode == "full", float(settings.tol), int(settings.max_iter), float(c.t0),
             int(c.n), float(c.h), int(n), c.y, c.f_start, c.z_prev, c.flags, _pars(dyn), stats,

@@ -50,6 +50,11 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
 from harness import cache
 from harness.errors import InputError
 from harness.problem import Problem
@@ -58,12 +63,18 @@ __all__ = [
     "UnsupportedExpression",
     "translate_decomposition",
     "module_source",
+    "family_source",
     "problem_module",
+    "family_module",
+    "address",
     "call_kernel",
+    "call_state",
+    "call_columns",
     "KERNELS",
     "TEMPLATES",
     "COMPILE_LOG",
     "MAX_SMALL_POWER",
+    "COLUMN_BLOCK",
     "PARTS",
 ]
 
@@ -131,8 +142,9 @@ def _power(base: str, exponent: ast.AST, tr: _Translator) -> str:
 class _Translator:
     """One decomposition entry (heyoka infix text) -> numba source text."""
 
-    def __init__(self, names: dict[str, str]):
+    def __init__(self, names: dict[str, str], param: str = "p[{0}]"):
         self.names = names  # heyoka name -> generated name
+        self.param = param  # how a parameter p<k> is read
 
     def __call__(self, text: str) -> str:
         try:
@@ -150,7 +162,7 @@ class _Translator:
             if node.id == "t":
                 return "t"
             if node.id[:1] == "p" and node.id[1:].isdigit():
-                return f"p[{int(node.id[1:])}]"
+                return self.param.format(int(node.id[1:]))
             raise UnsupportedExpression(f"unknown name {node.id!r} in the decomposition")
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd):
             sign = "-" if isinstance(node.op, ast.USub) else "+"
@@ -178,9 +190,11 @@ class _Translator:
 
 
 def translate_decomposition(
-    fname: str, dc: Iterable[Any], variables: list[str], nouts: int, arg: str
+    fname: str, dc: Iterable[Any], variables: list[str], nouts: int, arg: str, *, columns: bool = False
 ) -> str:
-    """Numba source of `fname(t, <arg>, p, out)` from a heyoka decomposition.
+    """Numba source of `fname(t, <arg>, p, out)` from a heyoka decomposition (one state), or with
+    `columns` of `fname(t, X, P, Out, N, j0, j1)` over the members j0 <= j < j1 of flat C-order
+    states shaped (variables, N) (a loop the compiler can vectorise: reads and writes go along j).
 
     `dc` lists the variables (u_0 .. u_{n-1}, in `variables` order), then the elementary
     assignments u_k = op(...), then the `nouts` output expressions.
@@ -192,17 +206,21 @@ def translate_decomposition(
             f"decomposition does not start with the variables {variables}: {entries[:nvars]}"
         )
     names = {f"u_{i}": f"u_{i}" for i in range(len(entries))}
-    tr = _Translator(names)
-    lines = [f"def {fname}(t, {arg}, p, out):"]
+    if columns:
+        tr = _Translator(names, "P[{0} * N + j]")
+        lines = [f"def {fname}(t, X, P, Out, N, j0, j1):", "    for j in range(j0, j1):"]
+        pad, read, write = "        ", "X[{0} * N + j]", "Out[{0} * N + j]"
+    else:
+        tr = _Translator(names)
+        lines = [f"def {fname}(t, {arg}, p, out):"]
+        pad, read, write = "    ", f"{arg}[{{0}}]", "out[{0}]"
     for i in range(nvars):
-        lines.append(f"    u_{i} = {arg}[{i}]")
+        lines.append(f"{pad}u_{i} = {read.format(i)}")
     for k in range(nvars, len(entries) - nouts):
-        lines.append(f"    u_{k} = {tr(entries[k])}")
+        lines.append(f"{pad}u_{k} = {tr(entries[k])}")
     for j, text in enumerate(entries[len(entries) - nouts :]):
-        lines.append(f"    out[{j}] = {tr(text)}")
+        lines.append(f"{pad}{write.format(j)} = {tr(text)}")
     return "\n".join(lines) + "\n"
-
-
 
 
 # -- kernels: one per family, coefficients as arrays ----------------------------------------------
@@ -217,7 +235,7 @@ _JIT_EXACT = '@njit(cache=True, error_model="numpy")'
 
 _HELPERS = f'''
 {_JIT}
-def rhs_all(t, Y, P, Out):
+def rhs_all(f_rhs, t, Y, P, Out):
     dim = Y.shape[0]
     y = np.empty(dim)
     out = np.empty(dim)
@@ -227,14 +245,14 @@ def rhs_all(t, Y, P, Out):
             y[d] = Y[d, j]
         for k in range(P.shape[0]):
             p[k] = P[k, j]
-        rhs(t, y, p, out)
+        call_state(f_rhs, t, y, p, out)
         for d in range(dim):
             Out[d, j] = out[d]
 '''
 
 _ACCEL_HELPER = f'''
 {_JIT}
-def accel_all(t, Q, P, Out):
+def accel_all(f_accel, t, Q, P, Out):
     nq = Q.shape[0]
     q = np.empty(nq)
     out = np.empty(nq)
@@ -244,7 +262,7 @@ def accel_all(t, Q, P, Out):
             q[d] = Q[d, j]
         for k in range(P.shape[0]):
             p[k] = P[k, j]
-        accel(t, q, p, out)
+        call_state(f_accel, t, q, p, out)
         for d in range(nq):
             Out[d, j] = out[d]
 '''
@@ -253,7 +271,7 @@ def accel_all(t, Q, P, Out):
 # k_i = f(t + c_i h, y + h sum_j a_ij k_j), y <- y + h sum_i b_i k_i; zero coefficients skipped.
 RK = f'''
 {_JIT}
-def rk_advance(A, b, c, t0, n0, h, nsteps, Y, P):
+def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
     s = b.shape[0]
     dim = Y.shape[0]
     npar = P.shape[0]
@@ -278,7 +296,7 @@ def rk_advance(A, b, c, t0, n0, h, nsteps, Y, P):
                         if hA[i, m] != 0.0:
                             acc += hA[i, m] * K[m, d]
                     stage[d] = acc
-                rhs(t + hc[i], stage, p, K[i])
+                call_state(f_rhs, t + hc[i], stage, p, K[i])
             for d in range(dim):
                 acc = y[d]
                 for m in range(s):
@@ -294,7 +312,7 @@ def rk_advance(A, b, c, t0, n0, h, nsteps, Y, P):
 # v += b_i h a(q, t + tau_i h); a scheme that begins and ends with a kick reuses the last force.
 SPLITTING = f'''
 {_JIT}
-def split_advance(kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
+def split_advance(f_accel, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
     nops = kick.shape[0]
     nq = Acc.shape[0]
     npar = P.shape[0]
@@ -317,7 +335,7 @@ def split_advance(kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P)
             for i in range(nops):
                 if kick[i]:
                     if not (i == 0 and valid):
-                        accel(t + htau[i], q, p, a)
+                        call_state(f_accel, t + htau[i], q, p, a)
                         e += 1
                     for d in range(nq):
                         v[d] += a[d] * hcoef[i]
@@ -336,7 +354,7 @@ def split_advance(kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P)
 # Staggered leapfrog: x += d h v_{n+1/2}, v_{n+3/2} = v_{n+1/2} + k h a(x_{n+1}, t_{n+1}).
 LEAPFROG = f'''
 {_JIT}
-def leapfrog_advance(hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
+def leapfrog_advance(f_accel, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
     nq = Acc.shape[0]
     npar = P.shape[0]
     q = np.empty(nq)
@@ -354,7 +372,7 @@ def leapfrog_advance(hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
             t = t0 + (n0 + n + 1) * h
             for d in range(nq):
                 q[d] += v[d] * hdrift
-            accel(t, q, p, a)
+            call_state(f_accel, t, q, p, a)
             for d in range(nq):
                 v[d] += a[d] * hkick
         for d in range(nq):
@@ -364,12 +382,97 @@ def leapfrog_advance(hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
     return nsteps
 '''
 
+# Ensemble forms of the three explicit one-step families: blocks of COLUMN_BLOCK members advance
+# together, every update a loop along the members (vectorisable), the right-hand side or force
+# evaluated by the generated column function. Per member the arithmetic is that of the kernels
+# above, operation for operation.
+COLUMN_BLOCK = 256
+
+RK_COLUMNS = f'''
+{_JIT}
+def rk_advance_cols(f_rhs_cols, A, b, c, t0, n0, h, nsteps, Y, K, Stage, P):
+    s = b.shape[0]
+    dim, N = Y.shape
+    hA = A * h
+    hb = b * h
+    hc = c * h
+    for j0 in range(0, N, {COLUMN_BLOCK}):
+        j1 = min(N, j0 + {COLUMN_BLOCK})
+        for n in range(nsteps):
+            t = t0 + (n0 + n) * h
+            for i in range(s):
+                for d in range(dim):
+                    for j in range(j0, j1):
+                        Stage[d, j] = Y[d, j]
+                    for m in range(i):
+                        coef = hA[i, m]
+                        if coef != 0.0:
+                            for j in range(j0, j1):
+                                Stage[d, j] += coef * K[m, d, j]
+                call_columns(f_rhs_cols, t + hc[i], Stage, P, K[i], j0, j1)
+            for d in range(dim):
+                for m in range(s):
+                    coef = hb[m]
+                    if coef != 0.0:
+                        for j in range(j0, j1):
+                            Y[d, j] += coef * K[m, d, j]
+    return s * nsteps
+'''
+
+SPLITTING_COLUMNS = f'''
+{_JIT}
+def split_advance_cols(f_accel_cols, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
+    nops = kick.shape[0]
+    nq, N = Acc.shape
+    evals = 0
+    for j0 in range(0, N, {COLUMN_BLOCK}):
+        j1 = min(N, j0 + {COLUMN_BLOCK})
+        valid = valid0
+        e = 0
+        for n in range(nsteps):
+            t = t0 + (n0 + n) * h
+            for i in range(nops):
+                coef = hcoef[i]
+                if kick[i]:
+                    if not (i == 0 and valid):
+                        call_columns(f_accel_cols, t + htau[i], Y, P, Acc, j0, j1)
+                        e += 1
+                    for d in range(nq):
+                        for j in range(j0, j1):
+                            Y[nq + d, j] += Acc[d, j] * coef
+                else:
+                    for d in range(nq):
+                        for j in range(j0, j1):
+                            Y[d, j] += Y[nq + d, j] * coef
+            valid = fsal
+        evals = e
+    return evals
+'''
+
+LEAPFROG_COLUMNS = f'''
+{_JIT}
+def leapfrog_advance_cols(f_accel_cols, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
+    nq, N = Acc.shape
+    for j0 in range(0, N, {COLUMN_BLOCK}):
+        j1 = min(N, j0 + {COLUMN_BLOCK})
+        for n in range(nsteps):
+            t = t0 + (n0 + n + 1) * h
+            for d in range(nq):
+                for j in range(j0, j1):
+                    Y[d, j] += Y[nq + d, j] * hdrift
+            call_columns(f_accel_cols, t, Y, P, Acc, j0, j1)
+            for d in range(nq):
+                for j in range(j0, j1):
+                    Y[nq + d, j] += Acc[d, j] * hkick
+    return nsteps
+'''
+
 # Stormer's two-step form (Hairer, Norsett & Wanner I, III.10):
 # x_{n+1} = -alpha_1 x_n - alpha_0 x_{n-1} + h^2 beta_1 a(x_n, t_n). Prev/Cur/Nxt hold
 # (x_{n-1}, x_n, x_{n+1}); a step shifts them and forms the new x_{n+1} at t = t_n + h.
 STORMER = f'''
 {_JIT}
-def stormer_advance(alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur, Nxt, Acc, P):
+def stormer_advance(f_accel, alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur, Nxt, Acc, P):
     nq = Cur.shape[0]
     npar = P.shape[0]
     xp = np.empty(nq)
@@ -390,7 +493,7 @@ def stormer_advance(alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur, Nxt, Acc
                 xp[d] = xc[d]
                 xc[d] = xn[d]
             t = (t0 + (n0 + n) * h) + h
-            accel(t, xc, p, a)
+            call_state(f_accel, t, xc, p, a)
             for d in range(nq):
                 x = xp[d] * (-alpha0)
                 x += xc[d] * (-alpha1)
@@ -408,7 +511,7 @@ def stormer_advance(alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur, Nxt, Acc
 # first needed) and psi = -sum_j alpha_j y_{n+j} + h sum_j beta_j f_{n+j} over j < k.
 _LMM_PSI = f'''
 {_JIT_EXACT}
-def lmm_psi(alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p):
+def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p):
     k, dim, N = H.shape
     evals = 0
     for jj in range(k):
@@ -419,7 +522,7 @@ def lmm_psi(alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p):
                     y[d] = H[jj, d, m]
                 for q in range(P.shape[0]):
                     p[q] = P[q, m]
-                rhs(tj, y, p, out)
+                call_state(f_rhs, tj, y, p, out)
                 for d in range(dim):
                     F[jj, d, m] = out[d]
             fvalid[jj] = True
@@ -459,7 +562,7 @@ def lmm_shift(H, F, fvalid):
 # newest state makes every member NaN with no further evaluation, as in the NumPy loop.
 LMM_EXPLICIT = f'''
 {_JIT_EXACT}
-def lmm_explicit_advance(alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
+def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
     k, dim, N = H.shape
     psi = np.empty((dim, N))
     y = np.empty(dim)
@@ -473,7 +576,7 @@ def lmm_explicit_advance(alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
             H[k - 1] = np.nan
             fvalid[k - 1] = False
             continue
-        evals += lmm_psi(alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p)
+        evals += lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p)
         lmm_shift(H, F, fvalid)
         H[k - 1] = psi
         fvalid[k - 1] = False
@@ -529,7 +632,7 @@ def lu_solve(M, b, x):
 # failed iteration, increment, residual, contraction, status].
 IMPLICIT_RK = f'''
 {_JIT_EXACT}
-def irk_advance(A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
+def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
                 full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
     dim, N = Y.shape
     impl = c_impl.shape[0]
@@ -571,7 +674,7 @@ def irk_advance(A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_ex
             if flags[0] != 0:
                 Fexp[:, :] = Fstart
             else:
-                rhs_all(t, Y, P, Fexp)
+                rhs_all(f_rhs, t, Y, P, Fexp)
                 n_rhs += 1
         for d in range(dim):
             for j in range(N):
@@ -602,7 +705,7 @@ def irk_advance(A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_ex
                         ys[d] = Y[d, j] + X[i * dim + d, j]
                     for q in range(npar):
                         p[q] = P[q, j]
-                    rhs(ti, ys, p, out)
+                    call_state(f_rhs, ti, ys, p, out)
                     for d in range(dim):
                         Fimp[i, d, j] = out[d]
                 n_rhs += 1
@@ -631,12 +734,12 @@ def irk_advance(A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_ex
                         for i in range(impl):
                             for d in range(dim):
                                 ys[d] = Y[d, j] + X[i * dim + d, j]
-                            jac(t + c_impl[i] * h, ys, p, Jb)
+                            call_state(f_jac, t + c_impl[i] * h, ys, p, Jb)
                             Jall[i, :] = Jb
                     else:
                         for d in range(dim):
                             ys[d] = Y[d, j]
-                        jac(t, ys, p, Jb)
+                        call_state(f_jac, t, ys, p, Jb)
                         for i in range(impl):
                             Jall[i, :] = Jb
                     for i in range(impl):
@@ -729,7 +832,7 @@ def irk_advance(A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_ex
 # the polynomial extrapolation of the history; f at the new point recovered as (y - psi) / h beta_k.
 LMM_IMPLICIT = f'''
 {_JIT_EXACT}
-def lmm_implicit_advance(alpha, beta, wpred, full, tol, max_iter, t0, n0, h, nsteps, H, F,
+def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, t0, n0, h, nsteps, H, F,
                          fvalid, P, stats):
     k, dim, N = H.shape
     npar = P.shape[0]
@@ -757,7 +860,7 @@ def lmm_implicit_advance(alpha, beta, wpred, full, tol, max_iter, t0, n0, h, nst
             H[k - 1] = np.nan
             fvalid[k - 1] = False
             continue
-        n_rhs += lmm_psi(alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p)
+        n_rhs += lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p)
         t_new = t + h
         for d in range(dim):
             for j in range(N):
@@ -780,7 +883,7 @@ def lmm_implicit_advance(alpha, beta, wpred, full, tol, max_iter, t0, n0, h, nst
                     y[d] = X[d, j]
                 for q in range(npar):
                     p[q] = P[q, j]
-                rhs(t_new, y, p, out)
+                call_state(f_rhs, t_new, y, p, out)
                 for d in range(dim):
                     g = X[d, j] - psi[d, j] - hb * out[d]
                     G[d, j] = g
@@ -795,11 +898,11 @@ def lmm_implicit_advance(alpha, beta, wpred, full, tol, max_iter, t0, n0, h, nst
                     if full:
                         for d in range(dim):
                             y[d] = X[d, j]
-                        jac(t_new, y, p, Jb)
+                        call_state(f_jac, t_new, y, p, Jb)
                     else:
                         for d in range(dim):
                             y[d] = H[k - 1, d, j]
-                        jac(t, y, p, Jb)
+                        call_state(f_jac, t, y, p, Jb)
                     for a in range(dim):
                         for bb in range(dim):
                             v = -hb * Jb[a * dim + bb]
@@ -865,74 +968,151 @@ def lmm_implicit_advance(alpha, beta, wpred, full, tol, max_iter, t0, n0, h, nst
     stats[8] = 0
 '''
 
-#: Which module part holds each family kernel.
-KERNELS = {
-    "rk_advance": "explicit",
-    "split_advance": "explicit",
-    "leapfrog_advance": "explicit",
-    "stormer_advance": "explicit",
-    "lmm_explicit_advance": "explicit",
-    "rhs_all": "explicit",
-    "accel_all": "explicit",
-    "irk_advance": "implicit",
-    "lmm_implicit_advance": "implicit",
-}
+#: The family kernels (and helpers) of the generated family module.
+KERNELS = (
+    "rk_advance", "rk_advance_cols", "split_advance", "split_advance_cols", "leapfrog_advance",
+    "leapfrog_advance_cols", "stormer_advance", "lmm_explicit_advance", "irk_advance",
+    "lmm_implicit_advance", "rhs_all", "accel_all",
+)
 #: Every template, for fingerprints (a change to any kernel changes every compiled stepper's).
 TEMPLATES = (
     _HELPERS, _ACCEL_HELPER, _LMM_PSI, _NEWTON, RK, SPLITTING, LEAPFROG, STORMER, LMM_EXPLICIT,
-    IMPLICIT_RK, LMM_IMPLICIT,
+    IMPLICIT_RK, LMM_IMPLICIT, RK_COLUMNS, SPLITTING_COLUMNS, LEAPFROG_COLUMNS,
 )
-PARTS = ("explicit", "implicit")
+#: Per problem: 'functions' (rhs, rhs_cols, and accel, accel_cols for accelerations of the
+#: positions only) and 'jacobian' (jac, for the Newton-solved families).
+PARTS = ("functions", "jacobian")
 
 
-_HEADER = '''"""Generated by implementations.compiled_kernels for problem {name!r} ({part} part); do not
-edit. Functions translated from heyoka's decomposition; kernels from the templates in
-implementations/compiled_kernels.py. numba {numba_version}, Python {python}.
+# -- calling a problem's compiled function through its address ----------------------------------
+# The family kernels are compiled once for every problem: they receive each problem function as
+# the integer address of a numba `cfunc` and call it through these two intrinsics (an indirect
+# call, as a C loop calling through a function pointer).
+#   state form:   void f(double t, double *x, double *p, double *out)
+#   columns form: void f(double t, double *X, double *P, double *Out, int64 N, int64 j0, int64 j1)
+#                 (arrays shaped (rows, N), C order; members j0 <= j < j1)
+def _data_pointer(context, builder, array_type, value):
+    return context.make_array(array_type)(context, builder, value).data
+
+
+@intrinsic
+def call_state(typingctx, address, t, x, p, out):
+    """Call the state-form function at `address` with the arrays' data."""
+    sig = types.void(address, t, x, p, out)
+
+    def codegen(context, builder, signature, args):
+        dptr = ir.DoubleType().as_pointer()
+        pointers = [
+            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
+            for ty, value in zip(signature.args[2:], args[2:], strict=True)
+        ]
+        fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType(), dptr, dptr, dptr])
+        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], *pointers])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def call_columns(typingctx, address, t, X, P, Out, j0, j1):
+    """Call the columns-form function at `address` for members j0 <= j < j1 of `X`."""
+    sig = types.void(address, t, X, P, Out, j0, j1)
+
+    def codegen(context, builder, signature, args):
+        dptr = ir.DoubleType().as_pointer()
+        i64 = ir.IntType(64)
+        pointers = [
+            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
+            for ty, value in zip(signature.args[2:5], args[2:5], strict=True)
+        ]
+        x_array = context.make_array(signature.args[2])(context, builder, args[2])
+        n = cgutils.unpack_tuple(builder, x_array.shape, 2)[1]
+        fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType(), dptr, dptr, dptr, i64, i64, i64])
+        bounds = [builder.sext(v, i64) if v.type.width < 64 else v for v in (n, args[5], args[6])]
+        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], *pointers, *bounds])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+_STATE_SIG = (
+    "types.void(types.float64, types.CPointer(types.float64), types.CPointer(types.float64), "
+    "types.CPointer(types.float64))"
+)
+_COLUMNS_SIG = (
+    "types.void(types.float64, types.CPointer(types.float64), types.CPointer(types.float64), "
+    "types.CPointer(types.float64), types.int64, types.int64, types.int64)"
+)
+_CFUNC = '@cfunc({sig}, cache=True, error_model="numpy", fastmath={{"contract"}})'
+
+_FAMILY_HEADER = '''"""Generated by implementations.compiled_kernels: the family kernels, compiled once
+for every problem (problem functions are called through their addresses); do not edit.
+numba {numba_version}, Python {python}.
 """
-import math
-
 import numpy as np
 from numba import njit
 
+from implementations.compiled_kernels import call_columns, call_state
+
 '''
+
+_PROBLEM_HEADER = '''"""Generated by implementations.compiled_kernels for problem {name!r} ({part}); do
+not edit. Functions translated from heyoka's decomposition, compiled as C-callable numba cfuncs. numba
+{numba_version}, Python {python}.
+"""
+import math
+
+from numba import cfunc, types
+
+'''
+
+
+def _versions() -> dict[str, str]:
+    import numba
+
+    return {"numba_version": numba.__version__, "python": ".".join(map(str, sys.version_info[:3]))}
+
+
+def family_source() -> str:
+    """The text of the generated family-kernel module (the same for every problem)."""
+    parts = [_HELPERS, _ACCEL_HELPER, RK, RK_COLUMNS, SPLITTING, SPLITTING_COLUMNS, LEAPFROG,
+             LEAPFROG_COLUMNS, STORMER, _LMM_PSI, LMM_EXPLICIT, _NEWTON, IMPLICIT_RK, LMM_IMPLICIT]
+    return _FAMILY_HEADER.format(**_versions()) + "\n\n".join(p.strip("\n") + "\n" for p in parts)
 
 
 def _accel_positions_only(problem: Problem) -> bool:
     return problem.newtonian is not None and not problem.velocity_dependent
 
 
-def module_source(problem: Problem, part: str = "explicit") -> str:
-    """The text of the generated module `part` ('explicit' or 'implicit') for `problem`
-    (raises UnsupportedExpression)."""
-    import numba
+def _cfunc_source(fname: str, fn: Any, variables: list[str], nouts: int, arg: str, columns: bool) -> str:
+    sig = _COLUMNS_SIG if columns else _STATE_SIG
+    if columns:
+        body = translate_decomposition(fname, fn.dc, variables, nouts, arg, columns=True)
+    else:
+        body = translate_decomposition(fname, fn.dc, variables, nouts, arg)
+    return _CFUNC.format(sig=sig) + "\n" + body
 
+
+def module_source(problem: Problem, part: str = "functions") -> str:
+    """The text of `problem`'s generated module `part` ('functions' or 'jacobian'); raises
+    UnsupportedExpression when an operation has no translation."""
     if part not in PARTS:
         raise InputError(f"`part` must be one of {PARTS}, got {part!r}")
     variables = [str(v) for v in problem.variables]
-    rhs_fn = problem.compiled("rhs", None)
-    parts = [_JIT + "\n" + translate_decomposition("rhs", rhs_fn.dc, variables, problem.dim, "y")]
-    parts.append(_HELPERS)
-    if part == "explicit":
-        parts += [RK, _LMM_PSI, LMM_EXPLICIT]
+    parts = []
+    if part == "functions":
+        rhs_fn = problem.compiled("rhs", None)
+        for fname, columns in (("rhs", False), ("rhs_cols", True)):
+            parts.append(_cfunc_source(fname, rhs_fn, variables, problem.dim, "y", columns))
         if _accel_positions_only(problem):
             positions = [str(v) for v in problem.newtonian.positions]
             acc_fn = problem.compiled("accel_q", None)
-            parts.append(
-                _JIT + "\n" + translate_decomposition("accel", acc_fn.dc, positions, len(positions), "q")
-            )
-            parts += [_ACCEL_HELPER, SPLITTING, LEAPFROG, STORMER]
+            for fname, columns in (("accel", False), ("accel_cols", True)):
+                parts.append(_cfunc_source(fname, acc_fn, positions, len(positions), "q", columns))
     else:
         jac_fn = problem.compiled("jac", None)
-        parts.append(
-            _JIT + "\n" + translate_decomposition("jac", jac_fn.dc, variables, problem.dim**2, "y")
-        )
-        parts += [_NEWTON, _LMM_PSI, IMPLICIT_RK, LMM_IMPLICIT]
-    header = _HEADER.format(
-        name=problem.name,
-        part=part,
-        numba_version=numba.__version__,
-        python=".".join(map(str, sys.version_info[:3])),
-    )
+        parts.append(_cfunc_source("jac", jac_fn, variables, problem.dim**2, "y", False))
+    header = _PROBLEM_HEADER.format(name=problem.name, part=part, **_versions())
     return header + "\n\n".join(p.strip("\n") + "\n" for p in parts)
 
 
@@ -943,11 +1123,12 @@ class _Entry:
     reason: str | None
 
 
-#: One record per kernel's first call in this process: problem, kernel, seconds, and whether
-#: numba loaded it from its on-disk cache ("cached") or compiled it ("compiled").
+#: One record per first use in this process: what ("family kernels" or the problem's module
+#: part, or a kernel), seconds, and whether numba compiled it or loaded it from its disk cache.
 COMPILE_LOG: list[dict[str, Any]] = []
 
 _modules: weakref.WeakKeyDictionary[Problem, dict[str, _Entry]] = weakref.WeakKeyDictionary()
+_family: list[ModuleType] = []
 _lock = threading.RLock()
 
 
@@ -977,8 +1158,36 @@ def _slug(name: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in name)[:40]
 
 
-def problem_module(problem: Problem, part: str = "explicit") -> ModuleType:
-    """The generated, imported module `part` for `problem` (raises UnsupportedExpression)."""
+def _import_text(text: str, stem: str, what: str) -> ModuleType:
+    digest = hashlib.sha256(text.encode()).hexdigest()[:20]
+    path = cache.cache_dir() / "numba" / f"{stem}_{digest}.py"
+    _write_once(path, text)
+    mod_name = f"_harness_numba_{digest}"
+    module = sys.modules.get(mod_name)
+    if module is None:
+        # Registered before it runs: numba's cache records the module by name and imports it by
+        # that name when it loads a cached function.
+        spec = importlib.util.spec_from_file_location(mod_name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = module
+        start = time.perf_counter()
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            sys.modules.pop(mod_name, None)
+            raise
+        cfuncs = [v for v in vars(module).values() if hasattr(v, "address") and hasattr(v, "cache_hits")]
+        if cfuncs:
+            COMPILE_LOG.append({
+                "what": what,
+                "seconds": time.perf_counter() - start,
+                "source": "cached" if all(f.cache_hits for f in cfuncs) else "compiled",
+            })
+    return module
+
+
+def problem_module(problem: Problem, part: str = "functions") -> ModuleType:
+    """`problem`'s generated, imported module `part` (raises UnsupportedExpression)."""
     with _lock:
         entries = _modules.setdefault(problem, {})
         entry = entries.get(part)
@@ -988,22 +1197,7 @@ def problem_module(problem: Problem, part: str = "explicit") -> ModuleType:
             except UnsupportedExpression as exc:
                 entry = _Entry(None, str(exc))
             else:
-                digest = hashlib.sha256(text.encode()).hexdigest()[:20]
-                path = cache.cache_dir() / "numba" / f"{_slug(problem.name)}_{part}_{digest}.py"
-                _write_once(path, text)
-                mod_name = f"_harness_numba_{digest}"
-                module = sys.modules.get(mod_name)
-                if module is None:
-                    # Registered before it runs: numba's cache records the module by name and
-                    # imports it by that name when it loads a cached kernel.
-                    spec = importlib.util.spec_from_file_location(mod_name, path)
-                    module = importlib.util.module_from_spec(spec)
-                    sys.modules[mod_name] = module
-                    try:
-                        spec.loader.exec_module(module)
-                    except BaseException:
-                        sys.modules.pop(mod_name, None)
-                        raise
+                module = _import_text(text, f"{_slug(problem.name)}_{part}", f"{problem.name} {part}")
                 entry = _Entry(module, None)
             entries[part] = entry
     if entry.module is None:
@@ -1011,12 +1205,30 @@ def problem_module(problem: Problem, part: str = "explicit") -> ModuleType:
     return entry.module
 
 
-def call_kernel(problem: Problem, name: str, *args: Any) -> Any:
-    """Call the family kernel `name` of `problem`'s generated module with `args`; the first call
-    in this process records its compile (or cache load) time in COMPILE_LOG."""
+def family_module() -> ModuleType:
+    """The generated, imported family-kernel module (one per process)."""
+    with _lock:
+        if not _family:
+            _family.append(_import_text(family_source(), "families", "family kernels"))
+        return _family[0]
+
+
+def address(problem: Problem, name: str) -> int:
+    """The address of `problem`'s generated function `name` ('rhs', 'rhs_cols', 'accel',
+    'accel_cols' or 'jac'); raises UnsupportedExpression."""
+    part = "jacobian" if name == "jac" else "functions"
+    fn = getattr(problem_module(problem, part), name, None)
+    if fn is None:
+        raise InputError(f"problem {problem.name!r} has no compiled function {name!r}")
+    return int(fn.address)
+
+
+def call_kernel(name: str, *args: Any) -> Any:
+    """Call the family kernel `name` with `args`; its first call in this process records its
+    compile (or cache load) time in COMPILE_LOG."""
     if name not in KERNELS:
-        raise InputError(f"`name` must be one of {sorted(KERNELS)}, got {name!r}")
-    kernel = getattr(problem_module(problem, KERNELS[name]), name)
+        raise InputError(f"`name` must be one of {list(KERNELS)}, got {name!r}")
+    kernel = getattr(family_module(), name)
     if kernel.signatures:
         return kernel(*args)
     start = time.perf_counter()
@@ -1024,8 +1236,7 @@ def call_kernel(problem: Problem, name: str, *args: Any) -> Any:
     elapsed = time.perf_counter() - start
     stats = kernel.stats
     COMPILE_LOG.append({
-        "problem": problem.name,
-        "kernel": name,
+        "what": name,
         "seconds": elapsed,
         "source": "cached" if stats.cache_hits and not stats.cache_misses else "compiled",
     })

@@ -32,6 +32,7 @@ from harness.stepper import StepFailure, check_compatible
 from harness.tolerances import COMPILED_AGREEMENT_ULPS, EPS
 from implementations import FAMILY_MODULES
 from implementations.compiled import (
+    COLUMN_MIN,
     COMPILE_LOG,
     NOT_COMPILED,
     SUFFIX,
@@ -41,7 +42,7 @@ from implementations.compiled import (
     problem_module,
     translate_decomposition,
 )
-from implementations.compiled_kernels import MAX_SMALL_POWER
+from implementations.compiled_kernels import COLUMN_BLOCK, MAX_SMALL_POWER
 from implementations.implicit_rk import ImplicitRungeKutta
 from implementations.multistep import LinearMultistepStepper
 from implementations.runge_kutta import ExplicitRungeKutta
@@ -169,16 +170,34 @@ def test_round_trip_and_single_step_agree(stepper):
     _assert_agree(one_a, one_b, f"{stepper.info.name} one step from history")
 
 
+@pytest.mark.parametrize("name", ["rk4", "velocity-verlet", "forest-ruth", "leapfrog", "position-verlet"])
+@pytest.mark.parametrize("problem_name", ["kepler-elliptic", "forced-duffing"])
+def test_ensembles_run_by_the_column_kernels_agree(name, problem_name):
+    """Ensembles of COLUMN_MIN members and more go through the column kernels (blocks of
+    COLUMN_BLOCK members); one that spans two blocks, with a partial last block."""
+    problem = get_problem(problem_name)
+    stepper = get_stepper(name + SUFFIX)
+    assert stepper.compatible(problem)
+    for size in (COLUMN_MIN, COLUMN_BLOCK + 5):
+        _compare(stepper.base, stepper, problem, steps=30, size=size)
+    _, back_a = stepper.base.round_trip(problem, h=_h(problem), n_steps=20, y0=problem.ensemble(20))
+    _, back_b = stepper.round_trip(problem, h=_h(problem), n_steps=20, y0=problem.ensemble(20))
+    _assert_agree(back_a, back_b, f"{name} ensemble round trip")
+
+
 def test_member_parameters_are_passed_per_member():
     problem = get_problem("dahlquist")
     pars = np.array([[-1.0, -2.0, -0.5], [0.0, 1.0, 3.0]])
     y0 = np.ones((2, 3))
+    wide_pars = np.repeat(pars, 4, axis=1)  # 12 members: the column kernels
+    wide_y0 = np.ones((2, 12))
     for name in ("rk4", "euler", "gauss-legendre-4", "bdf2", "ab3"):
-        a = get_stepper(name).integrate(problem, h=0.01, n_steps=50, y0=y0, pars=pars)
-        b = get_stepper(name + SUFFIX).integrate(problem, h=0.01, n_steps=50, y0=y0, pars=pars)
-        _assert_agree(a.final, b.final, f"{name} with per-member parameters")
-        assert a.evals == b.evals
-        assert not np.allclose(b.final[:, 0], b.final[:, 1])
+        for P, Y in ((pars, y0), (wide_pars, wide_y0)):
+            a = get_stepper(name).integrate(problem, h=0.01, n_steps=50, y0=Y, pars=P)
+            b = get_stepper(name + SUFFIX).integrate(problem, h=0.01, n_steps=50, y0=Y, pars=P)
+            _assert_agree(a.final, b.final, f"{name} with per-member parameters")
+            assert a.evals == b.evals
+            assert not np.allclose(b.final[:, 0], b.final[:, 1])
 
 
 # -- methods given only as coefficients --------------------------------------------------------------
