@@ -1,36 +1,38 @@
-"""Generated numba code for the compiled implementation: one step loop per family, fed
-coefficients as arrays, and the problem's functions translated from heyoka's decomposition.
+"""Generated numba code for the compiled implementation: one step loop per family, fed the
+method's coefficients as arrays and the problem's functions as addresses, compiled once.
 
-Per problem, two modules are generated (Lam, Pitrou & Seibert, *Numba: a LLVM-based Python JIT
-compiler*, LLVM-HPC 2015, for the compiler):
-- `explicit`: the right-hand side `rhs(t, y, p, out)` and, for Newtonian problems whose
-  acceleration ignores the velocity, `accel(t, q, p, out)`, with the kernels of the explicit
-  families (explicit Runge-Kutta, splitting, staggered leapfrog, Stormer two-step, explicit
-  linear multistep);
-- `implicit`: `rhs` and the Jacobian `jac(t, y, p, out)` (row-major df_i/dy_j), with the kernels
-  of the Newton-solved families (implicit Runge-Kutta, implicit linear multistep). Kept apart so
-  an explicit run never translates a Jacobian (1296 entries for 12 bodies).
-Every kernel reads its method from coefficient arrays (A, b, c; drift/kick sequence; alpha,
-beta), so one kernel per family serves every method of that family, built-in or a user's.
+Two kinds of generated module (Lam, Pitrou & Seibert, *Numba: a LLVM-based Python JIT compiler*,
+LLVM-HPC 2015, for the compiler):
+- the family module, the same for every problem and method: the kernels of explicit Runge-Kutta,
+  splitting, the staggered leapfrog, Stormer's two-step rule, explicit and implicit linear
+  multistep, implicit Runge-Kutta (Newton), and column forms of the explicit one-step families
+  for ensembles. A kernel reads its method from arrays (A, b, c; the drift/kick sequence; alpha,
+  beta) and calls the problem's functions through their addresses (`call_state`,
+  `call_columns`: an indirect call, as a C loop through a function pointer). So a cold run
+  compiles each family kernel once, whatever the problems and methods, and later processes load
+  them from numba's disk cache.
+- per problem, its functions as C-callable numba `cfunc`s: `rhs(t, y, p, out)`, its column form
+  `rhs_cols(t, X, P, Out, N, j0, j1)`, for Newtonian problems whose acceleration ignores the
+  velocity `accel` and `accel_cols`, and (a separate module, built only for the Newton-solved
+  families) the row-major Jacobian `jac(t, y, p, out)`. Small, so quick to compile.
+heyoka's Python `cfunc` exposes no function address to call instead (checked: heyoka 7.13, the
+object has `dc`, `fn`, `llvm_states`, no pointer), so the functions are generated from heyoka's
+decomposition (`cfunc.dc`): a list of elementary assignments u_k = op(u_i, u_j), common
+subexpressions already shared, each printed as Python-like infix (`(u_0 * u_1)`, `div(u_3,
+u_7)`, `u_6**1.5000000000000000`, `sin(u_0)`, `p0` for a parameter, `t` for time), parsed with
+`ast` and emitted as numba source. An operation without a translation makes the problem
+incompatible (with the reason).
 
-How the problem's functions are generated: heyoka's decomposition of the compiled function
-(`cfunc.dc`) is a list of elementary assignments u_k = op(u_i, u_j), common subexpressions
-already shared. Each entry is printed as Python-like infix (`(u_0 * u_1)`, `div(u_3, u_7)`,
-`u_6**1.5000000000000000`, `sin(u_0)`, `p0` for a parameter, `t` for time), parsed with `ast`
-and emitted as numba source. An operation without a translation makes the problem incompatible
-(with the reason). heyoka's Python `cfunc` exposes no function address to call instead (checked:
-heyoka 7.13, the object has `dc`, `fn`, `llvm_states`, no pointer).
+Caching: every module text is written once to `harness.cache.cache_dir() / "numba"`, named by a
+hash of its text, and imported under a name derived from that hash; every function has
+`cache=True`. `COMPILE_LOG` records, per process, what was compiled or loaded and how long it took.
 
-Caching: the module text is written once to `harness.cache.cache_dir() / "numba"`, named by a
-hash of its text, and imported under a name derived from that hash; every function is
-`@njit(cache=True)`, so a later process loads machine code from numba's on-disk cache in
-milliseconds. A kernel is compiled on its first call only: a run compiles the kernels of the
-families it uses, per problem.
-
-Floating-point rules: operations in the NumPy loops' order; a*b + c may become one fused
-multiply-add (as in heyoka's compiled functions and the BLAS axpy updates of the NumPy loops);
-no other fast-math licence; `error_model="numpy"` (a division by zero gives inf/NaN as in NumPy,
-and no check blocks vectorisation).
+Floating-point rules: operations in the NumPy loops' order; in the functions and the explicit
+one-step and Stormer kernels a*b + c may become one fused multiply-add (as in heyoka's compiled
+functions and the BLAS axpy updates of the NumPy loops); the multistep and implicit kernels,
+whose NumPy loops are plain array expressions, contract nothing; no other fast-math licence;
+`error_model="numpy"` (a division by zero gives inf/NaN as in NumPy, and no check blocks
+vectorisation).
 """
 
 from __future__ import annotations
@@ -1047,7 +1049,7 @@ _CFUNC = '@cfunc({sig}, cache=True, error_model="numpy", fastmath={{"contract"}}
 
 _FAMILY_HEADER = '''"""Generated by implementations.compiled_kernels: the family kernels, compiled once
 for every problem (problem functions are called through their addresses); do not edit.
-numba {numba_version}, Python {python}.
+numba {numba_version}, Python {python}; call intrinsics {intrinsics}.
 """
 import numpy as np
 from numba import njit
@@ -1073,11 +1075,21 @@ def _versions() -> dict[str, str]:
     return {"numba_version": numba.__version__, "python": ".".join(map(str, sys.version_info[:3]))}
 
 
+def _intrinsics_digest() -> str:
+    """A hash of the call intrinsics' code: numba's cache checks only the generated module's own
+    file, so the module's text names the intrinsics' version."""
+    import inspect
+
+    code = "".join(inspect.getsource(f) for f in (_data_pointer, call_state, call_columns))
+    return hashlib.sha256(code.encode()).hexdigest()[:16]
+
+
 def family_source() -> str:
     """The text of the generated family-kernel module (the same for every problem)."""
     parts = [_HELPERS, _ACCEL_HELPER, RK, RK_COLUMNS, SPLITTING, SPLITTING_COLUMNS, LEAPFROG,
              LEAPFROG_COLUMNS, STORMER, _LMM_PSI, LMM_EXPLICIT, _NEWTON, IMPLICIT_RK, LMM_IMPLICIT]
-    return _FAMILY_HEADER.format(**_versions()) + "\n\n".join(p.strip("\n") + "\n" for p in parts)
+    header = _FAMILY_HEADER.format(**_versions(), intrinsics=_intrinsics_digest())
+    return header + "\n\n".join(p.strip("\n") + "\n" for p in parts)
 
 
 def _accel_positions_only(problem: Problem) -> bool:

@@ -42,7 +42,7 @@ from implementations.compiled import (
     problem_module,
     translate_decomposition,
 )
-from implementations.compiled_kernels import COLUMN_BLOCK, MAX_SMALL_POWER
+from implementations.compiled_kernels import COLUMN_BLOCK, MAX_SMALL_POWER, family_module
 from implementations.implicit_rk import ImplicitRungeKutta
 from implementations.multistep import LinearMultistepStepper
 from implementations.runge_kutta import ExplicitRungeKutta
@@ -189,7 +189,7 @@ def test_member_parameters_are_passed_per_member():
     problem = get_problem("dahlquist")
     pars = np.array([[-1.0, -2.0, -0.5], [0.0, 1.0, 3.0]])
     y0 = np.ones((2, 3))
-    wide_pars = np.repeat(pars, 4, axis=1)  # 12 members: the column kernels
+    wide_pars = np.tile(pars, 4)  # 12 members: the column kernels
     wide_y0 = np.ones((2, 12))
     for name in ("rk4", "euler", "gauss-legendre-4", "bdf2", "ab3"):
         for P, Y in ((pars, y0), (wide_pars, wide_y0)):
@@ -301,16 +301,27 @@ def test_compiled_variant_refuses_steppers_without_coefficients(bad):
 
 # -- code generation ------------------------------------------------------------------------------------
 def test_generated_modules_are_cached_in_the_project_cache_dir():
+    """Per problem, its functions (and Jacobian); the family kernels once for all problems."""
     from harness.cache import cache_dir
 
     problem = get_problem("harmonic")
-    for part, needle in (("explicit", "def accel(t, q, p, out):"), ("implicit", "def jac(t, y, p, out):")):
+    needles = {
+        "functions": ["def rhs(t, y, p, out):", "def accel(t, q, p, out):",
+                      "def rhs_cols(t, X, P, Out, N, j0, j1):"],
+        "jacobian": ["def jac(t, y, p, out):"],
+    }
+    for part, wanted in needles.items():
         module = problem_module(problem, part)
         assert problem_module(problem, part) is module
         path = Path(module.__file__)
         assert path.parent == cache_dir() / "numba"
         text = path.read_text()
-        assert "def rhs(t, y, p, out):" in text and needle in text
+        assert all(needle in text for needle in wanted)
+    family = family_module()
+    assert Path(family.__file__).parent == cache_dir() / "numba"
+    assert family is family_module()
+    # one family module for every problem: no problem's name or function is in it
+    assert "kepler" not in Path(family.__file__).read_text()
 
 
 @pytest.mark.parametrize(
@@ -427,8 +438,10 @@ def test_cold_compile_and_cached_load_are_recorded(tmp_path):
         )
         assert done.returncode == 0, done.stderr
         runs[label] = json.loads(done.stdout.strip().splitlines()[-1])
-    assert runs["cold"]["kernel"][0]["source"] == "compiled"
-    assert runs["cached"]["kernel"][0]["source"] == "cached"
+    # the problem's functions and the splitting kernel: compiled cold, loaded when cached
+    assert {r["what"] for r in runs["cold"]["kernel"]} >= {"kepler-elliptic functions", "split_advance"}
+    assert {r["source"] for r in runs["cold"]["kernel"]} == {"compiled"}
+    assert {r["source"] for r in runs["cached"]["kernel"]} == {"cached"}
     assert runs["cold"]["final"] == runs["cached"]["final"]
     runs["load_average"] = os.getloadavg()
     runs["bytecode_cached"] = not sys.dont_write_bytecode
