@@ -7,6 +7,7 @@ never into a failure.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -74,35 +75,44 @@ def initial_states(problem, ensemble: int) -> np.ndarray:
 
 
 def prepared(stepper, problem, ensemble: int, h: float | None = None):
-    """(dyn, carry) after one warm-up step, so the next step is a steady-state step (a
-    first-same-as-last force is cached, a multistep history is started, a kernel is loaded)."""
+    """(dyn, carry) after warm-up steps, so the next step is a steady-state step (a
+    first-same-as-last force is cached, a multistep method's starting values are used up and
+    its formula has run once, a compiled kernel is loaded)."""
     h = STEP.get(problem.name, 1e-3) if h is None else h
     y = initial_states(problem, ensemble)
     dyn = problem.dynamics(None, ensemble)
     with np.errstate(all="ignore"):
         carry = stepper._start(dyn, problem.t0, y, h)
-        stepper._advance(dyn, carry, 1)
+        stepper._advance(dyn, carry, max(1, stepper.history_length))
     return dyn, carry
+
+
+#: The clock of `seconds_per_call`: wall time by default; `HARNESS_BENCH_CLOCK=cpu` takes this
+#: thread's CPU time instead, which leaves out the time other processes hold the cores (for
+#: ratios measured on a loaded machine).
+def _clock() -> Callable[[], float]:
+    return time.thread_time if os.environ.get("HARNESS_BENCH_CLOCK") == "cpu" else time.perf_counter
 
 
 def seconds_per_call(
     fn: Callable[[int], object], budget: float = 0.05, repeats: int = 3
 ) -> tuple[float, int]:
-    """Best wall time of fn(n) over `repeats` runs, with n doubled until one run takes `budget`
+    """Best time of fn(n) over `repeats` runs, with n doubled until one run takes `budget`
     seconds; returns (seconds per unit of n, n)."""
+    clock = _clock()
     n = 1
     while True:
-        start = time.perf_counter()
+        start = clock()
         fn(n)
-        elapsed = time.perf_counter() - start
+        elapsed = clock() - start
         if elapsed >= budget or n >= 1 << 22:
             break
         n *= 2 if elapsed > budget / 10 else 8
     best = elapsed
     for _ in range(repeats - 1):
-        start = time.perf_counter()
+        start = clock()
         fn(n)
-        best = min(best, time.perf_counter() - start)
+        best = min(best, clock() - start)
     return best / n, n
 
 

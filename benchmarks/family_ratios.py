@@ -2,6 +2,7 @@
 step at N = 10^5 (velocity Verlet and RK4, the C ensemble loops).
 
     .venv/bin/python -m benchmarks.family_ratios
+    HARNESS_BENCH_CLOCK=cpu .venv/bin/python -m benchmarks.family_ratios   # CPU time, loaded machine
 
 Prints a Markdown table (best of three calibrated runs per figure, steps run by the steppers'
 own `_advance`) with the machine's load average before and after: timings on a shared machine
@@ -62,7 +63,7 @@ def ensemble_table(size: int = 100_000) -> str:
 
 
 def main() -> None:
-    print(_load())
+    print(_load(), "| clock:", os.environ.get("HARNESS_BENCH_CLOCK", "wall"))
     print(family_table())
     print()
     print(ensemble_table())

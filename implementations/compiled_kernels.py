@@ -71,6 +71,7 @@ __all__ = [
     "address",
     "call_kernel",
     "call_state",
+    "call_state_into",
     "call_columns",
     "KERNELS",
     "TEMPLATES",
@@ -234,9 +235,12 @@ _JIT = '@njit(cache=True, error_model="numpy", fastmath={"contract"})'
 # The multistep and implicit Runge-Kutta loops of the NumPy implementation are plain array
 # expressions (one rounding per operation, no BLAS): their kernels contract nothing either.
 _JIT_EXACT = '@njit(cache=True, error_model="numpy")'
+# Helpers called once per step or per member are inlined into the kernels (numba's IR inlining):
+# a call between compiled functions passes each array with its reference counts.
+_JIT_INLINE = '@njit(cache=True, error_model="numpy", inline="always")'
 
 _HELPERS = f'''
-{_JIT}
+{_JIT_INLINE}
 def rhs_all(f_rhs, t, Y, P, Out):
     dim = Y.shape[0]
     y = np.empty(dim)
@@ -280,9 +284,30 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
     hA = A * h
     hb = b * h
     hc = c * h
+    # the nonzero terms of each stage (start[i] .. start[i + 1]) and of the update, in order
+    start = np.zeros(s + 1, dtype=np.int64)
+    term = np.empty(s * s, dtype=np.int64)
+    coef = np.empty(s * s)
+    nz = 0
+    for i in range(s):
+        start[i] = nz
+        for m in range(i):
+            if hA[i, m] != 0.0:
+                term[nz] = m
+                coef[nz] = hA[i, m]
+                nz += 1
+    start[s] = nz
+    wterm = np.empty(s, dtype=np.int64)
+    wcoef = np.empty(s)
+    nw = 0
+    for m in range(s):
+        if hb[m] != 0.0:
+            wterm[nw] = m
+            wcoef[nw] = hb[m]
+            nw += 1
     y = np.empty(dim)
     stage = np.empty(dim)
-    K = np.empty((s, dim))
+    K = np.empty(s * dim)
     p = np.empty(npar)
     for j in range(Y.shape[1]):
         for d in range(dim):
@@ -294,16 +319,14 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
             for i in range(s):
                 for d in range(dim):
                     acc = y[d]
-                    for m in range(i):
-                        if hA[i, m] != 0.0:
-                            acc += hA[i, m] * K[m, d]
+                    for q in range(start[i], start[i + 1]):
+                        acc += coef[q] * K[term[q] * dim + d]
                     stage[d] = acc
-                call_state(f_rhs, t + hc[i], stage, p, K[i])
+                call_state_into(f_rhs, t + hc[i], stage, p, K, i * dim)
             for d in range(dim):
                 acc = y[d]
-                for m in range(s):
-                    if hb[m] != 0.0:
-                        acc += hb[m] * K[m, d]
+                for q in range(nw):
+                    acc += wcoef[q] * K[wterm[q] * dim + d]
                 y[d] = acc
         for d in range(dim):
             Y[d, j] = y[d]
@@ -512,76 +535,152 @@ def stormer_advance(f_accel, alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur,
 # Linear multistep, shared part: f at the history points a beta needs (each evaluated once, when
 # first needed) and psi = -sum_j alpha_j y_{n+j} + h sum_j beta_j f_{n+j} over j < k.
 _LMM_PSI = f'''
-{_JIT_EXACT}
-def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p):
+{_JIT_INLINE}
+def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slots):
+    # history index jj (0 = oldest) lives in ring slot (head + jj) % k
     k, dim, N = H.shape
+    for jj in range(k):
+        slot = head + jj
+        slots[jj] = slot - k if slot >= k else slot
     evals = 0
     for jj in range(k):
-        if beta[jj] != 0.0 and not fvalid[jj]:
+        slot = slots[jj]
+        if beta[jj] != 0.0 and not fvalid[slot]:
             tj = t - (k - 1 - jj) * h
             for m in range(N):
                 for d in range(dim):
-                    y[d] = H[jj, d, m]
+                    y[d] = H[slot, d, m]
                 for q in range(P.shape[0]):
                     p[q] = P[q, m]
                 call_state(f_rhs, tj, y, p, out)
                 for d in range(dim):
-                    F[jj, d, m] = out[d]
-            fvalid[jj] = True
+                    F[slot, d, m] = out[d]
+            fvalid[slot] = True
             evals += 1
     for m in range(N):
         for d in range(dim):
             acc = 0.0
             for jj in range(k):
+                slot = slots[jj]
                 if alpha[jj] != 0.0:
-                    acc -= alpha[jj] * H[jj, d, m]
+                    acc -= alpha[jj] * H[slot, d, m]
                 if beta[jj] != 0.0:
-                    acc += (h * beta[jj]) * F[jj, d, m]
+                    acc += (h * beta[jj]) * F[slot, d, m]
             psi[d, m] = acc
     return evals
 
 
-{_JIT_EXACT}
-def lmm_finite(H):
+{_JIT_INLINE}
+def lmm_finite(H, slot):
     k, dim, N = H.shape
     for d in range(dim):
         for m in range(N):
-            if not np.isfinite(H[k - 1, d, m]):
+            if not np.isfinite(H[slot, d, m]):
                 return False
     return True
 
 
+{_JIT_INLINE}
+def lmm_blow_up(H, fvalid, slot):
+    k, dim, N = H.shape
+    for d in range(dim):
+        for m in range(N):
+            H[slot, d, m] = np.nan
+    fvalid[slot] = False
+
+
 {_JIT_EXACT}
-def lmm_shift(H, F, fvalid):
+def lmm_unroll(H, F, fvalid, head):
+    # the ring back in history order, oldest first
     k = H.shape[0]
-    for jj in range(k - 1):
-        H[jj] = H[jj + 1]
-        F[jj] = F[jj + 1]
-        fvalid[jj] = fvalid[jj + 1]
+    if head == 0:
+        return
+    Hc = H.copy()
+    Fc = F.copy()
+    vc = fvalid.copy()
+    for jj in range(k):
+        slot = (head + jj) % k
+        H[jj] = Hc[slot]
+        F[jj] = Fc[slot]
+        fvalid[jj] = vc[slot]
 '''
 
 # Explicit linear multistep (Hairer, Norsett & Wanner I, III.2): y_{n+k} = psi. A non-finite
-# newest state makes every member NaN with no further evaluation, as in the NumPy loop.
+# newest state makes every member NaN with no further evaluation, as in the NumPy loop. The
+# history is a ring of k slots: a step writes one slot instead of shifting k.
 LMM_EXPLICIT = f'''
 {_JIT_EXACT}
 def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
     k, dim, N = H.shape
-    psi = np.empty((dim, N))
+    npar = P.shape[0]
     y = np.empty(dim)
     out = np.empty(dim)
-    p = np.empty(P.shape[0])
+    p = np.empty(npar)
+    slots = np.empty(k, dtype=np.int64)
+    # the formula's nonzero terms in the NumPy loop's order (j ascending, alpha before beta):
+    # kind 0 is -alpha_j y_j, kind 1 is + h beta_j f_j
+    kind = np.empty(2 * k, dtype=np.int64)
+    index = np.empty(2 * k, dtype=np.int64)
+    coef = np.empty(2 * k)
+    nt = 0
+    for jj in range(k):
+        if alpha[jj] != 0.0:
+            kind[nt] = 0
+            index[nt] = jj
+            coef[nt] = alpha[jj]
+            nt += 1
+        if beta[jj] != 0.0:
+            kind[nt] = 1
+            index[nt] = jj
+            coef[nt] = h * beta[jj]
+            nt += 1
     evals = 0
+    head = 0
     for n in range(nsteps):
         t = t0 + (n0 + n) * h
-        if not lmm_finite(H):
-            lmm_shift(H, F, fvalid)
-            H[k - 1] = np.nan
-            fvalid[k - 1] = False
+        for jj in range(k):
+            sl = head + jj
+            slots[jj] = sl - k if sl >= k else sl
+        newest = slots[k - 1]
+        finite = True
+        for d in range(dim):
+            for m in range(N):
+                if not np.isfinite(H[newest, d, m]):
+                    finite = False
+        head = head + 1 if head + 1 < k else 0
+        slot = slots[0]  # the oldest slot takes the new state
+        if not finite:
+            for d in range(dim):
+                for m in range(N):
+                    H[slot, d, m] = np.nan
+            fvalid[slot] = False
             continue
-        evals += lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p)
-        lmm_shift(H, F, fvalid)
-        H[k - 1] = psi
-        fvalid[k - 1] = False
+        for jj in range(k):
+            sl = slots[jj]
+            if beta[jj] != 0.0 and not fvalid[sl]:
+                tj = t - (k - 1 - jj) * h
+                for m in range(N):
+                    for d in range(dim):
+                        y[d] = H[sl, d, m]
+                    for q in range(npar):
+                        p[q] = P[q, m]
+                    call_state(f_rhs, tj, y, p, out)
+                    for d in range(dim):
+                        F[sl, d, m] = out[d]
+                fvalid[sl] = True
+                evals += 1
+        for m in range(N):
+            for d in range(dim):
+                acc = 0.0
+                for q in range(nt):
+                    sl = slots[index[q]]
+                    if kind[q] == 0:
+                        acc -= coef[q] * H[sl, d, m]
+                    else:
+                        acc += coef[q] * F[sl, d, m]
+                H[slot, d, m] = acc
+        fvalid[slot] = False
+    lmm_unroll(H, F, fvalid, head)
     return evals
 '''
 
@@ -590,7 +689,7 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
 # contraction estimate theta / (1 - theta) |dx| at most `tol` (Hairer & Wanner II, IV.8, eq.
 # (8.10)); LU with partial pivoting per member. Status 1: no convergence; 2: singular matrix.
 _NEWTON = f'''
-{_JIT_EXACT}
+{_JIT_INLINE}
 def lu_solve(M, b, x):
     m = b.shape[0]
     for i in range(m):
@@ -674,7 +773,9 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
             continue
         if has_expl:
             if flags[0] != 0:
-                Fexp[:, :] = Fstart
+                for d in range(dim):
+                    for j in range(N):
+                        Fexp[d, j] = Fstart[d, j]
             else:
                 rhs_all(f_rhs, t, Y, P, Fexp)
                 n_rhs += 1
@@ -690,7 +791,9 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
                             acc += E[i, q] * Zprev[q, d, j]
                         X[i * dim + d, j] = acc
         else:
-            X[:, :] = 0.0
+            for r in range(m):
+                for j in range(N):
+                    X[r, j] = 0.0
         previous = np.inf
         norm = np.inf
         theta = np.nan
@@ -737,13 +840,15 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
                             for d in range(dim):
                                 ys[d] = Y[d, j] + X[i * dim + d, j]
                             call_state(f_jac, t + c_impl[i] * h, ys, p, Jb)
-                            Jall[i, :] = Jb
+                            for q in range(dim * dim):
+                                Jall[i, q] = Jb[q]
                     else:
                         for d in range(dim):
                             ys[d] = Y[d, j]
                         call_state(f_jac, t, ys, p, Jb)
                         for i in range(impl):
-                            Jall[i, :] = Jb
+                            for q in range(dim * dim):
+                                Jall[i, q] = Jb[q]
                     for i in range(impl):
                         for a in range(dim):
                             for q in range(impl):
@@ -755,7 +860,9 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
                 n_jac += impl if full else 1
             n_iter += 1
             for j in range(N):
-                Mw[:, :] = Mats[j]
+                for r in range(Mw.shape[0]):
+                    for q in range(Mw.shape[1]):
+                        Mw[r, q] = Mats[j, r, q]
                 for r in range(m):
                     rhs_w[r] = -G[r, j]
                 if not lu_solve(Mw, rhs_w, sol):
@@ -852,24 +959,26 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
     sol = np.empty(dim)
     p = np.empty(npar)
     hb = h * beta[k]
+    slots = np.empty(k, dtype=np.int64)
     n_rhs = 0
     n_jac = 0
     n_iter = 0
+    head = 0
     for n in range(nsteps):
         t = t0 + (n0 + n) * h
-        if not lmm_finite(H):
-            lmm_shift(H, F, fvalid)
-            H[k - 1] = np.nan
-            fvalid[k - 1] = False
+        newest = (head + k - 1) % k
+        if not lmm_finite(H, newest):
+            head = (head + 1) % k
+            lmm_blow_up(H, fvalid, (head + k - 1) % k)
             continue
-        n_rhs += lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, P, psi, y, out, p)
+        n_rhs += lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slots)
         t_new = t + h
         for d in range(dim):
             for j in range(N):
-                inv_scale[d, j] = 1.0 / (1.0 + abs(H[k - 1, d, j]))
+                inv_scale[d, j] = 1.0 / (1.0 + abs(H[newest, d, j]))
                 acc = 0.0
                 for q in range(k):
-                    acc += wpred[q] * H[q, d, j]
+                    acc += wpred[q] * H[slots[q], d, j]
                 X[d, j] = acc
         previous = np.inf
         norm = np.inf
@@ -903,7 +1012,7 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                         call_state(f_jac, t_new, y, p, Jb)
                     else:
                         for d in range(dim):
-                            y[d] = H[k - 1, d, j]
+                            y[d] = H[newest, d, j]
                         call_state(f_jac, t, y, p, Jb)
                     for a in range(dim):
                         for bb in range(dim):
@@ -914,7 +1023,9 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                 n_jac += 1
             n_iter += 1
             for j in range(N):
-                Mw[:, :] = Mats[j]
+                for r in range(Mw.shape[0]):
+                    for q in range(Mw.shape[1]):
+                        Mw[r, q] = Mats[j, r, q]
                 for r in range(dim):
                     rhs_w[r] = -G[r, j]
                 if not lu_solve(Mw, rhs_w, sol):
@@ -956,13 +1067,16 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
             stats[6] = res_norm
             stats[7] = theta
             stats[8] = status
+            lmm_unroll(H, F, fvalid, head)
             return
-        lmm_shift(H, F, fvalid)
+        head = (head + 1) % k
+        slot = (head + k - 1) % k
         for d in range(dim):
             for j in range(N):
-                H[k - 1, d, j] = X[d, j]
-                F[k - 1, d, j] = (X[d, j] - psi[d, j]) / hb
-        fvalid[k - 1] = True
+                H[slot, d, j] = X[d, j]
+                F[slot, d, j] = (X[d, j] - psi[d, j]) / hb
+        fvalid[slot] = True
+    lmm_unroll(H, F, fvalid, head)
     stats[0] = nsteps
     stats[1] = n_rhs
     stats[2] = n_jac
@@ -1016,6 +1130,26 @@ def call_state(typingctx, address, t, x, p, out):
 
 
 @intrinsic
+def call_state_into(typingctx, address, t, x, p, out, offset):
+    """As `call_state`, writing to `out`'s data from element `offset` on (a row of a matrix
+    without making a view of it)."""
+    sig = types.void(address, t, x, p, out, offset)
+
+    def codegen(context, builder, signature, args):
+        dptr = ir.DoubleType().as_pointer()
+        pointers = [
+            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
+            for ty, value in zip(signature.args[2:5], args[2:5], strict=True)
+        ]
+        pointers[2] = builder.gep(pointers[2], [args[5]])
+        fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType(), dptr, dptr, dptr])
+        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], *pointers])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
 def call_columns(typingctx, address, t, X, P, Out, j0, j1):
     """Call the columns-form function at `address` for members j0 <= j < j1 of `X`."""
     sig = types.void(address, t, X, P, Out, j0, j1)
@@ -1054,7 +1188,7 @@ numba {numba_version}, Python {python}; call intrinsics {intrinsics}.
 import numpy as np
 from numba import njit
 
-from implementations.compiled_kernels import call_columns, call_state
+from implementations.compiled_kernels import call_columns, call_state, call_state_into
 
 '''
 
@@ -1080,7 +1214,7 @@ def _intrinsics_digest() -> str:
     file, so the module's text names the intrinsics' version."""
     import inspect
 
-    code = "".join(inspect.getsource(f) for f in (_data_pointer, call_state, call_columns))
+    code = "".join(inspect.getsource(f) for f in (_data_pointer, call_state, call_state_into, call_columns))
     return hashlib.sha256(code.encode()).hexdigest()[:16]
 
 
