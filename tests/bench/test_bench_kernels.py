@@ -35,3 +35,34 @@ def test_compiled_family_loop(benchmark, family, ensemble):
     assert np.max(np.abs(trajectory.final - exact)) < ACCURACY
     numpy_run = get_stepper(method).integrate(problem, h=H, n_steps=STEPS, y0=y0)
     assert np.max(np.abs(trajectory.final - numpy_run.final)) < 1e-12
+
+
+def test_the_c_family_loops_compute_the_harness_methods():
+    """The C loops the family ratios divide by run the same methods: 1000 Kepler steps of each
+    from the same start agree with the harness's compiled stepper (states at step 1000; the
+    implicit midpoint's and AB4's to the Newton tolerance and the starting values' accuracy)."""
+    from benchmarks._common import c_family_state
+    from benchmarks.c_baseline.build import CompilerUnavailable, load
+
+    try:
+        baseline = load()
+    except CompilerUnavailable as exc:
+        pytest.skip(f"no C compiler on this machine: {exc}")
+    problem = get_problem("kepler-elliptic")
+    n = 1000
+    for family, (method, c_method) in FAMILY_C_LOOPS.items():
+        stepper = get_stepper(method + "@compiled")
+        if c_method == "stormer":  # the harness's Taylor start gives x_1
+            y0 = problem.y0
+            a0 = -y0[:2] / np.hypot(y0[0], y0[1]) ** 3
+            x1 = y0[:2] + H * y0[2:] + 0.5 * H * H * a0
+            c_out = baseline.run(c_method, np.concatenate([y0[:2], x1]), H, n)[:2]  # (x_n, x_n+1)
+        steps = n
+        if c_method == "ab4":  # the same exact starting values; C starts at y_3
+            c_out = baseline.run(c_method, c_family_state(c_method), H, n)[12:14]
+            stepper = type(stepper)(get_stepper(method).with_starter("reference"))
+            steps = n + 3
+        elif c_method != "stormer":
+            c_out = baseline.run(c_method, c_family_state(c_method), H, n)[:2]
+        harness_out = stepper.integrate(problem, h=H, n_steps=steps).final[:2, 0]
+        assert np.max(np.abs(c_out - harness_out)) < 1e-9, family
