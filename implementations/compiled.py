@@ -124,8 +124,10 @@ class _Compiled(Stepper):
         reason = self.base.incompatibility(problem)
         if reason:
             return reason
+        parts = ("functions", "jacobian") if self.part == "jacobian" else ("functions",)
         try:
-            problem_module(problem, self.part)
+            for part in parts:
+                problem_module(problem, part)
         except UnsupportedExpression as exc:
             return f"no compiled right-hand side: {exc}"
         return None
