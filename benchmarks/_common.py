@@ -7,6 +7,7 @@ never into a failure.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -36,7 +37,10 @@ def skip(reason: str) -> NotImplementedError:
 def stepper_names() -> list[str]:
     from harness.registry import steppers
 
-    return steppers.names()
+    try:  # compiled variants are listed on request only (older commits list every entry)
+        return steppers.names(variants=True)
+    except TypeError:
+        return steppers.names()
 
 
 def lookup(stepper: str, problem: str):
@@ -74,35 +78,44 @@ def initial_states(problem, ensemble: int) -> np.ndarray:
 
 
 def prepared(stepper, problem, ensemble: int, h: float | None = None):
-    """(dyn, carry) after one warm-up step, so the next step is a steady-state step (a
-    first-same-as-last force is cached, a multistep history is started, a kernel is loaded)."""
+    """(dyn, carry) after warm-up steps, so the next step is a steady-state step (a
+    first-same-as-last force is cached, a multistep method's starting values are used up and
+    its formula has run once, a compiled kernel is loaded)."""
     h = STEP.get(problem.name, 1e-3) if h is None else h
     y = initial_states(problem, ensemble)
     dyn = problem.dynamics(None, ensemble)
     with np.errstate(all="ignore"):
         carry = stepper._start(dyn, problem.t0, y, h)
-        stepper._advance(dyn, carry, 1)
+        stepper._advance(dyn, carry, max(1, stepper.history_length))
     return dyn, carry
+
+
+#: The clock of `seconds_per_call`: wall time by default; `HARNESS_BENCH_CLOCK=cpu` takes this
+#: thread's CPU time instead, which leaves out the time other processes hold the cores (for
+#: ratios measured on a loaded machine).
+def _clock() -> Callable[[], float]:
+    return time.thread_time if os.environ.get("HARNESS_BENCH_CLOCK") == "cpu" else time.perf_counter
 
 
 def seconds_per_call(
     fn: Callable[[int], object], budget: float = 0.05, repeats: int = 3
 ) -> tuple[float, int]:
-    """Best wall time of fn(n) over `repeats` runs, with n doubled until one run takes `budget`
+    """Best time of fn(n) over `repeats` runs, with n doubled until one run takes `budget`
     seconds; returns (seconds per unit of n, n)."""
+    clock = _clock()
     n = 1
     while True:
-        start = time.perf_counter()
+        start = clock()
         fn(n)
-        elapsed = time.perf_counter() - start
+        elapsed = clock() - start
         if elapsed >= budget or n >= 1 << 22:
             break
         n *= 2 if elapsed > budget / 10 else 8
     best = elapsed
     for _ in range(repeats - 1):
-        start = time.perf_counter()
+        start = clock()
         fn(n)
-        best = min(best, time.perf_counter() - start)
+        best = min(best, clock() - start)
     return best / n, n
 
 
@@ -140,3 +153,46 @@ def c_seconds_per_step(method: str, ensemble: int) -> float:
     h = STEP["kepler-elliptic"]
     per_call, _ = seconds_per_call(lambda n: base.run(method, y, h, n))
     return per_call / ensemble
+
+
+#: Per family: the representative method (a registered stepper; its `@compiled` variant is timed)
+#: and the C loop of the same method in `c_baseline/kepler.c`.
+FAMILY_C_LOOPS = {
+    "explicit-rk": ("rk4", "rk4"),
+    "splitting": ("velocity-verlet", "vv"),
+    "staggered-leapfrog": ("leapfrog", "leapfrog"),
+    "stormer": ("stormer-verlet", "stormer"),
+    "multistep": ("ab4", "ab4"),
+    "implicit-rk": ("implicit-midpoint", "midpoint"),
+}
+
+
+def c_family_state(method: str) -> np.ndarray:
+    """The C loop's input for one Kepler trajectory from the problem's start: the state, the
+    staggered state (x_0, v_1/2), two positions (x_0, x_1), or four exact states."""
+    from harness.registry import get_problem
+
+    problem = get_problem("kepler-elliptic")
+    h = STEP["kepler-elliptic"]
+    y0 = problem.y0.copy()
+    if method in ("vv", "rk4", "midpoint"):
+        return y0
+    if method == "leapfrog":
+        r3 = float(np.hypot(y0[0], y0[1])) ** 3
+        return np.concatenate([y0[:2], y0[2:] - 0.5 * h * y0[:2] / r3])
+    if method == "stormer":
+        x1 = problem.exact(problem.t0 + h, y0[:, None], problem.t0, None)[:2, 0]
+        return np.concatenate([y0[:2], x1])
+    if method == "ab4":
+        states = [problem.exact(problem.t0 + j * h, y0[:, None], problem.t0, None)[:, 0] for j in range(4)]
+        return np.concatenate(states)
+    raise ValueError(f"`method` {method!r} has no C loop")
+
+
+def c_family_seconds_per_step(method: str) -> float:
+    """Wall seconds per step of the single-trajectory C loop `method` on Kepler (h = 1e-3)."""
+    base = c_baseline()
+    s = c_family_state(method)
+    h = STEP["kepler-elliptic"]
+    per_call, _ = seconds_per_call(lambda n: base.run(method, s, h, n))
+    return per_call

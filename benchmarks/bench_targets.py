@@ -6,6 +6,8 @@
   loading numba's on-disk cache);
 - NumPy ensemble steppers at N = 10^5 (velocity Verlet, RK4 on Kepler) take at most 1.0x the C
   loop's time per trajectory-step (`NumpyTargets.track_ensemble`);
+- every family's compiled single-trajectory step (its representative method on Kepler) in at
+  most 2x the C loop of the same method (`FamilyTargets.track_single_ratio`);
 and, for comparison, the other method/implementation/size combinations, each against the C
 loop of the same method (velocity Verlet or RK4) at the same ensemble size.
 C: `c_baseline/kepler.c` compiled with `-O3` (no machine-specific flags).
@@ -18,7 +20,18 @@ import os
 import subprocess
 import sys
 
-from ._common import c_baseline, c_seconds_per_step, lookup, skip, stepper_seconds_per_step
+from ._common import (
+    FAMILY_C_LOOPS,
+    STEP,
+    c_baseline,
+    c_family_seconds_per_step,
+    c_family_state,
+    c_seconds_per_step,
+    lookup,
+    prepared,
+    skip,
+    stepper_seconds_per_step,
+)
 
 _C_METHOD = {"velocity-verlet": "vv", "rk4": "rk4"}
 
@@ -124,3 +137,31 @@ class CLoops:
 
     def time_c_loop(self, method, ensemble):
         self.baseline.run(method, self.y, 1e-3, self.steps)
+
+
+class FamilyTargets:
+    """Per family: its representative method's compiled single-trajectory step on Kepler divided
+    by the C loop of the same method (`_common.FAMILY_C_LOOPS`; target <= 2.0), and both loops'
+    times for 1000 steps."""
+
+    unit = "x C loop"
+    timeout = 300
+    params = (list(FAMILY_C_LOOPS),)
+    param_names = ["family"]
+
+    def setup(self, family):
+        method, self.c_method = FAMILY_C_LOOPS[family]
+        self.stepper, self.problem = lookup(method + "@compiled", "kepler-elliptic")
+        self.base = c_baseline()
+        self.c_state = c_family_state(self.c_method)
+        self.dyn, self.carry = prepared(self.stepper, self.problem, 1)
+
+    def track_single_ratio(self, family):
+        compiled = stepper_seconds_per_step(self.stepper, self.problem, 1)
+        return compiled / c_family_seconds_per_step(self.c_method)
+
+    def time_compiled_1000_steps(self, family):
+        self.stepper._advance(self.dyn, self.carry, 1000)
+
+    def time_c_1000_steps(self, family):
+        self.base.run(self.c_method, self.c_state, STEP["kepler-elliptic"], 1000)

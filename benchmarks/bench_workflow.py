@@ -1,5 +1,6 @@
-"""Whole-workflow timings: the ground-truth build, cached and cold (kept apart), and the gate on
-one problem.
+"""Whole-workflow timings: the ground-truth build, cached and cold (kept apart), the gate on one
+problem, and the user-facing commands end to end (`WorkflowCold`: the report and the
+whole-registry gate from nothing on disk; `ReportCached`: the report with everything cached).
 
 Cold means nothing on disk and nothing in the process: `setup` points HARNESS_CACHE_DIR at a
 fresh temporary directory (heyoka's JIT cache and the reference cache live there), drops the
@@ -98,3 +99,65 @@ class Gate:
             "convergence", None, ["harmonic"], jobs=1, cache=False, quick=True, progress=False
         )
         self.gate_table(result.summary)
+
+
+def _harness(args: list[str], env: dict[str, str]) -> None:
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-m", "harness", *args], env=env, capture_output=True, text=True, timeout=3600
+    )
+    # A failed verdict exits non-zero with its table; only a crash (no output) is an error here.
+    if done.returncode != 0 and not done.stdout.strip():
+        raise RuntimeError(f"harness {' '.join(args)} failed: {done.stderr.strip()[-800:]}")
+
+
+class _Workflow:
+    timeout = 3600
+    number = 1
+    repeat = 1
+    warmup_time = 0.0
+
+    def setup(self):
+        try:
+            import harness.cli  # noqa: F401
+        except ImportError as exc:
+            raise skip(str(exc)) from None
+        self._tmp = tempfile.mkdtemp(prefix="harness-workflow-")
+
+    def teardown(self):
+        shutil.rmtree(self._tmp, ignore_errors=True)
+
+    def _env(self) -> dict[str, str]:
+        return dict(
+            os.environ,
+            HARNESS_CACHE_DIR=os.path.join(self._tmp, "cache"),
+            HARNESS_RESULTS_DIR=os.path.join(self._tmp, "results"),
+        )
+
+    def _report(self) -> None:
+        _harness(["report", "--jobs", "1", "--output", os.path.join(self._tmp, "reports")], self._env())
+
+
+class WorkflowCold(_Workflow):
+    """`harness report` and the whole-registry `harness gate` from nothing on disk (fresh results
+    and compiled-code caches: heyoka, numba, references), each in a new process with `--jobs 1`.
+    Minutes each: run them on their own (`asv run --bench WorkflowCold`)."""
+
+    def time_report_cold(self):
+        self._report()
+
+    def time_gate_cold(self):
+        _harness(["gate", "--jobs", "1"], self._env())
+
+
+class ReportCached(_Workflow):
+    """`harness report` with every cell, reference and kernel cached: `setup` runs it once."""
+
+    def setup(self):
+        super().setup()
+        self._report()
+
+    def time_report_cached(self):
+        self._report()

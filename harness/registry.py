@@ -79,6 +79,11 @@ os._exit(0)
 _probed: dict[str, str | None] = {}
 
 
+def _is_variant(obj: Any) -> bool:
+    info = getattr(obj, "info", None)
+    return bool(getattr(info, "extra", None)) and "numpy_implementation" in info.extra
+
+
 class Registry(Generic[T]):
     """A name -> object map for one kind of entry, filled lazily on the first lookup."""
 
@@ -156,13 +161,17 @@ class Registry(Generic[T]):
         self._ensure()
         return self._origin[name]
 
-    def names(self) -> list[str]:
+    def names(self, *, variants: bool = False) -> list[str]:
+        """Registered names. A second implementation of a registered method (a compiled variant,
+        `info.extra['numpy_implementation']`) has the same facts and verdicts as the method it
+        implements: it is looked up by name but listed, and scheduled by default, only with
+        `variants=True` (the test suite compares every variant with its NumPy loop)."""
         self._ensure()
-        return list(self._items)
+        return [n for n, obj in self._items.items() if variants or not _is_variant(obj)]
 
-    def all(self) -> list[T]:
+    def all(self, *, variants: bool = False) -> list[T]:
         self._ensure()
-        return list(self._items.values())
+        return [obj for obj in self._items.values() if variants or not _is_variant(obj)]
 
     def __contains__(self, name: object) -> bool:
         self._ensure()

@@ -1,67 +1,65 @@
-"""Compiled steppers: the same methods, generated from the same coefficient objects, run by numba.
+"""Compiled steppers: every method with a coefficient object, run by one numba loop per family.
 
-A second implementation of the explicit Runge-Kutta and splitting families, for long single
-trajectories where a per-step NumPy loop costs ~500x a compiled loop (measured: README and the
-asv suite). Nothing here holds a coefficient: each compiled stepper wraps a registered NumPy
-stepper and reads the tableau (`ButcherTableau` A, b, c) or the scheme (`SplittingScheme`
-drift/kick sequence) from it at run time, so one compiled kernel per family serves every table.
+A second implementation of each family's step loop, for long single trajectories where a
+per-step NumPy loop costs ~500x a compiled loop. Nothing here holds a coefficient or reads
+another module's private state: a compiled stepper wraps a NumPy stepper (`base`), reads its
+public coefficient object (`ButcherTableau.A/.b/.c`, `SplittingScheme.sequence`,
+`LinearMultistep.alpha/.beta`, `SecondOrderMultistep.alpha/.beta`) and public settings
+(`newton`, `starter`, `info`), and passes the coefficients as arrays to the family kernel of
+`implementations.compiled_kernels`. So a user's method given as coefficients gets a compiled
+implementation from `compiled_variant`, and every built-in one is registered as
+`<name>@compiled` below.
 
-How the code is generated (Lam, Pitrou & Seibert, *Numba: a LLVM-based Python JIT compiler*,
-LLVM-HPC 2015, for the compiler; heyoka's expression decomposition for the right-hand side):
+Families: explicit Runge-Kutta, splitting (drift/kick), staggered leapfrog, Stormer two-step
+(accelerations independent of the velocity), linear multistep (explicit, and implicit by
+Newton's method with the problem's Jacobian), implicit Runge-Kutta (Newton). Each follows the
+NumPy loop of its family step for step: the same operations in the same order, the same starts,
+observations, time reversal and first-same-as-last reuse, the same evaluation counts, the same
+Newton tolerance, iteration cap and convergence test (ensemble-wide), and `StepFailure` where
+the NumPy loop raises it. Agreement to rounding is tested over the whole registry
+(`tests/test_compiled.py`).
 
-1. The problem's right-hand side (and, for Newtonian problems, its position-only acceleration)
-   is taken from heyoka's decomposition of the compiled function (`cfunc.dc`): a list of
-   elementary assignments u_k = op(u_i, u_j), common subexpressions already shared. Each entry
-   is printed as Python-like infix (`(u_0 * u_1)`, `div(u_3, u_7)`, `u_6**1.5000000000000000`,
-   `sin(u_0)`, `p0` for a parameter, `t` for time), parsed with `ast` and emitted as numba
-   source. An operation without a translation makes the problem incompatible (with the reason).
-2. The generated functions and the family kernels (templates below) are written to one module
-   file per problem in `harness.cache.cache_dir() / "numba"`, named by a hash of its text, and
-   imported; every function is `@njit(cache=True)`, so a later process loads the machine code
-   from numba's on-disk cache in milliseconds instead of compiling again (a kernel that received
-   the right-hand side as an argument would be recompiled in every process).
-3. A stepper overrides `Stepper._advance` (and `_step`) to run many steps of every ensemble
-   member in one compiled call; start, observation and time reversal are the NumPy family's
-   own. Evaluation counts are the NumPy implementation's: one right-hand-side (or force)
-   evaluation per stage of the whole ensemble.
-
-Floating-point operations follow the NumPy loops' order (a stage is y + h a_i1 k_1 + h a_i2 k_2
-+ ..., zero coefficients skipped; kicks add b h a to v; times are t0 + n h), with fused
-multiply-adds allowed as in the NumPy loops' BLAS updates and no other fast-math, so the two
-implementations agree to rounding (tested in `tests/test_compiled.py`).
+`fastest(stepper, problem)` is the implementation experiments run: the compiled variant when it
+applies to the problem, else the stepper itself.
 """
 
 from __future__ import annotations
 
-import ast
 import dataclasses
-import hashlib
-import importlib.util
-import os
-import sys
-import tempfile
+import math
 import threading
-import time
 import weakref
-from collections.abc import Iterable
-from pathlib import Path
-from types import ModuleType
-from typing import Any
+from importlib import import_module
 
 import numpy as np
+from scipy.linalg.blas import daxpy
 
-from harness import cache
-from harness.errors import InputError
+from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
+from harness.errors import InputError, UnknownNameError
 from harness.problem import Dynamics, Problem
-from harness.stepper import Carry, Stepper
-from implementations.runge_kutta import ExplicitRungeKutta
-from implementations.splitting import SplittingStepper, StaggeredLeapfrog
+from harness.stepper import Carry, StepFailure, Stepper, check_compatible
+from implementations.compiled_kernels import (
+    COMPILE_LOG,
+    TEMPLATES,
+    UnsupportedExpression,
+    address,
+    call_kernel,
+    module_source,
+    problem_module,
+    translate_decomposition,
+)
+from implementations.implicit_rk import NewtonSettings
+from implementations.splitting import StaggeredLeapfrog
 
 __all__ = [
     "CompiledRungeKutta",
     "CompiledSplitting",
     "CompiledLeapfrog",
+    "CompiledStormer",
+    "CompiledMultistep",
+    "CompiledImplicitRungeKutta",
     "compiled_variant",
+    "fastest",
     "problem_module",
     "module_source",
     "translate_decomposition",
@@ -69,396 +67,14 @@ __all__ = [
     "COMPILE_LOG",
     "SUFFIX",
     "STEPPERS",
+    "NOT_COMPILED",
+    "COLUMN_MIN",
 ]
 
 SUFFIX = "@compiled"
-
-# -- expression translation -----------------------------------------------------------------------
-# heyoka function name -> (numba expression template, number of arguments or None for any).
-_UNARY_MATH = (
-    "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh",
-    "atanh", "exp", "expm1", "log", "log1p", "sqrt", "erf", "erfc",
-)
-_CALLS: dict[str, tuple[str, int | None]] = {name: (f"math.{name}({{0}})", 1) for name in _UNARY_MATH}
-_CALLS.update({
-    "div": ("({0} / {1})", 2),
-    "sub": ("({0} - {1})", 2),
-    "square": ("({0} * {0})", 1),
-    "atan2": ("math.atan2({0}, {1})", 2),
-    "sigmoid": ("(1.0 / (1.0 + math.exp(-{0})))", 1),
-})
-_BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
-
-
-class UnsupportedExpression(InputError):
-    """A right-hand side uses an operation the compiled implementation cannot translate."""
-
-
-# Powers with a constant exponent e, 2e a whole number up to this size, are evaluated as heyoka
-# evaluates them (measured against its compiled functions, bit for bit for e = +-1/2, +-3/2, 2,
-# 3, 4, 5, ...): the base (sqrt(x) when 2e is odd) raised by binary exponentiation, inverted for
-# e < 0. Other exponents go to the library `pow` (agreement to rounding, not to the bit).
-_MAX_SMALL_POWER = 16
-
-
-def _binary_power(base: str, m: int) -> str:
-    result, square = None, base
-    while m:
-        if m & 1:
-            result = square if result is None else f"({result} * {square})"
-        m >>= 1
-        if m:
-            square = f"({square} * {square})"
-    return result
-
-
-def _power(base: str, exponent: ast.AST, tr: _Translator) -> str:
-    value = None
-    if isinstance(exponent, ast.Constant) and isinstance(exponent.value, int | float):
-        value = float(exponent.value)
-    elif (
-        isinstance(exponent, ast.UnaryOp)
-        and isinstance(exponent.op, ast.USub)
-        and isinstance(exponent.operand, ast.Constant)
-        and isinstance(exponent.operand.value, int | float)
-    ):
-        value = -float(exponent.operand.value)
-    if value is not None and value != 0.0 and (2.0 * value).is_integer():
-        twice = abs(int(2.0 * value))
-        if twice <= _MAX_SMALL_POWER:
-            if twice % 2:
-                expr = _binary_power(f"math.sqrt({base})", twice)
-            else:
-                expr = _binary_power(base, twice // 2)
-            return f"(1.0 / {expr})" if value < 0 else expr
-    return f"({base} ** {tr.emit(exponent)})"
-
-
-class _Translator:
-    """One decomposition entry (heyoka infix text) -> numba source text."""
-
-    def __init__(self, names: dict[str, str]):
-        self.names = names  # heyoka name -> generated name
-
-    def __call__(self, text: str) -> str:
-        try:
-            tree = ast.parse(text.strip(), mode="eval")
-        except SyntaxError:
-            raise UnsupportedExpression(f"cannot parse decomposition entry {text!r}") from None
-        return self.emit(tree.body)
-
-    def emit(self, node: ast.AST) -> str:
-        if isinstance(node, ast.Constant) and isinstance(node.value, int | float):
-            return repr(float(node.value))
-        if isinstance(node, ast.Name):
-            if node.id in self.names:
-                return self.names[node.id]
-            if node.id == "t":
-                return "t"
-            if node.id[:1] == "p" and node.id[1:].isdigit():
-                return f"p[{int(node.id[1:])}]"
-            raise UnsupportedExpression(f"unknown name {node.id!r} in the decomposition")
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd):
-            sign = "-" if isinstance(node.op, ast.USub) else "+"
-            return f"({sign}{self.emit(node.operand)})"
-        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
-            return _power(self.emit(node.left), node.right, self)
-        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-            return f"({self.emit(node.left)} {_BINOPS[type(node.op)]} {self.emit(node.right)})"
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and not node.keywords:
-            name = node.func.id
-            args = [self.emit(a) for a in node.args]
-            if name == "sum" and args:
-                return "(" + " + ".join(args) + ")"
-            if name == "prod" and args:
-                return "(" + " * ".join(args) + ")"
-            if name == "pow" and len(args) == 2:
-                return _power(args[0], node.args[1], self)
-            if name in _CALLS:
-                template, arity = _CALLS[name]
-                if arity is not None and arity != len(args):
-                    raise UnsupportedExpression(f"`{name}` with {len(args)} arguments")
-                return template.format(*args)
-            raise UnsupportedExpression(f"operation `{name}` has no compiled translation")
-        raise UnsupportedExpression(f"expression {ast.unparse(node)!r} has no compiled translation")
-
-
-def translate_decomposition(
-    fname: str, dc: Iterable[Any], variables: list[str], nouts: int, arg: str
-) -> str:
-    """Numba source of `fname(t, <arg>, p, out)` from a heyoka decomposition.
-
-    `dc` lists the variables (u_0 .. u_{n-1}, in `variables` order), then the elementary
-    assignments u_k = op(...), then the `nouts` output expressions.
-    """
-    entries = [str(e) for e in dc]
-    nvars = len(variables)
-    if len(entries) < nvars + nouts or entries[:nvars] != variables:
-        raise UnsupportedExpression(
-            f"decomposition does not start with the variables {variables}: {entries[:nvars]}"
-        )
-    names = {f"u_{i}": f"u_{i}" for i in range(len(entries))}
-    tr = _Translator(names)
-    lines = [f"def {fname}(t, {arg}, p, out):"]
-    for i in range(nvars):
-        lines.append(f"    u_{i} = {arg}[{i}]")
-    for k in range(nvars, len(entries) - nouts):
-        lines.append(f"    u_{k} = {tr(entries[k])}")
-    for j, text in enumerate(entries[len(entries) - nouts :]):
-        lines.append(f"    out[{j}] = {tr(text)}")
-    return "\n".join(lines) + "\n"
-
-
-# -- kernels (one per family; `rhs` / `accel` are the problem's generated functions) --------------
-# a*b + c may become one fused multiply-add, as in heyoka's compiled functions (measured:
-# x*x + y*y is fma(x, x, y*y) there) and in the BLAS axpy updates of the NumPy loops; no other
-# fast-math licence (no reassociation, no reciprocal tricks).
-_JIT = '@njit(cache=True, error_model="numpy", fastmath={"contract"})'
-_JIT_RHS = _JIT
-
-_RK_KERNEL = f'''
-{_JIT}
-def rk_advance(A, b, c, t0, n0, h, nsteps, Y, P):
-    s = b.shape[0]
-    dim = Y.shape[0]
-    npar = P.shape[0]
-    hA = A * h
-    hb = b * h
-    hc = c * h
-    y = np.empty(dim)
-    stage = np.empty(dim)
-    K = np.empty((s, dim))
-    p = np.empty(npar)
-    for j in range(Y.shape[1]):
-        for d in range(dim):
-            y[d] = Y[d, j]
-        for k in range(npar):
-            p[k] = P[k, j]
-        for n in range(nsteps):
-            t = t0 + (n0 + n) * h
-            for i in range(s):
-                for d in range(dim):
-                    acc = y[d]
-                    for m in range(i):
-                        if hA[i, m] != 0.0:
-                            acc += hA[i, m] * K[m, d]
-                    stage[d] = acc
-                rhs(t + hc[i], stage, p, K[i])
-            for d in range(dim):
-                acc = y[d]
-                for m in range(s):
-                    if hb[m] != 0.0:
-                        acc += hb[m] * K[m, d]
-                y[d] = acc
-        for d in range(dim):
-            Y[d, j] = y[d]
-    return s * nsteps
-'''
-
-_SPLIT_KERNEL = f'''
-{_JIT}
-def split_advance(kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
-    nops = kick.shape[0]
-    nq = Acc.shape[0]
-    npar = P.shape[0]
-    q = np.empty(nq)
-    v = np.empty(nq)
-    a = np.empty(nq)
-    p = np.empty(npar)
-    evals = 0
-    for j in range(Y.shape[1]):
-        for d in range(nq):
-            q[d] = Y[d, j]
-            v[d] = Y[nq + d, j]
-            a[d] = Acc[d, j]
-        for k in range(npar):
-            p[k] = P[k, j]
-        valid = valid0
-        e = 0
-        for n in range(nsteps):
-            t = t0 + (n0 + n) * h
-            for i in range(nops):
-                if kick[i]:
-                    if not (i == 0 and valid):
-                        accel(t + htau[i], q, p, a)
-                        e += 1
-                    for d in range(nq):
-                        v[d] += a[d] * hcoef[i]
-                else:
-                    for d in range(nq):
-                        q[d] += v[d] * hcoef[i]
-            valid = fsal
-        for d in range(nq):
-            Y[d, j] = q[d]
-            Y[nq + d, j] = v[d]
-            Acc[d, j] = a[d]
-        evals = e
-    return evals
-'''
-
-_LEAPFROG_KERNEL = f'''
-{_JIT}
-def leapfrog_advance(hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
-    nq = Acc.shape[0]
-    npar = P.shape[0]
-    q = np.empty(nq)
-    v = np.empty(nq)
-    a = np.empty(nq)
-    p = np.empty(npar)
-    for j in range(Y.shape[1]):
-        for d in range(nq):
-            q[d] = Y[d, j]
-            v[d] = Y[nq + d, j]
-            a[d] = Acc[d, j]
-        for k in range(npar):
-            p[k] = P[k, j]
-        for n in range(nsteps):
-            t = t0 + (n0 + n) * h
-            for d in range(nq):
-                q[d] += v[d] * hdrift
-            accel(t + h, q, p, a)
-            for d in range(nq):
-                v[d] += a[d] * hkick
-        for d in range(nq):
-            Y[d, j] = q[d]
-            Y[nq + d, j] = v[d]
-            Acc[d, j] = a[d]
-    return nsteps
-'''
-
-_HEADER = '''"""Generated by implementations.compiled for problem {name!r}; do not edit.
-
-Right-hand side{accel_note} translated from heyoka's decomposition; kernels from the templates
-in implementations/compiled.py. numba {numba_version}, Python {python}.
-"""
-import math
-
-import numpy as np
-from numba import njit
-
-'''
-
-
-def module_source(problem: Problem) -> str:
-    """The text of the generated module for `problem` (raises UnsupportedExpression)."""
-    import numba
-
-    variables = [str(v) for v in problem.variables]
-    rhs_fn = problem.compiled("rhs", None)
-    parts = [_JIT_RHS + "\n" + translate_decomposition("rhs", rhs_fn.dc, variables, problem.dim, "y")]
-    parts.append(_RK_KERNEL)
-    accel_note = ""
-    if problem.newtonian is not None and not problem.velocity_dependent:
-        positions = [str(v) for v in problem.newtonian.positions]
-        acc_fn = problem.compiled("accel_q", None)
-        parts.append(
-            _JIT_RHS + "\n" + translate_decomposition("accel", acc_fn.dc, positions, len(positions), "q")
-        )
-        parts += [_SPLIT_KERNEL, _LEAPFROG_KERNEL]
-        accel_note = " and position-only acceleration"
-    header = _HEADER.format(
-        name=problem.name,
-        accel_note=accel_note,
-        numba_version=numba.__version__,
-        python=".".join(map(str, sys.version_info[:3])),
-    )
-    return header + "\n\n".join(p.strip("\n") + "\n" for p in parts)
-
-
-# -- generated modules: written once, imported, numba-cached on disk ------------------------------
-@dataclasses.dataclass
-class _Entry:
-    module: ModuleType | None
-    reason: str | None
-    path: Path | None
-
-
-#: One record per kernel's first call in this process: problem, kernel, seconds, and whether
-#: numba loaded it from its on-disk cache ("cached") or compiled it ("compiled").
-COMPILE_LOG: list[dict[str, Any]] = []
-
-_modules: weakref.WeakKeyDictionary[Problem, _Entry] = weakref.WeakKeyDictionary()
-_lock = threading.RLock()
-
-
-def _write_once(path: Path, text: str) -> None:
-    """Create `path` with `text` unless it exists; never rewrite it (numba's cache index is keyed
-    by the source file's time stamp, so a rewrite would force a recompile in every process)."""
-    if path.exists():
-        return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        try:
-            os.link(tmp, path)
-        except FileExistsError:
-            pass
-        except OSError:  # no hard links on this file system
-            if not path.exists():
-                os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def _slug(name: str) -> str:
-    return "".join(ch if ch.isalnum() else "_" for ch in name)[:40]
-
-
-def problem_module(problem: Problem) -> ModuleType:
-    """The generated, imported module for `problem` (raises UnsupportedExpression)."""
-    with _lock:
-        entry = _modules.get(problem)
-        if entry is None:
-            try:
-                text = module_source(problem)
-            except UnsupportedExpression as exc:
-                entry = _Entry(None, str(exc), None)
-            else:
-                digest = hashlib.sha256(text.encode()).hexdigest()[:20]
-                path = cache.cache_dir() / "numba" / f"{_slug(problem.name)}_{digest}.py"
-                _write_once(path, text)
-                mod_name = f"_harness_numba_{digest}"
-                module = sys.modules.get(mod_name)
-                if module is None:
-                    # Registered before it runs: numba's cache records the module by name and
-                    # imports it by that name when it loads a cached kernel.
-                    spec = importlib.util.spec_from_file_location(mod_name, path)
-                    module = importlib.util.module_from_spec(spec)
-                    sys.modules[mod_name] = module
-                    try:
-                        spec.loader.exec_module(module)
-                    except BaseException:
-                        sys.modules.pop(mod_name, None)
-                        raise
-                entry = _Entry(module, None, path)
-            _modules[problem] = entry
-    if entry.module is None:
-        raise UnsupportedExpression(entry.reason)
-    return entry.module
-
-
-def _kernel(problem: Problem, name: str):
-    return getattr(problem_module(problem), name)
-
-
-def _timed_first_call(problem: Problem, name: str, kernel, args: tuple) -> Any:
-    """Call `kernel`; on its first call in this process, record the compile (or load) time."""
-    if kernel.signatures:
-        return kernel(*args)
-    start = time.perf_counter()
-    result = kernel(*args)
-    elapsed = time.perf_counter() - start
-    stats = kernel.stats
-    COMPILE_LOG.append({
-        "problem": problem.name,
-        "kernel": name,
-        "seconds": elapsed,
-        "source": "cached" if stats.cache_hits and not stats.cache_misses else "compiled",
-    })
-    return result
+#: Ensembles of at least this many members run the explicit one-step families by their column
+#: kernels (members advanced together in blocks, vectorisable); smaller ones member by member.
+COLUMN_MIN = 8
 
 
 def _pars(dyn: Dynamics) -> np.ndarray:
@@ -468,7 +84,6 @@ def _pars(dyn: Dynamics) -> np.ndarray:
     return np.ascontiguousarray(P, dtype=np.float64)
 
 
-# -- steppers -------------------------------------------------------------------------------------
 def _compiled_info(base: Stepper, kind: str):
     return dataclasses.replace(
         base.info,
@@ -482,24 +97,46 @@ def _compiled_info(base: Stepper, kind: str):
     )
 
 
-class _CompiledMixin:
-    """What the compiled families share: compatibility through code generation, a fingerprint
-    that includes the kernel templates, and the `_step` = one-step `_advance` rule."""
+def _newton_settings(base: Stepper) -> NewtonSettings:
+    settings = getattr(base, "newton", None)
+    return settings if isinstance(settings, NewtonSettings) else NewtonSettings()
 
-    _templates: tuple[str, ...] = ()
+
+class _Compiled(Stepper):
+    """What the compiled families share: the wrapped NumPy stepper's claims and coefficient
+    object, compatibility through code generation, a fingerprint that includes the kernel
+    templates, and `_advance` as one kernel call (`_run`) for many steps."""
+
+    kind = ""
+    part = "functions"
+
+    def __init__(self, base: Stepper):
+        if not isinstance(base, Stepper):
+            raise InputError(f"`base` must be a Stepper, got {type(base).__name__}")
+        if base.info.implementation == "compiled":
+            raise InputError(f"`stepper` {base.info.name!r} is already compiled")
+        self.base = base
+        self.coefficients = base.coefficients
+        self.history_length = base.history_length
+        self.info = _compiled_info(base, self.kind)
 
     def incompatibility(self, problem: Problem) -> str | None:
-        reason = super().incompatibility(problem)  # type: ignore[misc]
+        reason = self.base.incompatibility(problem)
         if reason:
             return reason
+        parts = ("functions", "jacobian") if self.part == "jacobian" else ("functions",)
         try:
-            problem_module(problem)
+            for part in parts:
+                problem_module(problem, part)
         except UnsupportedExpression as exc:
             return f"no compiled right-hand side: {exc}"
         return None
 
     def fingerprint(self) -> str:
-        return super().fingerprint() + "\n" + "\n".join(self._templates)  # type: ignore[misc]
+        return "\n".join([super().fingerprint(), self.base.fingerprint(), *TEMPLATES])
+
+    def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
 
     def _step(self, dyn: Dynamics, c: Carry) -> None:
         self._run(dyn, c, 1)
@@ -510,124 +147,575 @@ class _CompiledMixin:
             c.n += n
 
 
-class CompiledRungeKutta(_CompiledMixin, ExplicitRungeKutta):
-    """An explicit Runge-Kutta method (the wrapped stepper's `ButcherTableau`) run by the compiled
-    generic RK kernel: k_i = f(t + c_i h, y + h sum_j a_ij k_j), y <- y + h sum_i b_i k_i
-    (Hairer, Norsett & Wanner I, Sect. II.1, eq. (1.8))."""
+# -- explicit Runge-Kutta ------------------------------------------------------------------------
+class CompiledRungeKutta(_Compiled):
+    """An explicit Runge-Kutta method (a `ButcherTableau`) run by the compiled RK kernel:
+    k_i = f(t + c_i h, y + h sum_j a_ij k_j), y <- y + h sum_i b_i k_i (Hairer, Norsett & Wanner
+    I, Sect. II.1, eq. (1.8))."""
 
-    _templates = (_RK_KERNEL,)
+    kind = "explicit Runge-Kutta"
 
-    def __init__(self, base: ExplicitRungeKutta):
-        if not isinstance(base, ExplicitRungeKutta):
-            raise InputError(f"`base` must be an ExplicitRungeKutta stepper, got {type(base).__name__}")
-        super().__init__(
-            base.coefficients,
-            claimed_order=base.info.claimed_order,
-            reference=base.info.reference,
-            description=base.info.description,
-        )
-        self.info = _compiled_info(base, "explicit Runge-Kutta")
+    def __init__(self, base: Stepper):
+        tab = base.coefficients
+        if not isinstance(tab, ButcherTableau) or not tab.explicit:
+            raise InputError(f"`stepper` {base.info.name!r} needs an explicit ButcherTableau")
+        super().__init__(base)
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        c = Carry(t0, h, np.ascontiguousarray(y0))
-        self._scale(c)
-        return c
+        return Carry(t0, h, np.ascontiguousarray(y0))
 
     def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
         tab = self.coefficients
-        kernel = _kernel(dyn.problem, "rk_advance")
-        args = (tab.A, tab.b, tab.c, float(c.t0), int(c.n), float(c.h), int(n), c.y, _pars(dyn))
-        evals = _timed_first_call(dyn.problem, "rk_advance", kernel, args)
+        args = (tab.A, tab.b, tab.c, float(c.t0), int(c.n), float(c.h), int(n), c.y)
+        if c.y.shape[1] >= COLUMN_MIN:
+            if getattr(c, "k", None) is None:
+                c.k = np.empty((tab.stages, *c.y.shape))
+                c.stage = np.empty_like(c.y)
+            evals = call_kernel(
+                "rk_advance_cols", address(dyn.problem, "rhs_cols"), *args, c.k, c.stage, _pars(dyn)
+            )
+        else:
+            evals = call_kernel("rk_advance", address(dyn.problem, "rhs"), *args, _pars(dyn))
         dyn.counts["rhs"] += int(evals)
 
 
-class CompiledSplitting(_CompiledMixin, SplittingStepper):
-    """A drift/kick splitting scheme (the wrapped stepper's `SplittingScheme`) run by the compiled
-    generic splitting kernel: drifts q += a_i h v, kicks v += b_i h a(q, t), first same as last
-    when the scheme begins and ends with a kick (Hairer, Lubich & Wanner, *Geometric Numerical
-    Integration*, 2nd ed., II.5)."""
+# -- splitting and the staggered leapfrog ----------------------------------------------------------
+def _newtonian_carry(t0: float, h: float, y0: np.ndarray, dyn: Dynamics) -> Carry:
+    c = Carry(t0, h, np.ascontiguousarray(y0))
+    c.a = np.zeros((dyn.nq, c.y.shape[1]))
+    return c
 
-    _templates = (_SPLIT_KERNEL,)
 
-    def __init__(self, base: SplittingStepper):
-        if not isinstance(base, SplittingStepper):
-            raise InputError(f"`base` must be a SplittingStepper, got {type(base).__name__}")
-        super().__init__(
-            base.coefficients,
-            claimed_order=base.info.claimed_order,
-            reference=base.info.reference,
-            description=base.info.description,
-        )
-        self.info = _compiled_info(base, "splitting")
-        self._kick = np.array([is_kick for is_kick, _, _ in self._ops], dtype=np.bool_)
+def _accel_all(dyn: Dynamics, t: float, q: np.ndarray, out: np.ndarray) -> None:
+    call_kernel(
+        "accel_all", address(dyn.problem, "accel"), float(t), np.ascontiguousarray(q), _pars(dyn), out
+    )
+    dyn.counts["accel"] += 1
+
+
+class CompiledSplitting(_Compiled):
+    """A drift/kick splitting scheme (a `SplittingScheme`) run by the compiled splitting kernel:
+    drifts q += a_i h v, kicks v += b_i h a(q, t + tau_i h) with tau_i the drifts before the
+    kick (the last kick at t + h), first same as last when the scheme begins and ends with a
+    kick (Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed., II.5)."""
+
+    kind = "splitting"
+
+    def __init__(self, base: Stepper):
+        scheme = base.coefficients
+        if not isinstance(scheme, SplittingScheme):
+            raise InputError(f"`stepper` {base.info.name!r} needs a SplittingScheme")
+        super().__init__(base)
+        seq = scheme.sequence
+        self.fsal = len(seq) > 1 and seq[0][0] == "K" and seq[-1][0] == "K"
+        kicks, coeffs, fractions = [], [], []
+        elapsed = 0.0
+        for kind, coeff in seq:
+            kicks.append(kind == "K")
+            coeffs.append(coeff)
+            fractions.append(elapsed)
+            if kind == "D":
+                elapsed += coeff
+        if kicks and kicks[-1]:
+            fractions[-1] = 1.0  # the drifts sum to one: the last kick is at t + h exactly
+        self.kicks = np.array(kicks, dtype=np.bool_)
+        self.op_coefficients = tuple(coeffs)
+        self.op_fractions = tuple(fractions)
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        c = _newtonian_carry(t0, h, y0, dyn)
+        c.force_valid = False
+        return c
 
     def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
-        kernel = _kernel(dyn.problem, "split_advance")
-        if getattr(c, "h_arrays_for", None) != c.h:
-            c.hcoef_arr = np.array(c.hcoef, dtype=np.float64)
-            c.htau_arr = np.array(c.htau, dtype=np.float64)
-            c.h_arrays_for = c.h
-        args = (
-            self._kick, c.hcoef_arr, c.htau_arr, bool(self._fsal), bool(c.force_valid),
+        hcoef = np.array([coeff * c.h for coeff in self.op_coefficients])
+        htau = np.array([frac * c.h for frac in self.op_fractions])
+        columns = c.y.shape[1] >= COLUMN_MIN
+        evals = call_kernel(
+            "split_advance_cols" if columns else "split_advance",
+            address(dyn.problem, "accel_cols" if columns else "accel"), self.kicks, hcoef, htau,
+            bool(self.fsal), bool(c.force_valid),
             float(c.t0), int(c.n), float(c.h), int(n), c.y, c.a, _pars(dyn),
         )
-        evals = _timed_first_call(dyn.problem, "split_advance", kernel, args)
         dyn.counts["accel"] += int(evals)
-        c.force_valid = self._fsal
+        c.force_valid = self.fsal
 
 
-class CompiledLeapfrog(_CompiledMixin, StaggeredLeapfrog):
-    """The staggered leapfrog (velocities at half steps) built from a kick-drift-kick scheme, with
-    its whole-step loop x += h v, v += h a(x) compiled (course-material files 002 and 004)."""
+class CompiledLeapfrog(_Compiled):
+    """The staggered leapfrog built from a kick-drift-kick scheme K(b) D(1) K(b): positions at
+    whole steps, velocities at half steps (start v_1/2 = v_0 + b h a_0), synchronised on output
+    and on reversal (course-material files 002 and 004)."""
 
-    _templates = (_LEAPFROG_KERNEL,)
+    kind = "staggered leapfrog"
 
-    def __init__(self, base: StaggeredLeapfrog):
-        if not isinstance(base, StaggeredLeapfrog):
-            raise InputError(f"`base` must be a StaggeredLeapfrog, got {type(base).__name__}")
-        super().__init__(
-            base.info.name,
-            base.coefficients,
-            reference=base.info.reference,
-            description=base.info.description,
-        )
-        self.info = _compiled_info(base, "staggered leapfrog")
+    def __init__(self, base: Stepper):
+        scheme = base.coefficients
+        if not isinstance(scheme, SplittingScheme):
+            raise InputError(f"`stepper` {base.info.name!r} needs a SplittingScheme")
+        seq = scheme.sequence
+        if len(seq) != 3 or [k for k, _ in seq] != ["K", "D", "K"] or not scheme.symmetric:
+            raise InputError(
+                f"`stepper` {base.info.name!r}: the staggered leapfrog needs a symmetric "
+                f"kick-drift-kick scheme K(b) D(1) K(b), got {seq}"
+            )
+        super().__init__(base)
+        self.half = seq[0][1]
+        self.drift = seq[1][1]
+        self.kick = seq[0][1] + seq[2][1]
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        c = _newtonian_carry(t0, h, y0, dyn)
+        nq = dyn.nq
+        _accel_all(dyn, t0, c.y[:nq], c.a)
+        self._kick_velocity(c, nq, self.half * h)
+        return c
+
+    @staticmethod
+    def _kick_velocity(c: Carry, nq: int, coef: float) -> None:
+        v_flat = c.y[nq:].reshape(-1)
+        daxpy(c.a.reshape(-1), v_flat, a=coef)
 
     def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
-        kernel = _kernel(dyn.problem, "leapfrog_advance")
-        args = (
-            float(self._drift * c.h), float(self._kick * c.h), float(c.t0), int(c.n), float(c.h),
-            int(n), c.y, c.a, _pars(dyn),
+        columns = c.y.shape[1] >= COLUMN_MIN
+        evals = call_kernel(
+            "leapfrog_advance_cols" if columns else "leapfrog_advance",
+            address(dyn.problem, "accel_cols" if columns else "accel"), float(self.drift * c.h),
+            float(self.kick * c.h),
+            float(c.t0), int(c.n), float(c.h), int(n), c.y, c.a, _pars(dyn),
         )
-        evals = _timed_first_call(dyn.problem, "leapfrog_advance", kernel, args)
         dyn.counts["accel"] += int(evals)
 
+    def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
+        out = c.y.copy()
+        out[dyn.nq :] -= (self.half * c.h) * c.a
+        return out
 
-def compiled_variant(stepper: Stepper) -> Stepper:
-    """The compiled implementation of a NumPy explicit Runge-Kutta, splitting or staggered
-    leapfrog stepper (named `<name>@compiled`); users may register more with it."""
-    if isinstance(stepper, _CompiledMixin):
-        raise InputError(f"`stepper` {stepper.info.name!r} is already compiled")
-    if isinstance(stepper, StaggeredLeapfrog):
-        return CompiledLeapfrog(stepper)
-    if isinstance(stepper, SplittingStepper):
-        return CompiledSplitting(stepper)
-    if isinstance(stepper, ExplicitRungeKutta):
-        return CompiledRungeKutta(stepper)
-    raise InputError(
-        "`stepper` must be an explicit Runge-Kutta, splitting or staggered-leapfrog stepper, got "
-        f"{type(stepper).__name__}"
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        self._kick_velocity(c, dyn.nq, -self.half * c.h)  # synchronise: v_n
+        super()._reverse(dyn, c)
+        self._kick_velocity(c, dyn.nq, self.half * c.h)  # half step the new way: v_{n-1/2}
+
+
+# -- Stormer two-step ------------------------------------------------------------------------------
+class CompiledStormer(_Compiled):
+    """Stormer's two-step rule sum_j alpha_j x_{n+j} = h^2 beta_1 a(x_{n+1}) (a
+    `SecondOrderMultistep` with beta_0 = beta_2 = 0; Hairer, Norsett & Wanner I, III.10) with the
+    Taylor start x_1 = x_0 + h v_0 + h^2 a_0 / 2 and the central-difference velocity (course-material
+    files 000 and 001). Accelerations independent of the velocity only: where the force depends
+    on it, the NumPy loop's implicit velocity (closed form or Newton) is not compiled."""
+
+    kind = "Stormer two-step"
+
+    def __init__(self, base: Stepper):
+        table = base.coefficients
+        if not isinstance(table, SecondOrderMultistep):
+            raise InputError(f"`stepper` {base.info.name!r} needs a SecondOrderMultistep")
+        if table.steps != 2 or not table.explicit or table.beta[0] != 0.0:
+            raise InputError(
+                f"`stepper` {base.info.name!r}: the Stormer loop needs a two-step table with "
+                f"beta_0 = beta_2 = 0, got alpha={table.alpha.tolist()}, beta={table.beta.tolist()}"
+            )
+        super().__init__(base)
+        self.alpha0, self.alpha1 = float(table.alpha[0]), float(table.alpha[1])
+        self.beta1 = float(table.beta[1])
+
+    def incompatibility(self, problem: Problem) -> str | None:
+        if problem.velocity_dependent:
+            return (
+                "the compiled Stormer loop needs an acceleration independent of the velocity "
+                "(the implicit central-difference velocity is NumPy only)"
+            )
+        return super().incompatibility(problem)
+
+    def _new_carry(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        nq = dyn.nq
+        c = Carry(t0, h, y0)
+        c.v0 = y0[nq:].copy()
+        c.cur = y0[:nq].copy()
+        c.prev = np.empty_like(c.cur)
+        c.nxt = np.empty_like(c.cur)
+        c.a = np.zeros_like(c.cur)
+        return c
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        c = self._new_carry(dyn, t0, y0, h)
+        c.at_start = True
+        c.a_start = np.empty_like(c.cur)
+        _accel_all(dyn, t0, c.cur, c.a_start)
+        c.nxt = c.cur + h * c.v0 + (0.5 * h * h) * c.a_start
+        return c
+
+    def _start_from_history(self, dyn: Dynamics, t0: float, h: float, history: list) -> Carry:
+        c = self._new_carry(dyn, t0 + h, history[-1], h)
+        c.at_start = False
+        c.prev = np.ascontiguousarray(history[0][: dyn.nq])
+        _accel_all(dyn, c.t, c.cur, c.a)
+        np.multiply(c.prev, -self.alpha0, out=c.nxt)
+        flat = c.nxt.reshape(-1)
+        daxpy(c.cur.reshape(-1), flat, a=-self.alpha1)
+        daxpy(c.a.reshape(-1), flat, a=self.beta1 * c.h * c.h)
+        return c
+
+    def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
+        evals = call_kernel(
+            "stormer_advance", address(dyn.problem, "accel"), self.alpha0, self.alpha1,
+            float(self.beta1 * c.h * c.h),
+            float(c.t0), int(c.n), float(c.h), int(n), c.prev, c.cur, c.nxt, c.a, _pars(dyn),
+        )
+        dyn.counts["accel"] += int(evals)
+        c.at_start = False
+
+    def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
+        nq = dyn.nq
+        out = np.empty_like(c.y)
+        out[:nq] = c.cur
+        if c.at_start:
+            out[nq:] = c.v0
+        else:
+            np.subtract(c.nxt, c.prev, out=out[nq:])
+            out[nq:] /= 2.0 * c.h
+        return out
+
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        super()._reverse(dyn, c)
+        if c.at_start:
+            h = c.h
+            c.prev = c.nxt
+            c.nxt = c.cur + h * c.v0 + (0.5 * h * h) * c.a_start
+            c.at_start = False
+        else:
+            c.prev, c.nxt = c.nxt, c.prev
+
+
+# -- Newton failures ---------------------------------------------------------------------------------
+def _newton_failure(name: str, settings: NewtonSettings, t: float, stats: np.ndarray) -> StepFailure:
+    iteration, norm, residual, theta, status = (
+        int(stats[4]), float(stats[5]), float(stats[6]), float(stats[7]), int(stats[8])
+    )
+    if status == 2:
+        return StepFailure(
+            f"stepper {name!r}: singular Newton matrix at t={t:.17g} (iteration {iteration}); "
+            f"scaled residual {residual:.3e}"
+        )
+    return StepFailure(
+        f"stepper {name!r}: Newton iteration did not converge at t={t:.17g} after "
+        f"{iteration} iteration(s) ({settings.mode}): scaled increment {norm:.3e}, "
+        f"scaled residual {residual:.3e} (before the last increment), contraction "
+        f"{theta:.3g}, tolerance {settings.tol:.1e}"
     )
 
 
+def _add_newton_counts(dyn: Dynamics, stats: np.ndarray) -> None:
+    dyn.counts["rhs"] += int(stats[1])
+    dyn.counts["jac"] += int(stats[2])
+    if stats[3] > 0:
+        dyn.counts["newton_iterations"] = dyn.counts.get("newton_iterations", 0) + int(stats[3])
+
+
+# -- linear multistep --------------------------------------------------------------------------------
+class CompiledMultistep(_Compiled):
+    """A linear multistep method sum_j alpha_j y_{n+j} = h sum_j beta_j f_{n+j} (a
+    `LinearMultistep`; Hairer, Norsett & Wanner I, III.1-III.2): explicit tables by the compiled
+    explicit kernel, implicit ones by Newton's method with the problem's Jacobian (full or
+    simplified, as the wrapped stepper's `newton` settings). Starting values come from the
+    wrapped stepper's `starter` (the certified reference or a one-step stepper, whose evaluations
+    are counted with the method's); the history after a reversal is the NumPy loop's."""
+
+    kind = "linear multistep"
+
+    def __init__(self, base: Stepper):
+        table = base.coefficients
+        if not isinstance(table, LinearMultistep):
+            raise InputError(f"`stepper` {base.info.name!r} needs a LinearMultistep")
+        super().__init__(base)
+        self.history_length = table.steps
+        self.implicit = not bool(table.explicit)
+        self.part = "jacobian" if self.implicit else "functions"
+        self.kind = "implicit linear multistep" if self.implicit else "explicit linear multistep"
+        self.newton = _newton_settings(base)
+        self.starter = getattr(base, "starter", "rk4")
+        k = table.steps
+        self.predictor = np.array(
+            [float((-1) ** (k - 1 - j) * math.comb(k, j)) for j in range(k)], dtype=np.float64
+        )
+
+    def _starter_stepper(self) -> Stepper:
+        if isinstance(self.starter, Stepper):
+            return self.starter
+        from harness.registry import get_stepper  # lazy: the registry imports this module
+
+        return get_stepper(self.starter)
+
+    def _starting_values(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> list:
+        count = self.coefficients.steps - 1
+        if count == 0:
+            return []
+        if self.starter == "reference":
+            from harness.ground_truth import reference
+
+            times = t0 + h * np.arange(1, count + 1)
+            ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)
+            values = [np.array(ref.y[i], dtype=np.float64) for i in range(count)]
+        else:
+            try:
+                starter = self._starter_stepper()
+            except UnknownNameError as exc:
+                raise InputError(f"starter of {self.info.name!r}: {exc}") from None
+            check_compatible(starter, dyn.problem)
+            tr = starter.integrate(
+                dyn.problem, h=h, n_steps=count, y0=y0, t0=t0, pars=dyn.pars,
+                save_steps=range(1, count + 1),
+            )
+            values = [np.ascontiguousarray(tr.y[i]) for i in range(count)]
+            for key, value in tr.evals.items():
+                dyn.counts[key] = dyn.counts.get(key, 0) + value
+        dyn.counts["starter_steps"] = dyn.counts.get("starter_steps", 0) + count
+        return values
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        pending = [(y, None) for y in self._starting_values(dyn, t0, y0, h)]
+        return Carry(t0, h, y0, hist_y=[y0], hist_f=[None], pending=pending)
+
+    def _start_from_history(self, dyn: Dynamics, t0: float, h: float, history: list) -> Carry:
+        k = len(history)
+        return Carry(
+            t0 + (k - 1) * h, h, history[-1], hist_y=list(history), hist_f=[None] * k, pending=[]
+        )
+
+    def _push(self, c: Carry, y: np.ndarray, f: np.ndarray | None) -> None:
+        c.hist_y.append(y)
+        c.hist_f.append(f)
+        if len(c.hist_y) > self.coefficients.steps:
+            del c.hist_y[0]
+            del c.hist_f[0]
+        c.y = y
+
+    def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
+        done = 0
+        while done < n and c.pending:
+            y, f = c.pending.pop(0)
+            self._push(c, y, f)
+            done += 1
+        if done == n:
+            return
+        table = self.coefficients
+        H = np.ascontiguousarray(np.stack(c.hist_y))
+        F = np.zeros_like(H)
+        fvalid = np.zeros(H.shape[0], dtype=np.bool_)
+        for j, f in enumerate(c.hist_f):
+            if f is not None:
+                F[j] = f
+                fvalid[j] = True
+        n0 = int(c.n) + done
+        steps = n - done
+        failure = None
+        if self.implicit:
+            stats = np.zeros(9)
+            settings = self.newton
+            call_kernel(
+                "lmm_implicit_advance", address(dyn.problem, "rhs"), address(dyn.problem, "jac"),
+                table.alpha, table.beta, self.predictor,
+                settings.mode == "full", float(settings.tol), int(settings.max_iter), float(c.t0), n0,
+                float(c.h), steps, H, F, fvalid, _pars(dyn), stats,
+            )
+            _add_newton_counts(dyn, stats)
+            if stats[8] != 0:
+                failure = _newton_failure(
+                    self.info.name, settings, c.t0 + (n0 + int(stats[0])) * c.h, stats
+                )
+        else:
+            evals = call_kernel(
+                "lmm_explicit_advance", address(dyn.problem, "rhs"), table.alpha, table.beta, float(c.t0), n0,
+                float(c.h), steps, H, F, fvalid, _pars(dyn),
+            )
+            dyn.counts["rhs"] += int(evals)
+        c.hist_y = [H[j] for j in range(H.shape[0])]
+        c.hist_f = [F[j] if fvalid[j] else None for j in range(H.shape[0])]
+        c.y = c.hist_y[-1]
+        if failure is not None:
+            raise failure
+
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        super()._reverse(dyn, c)
+        known = list(zip(c.hist_y, c.hist_f, strict=True))
+        ahead = [(y, f) for y, f in reversed(known[:-1])]
+        behind = [(y, f) for y, f in reversed(c.pending)] + [known[-1]]
+        behind = behind[-self.coefficients.steps :]
+        c.hist_y = [y for y, _ in behind]
+        c.hist_f = [f for _, f in behind]
+        c.pending = ahead
+        c.y = c.hist_y[-1]
+
+
+# -- implicit Runge-Kutta ----------------------------------------------------------------------------
+def _extrapolation_matrix(nodes: np.ndarray) -> np.ndarray | None:
+    """E with Z_new_i ~ sum_j E_ij Z_prev_j: the previous step's collocation polynomial u(tau)
+    through (0, 0) and (c_j, Z_j), evaluated at 1 + c_i, relative to u(1) (Hairer & Wanner II,
+    IV.8). None when the nodes are not distinct and nonzero."""
+    pts = np.concatenate([[0.0], nodes])
+    if np.any(nodes == 0.0) or np.unique(pts).size != pts.size:
+        return None
+
+    def lagrange(j: int, tau: float) -> float:
+        others = np.delete(pts, j)
+        return float(np.prod((tau - others) / (pts[j] - others)))
+
+    s = nodes.size
+    E = np.empty((s, s))
+    for i in range(s):
+        for j in range(s):
+            E[i, j] = lagrange(j + 1, 1.0 + nodes[i]) - lagrange(j + 1, 1.0)
+    return E
+
+
+class CompiledImplicitRungeKutta(_Compiled):
+    """An implicit Runge-Kutta method (a `ButcherTableau` with a nonzero upper triangle) run by
+    the compiled Newton kernel: unknowns Z_i = h sum_j a_ij f(t + c_j h, y + Z_j) on the stages
+    with a nonzero row of A, y_{n+1} = y + sum_i d_i Z_i + h w f(t, y) with d = A_ii^{-T} b
+    (Hairer & Wanner, *Solving ODEs II*, IV.8), the previous step's collocation polynomial as
+    first iterate, first same as last when the tableau allows it; Newton settings (tolerance,
+    iteration cap, full or simplified) from the wrapped stepper."""
+
+    kind = "implicit Runge-Kutta"
+    part = "jacobian"
+
+    def __init__(self, base: Stepper):
+        tab = base.coefficients
+        if not isinstance(tab, ButcherTableau) or tab.explicit:
+            raise InputError(f"`stepper` {base.info.name!r} needs an implicit ButcherTableau")
+        super().__init__(base)
+        self.newton = _newton_settings(base)
+        A, b, c = tab.A, tab.b, tab.c
+        zero_rows = np.all(A == 0.0, axis=1)
+        expl = np.flatnonzero(zero_rows)
+        impl = np.flatnonzero(~zero_rows)
+        A_ii = A[np.ix_(impl, impl)]
+        A_ie = A[np.ix_(impl, expl)]
+        try:
+            A_ii_inv = np.linalg.inv(A_ii)
+        except np.linalg.LinAlgError:
+            raise InputError(
+                f"`stepper` {base.info.name!r}: the implicit block of A must be invertible"
+            ) from None
+        d = A_ii_inv.T @ b[impl]
+        w = b[expl] - A_ie.T @ d
+        self.A_ii = np.ascontiguousarray(A_ii)
+        self.aie_sum = np.ascontiguousarray(A_ie.sum(axis=1))
+        self.c_impl = np.ascontiguousarray(c[impl])
+        self.d = np.ascontiguousarray(d)
+        self.w_sum = float(w.sum())
+        self.has_explicit = bool(expl.size)
+        self.fsal = bool(
+            expl.size == 1 and expl[0] == 0 and impl.size == tab.stages - 1
+            and np.array_equal(A[-1], b) and c[-1] == 1.0
+        )
+        E = _extrapolation_matrix(self.c_impl)
+        self.has_predictor = E is not None
+        self.E = np.zeros((impl.size, impl.size)) if E is None else E
+        self.last_row_inv = np.ascontiguousarray(A_ii_inv[-1])
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        y = np.ascontiguousarray(y0)
+        c = Carry(t0, h, y)
+        c.f_start = np.zeros_like(y)
+        c.z_prev = np.zeros((self.c_impl.size, *y.shape))
+        c.flags = np.zeros(2, dtype=np.int64)  # [f_start valid, z_prev valid]
+        return c
+
+    def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
+        settings = self.newton
+        stats = np.zeros(9)
+        call_kernel(
+            "irk_advance", address(dyn.problem, "rhs"), address(dyn.problem, "jac"), self.A_ii,
+            self.aie_sum, self.c_impl, self.d, self.w_sum,
+            self.last_row_inv, self.E, self.has_predictor, self.has_explicit, self.fsal,
+            settings.mode == "full", float(settings.tol), int(settings.max_iter), float(c.t0),
+            int(c.n), float(c.h), int(n), c.y, c.f_start, c.z_prev, c.flags, _pars(dyn), stats,
+        )
+        _add_newton_counts(dyn, stats)
+        if stats[8] != 0:
+            raise _newton_failure(self.info.name, settings, c.t0 + (c.n + int(stats[0])) * c.h, stats)
+
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        super()._reverse(dyn, c)
+        c.flags[1] = 0  # the predictor extrapolates forward only
+
+
+# -- choosing the family -------------------------------------------------------------------------------
+def compiled_variant(stepper: Stepper) -> Stepper:
+    """The compiled implementation (named `<name>@compiled`) of a stepper whose method is a
+    coefficient object: explicit or implicit `ButcherTableau`, `SplittingScheme` (a
+    `StaggeredLeapfrog` keeps its staggered form), `LinearMultistep`, `SecondOrderMultistep`."""
+    if not isinstance(stepper, Stepper):
+        raise InputError(f"`stepper` must be a Stepper, got {type(stepper).__name__}")
+    if stepper.info.implementation == "compiled":
+        raise InputError(f"`stepper` {stepper.info.name!r} is already compiled")
+    coeffs = stepper.coefficients
+    if isinstance(coeffs, ButcherTableau):
+        return CompiledRungeKutta(stepper) if coeffs.explicit else CompiledImplicitRungeKutta(stepper)
+    if isinstance(coeffs, SplittingScheme):
+        if isinstance(stepper, StaggeredLeapfrog):
+            return CompiledLeapfrog(stepper)
+        return CompiledSplitting(stepper)
+    if isinstance(coeffs, LinearMultistep):
+        return CompiledMultistep(stepper)
+    if isinstance(coeffs, SecondOrderMultistep):
+        return CompiledStormer(stepper)
+    raise InputError(
+        f"`stepper` {stepper.info.name!r} has no coefficient object a compiled family runs "
+        f"(ButcherTableau, SplittingScheme, LinearMultistep, SecondOrderMultistep); got "
+        f"{type(coeffs).__name__}"
+    )
+
+
+_variants: weakref.WeakKeyDictionary[Stepper, Stepper | None] = weakref.WeakKeyDictionary()
+_variants_lock = threading.Lock()
+
+
+def fastest(stepper: Stepper, problem: Problem) -> Stepper:
+    """The fastest correct implementation of `stepper`'s method on `problem`: its compiled
+    variant (agreeing with the NumPy loop to rounding, tested over the registry) when the method
+    is a coefficient object and the problem's functions translate, else `stepper` itself. Read
+    `.info.implementation` of the result to record which one ran."""
+    if stepper.info.implementation == "compiled":
+        return stepper
+    with _variants_lock:
+        known = stepper in _variants
+        variant = _variants.get(stepper)
+    if not known:
+        try:
+            variant = compiled_variant(stepper)
+        except InputError:
+            variant = None
+        with _variants_lock:
+            _variants[stepper] = variant
+    if variant is not None and variant.compatible(problem):
+        return variant
+    return stepper
+
+
+# -- the registered variants -----------------------------------------------------------------------------
+#: Built-in steppers with a coefficient object that no compiled family runs: name -> reason.
+NOT_COMPILED: dict[str, str] = {}
+
+
 def _registered() -> list[Stepper]:
-    from implementations import runge_kutta, splitting
+    from implementations import FAMILY_MODULES
 
-    numpy_steppers = {s.info.name: s for s in [*runge_kutta.STEPPERS, *splitting.STEPPERS]}
-    chosen = ("velocity-verlet", "leapfrog", "forest-ruth", "rk4", "euler", "heun")
-    return [compiled_variant(numpy_steppers[name]) for name in chosen]
+    out = []
+    for name in FAMILY_MODULES:
+        if name == "compiled":
+            continue
+        module = import_module(f"implementations.{name}")
+        for stepper in module.STEPPERS:
+            if stepper.coefficients is None:
+                continue
+            try:
+                out.append(compiled_variant(stepper))
+            except InputError as exc:
+                NOT_COMPILED[stepper.info.name] = str(exc)
+    return out
 
 
-#: The compiled variants in the registry: the drift-run workhorses (velocity Verlet, leapfrog,
-#: Forest-Ruth, RK4) and two cheap Runge-Kutta methods; `compiled_variant` makes any other.
+#: `<name>@compiled` for every built-in stepper with a coefficient object.
 STEPPERS: list[Stepper] = _registered()

@@ -25,11 +25,18 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CompilerUnavailable", "CBaseline", "load", "find_compiler", "FLAGS", "SOURCE"]
+__all__ = ["CompilerUnavailable", "CBaseline", "load", "find_compiler", "FLAGS", "SOURCE", "SINGLE_FAMILY"]
 
 SOURCE = Path(__file__).with_name("kepler.c")
 FLAGS = ("-O3", "-fPIC", "-shared")
 LIBS = ("-lm",)
+
+#: Single-trajectory loops of the other families: method -> number of state values they take.
+SINGLE_FAMILY = {"leapfrog": 4, "stormer": 4, "ab4": 16, "midpoint": 4}
+# The harness's Newton settings (harness.tolerances.NEWTON_TOL / NEWTON_MAX_ITER), as numbers so
+# the C baseline loads without the harness.
+NEWTON_TOL = 1e-14
+NEWTON_MAX_ITER = 20
 
 _loaded: dict[str, CBaseline] = {}
 
@@ -77,6 +84,13 @@ class CBaseline:
             fn = getattr(self.lib, name)
             fn.argtypes = [dp, dp, ctypes.c_long, ctypes.c_double, ctypes.c_long]
             fn.restype = None
+        for name in ("leapfrog_single", "stormer_single", "ab4_single"):
+            fn = getattr(self.lib, name)
+            fn.argtypes = [dp, ctypes.c_double, ctypes.c_long]
+            fn.restype = None
+        midpoint = self.lib.midpoint_single
+        midpoint.argtypes = [dp, ctypes.c_double, ctypes.c_long, ctypes.c_double, ctypes.c_long]
+        midpoint.restype = ctypes.c_long
 
     @property
     def command(self) -> str:
@@ -88,9 +102,29 @@ class CBaseline:
 
     def run(self, method: str, y: np.ndarray, h: float, n_steps: int) -> np.ndarray:
         """Advance states `y` shaped (4,) or (4, N) by `n_steps` steps of `method` ('vv' or
-        'rk4'); returns the new states (the input is not modified)."""
+        'rk4'), or one trajectory's state of a single-trajectory family loop (`SINGLE_FAMILY`:
+        'leapfrog' (x, v_1/2), 'stormer' (x_{n-1}, x_n), 'ab4' (y_{n-3} .. y_n), 'midpoint'
+        (x, v; Newton tolerance NEWTON_TOL, NEWTON_MAX_ITER iterations)); returns the new
+        states (the input is not modified)."""
+        if method in SINGLE_FAMILY:
+            out = np.array(y, dtype=np.float64, order="C", copy=True).reshape(-1)
+            if out.size != SINGLE_FAMILY[method]:
+                raise ValueError(
+                    f"`y` for {method!r} must hold {SINGLE_FAMILY[method]} values, got {out.size}"
+                )
+            if method == "midpoint":
+                taken = self.lib.midpoint_single(
+                    self._ptr(out), float(h), int(n_steps), NEWTON_TOL, NEWTON_MAX_ITER
+                )
+                if taken < 0:
+                    raise RuntimeError("the C implicit midpoint loop's Newton iteration did not converge")
+            else:
+                getattr(self.lib, f"{method}_single")(self._ptr(out), float(h), int(n_steps))
+            return out
         if method not in ("vv", "rk4"):
-            raise ValueError(f"`method` must be 'vv' or 'rk4', got {method!r}")
+            raise ValueError(
+                f"`method` must be 'vv', 'rk4' or one of {sorted(SINGLE_FAMILY)}, got {method!r}"
+            )
         out = np.array(y, dtype=np.float64, order="C", copy=True)
         if out.ndim == 1:
             getattr(self.lib, f"{method}_single")(self._ptr(out), float(h), int(n_steps))

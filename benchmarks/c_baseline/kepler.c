@@ -113,3 +113,134 @@ void rk4_ensemble(double *restrict y, double *restrict work, long n, double h, l
                                            + 2.0 * k[2][i * n + j] + k[3][i * n + j]);
     }
 }
+
+/* ---- one loop per family beyond velocity Verlet and RK4 (single trajectory) ---------------- */
+
+/* Staggered leapfrog: x += h v_{n+1/2}, v_{n+3/2} = v_{n+1/2} + h a(x_{n+1}); s holds the
+ * positions and the half-step velocities (the start v_1/2 = v_0 + h a_0 / 2 is the caller's). */
+void leapfrog_single(double *s, double h, long n_steps)
+{
+    double x = s[0], y = s[1], vx = s[2], vy = s[3], ax, ay;
+    for (long k = 0; k < n_steps; ++k) {
+        x += h * vx;
+        y += h * vy;
+        kepler_accel(x, y, &ax, &ay);
+        vx += h * ax;
+        vy += h * ay;
+    }
+    s[0] = x; s[1] = y; s[2] = vx; s[3] = vy;
+}
+
+/* Stormer's two-step rule x_{n+1} = 2 x_n - x_{n-1} + h^2 a(x_n) (Hairer, Norsett & Wanner I,
+ * III.10); s = (x_{n-1}, y_{n-1}, x_n, y_n) in, the last two positions out. */
+void stormer_single(double *s, double h, long n_steps)
+{
+    double xp = s[0], yp = s[1], x = s[2], y = s[3], ax, ay, hh = h * h;
+    for (long k = 0; k < n_steps; ++k) {
+        kepler_accel(x, y, &ax, &ay);
+        double xn = 2.0 * x - xp + hh * ax;
+        double yn = 2.0 * y - yp + hh * ay;
+        xp = x; yp = y; x = xn; y = yn;
+    }
+    s[0] = xp; s[1] = yp; s[2] = x; s[3] = y;
+}
+
+/* Fourth-order Adams-Bashforth (Hairer, Norsett & Wanner I, III.1): y_{n+1} = y_n +
+ * h/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3}); s = (y_{n-3}, ..., y_n), 16 values, with
+ * the derivatives of the three oldest evaluated once at the start, one evaluation per step. */
+void ab4_single(double *s, double h, long n_steps)
+{
+    double f[4][4], u[4];
+    for (int j = 0; j < 3; ++j) kepler_rhs(s + 4 * j, f[j]);
+    for (int i = 0; i < 4; ++i) u[i] = s[12 + i];
+    double c0 = -9.0 / 24.0 * h, c1 = 37.0 / 24.0 * h, c2 = -59.0 / 24.0 * h, c3 = 55.0 / 24.0 * h;
+    for (long k = 0; k < n_steps; ++k) {
+        kepler_rhs(u, f[3]);
+        for (int i = 0; i < 4; ++i)
+            u[i] += c0 * f[0][i] + c1 * f[1][i] + c2 * f[2][i] + c3 * f[3][i];
+        for (int j = 0; j < 3; ++j)
+            for (int i = 0; i < 4; ++i) f[j][i] = f[j + 1][i];
+    }
+    for (int i = 0; i < 4; ++i) s[12 + i] = u[i];
+}
+
+static inline void kepler_jac(const double *u, double *J)
+{
+    /* J = d(vx, vy, ax, ay)/d(x, y, vx, vy), row-major 4x4 */
+    double x = u[0], y = u[1];
+    double r2 = x * x + y * y, r = sqrt(r2), r3 = r2 * r, r5 = r3 * r2;
+    for (int i = 0; i < 16; ++i) J[i] = 0.0;
+    J[0 * 4 + 2] = 1.0;
+    J[1 * 4 + 3] = 1.0;
+    J[2 * 4 + 0] = -1.0 / r3 + 3.0 * x * x / r5;
+    J[2 * 4 + 1] = 3.0 * x * y / r5;
+    J[3 * 4 + 0] = 3.0 * x * y / r5;
+    J[3 * 4 + 1] = -1.0 / r3 + 3.0 * y * y / r5;
+}
+
+static int solve4(double *M, double *b)
+{
+    for (int c = 0; c < 4; ++c) {
+        int p = c;
+        for (int r = c + 1; r < 4; ++r)
+            if (fabs(M[r * 4 + c]) > fabs(M[p * 4 + c])) p = r;
+        if (M[p * 4 + c] == 0.0) return 0;
+        if (p != c) {
+            for (int q = 0; q < 4; ++q) { double t = M[c * 4 + q]; M[c * 4 + q] = M[p * 4 + q]; M[p * 4 + q] = t; }
+            double t = b[c]; b[c] = b[p]; b[p] = t;
+        }
+        for (int r = c + 1; r < 4; ++r) {
+            double l = M[r * 4 + c] / M[c * 4 + c];
+            for (int q = c + 1; q < 4; ++q) M[r * 4 + q] -= l * M[c * 4 + q];
+            b[r] -= l * b[c];
+        }
+    }
+    for (int i = 3; i >= 0; --i) {
+        double acc = b[i];
+        for (int q = i + 1; q < 4; ++q) acc -= M[i * 4 + q] * b[q];
+        b[i] = acc / M[i * 4 + i];
+    }
+    return 1;
+}
+
+/* Implicit midpoint rule (the one-stage Gauss method; Hairer & Wanner II, IV.8): Z = h/2
+ * f(y + Z), y <- y + 2 Z, by full Newton from the previous step's Z, converged when the
+ * increment scaled by 1 + |y| is at most tol or the contraction estimate theta/(1-theta)|dZ| is.
+ * Returns the Newton iterations taken, or -1 when an iteration fails to converge in max_iter. */
+long midpoint_single(double *s, double h, long n_steps, double tol, long max_iter)
+{
+    double u[4], Z[4] = {0.0, 0.0, 0.0, 0.0}, w[4], f[4], J[16], M[16], g[4], inv[4];
+    long iterations = 0;
+    for (int i = 0; i < 4; ++i) u[i] = s[i];
+    for (long k = 0; k < n_steps; ++k) {
+        for (int i = 0; i < 4; ++i) inv[i] = 1.0 / (1.0 + fabs(u[i]));
+        double previous = INFINITY;
+        int converged = 0;
+        for (long it = 0; it < max_iter && !converged; ++it) {
+            for (int i = 0; i < 4; ++i) w[i] = u[i] + Z[i];
+            kepler_rhs(w, f);
+            kepler_jac(w, J);
+            for (int i = 0; i < 4; ++i) g[i] = -(Z[i] - 0.5 * h * f[i]);
+            for (int i = 0; i < 16; ++i) M[i] = -0.5 * h * J[i];
+            for (int i = 0; i < 4; ++i) M[i * 4 + i] += 1.0;
+            if (!solve4(M, g)) return -1;
+            double norm = 0.0;
+            for (int i = 0; i < 4; ++i) {
+                Z[i] += g[i];
+                double e = fabs(g[i] * inv[i]);
+                if (e > norm) norm = e;
+            }
+            ++iterations;
+            if (norm <= tol) converged = 1;
+            else if (isfinite(previous)) {
+                double theta = norm / previous;
+                if (theta < 1.0 && theta / (1.0 - theta) * norm <= tol) converged = 1;
+            }
+            previous = norm;
+        }
+        if (!converged) return -1;
+        for (int i = 0; i < 4; ++i) u[i] += 2.0 * Z[i];
+    }
+    for (int i = 0; i < 4; ++i) s[i] = u[i];
+    return iterations;
+}
