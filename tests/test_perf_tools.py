@@ -87,7 +87,7 @@ def test_suites_are_parameterised_over_the_registry():
     from benchmarks import bench_accuracy, bench_steppers
     from harness.registry import steppers
 
-    names = steppers.names()
+    names = steppers.names(variants=True)
     assert bench_steppers.StepTime.params[0] == names
     assert bench_steppers.StepTime.params[2] == [1, 1_000, 100_000]
     assert bench_steppers.RatioToC.params[0] == names
