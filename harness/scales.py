@@ -53,6 +53,7 @@ __all__ = [
     "draw_noise",
     "states_at",
     "fastest_times",
+    "regime_end",
 ]
 
 
@@ -174,18 +175,21 @@ def _eigenvalues(problem, jac: np.ndarray) -> np.ndarray:
     return np.linalg.eigvals(mats)
 
 
-def states_at(problem, times: np.ndarray) -> np.ndarray:
-    """States (dim, len(times)) of the float64 Taylor orbit from y0 at increasing `times` >= t0:
-    points on the orbit (for probing a map there), not a certified reference."""
+def states_at(problem, times: np.ndarray, y0: np.ndarray | None = None) -> np.ndarray:
+    """States (dim, len(times)) of the float64 Taylor orbit from y0 (default: the problem's) at
+    increasing `times` >= t0: points on the orbit, not a certified reference."""
     lock, ta = _integrator(problem)
     times = np.asarray(times, dtype=np.float64)
+    start = np.array(problem.y0 if y0 is None else y0, dtype=np.float64).reshape(problem.dim)
     with lock:
         ta.time = problem.t0
-        ta.state[:] = problem.y0
+        ta.state[:] = start
         if problem.parameters:
             ta.pars[:] = problem.parameter_values
-        out = ta.propagate_grid(times)
-    return np.ascontiguousarray(out[-1].T)
+        lead = bool(times.size == 0 or times[0] != problem.t0)  # the grid starts at t0
+        grid = np.concatenate([[problem.t0], times]) if lead else times
+        out = ta.propagate_grid(grid)[-1]
+    return np.ascontiguousarray((out[1:] if lead else out).T)
 
 
 def fastest_times(problem, n: int) -> np.ndarray:
@@ -337,3 +341,48 @@ def derive_perturbation(problem) -> Perturbation:
         reason += (f"; even the smallest size tried leaves a member outside a factor "
                    f"{tol.REGIME_RATE_FACTOR:g}: members may not share one dynamical regime")
     return Perturbation(size, scale, "derived", reason)
+
+
+_regime_ends: dict[tuple[str, float], tuple[float, str]] = {}
+
+
+def regime_end(problem, t_end: float) -> tuple[float, str]:
+    """(t_stop, reason): how far past its span a long run of `problem` towards `t_end` stays in
+    the dynamical regime of the span. The float64 orbit is followed to `t_end`; where its
+    fastest rate first exceeds REGIME_RATE_FACTOR x the span's (a closer encounter than any
+    within the span: beyond its span the Pleiades collides), or the orbit stops (non-finite,
+    step cap), the run stops LONG_RUN_MARGIN fastest-time units earlier. t_stop = t_end and
+    reason "" when the regime holds throughout."""
+    key = (problem.fingerprint(), float(t_end))
+    if key in _regime_ends:
+        return _regime_ends[key]
+    base = problem.time_scale.fastest_rate
+    orbit = sample_orbit(problem, t_end=t_end)
+    idx = np.arange(orbit.t.size)
+    if idx.size > tol.ORBIT_MAX_SAMPLES:
+        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
+    t, y = orbit.t[idx], np.ascontiguousarray(orbit.y[:, idx])
+    jac = problem.compiled("jac", None)(y, pars=problem.pars_for(t.size), time=t)
+    jac = jac.reshape(problem.dim, problem.dim, t.size)
+    limit = tol.REGIME_RATE_FACTOR * base
+    # ||J||_F bounds the spectral radius: only samples above the limit can leave the regime;
+    # their spectra are taken in time order until one does.
+    maybe = np.flatnonzero(np.sqrt(np.sum(jac * jac, axis=(0, 1))) > limit) if base > 0 else []
+    stop, reason = float(t_end), ""
+    for start in range(0, len(maybe), tol.REGIME_CANDIDATES):
+        chunk = maybe[start:start + tol.REGIME_CANDIDATES]
+        rate = np.max(np.abs(_eigenvalues(problem, jac[:, :, chunk])), axis=1)
+        over = np.flatnonzero(rate > limit)
+        if over.size:
+            k, r = int(chunk[over[0]]), float(rate[over[0]])
+            stop = float(t[k]) - tol.LONG_RUN_MARGIN / r
+            reason = (f"the orbit leaves the regime of the problem's span at t = {t[k]:.6g} (fastest "
+                      f"rate {r:.4g}, over {tol.REGIME_RATE_FACTOR:g} x the span's {base:.4g})")
+            break
+    if not reason and not orbit.complete:
+        stop = float(orbit.t[-1])
+        reason = f"the orbit could not be followed past t = {stop:.6g}"
+    stop = max(stop, problem.t_end) if stop < t_end else stop
+    out = (min(stop, float(t_end)), reason)
+    _regime_ends[key] = out
+    return out

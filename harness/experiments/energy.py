@@ -57,6 +57,7 @@ from harness.experiments.common import (
     fixed_plan,
     initial_ensemble,
     invariant_reason,
+    long_run_steps,
     perturbation_used,
     primary_invariant,
     problem_cells,
@@ -292,21 +293,22 @@ def _max_members(rel: np.ndarray) -> np.ndarray:
 
 def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
     h, n, tolerance = _plan(stepper, problem, config)
+    n, capped = long_run_steps(problem, h, n)
     size = int(config["adaptive_ensemble" if isinstance(stepper, AdaptiveStepper) else "ensemble"])
     y0 = initial_ensemble(problem, config, size)
     period = problem.time_scale.period
     save = save_grid(n, int(config["samples_per_decade"]), int(config["uniform_samples"]))
     started = time.perf_counter()
-    message = ""
+    message = capped
     try:
         tr = stepper.integrate(problem, h=h, n_steps=n, y0=y0, save_steps=save)
         steps, times, states = tr.steps, tr.t, tr.y
         if not tr.finite:
-            message = "the state overflowed (non-finite)"
+            message = "; ".join(filter(None, [capped, "the state overflowed (non-finite)"]))
     except StepFailure as exc:
         steps, times = np.array([0, n]), problem.t0 + np.array([0, n]) * h
         states = np.stack([y0, np.full_like(y0, np.nan)])
-        message = f"step failure: {exc}"
+        message = "; ".join(filter(None, [capped, f"step failure: {exc}"]))
     wall = time.perf_counter() - started
     errors = _invariant_errors(problem, states)
     frames = []
@@ -341,7 +343,7 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
                     tol.FIT_MIN_PERIODS * steps_per_period)
     e = classify_drift(energy.step.values, energy.t.values, energy.error.values,
                        fit_start=int(fit_start))
-    if message.startswith("step failure"):
+    if "step failure: " in message:
         e["drift_class"] = "unstable"  # an implicit solve broke down: the motion is destroyed
     expected = EXPECTATIONS.get((info.name, problem))
     limit = rounding_growth(n_end)
