@@ -66,6 +66,9 @@ class TimeScale:
     h: float
     source: str  # "declared" or "derived"
     reason: str
+    # fastest over median spectral radius along the span: ~1 for an oscillator, large where
+    # close encounters come and go (a fixed step is then far finer than most of the orbit needs)
+    rate_contrast: float = 1.0
 
     @property
     def steps_per_period(self) -> float:
@@ -73,6 +76,7 @@ class TimeScale:
 
     def as_dict(self) -> dict[str, Any]:
         return {"period": self.period, "fastest_rate": self.fastest_rate, "h": self.h,
+                "rate_contrast": self.rate_contrast,
                 "steps_per_period": self.steps_per_period, "source": self.source,
                 "reason": self.reason}
 
@@ -268,7 +272,10 @@ def derive_time_scale(problem) -> TimeScale:
         why += f"; J is nilpotent along the orbit: h = {tol.STEP_RATE_PRODUCT:g} x that time"
     if not orbit.complete:
         why += f"; the orbit sample stopped at t = {orbit.t[-1]:.6g} before the span's end"
-    return TimeScale(period=period, fastest_rate=rho, h=h, source=source, reason=why)
+    median = float(np.median(rates["spectral"]))
+    contrast = rho / median if median > 0.0 else (1.0 if rho == 0.0 else math.inf)
+    return TimeScale(period=period, fastest_rate=rho, h=h, source=source, reason=why,
+                     rate_contrast=contrast)
 
 
 # -- perturbation -----------------------------------------------------------------------------------
