@@ -357,9 +357,11 @@ def regime_end(problem, t_end: float) -> tuple[float, str]:
     """(t_stop, reason): how far past its span a long run of `problem` towards `t_end` stays in
     the dynamical regime of the span. The float64 orbit is followed to `t_end`; where its
     fastest rate first exceeds REGIME_RATE_FACTOR x the span's (a closer encounter than any
-    within the span: beyond its span the Pleiades collides), or the orbit stops (non-finite,
-    step cap), the run stops LONG_RUN_MARGIN fastest-time units earlier. t_stop = t_end and
-    reason "" when the regime holds throughout."""
+    within the span: beyond its span the Pleiades collides; the run stops LONG_RUN_MARGIN
+    fastest-time units earlier), where the state first grows past REGIME_SIZE_FACTOR x its size
+    over the span (a dropped ball keeps falling), or where the orbit stops (non-finite, step
+    cap), whichever comes first, and never before the span's end. t_stop = t_end and reason ""
+    when the regime holds throughout."""
     key = (problem.fingerprint(), float(t_end))
     if key in _regime_ends:
         return _regime_ends[key]
@@ -376,11 +378,25 @@ def regime_end(problem, t_end: float) -> tuple[float, str]:
     # their spectra are taken in time order until one does.
     maybe = np.flatnonzero(np.sqrt(np.sum(jac * jac, axis=(0, 1))) > limit) if base > 0 else []
     stop, reason = float(t_end), ""
+    # The state's size, per block (positions, velocities; the whole state for a first-order
+    # problem): beyond its span the orbit may run off (a dropped ball falls forever).
+    span_part = orbit.t <= problem.t_end
+    nq = len(problem.newtonian.positions) if problem.newtonian is not None else problem.dim
+    blocks = [b for b in (slice(0, nq), slice(nq, problem.dim)) if b.stop > b.start]
+    grown = np.zeros(orbit.t.size, dtype=bool)
+    for b in blocks:
+        size = np.max(np.abs(orbit.y[b]), axis=0)
+        grown |= size > tol.REGIME_SIZE_FACTOR * max(float(np.max(size[span_part])), tol.SCALE_FLOOR)
+    if grown.any():
+        k = int(np.argmax(grown))
+        stop = float(orbit.t[max(k - 1, 0)])  # the last sample still inside
+        reason = (f"the orbit leaves the regime of the problem's span by t = {orbit.t[k]:.6g} (the "
+                  f"state grows past {tol.REGIME_SIZE_FACTOR:g} x its size over the span)")
     for start in range(0, len(maybe), tol.REGIME_CANDIDATES):
         chunk = maybe[start:start + tol.REGIME_CANDIDATES]
         rate = np.max(np.abs(_eigenvalues(problem, jac[:, :, chunk])), axis=1)
         over = np.flatnonzero(rate > limit)
-        if over.size:
+        if over.size and float(t[chunk[over[0]]]) - tol.LONG_RUN_MARGIN / float(rate[over[0]]) < stop:
             k, r = int(chunk[over[0]]), float(rate[over[0]])
             stop = float(t[k]) - tol.LONG_RUN_MARGIN / r
             reason = (f"the orbit leaves the regime of the problem's span at t = {t[k]:.6g} (fastest "

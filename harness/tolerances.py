@@ -239,5 +239,8 @@ HORIZON_PERIODS = 10.0
 # ||J|| (a bound on the spectral radius) is largest: the fastest motion is among them.
 REGIME_CANDIDATES = 64
 # A long run (energy, reversibility) towards a horizon beyond the problem's span stops this many
-# fastest-time units (1 / rate) before its orbit first leaves the span's dynamical regime.
+# fastest-time units (1 / rate) before its orbit first leaves the span's dynamical regime ...
 LONG_RUN_MARGIN = 10.0
+# ... or where the state (each block: positions, velocities) first grows past this factor of
+# its size over the span.
+REGIME_SIZE_FACTOR = 2.0
