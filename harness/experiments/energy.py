@@ -11,9 +11,9 @@ For one (stepper, problem) cell:
    `implicit_steps`. Adaptive steppers choose their own steps: they run at their own tolerance
    with `adaptive_outputs` output steps over `adaptive_periods` natural periods (or up to
    `t_end`) and `adaptive_ensemble` members (each output step costs a solver call per member).
-   A run past the problem's span stops where its orbit leaves the span's dynamical regime (a
-   closer encounter than any within the span, a state that runs off: `harness.scales.
-   regime_end`), and its message says where and why.
+   A run past the problem's span (unless `t_end` asks for it) stops where its orbit leaves the
+   span's dynamical regime (a closer encounter than any within the span, a state that runs
+   off: `harness.scales.regime_end`), and its message says where and why.
 2. The state is saved on a log-spaced grid of step indices (`samples_per_decade`) merged with a
    uniform grid (`uniform_samples`). The relative energy error |E(t) - E0| / |E0| is taken as the
    maximum over members; for problems with an angular momentum invariant the relative error of
@@ -296,7 +296,9 @@ def _max_members(rel: np.ndarray) -> np.ndarray:
 
 def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
     h, n, tolerance = _plan(stepper, problem, config)
-    n, capped = long_run_steps(problem, h, n)
+    capped = ""
+    if config.get("t_end") is None:  # a final time the user asked for is honoured as given
+        n, capped = long_run_steps(problem, h, n)
     size = int(config["adaptive_ensemble" if isinstance(stepper, AdaptiveStepper) else "ensemble"])
     y0 = initial_ensemble(problem, config, size)
     period = problem.time_scale.period
