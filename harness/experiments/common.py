@@ -336,11 +336,11 @@ def step_sweep(stepper, problem, config):
     """The convergence experiment's step-size sweep (errors at the horizon against step size)."""
     from harness.experiments import convergence
 
-    return convergence._step_sweep(stepper, problem, config)
+    return convergence.step_sweep(stepper, problem, config)
 
 
 def tolerance_sweep(stepper, problem, config):
     """The convergence experiment's tolerance sweep of an adaptive stepper."""
     from harness.experiments import convergence
 
-    return convergence._tolerance_sweep(stepper, problem, config)
+    return convergence.tolerance_sweep(stepper, problem, config)

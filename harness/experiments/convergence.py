@@ -442,4 +442,7 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     return frame
 
 
+# The sweeps under public names: work-precision runs them too (through experiments.common).
+step_sweep, tolerance_sweep = _step_sweep, _tolerance_sweep
+
 register_experiment(ConvergenceExperiment())
