@@ -53,6 +53,7 @@ __all__ = [
     "draw_noise",
     "states_at",
     "fastest_times",
+    "regime_end",
 ]
 
 
@@ -65,6 +66,9 @@ class TimeScale:
     h: float
     source: str  # "declared" or "derived"
     reason: str
+    # fastest over median spectral radius along the span: ~1 for an oscillator, large where
+    # close encounters come and go (a fixed step is then far finer than most of the orbit needs)
+    rate_contrast: float = 1.0
 
     @property
     def steps_per_period(self) -> float:
@@ -72,6 +76,7 @@ class TimeScale:
 
     def as_dict(self) -> dict[str, Any]:
         return {"period": self.period, "fastest_rate": self.fastest_rate, "h": self.h,
+                "rate_contrast": self.rate_contrast,
                 "steps_per_period": self.steps_per_period, "source": self.source,
                 "reason": self.reason}
 
@@ -174,18 +179,21 @@ def _eigenvalues(problem, jac: np.ndarray) -> np.ndarray:
     return np.linalg.eigvals(mats)
 
 
-def states_at(problem, times: np.ndarray) -> np.ndarray:
-    """States (dim, len(times)) of the float64 Taylor orbit from y0 at increasing `times` >= t0:
-    points on the orbit (for probing a map there), not a certified reference."""
+def states_at(problem, times: np.ndarray, y0: np.ndarray | None = None) -> np.ndarray:
+    """States (dim, len(times)) of the float64 Taylor orbit from y0 (default: the problem's) at
+    increasing `times` >= t0: points on the orbit, not a certified reference."""
     lock, ta = _integrator(problem)
     times = np.asarray(times, dtype=np.float64)
+    start = np.array(problem.y0 if y0 is None else y0, dtype=np.float64).reshape(problem.dim)
     with lock:
         ta.time = problem.t0
-        ta.state[:] = problem.y0
+        ta.state[:] = start
         if problem.parameters:
             ta.pars[:] = problem.parameter_values
-        out = ta.propagate_grid(times)
-    return np.ascontiguousarray(out[-1].T)
+        lead = bool(times.size == 0 or times[0] != problem.t0)  # the grid starts at t0
+        grid = np.concatenate([[problem.t0], times]) if lead else times
+        out = ta.propagate_grid(grid)[-1]
+    return np.ascontiguousarray((out[1:] if lead else out).T)
 
 
 def fastest_times(problem, n: int) -> np.ndarray:
@@ -264,7 +272,10 @@ def derive_time_scale(problem) -> TimeScale:
         why += f"; J is nilpotent along the orbit: h = {tol.STEP_RATE_PRODUCT:g} x that time"
     if not orbit.complete:
         why += f"; the orbit sample stopped at t = {orbit.t[-1]:.6g} before the span's end"
-    return TimeScale(period=period, fastest_rate=rho, h=h, source=source, reason=why)
+    median = float(np.median(rates["spectral"]))
+    contrast = rho / median if median > 0.0 else (1.0 if rho == 0.0 else math.inf)
+    return TimeScale(period=period, fastest_rate=rho, h=h, source=source, reason=why,
+                     rate_contrast=contrast)
 
 
 # -- perturbation -----------------------------------------------------------------------------------
@@ -337,3 +348,64 @@ def derive_perturbation(problem) -> Perturbation:
         reason += (f"; even the smallest size tried leaves a member outside a factor "
                    f"{tol.REGIME_RATE_FACTOR:g}: members may not share one dynamical regime")
     return Perturbation(size, scale, "derived", reason)
+
+
+_regime_ends: dict[tuple[str, float], tuple[float, str]] = {}
+
+
+def regime_end(problem, t_end: float) -> tuple[float, str]:
+    """(t_stop, reason): how far past its span a long run of `problem` towards `t_end` stays in
+    the dynamical regime of the span. The float64 orbit is followed to `t_end`; where its
+    fastest rate first exceeds REGIME_RATE_FACTOR x the span's (a closer encounter than any
+    within the span: beyond its span the Pleiades collides; the run stops LONG_RUN_MARGIN
+    fastest-time units earlier), where the state first grows past REGIME_SIZE_FACTOR x its size
+    over the span (a dropped ball keeps falling), or where the orbit stops (non-finite, step
+    cap), whichever comes first, and never before the span's end. t_stop = t_end and reason ""
+    when the regime holds throughout."""
+    key = (problem.fingerprint(), float(t_end))
+    if key in _regime_ends:
+        return _regime_ends[key]
+    base = problem.time_scale.fastest_rate
+    orbit = sample_orbit(problem, t_end=t_end)
+    idx = np.arange(orbit.t.size)
+    if idx.size > tol.ORBIT_MAX_SAMPLES:
+        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
+    t, y = orbit.t[idx], np.ascontiguousarray(orbit.y[:, idx])
+    jac = problem.compiled("jac", None)(y, pars=problem.pars_for(t.size), time=t)
+    jac = jac.reshape(problem.dim, problem.dim, t.size)
+    limit = tol.REGIME_RATE_FACTOR * base
+    # ||J||_F bounds the spectral radius: only samples above the limit can leave the regime;
+    # their spectra are taken in time order until one does.
+    maybe = np.flatnonzero(np.sqrt(np.sum(jac * jac, axis=(0, 1))) > limit) if base > 0 else []
+    stop, reason = float(t_end), ""
+    # The state's size, per block (positions, velocities; the whole state for a first-order
+    # problem): beyond its span the orbit may run off (a dropped ball falls forever).
+    span_part = orbit.t <= problem.t_end
+    nq = len(problem.newtonian.positions) if problem.newtonian is not None else problem.dim
+    blocks = [b for b in (slice(0, nq), slice(nq, problem.dim)) if b.stop > b.start]
+    grown = np.zeros(orbit.t.size, dtype=bool)
+    for b in blocks:
+        size = np.max(np.abs(orbit.y[b]), axis=0)
+        grown |= size > tol.REGIME_SIZE_FACTOR * max(float(np.max(size[span_part])), tol.SCALE_FLOOR)
+    if grown.any():
+        k = int(np.argmax(grown))
+        stop = float(orbit.t[max(k - 1, 0)])  # the last sample still inside
+        reason = (f"the orbit leaves the regime of the problem's span by t = {orbit.t[k]:.6g} (the "
+                  f"state grows past {tol.REGIME_SIZE_FACTOR:g} x its size over the span)")
+    for start in range(0, len(maybe), tol.REGIME_CANDIDATES):
+        chunk = maybe[start:start + tol.REGIME_CANDIDATES]
+        rate = np.max(np.abs(_eigenvalues(problem, jac[:, :, chunk])), axis=1)
+        over = np.flatnonzero(rate > limit)
+        if over.size and float(t[chunk[over[0]]]) - tol.LONG_RUN_MARGIN / float(rate[over[0]]) < stop:
+            k, r = int(chunk[over[0]]), float(rate[over[0]])
+            stop = float(t[k]) - tol.LONG_RUN_MARGIN / r
+            reason = (f"the orbit leaves the regime of the problem's span at t = {t[k]:.6g} (fastest "
+                      f"rate {r:.4g}, over {tol.REGIME_RATE_FACTOR:g} x the span's {base:.4g})")
+            break
+    if not reason and not orbit.complete:
+        stop = float(orbit.t[-1])
+        reason = f"the orbit could not be followed past t = {stop:.6g}"
+    stop = max(stop, problem.t_end) if stop < t_end else stop
+    out = (min(stop, float(t_end)), reason)
+    _regime_ends[key] = out
+    return out

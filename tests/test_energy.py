@@ -255,3 +255,14 @@ def test_rk4_labelled_symplectic_fails_on_kepler(registered):
     assert r.drift_class == "linear"
     assert r.verdict == "claim-false" and not bool(r.passed)
     assert "claimed symplectic" in r.message
+
+
+def test_step_size_and_final_time_overrides_set_the_run():
+    """`h` and `t_end` (the CLI's --h and --t-end) replace the problem's derived step and the
+    step count: 200 steps of 0.1 reach t = 20, for explicit and implicit steppers alike."""
+    table = run_direct(["velocity-verlet", "implicit-midpoint"], ["harmonic"], h=0.1, t_end=20.0,
+                       ensemble=2, perturbation=1e-3).set_index("stepper")
+    for name in ("velocity-verlet", "implicit-midpoint"):
+        r = table.loc[name]
+        assert r.steps == 200 and r.h == pytest.approx(0.1) and r.t_end == pytest.approx(20.0)
+        assert r.perturbation == 1e-3

@@ -374,3 +374,13 @@ def test_applicability_follows_facts_and_says_why():
     masses = np.repeat([1.00000597682, 0.000954786104043, 0.000285583733151, 0.0000437273164546,
                         0.0000517759138449, 1.0 / 1.3e8], 3)
     assert w == pytest.approx(masses / masses.max(), rel=1e-6)
+
+
+def test_long_runs_stop_where_the_orbit_leaves_the_regime_of_its_span(pleiades):
+    """Past its span [0, 3] the Pleiades comes closer than any encounter within it: a long run
+    stops before that and says why; an oscillator's long run is never stopped."""
+    stop, why = scales.regime_end(pleiades, 18.0)
+    assert pleiades.t_end <= stop < 18.0 and "leaves the regime" in why
+    harmonic = problems.get("harmonic")
+    assert scales.regime_end(harmonic, 1e4) == (1e4, "")
+    assert pleiades.time_scale.rate_contrast > 10 * harmonic.time_scale.rate_contrast

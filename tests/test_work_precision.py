@@ -165,3 +165,10 @@ def test_cli_json_records(capsys):
     records = pd.DataFrame(json.loads(out))
     assert set(records.stepper) == {"leapfrog"} and len(records) >= 5
     assert {"error", "rhs_evals", "wall_s"} <= set(records.columns)
+
+
+def test_sweep_horizon_and_perturbation_overrides_reach_the_rows():
+    """`t_end` and `perturbation` (the CLI's --t-end and --perturbation) set the sweep's horizon
+    and the ensemble; both are recorded in every row."""
+    out = run(["rk4"], ["harmonic"], t_end=3.0, perturbation=1e-6, ensemble=2)
+    assert (out.t_end == 3.0).all() and (out.perturbation == 1e-6).all()

@@ -38,6 +38,7 @@ __all__ = [
     "initial_ensemble",
     "perturbation_used",
     "fixed_plan",
+    "long_run_steps",
     "period_states",
     "step_sweep",
     "tolerance_sweep",
@@ -319,15 +320,27 @@ def fixed_plan(problem, config: Mapping[str, Any], steps: int) -> tuple[float, i
     return span / n, n
 
 
+def long_run_steps(problem, h: float, n: int) -> tuple[int, str]:
+    """(n, reason): n steps of h, or fewer where the orbit would leave the dynamical regime of
+    the problem's span before n h (`harness.scales.regime_end`); reason says why ("" if not)."""
+    from harness.scales import regime_end
+
+    stop, why = regime_end(problem, problem.t0 + n * h)
+    if not why or problem.t0 + n * h <= stop:
+        return n, ""
+    capped = max(1, int((stop - problem.t0) / h))
+    return capped, f"run stopped after {capped} of {n} steps (t = {problem.t0 + capped * h:.6g}): {why}"
+
+
 def step_sweep(stepper, problem, config):
     """The convergence experiment's step-size sweep (errors at the horizon against step size)."""
     from harness.experiments import convergence
 
-    return convergence._step_sweep(stepper, problem, config)
+    return convergence.step_sweep(stepper, problem, config)
 
 
 def tolerance_sweep(stepper, problem, config):
     """The convergence experiment's tolerance sweep of an adaptive stepper."""
     from harness.experiments import convergence
 
-    return convergence._tolerance_sweep(stepper, problem, config)
+    return convergence.tolerance_sweep(stepper, problem, config)

@@ -40,6 +40,7 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.experiments.common import perturbation_used
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
@@ -47,13 +48,13 @@ __all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS
 ROW_COLUMNS = [
     "stepper", "problem", "kind", "h", "tol", "n_steps", "t_end", "error", "reference_error",
     "rounding_level", "excluded", "in_fit", "rhs_evals", "force_evals", "wall_s",
-    "ensemble_size",
+    "ensemble_size", "perturbation",
 ]
 SUMMARY_COLUMNS = [
     "stepper", "problem", "claimed_order", "measured_order", "order_ci_low", "order_ci_high",
     "fit_residual", "fit_points", "fit_h_min", "fit_h_max", "fit_error_min", "fit_error_max",
     "local_exponent", "local_exponent_q", "verdict", "reference_error", "reference_precision",
-    "points", "total_steps", "wall_s", "message",
+    "points", "total_steps", "perturbation", "wall_s", "message",
 ]
 
 
@@ -389,6 +390,7 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     out["problem"] = problem.name
     out["t_end"] = T
     out["ensemble_size"] = y0.shape[1]
+    out["perturbation"] = perturbation_used(problem, config) if y0.shape[1] > 1 else 0.0
     out.attrs["budget_ended"] = budget_ended
     return out
 
@@ -483,7 +485,11 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     frame["problem"] = problem.name
     frame["t_end"] = T
     frame["ensemble_size"] = y0.shape[1]
+    frame["perturbation"] = perturbation_used(problem, config) if y0.shape[1] > 1 else 0.0
     return frame
 
+
+# The sweeps under public names: work-precision runs them too (through experiments.common).
+step_sweep, tolerance_sweep = _step_sweep, _tolerance_sweep
 
 register_experiment(ConvergenceExperiment())

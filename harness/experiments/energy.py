@@ -11,6 +11,9 @@ For one (stepper, problem) cell:
    `implicit_steps`. Adaptive steppers choose their own steps: they run at their own tolerance
    with `adaptive_outputs` output steps over `adaptive_periods` natural periods (or up to
    `t_end`) and `adaptive_ensemble` members (each output step costs a solver call per member).
+   A run past the problem's span (unless `t_end` asks for it) stops where its orbit leaves the
+   span's dynamical regime (a closer encounter than any within the span, a state that runs
+   off: `harness.scales.regime_end`), and its message says where and why.
 2. The state is saved on a log-spaced grid of step indices (`samples_per_decade`) merged with a
    uniform grid (`uniform_samples`). The relative energy error |E(t) - E0| / |E0| is taken as the
    maximum over members; for problems with an angular momentum invariant the relative error of
@@ -55,6 +58,7 @@ from harness.experiments.common import (
     fixed_plan,
     initial_ensemble,
     invariant_reason,
+    long_run_steps,
     perturbation_used,
     primary_invariant,
     problem_cells,
@@ -261,6 +265,9 @@ def _max_members(rel: np.ndarray) -> np.ndarray:
 
 def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
     h, n, tolerance = _plan(stepper, problem, config)
+    capped = ""
+    if config.get("t_end") is None:  # a final time the user asked for is honoured as given
+        n, capped = long_run_steps(problem, h, n)
     size = int(config["adaptive_ensemble" if isinstance(stepper, AdaptiveStepper) else "ensemble"])
     y0 = initial_ensemble(problem, config, size)
     period = problem.time_scale.period
@@ -269,16 +276,16 @@ def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
 
     runner = fastest(stepper, problem)
     started = time.perf_counter()
-    message = ""
+    message = capped
     try:
         tr = runner.integrate(problem, h=h, n_steps=n, y0=y0, save_steps=save)
         steps, times, states = tr.steps, tr.t, tr.y
         if not tr.finite:
-            message = "the state overflowed (non-finite)"
+            message = "; ".join(filter(None, [capped, "the state overflowed (non-finite)"]))
     except StepFailure as exc:
         steps, times = np.array([0, n]), problem.t0 + np.array([0, n]) * h
         states = np.stack([y0, np.full_like(y0, np.nan)])
-        message = f"step failure: {exc}"
+        message = "; ".join(filter(None, [capped, f"step failure: {exc}"]))
     wall = time.perf_counter() - started
     errors = _invariant_errors(problem, states)
     frames = []
@@ -314,7 +321,7 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
                     tol.FIT_MIN_PERIODS * steps_per_period)
     e = classify_drift(energy.step.values, energy.t.values, energy.error.values,
                        fit_start=int(fit_start))
-    if message.startswith("step failure"):
+    if "step failure: " in message:
         e["drift_class"] = "unstable"  # an implicit solve broke down: the motion is destroyed
     from harness.facts import method_facts
     from harness.rules import energy_expectation
