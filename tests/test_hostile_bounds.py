@@ -99,7 +99,7 @@ def test_a_bad_scheduler_is_an_error_even_when_every_cell_is_cached(tmp_path, mo
 
 
 # -- process control ------------------------------------------------------------------------------
-SLOW_PLUGIN = '''"""Explicit Euler that sleeps in every step (Hairer, Norsett & Wanner, Solving ODEs I, I.7)."""
+SLOW_PLUGIN = '''"""Explicit Euler sleeping in every step (Hairer, Norsett & Wanner, Solving ODEs I, I.7)."""
 import time
 
 from harness.stepper import Carry, Stepper, StepperInfo
