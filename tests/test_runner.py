@@ -151,7 +151,7 @@ def test_parallel_run_equals_serial_run(run):
 
 
 def test_claim_directories_of_long_killed_runs_are_removed(tmp_path, monkeypatch):
-    monkeypatch.setattr(runner.tempfile, "gettempdir", lambda: str(tmp_path))
+    monkeypatch.setattr(runner.workers.tempfile, "gettempdir", lambda: str(tmp_path))
     old, fresh = tmp_path / "harness-claims-old", tmp_path / "harness-claims-fresh"
     for d in (old, fresh):
         d.mkdir()
@@ -194,7 +194,7 @@ def test_each_failure_is_recorded_in_its_cell_and_the_others_complete(run, jobs)
 def test_a_crashing_or_stuck_worker_fails_only_its_cell(run, monkeypatch):
     """Real worker processes: a segfault and a cell stuck past its limit (deaf to the alarm) are
     named by their claim files; the pool is replaced and the other cells complete."""
-    monkeypatch.setattr(runner, "HARD_TIMEOUT_GRACE_S", 0.5)
+    monkeypatch.setattr(runner.limits, "HARD_TIMEOUT_GRACE_S", 0.5)
     steppers = ["toy-ok", "toy-crash", "toy-stuck", "toy-alt"]
     r = run(steppers=steppers, problems=["toy-decay"], jobs=2, config={"n": 1}, cell_timeout=1.0)
     failures = r.failures.set_index("stepper")
@@ -233,7 +233,7 @@ class _FakePool:
 
 def test_a_silent_worker_death_is_pinned_on_its_cell_by_rerunning_alone(monkeypatch):
     pool = _FakePool(silent={"bad"})
-    monkeypatch.setattr(runner, "_loky_batch", pool)
+    monkeypatch.setattr(runner.executors, "_loky_batch", pool)
     names = ["a", "bad", "b", "c", "d"]
     tasks = [runner._Task(i, Cell("toy", n, "p"), f"{i:032x}", {"timeout": None})
              for i, n in enumerate(names)]
@@ -326,7 +326,7 @@ def test_unknown_experiment_names(toy, experiment, match):
 
 
 def test_unreachable_scheduler_is_an_input_error(run, monkeypatch):
-    monkeypatch.setattr(runner, "DASK_CONNECT_TIMEOUT_S", 1)
+    monkeypatch.setattr(runner.executors, "DASK_CONNECT_TIMEOUT_S", 1)
     with pytest.raises(InputError, match=r"`scheduler` 'tcp://127.0.0.1:9': cannot connect"):
         run(scheduler="tcp://127.0.0.1:9")
 
