@@ -449,3 +449,14 @@ def test_failed_record_has_the_documented_columns(run):
     rec = r.failures.iloc[0]
     assert rec.cell == "toy:toy-raise:toy-decay[k=0]" and json.loads(rec.params) == {"k": 0}
     assert set(r.failures.kind) <= set(runner.FAILURE_KINDS)
+
+
+def test_one_options_object_equals_the_keywords(run, toy):
+    by_keywords = run(cache=False)
+    options = runner.RunOptions(jobs=1, cache=False, plugins=(str(toy),))
+    by_object = run_experiment("toy", ["toy-ok", "toy-alt"], ["toy-decay", "toy-growth"],
+                               options=options, progress=False)
+    pd.testing.assert_frame_equal(by_keywords.rows, by_object.rows)
+    assert by_object.options["cache"] is False and by_object.options["jobs"] == 1
+    with pytest.raises(InputError, match=r"`options` must be a RunOptions, got dict"):
+        run(options={"jobs": 1})

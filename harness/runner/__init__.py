@@ -91,6 +91,7 @@ import os
 import re
 import time
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -156,6 +157,7 @@ from harness.store import (
 
 __all__ = [
     "RunResult",
+    "RunOptions",
     "run_experiment",
     "run_experiments",
     "cell_key",
@@ -351,12 +353,28 @@ def _roundtrip(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[p
         raise CellOutputError(f"rows {exc}") from None
 
 
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run cells, as one object: what `run_experiments` hands to each `run_experiment`
+    (and what a caller may pass as `options=` instead of the keywords of the same names)."""
+
+    quick: bool = False
+    jobs: int | None = None
+    scheduler: str | Any | None = None
+    fresh: bool = False
+    cache: bool = True
+    cache_dir: str | os.PathLike | None = None
+    plugins: tuple[str | os.PathLike, ...] = ()
+    cell_timeout: float | None = None
+
+
 def run_experiment(
     experiment: str | Experiment,
     steppers: Sequence[str] | None = None,
     problems: Sequence[str] | None = None,
     *,
     config: Mapping[str, Any] | None = None,
+    options: RunOptions | None = None,
     quick: bool = False,
     jobs: int | None = None,
     scheduler: str | Any | None = None,
@@ -380,7 +398,9 @@ def run_experiment(
     here and on every worker before names are looked up; `cell_timeout` seconds per cell;
     `progress` None/True (bar on a terminal, plain lines otherwise), False (silent), a mode
     ('bar', 'lines', 'off') or a shared `Progress`; `allow_empty=True` returns an empty result
-    instead of raising when no cell applies.
+    instead of raising when no cell applies. `options` (a `RunOptions`), when given, supplies
+    `quick`, `jobs`, `scheduler`, `fresh`, `cache`, `cache_dir`, `plugins` and `cell_timeout`
+    in place of those keywords.
 
     Raises `InputError` / `UnknownNameError` / `PluginError` (all `HarnessError`) for bad
     arguments before any cell runs, `NoApplicableCellsError` (with every skip reason) when no
@@ -389,6 +409,12 @@ def run_experiment(
     they are in `RunResult.failures`.
     """
     started = time.perf_counter()
+    if options is not None:
+        if not isinstance(options, RunOptions):
+            raise InputError(f"`options` must be a RunOptions, got {type(options).__name__}")
+        quick, jobs, scheduler, fresh = options.quick, options.jobs, options.scheduler, options.fresh
+        cache, cache_dir, plugins = options.cache, options.cache_dir, options.plugins
+        cell_timeout = options.cell_timeout
     exp = _resolve_experiment(experiment)
     jobs_n = _check_jobs(jobs)
     timeout = _check_timeout(cell_timeout)
@@ -604,8 +630,11 @@ def run_experiments(
     sched = _check_scheduler(scheduler)
     from harness.registry import load_plugin
 
-    for p in _check_plugins(plugins):
+    plugin_paths = _check_plugins(plugins)
+    for p in plugin_paths:
         load_plugin(p)
+    options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
+                         cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
     stepper_names = _check_names("steppers", steppers)
     problem_names = _check_names("problems", problems)
     bar, own_bar = _progress(progress, "cells")
@@ -630,9 +659,7 @@ def run_experiments(
             bar.set_description(f"[{i}/{len(exps)}] {exp.name}")
             out[exp.name] = run_experiment(
                 exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
-                quick=quick, jobs=jobs, fresh=fresh, cache=cache, cache_dir=cache_dir,
-                plugins=plugins, cell_timeout=cell_timeout, progress=bar, _client=client,
-                _counted=counted, allow_empty=True,
+                options=options, progress=bar, _client=client, _counted=counted, allow_empty=True,
             )
             if sched is not None:
                 out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None
