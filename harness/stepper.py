@@ -287,7 +287,17 @@ class Stepper(ABC):
                            upto: int, prefix=None) -> None:
         """Replay a run that ended non-finite within `upto` steps (after `prefix(dyn, c)` when
         given) and raise `StepperOutputError` when its first non-finite step made NaN from a
-        finite, moderate state; return quietly for a genuine blow-up."""
+        finite, moderate state; return quietly for a genuine blow-up, and when the replay itself
+        fails (an adaptive stepper stepped in other chunks may refuse a non-finite state): the
+        run's own result, flagged non-finite, stands."""
+        try:
+            self._replay_nonfinite(problem, h, t0, y, pars, upto, prefix)
+        except StepperOutputError:
+            raise
+        except Exception:  # the diagnosis is best effort; the measurement is already flagged
+            return
+
+    def _replay_nonfinite(self, problem, h, t0, y, pars, upto, prefix) -> None:
         shape = (problem.dim, y.shape[1])
 
         def fresh():

@@ -137,3 +137,19 @@ def test_every_stepper_class_in_implementations_is_registered():
                 if not any(issubclass(t, cls) for t in registered_types):
                     missing.append(f"{module.__name__}.{cls.__name__}")
     assert not missing, f"stepper classes with no registered instance: {missing}"
+
+
+def test_one_list_of_experiments_builds_the_cli_runner_and_report(capsys, tmp_path, monkeypatch):
+    """Every experiment in harness/experiments/__init__.py is listed, runnable on its own, and a
+    report section, in that order (roundoff used to be registered only by building a report)."""
+    from harness.experiments import EXPERIMENT_NAMES, EXPERIMENTS
+    from harness.report import REPORT_EXPERIMENTS
+
+    code, out, _ = run_cli(capsys, "list", "experiments", "--json")
+    assert code == 0 and [r["name"] for r in json.loads(out)] == list(EXPERIMENT_NAMES)
+    assert tuple(REPORT_EXPERIMENTS) == EXPERIMENT_NAMES and list(EXPERIMENTS) == list(EXPERIMENT_NAMES)
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
+    code, out, err = run_cli(capsys, "run", "roundoff", "--stepper", "leapfrog", "--problem",
+                             "harmonic", "--quick", "--jobs", "1", "--json")
+    assert code == 0, err
+    assert {r["stepper"] for r in json.loads(out)} == {"leapfrog"}

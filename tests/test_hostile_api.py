@@ -285,7 +285,7 @@ def test_ensembles_and_memory(size, problem, which):
 
 @pytest.fixture(scope="module")
 def toy_plugin(tmp_path_factory):
-    from test_runner import toy_registry
+    from toys import toy_registry
 
     with toy_registry(tmp_path_factory.mktemp("hostile-toy")) as path:
         yield path

@@ -86,7 +86,7 @@ def test_a_value_that_looks_like_an_option_reaches_its_rule(value, rule):
 
 
 def test_a_bad_scheduler_is_an_error_even_when_every_cell_is_cached(tmp_path, monkeypatch):
-    monkeypatch.setattr(runner, "DASK_CONNECT_TIMEOUT_S", 1)
+    monkeypatch.setattr(runner.executors, "DASK_CONNECT_TIMEOUT_S", 1)
     kw = {"jobs": 1, "cache_dir": tmp_path, "progress": False}
     first = runner.run_experiment("convergence", ["euler"], ["dahlquist"], quick=True, **kw)
     assert first.computed_cells == 1
@@ -99,7 +99,7 @@ def test_a_bad_scheduler_is_an_error_even_when_every_cell_is_cached(tmp_path, mo
 
 
 # -- process control ------------------------------------------------------------------------------
-SLOW_PLUGIN = '''"""Explicit Euler that sleeps in every step (Hairer, Norsett & Wanner, Solving ODEs I, I.7)."""
+SLOW_PLUGIN = '''"""Explicit Euler sleeping in every step (Hairer, Norsett & Wanner, Solving ODEs I, I.7)."""
 import time
 
 from harness.stepper import Carry, Stepper, StepperInfo

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import pandas as pd
-from test_runner import toy_registry  # the toy plugin
+from toys import toy_registry  # the toy plugin
 
 from harness.runner import run_experiment
 from harness.store import CellCache

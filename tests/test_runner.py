@@ -1,15 +1,14 @@
 """The runner: cache reuse and invalidation, parallel = serial, failures isolated per cell,
 memory guard, argument checks, progress output.
 
-A toy experiment (below) stands in for the real ones: its cells are cheap and deterministic, and
-a stepper's name picks a misbehaviour (raise, wrong type, NaN, sleep, crash, stuck). The toy
-steppers and problems live in a plugin file, so worker processes load them like a user's plugin.
+A toy experiment (tests/toys.py) stands in for the real ones: its cells are cheap and
+deterministic, and a stepper's name picks a misbehaviour (raise, wrong type, NaN, sleep, crash,
+stuck). The toy steppers and problems live in a plugin file, so worker processes load them like a
+user's plugin.
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import io
 import json
 import os
@@ -22,9 +21,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+# the toy plugin and experiment (shared with other test files); toy_registry is re-exported here
+from toys import CALLS, TOY_PLUGIN, ToyExperiment, toy_registry  # noqa: F401
+
 from harness import registry, runner
 from harness.errors import HarnessError, InputError, UnknownNameError
-from harness.experiments.base import EXPERIMENTS, Cell, Experiment, Skip
+from harness.experiments.base import Cell
 from harness.progress import Progress, choose_mode
 from harness.runner import (
     CellOutputError,
@@ -36,117 +38,6 @@ from harness.runner import (
     validate_rows,
 )
 from harness.store import CellCache, CorruptResultsError
-
-TOY_PLUGIN = '''"""Toy steppers and problems for the harness's own tests: explicit Euler under several names
-(Hairer, Norsett & Wanner, Solving ODEs I, I.7) and two scalar linear problems."""
-import heyoka as hy
-
-from harness.problem import Problem
-from harness.stepper import Carry, Stepper, StepperInfo
-
-
-class ToyEuler(Stepper):
-    """Explicit Euler, y1 = y0 + h f(t0, y0) (Hairer, Norsett & Wanner, Solving ODEs I, I.7)."""
-
-    def __init__(self, name):
-        self.info = StepperInfo(
-            name=name, family="toy", claimed_order=1, explicit=True, symplectic=False,
-            symmetric=False, evals_per_step=1, form="first-order", velocity_dependent=True,
-            reference="Hairer, Norsett & Wanner, Solving ODEs I, I.7",
-        )
-
-    def _start(self, dyn, t0, y0, h):
-        return Carry(t0, h, y0)
-
-    def _step(self, dyn, c):
-        c.y = c.y + c.h * dyn.f(c.t, c.y)
-
-
-x = hy.make_vars("x")
-STEPPERS = [ToyEuler(n) for n in (
-    "toy-ok", "toy-alt", "toy-raise", "toy-wrongtype", "toy-nan", "toy-sleep", "toy-crash",
-    "toy-exit", "toy-stuck", "toy-slow",
-)]
-PROBLEMS = [
-    Problem("toy-decay", variables=[x], rhs=[-x], y0=[1.0], t_span=(0.0, 1.0),
-            reference="y' = -y, y = exp(-t)"),
-    Problem("toy-growth", variables=[x], rhs=[x], y0=[1.0], t_span=(0.0, 1.0),
-            reference="y' = y, y = exp(t)"),
-]
-'''
-
-CALLS: Counter = Counter()  # run_cell calls made in this process, by stepper
-
-
-class ToyExperiment(Experiment):
-    """A cheap deterministic experiment: `n` cells per stepper x problem, three rows each."""
-
-    name = "toy"
-    description = "Toy experiment for the runner's tests."
-    default_config = {"n": 3, "scale": 1.0, "sleep": 0.0, "ensemble": 4, "break_summary": False}
-    quick_config = {"n": 2}
-    row_dtypes = {"j": "int", "value": "float"}
-    finite_columns = ("value",)
-
-    def cells(self, steppers, problems, config):
-        cells, skips = [], []
-        for s in steppers:
-            for p in problems:
-                if s == "toy-alt" and p == "toy-growth":
-                    skips.append(Skip(self.name, s, p, "toy-alt does not apply to growth"))
-                    continue
-                cells += [Cell(self.name, s, p, (("k", k),)) for k in range(config["n"])]
-        return cells, skips
-
-    def run_cell(self, cell, config):
-        s = cell.stepper
-        CALLS[s] += 1
-        if config["sleep"] or s == "toy-slow":
-            time.sleep(config["sleep"] or 0.3)
-        if s == "toy-raise":
-            raise RuntimeError("toy failure in run_cell")
-        if s == "toy-wrongtype":
-            return [1.0, 2.0]
-        if s == "toy-sleep":
-            time.sleep(60)
-        if s == "toy-stuck":  # as if stuck in compiled code: the alarm cannot interrupt it
-            signal.signal(signal.SIGALRM, signal.SIG_IGN)
-            time.sleep(60)
-        if s == "toy-crash":  # a segmentation fault, as a broken compiled plugin would cause
-            ctypes.string_at(0)
-        if s == "toy-exit":  # the process ends without a word (as if killed)
-            os._exit(3)
-        k = cell.param("k")
-        sign = -1.0 if cell.problem == "toy-decay" else 1.0
-        value = config["scale"] * (k + 1) * np.exp(sign * np.arange(3.0)) + len(s)
-        if s == "toy-nan":
-            value[1] = np.nan
-        return pd.DataFrame({"j": np.arange(3), "value": value,
-                             "label": [f"{s}/{i}" for i in range(3)]})
-
-    def summarize(self, rows, config):
-        if config["break_summary"]:
-            raise ValueError("toy summary broke")
-        g = rows.groupby(["stepper", "problem", "k"], sort=False)
-        return g["value"].agg(["sum", "max"]).reset_index()
-
-
-@contextlib.contextmanager
-def toy_registry(directory: Path):
-    """The toy plugin loaded from `directory` and the toy experiment registered; both removed
-    again afterwards so later tests see the registry unchanged."""
-    path = Path(directory) / "toy_plugin.py"
-    path.write_text(TOY_PLUGIN)
-    names = registry.load_plugin(path)
-    EXPERIMENTS["toy"] = ToyExperiment()
-    try:
-        yield path
-    finally:
-        for n in names:
-            registry.steppers.unregister(n)
-            registry.problems.unregister(n)
-        registry._plugins.pop(str(path.resolve()), None)
-        EXPERIMENTS.pop("toy", None)
 
 
 @pytest.fixture(scope="module")
@@ -260,7 +151,7 @@ def test_parallel_run_equals_serial_run(run):
 
 
 def test_claim_directories_of_long_killed_runs_are_removed(tmp_path, monkeypatch):
-    monkeypatch.setattr(runner.tempfile, "gettempdir", lambda: str(tmp_path))
+    monkeypatch.setattr(runner.workers.tempfile, "gettempdir", lambda: str(tmp_path))
     old, fresh = tmp_path / "harness-claims-old", tmp_path / "harness-claims-fresh"
     for d in (old, fresh):
         d.mkdir()
@@ -303,7 +194,7 @@ def test_each_failure_is_recorded_in_its_cell_and_the_others_complete(run, jobs)
 def test_a_crashing_or_stuck_worker_fails_only_its_cell(run, monkeypatch):
     """Real worker processes: a segfault and a cell stuck past its limit (deaf to the alarm) are
     named by their claim files; the pool is replaced and the other cells complete."""
-    monkeypatch.setattr(runner, "HARD_TIMEOUT_GRACE_S", 0.5)
+    monkeypatch.setattr(runner.limits, "HARD_TIMEOUT_GRACE_S", 0.5)
     steppers = ["toy-ok", "toy-crash", "toy-stuck", "toy-alt"]
     r = run(steppers=steppers, problems=["toy-decay"], jobs=2, config={"n": 1}, cell_timeout=1.0)
     failures = r.failures.set_index("stepper")
@@ -342,7 +233,7 @@ class _FakePool:
 
 def test_a_silent_worker_death_is_pinned_on_its_cell_by_rerunning_alone(monkeypatch):
     pool = _FakePool(silent={"bad"})
-    monkeypatch.setattr(runner, "_loky_batch", pool)
+    monkeypatch.setattr(runner.executors, "_loky_batch", pool)
     names = ["a", "bad", "b", "c", "d"]
     tasks = [runner._Task(i, Cell("toy", n, "p"), f"{i:032x}", {"timeout": None})
              for i, n in enumerate(names)]
@@ -435,7 +326,7 @@ def test_unknown_experiment_names(toy, experiment, match):
 
 
 def test_unreachable_scheduler_is_an_input_error(run, monkeypatch):
-    monkeypatch.setattr(runner, "DASK_CONNECT_TIMEOUT_S", 1)
+    monkeypatch.setattr(runner.executors, "DASK_CONNECT_TIMEOUT_S", 1)
     with pytest.raises(InputError, match=r"`scheduler` 'tcp://127.0.0.1:9': cannot connect"):
         run(scheduler="tcp://127.0.0.1:9")
 
@@ -558,3 +449,14 @@ def test_failed_record_has_the_documented_columns(run):
     rec = r.failures.iloc[0]
     assert rec.cell == "toy:toy-raise:toy-decay[k=0]" and json.loads(rec.params) == {"k": 0}
     assert set(r.failures.kind) <= set(runner.FAILURE_KINDS)
+
+
+def test_one_options_object_equals_the_keywords(run, toy):
+    by_keywords = run(cache=False)
+    options = runner.RunOptions(jobs=1, cache=False, plugins=(str(toy),))
+    by_object = run_experiment("toy", ["toy-ok", "toy-alt"], ["toy-decay", "toy-growth"],
+                               options=options, progress=False)
+    pd.testing.assert_frame_equal(by_keywords.rows, by_object.rows)
+    assert by_object.options["cache"] is False and by_object.options["jobs"] == 1
+    with pytest.raises(InputError, match=r"`options` must be a RunOptions, got dict"):
+        run(options={"jobs": 1})

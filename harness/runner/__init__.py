@@ -1,0 +1,675 @@
+"""How cells run: cached, in parallel (local processes or a Dask cluster), each failure in its cell.
+
+Layout (one job per module; everything public is re-exported here):
+
+    harness/runner/__init__.py    argument checks and orchestration: run_experiment(s)
+    harness/runner/limits.py      a cell's time limit (SIGALRM, or an abandoned helper thread)
+    harness/runner/validation.py  checking a cell's rows (validate_rows)
+    harness/runner/memory.py      the memory guard (estimate_bytes, check_memory)
+    harness/runner/workers.py     one cell wherever it runs (_execute), claim files, orphan watch
+    harness/runner/executors.py   many cells: serial, loky workers, Dask
+    harness/runner/result.py      RunResult and its tables' columns
+    harness/keys.py               cache keys from the import graph
+    harness/store.py              the only reader and writer of cell and result files
+
+`run_experiment(name, steppers, problems, ...)` lists an experiment's cells, reuses every cell
+already in the cache, runs the others, and returns a `RunResult` (rows, summary, failures, skips,
+per-cell records, counts, wall time). `run_experiments(...)` does the same for several
+experiments with one progress display and one Dask connection.
+
+Cache. A cell's key (`cell_key`, harness/keys.py) hashes the cell, the experiment's resolved
+configuration and a code version: the fingerprints of its stepper and problem (coefficients and
+class source), the measuring source of the experiment found from its import graph (judging code
+and judging thresholds left out), and the harness version. A finished cell is written to the
+cache (`harness.store.CellCache`, with a checksum and its schema) the moment its result reaches
+this process, so a `kill -9` loses only the cells in flight; the next run reuses the rest. A
+changed method changes only its own cells' keys. `fresh=True` recomputes every cell and
+overwrites its cache entry. Failed cells are not cached: they run again.
+
+Where cells run.
+- `jobs=1`: in this process, one after another.
+- `jobs=N>1` (default: all cores): N local worker processes (loky, joblib's process executor,
+  reused across runs). Results come back in any order; rows are put in the order of the
+  experiment's cell list, so the result equals a serial run.
+- `scheduler='tcp://HOST:PORT'` (or a `distributed.Client`): the same cells as Dask tasks
+  (`client.submit` of `_execute`, gathered with `as_completed`). Workers need the same
+  environment as this process (`pip install -r requirements.txt` and this project, e.g.
+  `pip install -e .`); plugin files are shipped with each task and written to the worker's temp
+  directory when the worker cannot see the path. The cache stays with this process.
+Each task carries the experiment object, the cell, the configuration, the plugin files and the
+expected stepper/problem code version: a worker whose code differs (an older checkout on the
+cluster) records the cell as failed instead of mixing results from other code into the run.
+
+Failures stay in their cell. Each cell ends in rows or in a failure record
+(`harness.experiments.base.failed_record`) of one of these kinds:
+`error` (run_cell raised), `invalid` (not a DataFrame, no rows, non-scalar or complex columns,
+declared dtypes or finite columns violated, not storable as Parquet; or a stepper returned a
+state of the wrong shape or made NaN from a finite state: `StepperOutputError`), `timeout`, `crash` (the
+worker process died: segfault, `os._exit`, out-of-memory kill), `lookup` (the stepper or problem
+cannot be found or fingerprinted), `version` (a worker runs other code), `summarize` (the
+experiment's summary raised; the rows are kept).
+
+Experiments may declare (all optional):
+- `row_dtypes = {"error": "float", "n_steps": "int", "verdict": "str"}`: required columns and
+  their kinds (`float`, `int`, `bool`, `str`, or a tuple of them);
+- `finite_columns = ("n_steps", "wall_s")`: measured columns in which NaN/inf means the cell went
+  wrong (other columns may hold NaN/inf as a measurement, e.g. the error of a blow-up);
+- `estimate_bytes(cell, config) -> int`: peak memory of one cell, for the memory guard.
+
+Time limit (`cell_timeout` seconds, from the moment the cell starts):
+- in a process's main thread (`jobs=1`, and every loky worker): `SIGALRM` via
+  `signal.setitimer` raises `CellTimeout` (a BaseException, so `except Exception` in the cell
+  cannot swallow it). It takes effect when control returns to Python, so in loky workers a
+  watchdog thread also ends the worker process (`os._exit`) `HARD_TIMEOUT_GRACE_S` seconds later
+  if the cell is stuck in compiled code; the pool replaces the worker and the run goes on.
+- elsewhere (a Dask worker's task thread, or `jobs=1` outside the main thread): the cell runs in
+  a helper thread that is abandoned at the limit; the cell is recorded as timed out, but its
+  thread keeps running (Python cannot stop a thread) until it returns.
+
+Crashes. When a loky worker dies, every cell in flight fails with it. While a worker runs a
+cell it keeps a claim file holding its pid, faulthandler's traceback should a fatal signal
+(SIGSEGV, SIGFPE, SIGABRT, SIGBUS, SIGILL) end it, and the watchdog's note on a hard timeout.
+After the pool breaks, a claim that says why names its cell (`crash` with the fatal error, or
+`timeout`) and the other cells are resubmitted; when no claim says why (`os._exit`, a SIGKILL
+from the out-of-memory killer), the cells that were in flight are rerun one at a time, alone,
+and the one that kills its worker again is recorded as `crash`. A Dask cluster retries a task
+whose worker died and finally reports it (`KilledWorker`), which becomes a `crash` record.
+
+Time limits, crashes and the memory guard protect the run, not the machine: `jobs=1` runs cells
+in this process, so a segfault there ends the run (finished cells are in the cache).
+
+Memory guard. Before anything runs, the runner estimates each cell's peak memory (the
+experiment's `estimate_bytes` hook, else from `config['ensemble']` and the problem's dimension,
+see `estimate_bytes`) and refuses, with `InputError`, a run whose `jobs` largest cells together
+exceed `MEMORY_HEADROOM` of the available memory.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness.errors import (
+    HarnessError,
+    InputError,
+    NoApplicableCellsError,
+    UnknownNameError,
+)
+from harness.experiments.base import Cell, Experiment, Skip, failed_record
+from harness.keys import MEASURING_MODULES, cell_key, code_version, experiment_fingerprint
+from harness.progress import Progress
+from harness.runner.executors import (  # noqa: F401  (re-exported)
+    DASK_CONNECT_TIMEOUT_S,
+    LOKY_IDLE_TIMEOUT_S,
+    MAX_CRASH_ROUNDS,
+    _crash_outcome,
+    _dask_client,
+    _loky_batch,
+    _run_dask,
+    _run_loky,
+    _run_serial,
+    _Task,
+)
+from harness.runner.limits import (  # noqa: F401  (re-exported)
+    HARD_TIMEOUT_GRACE_S,
+    MAX_CELL_TIMEOUT_S,
+    CellTimeout,
+    _call_limited,
+    _check_timeout,
+    time_limit,
+)
+from harness.runner.memory import (  # noqa: F401  (re-exported)
+    WORK_ARRAYS,
+    _guard_memory,
+    available_memory,
+    check_memory,
+    estimate_bytes,
+)
+from harness.runner.result import (  # noqa: F401  (re-exported)
+    CELL_COLUMNS,
+    FAILURE_COLUMNS,
+    ID_COLUMNS,
+    SKIP_COLUMNS,
+    RunResult,
+)
+from harness.runner.validation import _SCALARS, CellOutputError, validate_rows  # noqa: F401
+from harness.runner.workers import (  # noqa: F401  (re-exported)
+    ORPHAN_CHECK_S,
+    STALE_CLAIMS_S,
+    _clean_stale_claims,
+    _execute,
+    _one_line,
+    _plugin_spec,
+    _short_traceback,
+)
+from harness.store import (
+    CellCache,
+    encode_cell,
+)
+
+__all__ = [
+    "RunResult",
+    "RunOptions",
+    "run_experiment",
+    "run_experiments",
+    "cell_key",
+    "code_version",
+    "experiment_fingerprint",
+    "validate_rows",
+    "estimate_bytes",
+    "check_memory",
+    "available_memory",
+    "default_jobs",
+    "time_limit",
+    "CellTimeout",
+    "CellOutputError",
+    "ExperimentError",
+    "NoApplicableCellsError",
+    "no_cells_error",
+    "FAILURE_KINDS",
+    "MEASURING_MODULES",
+]
+
+
+FAILURE_KINDS = ("error", "invalid", "timeout", "crash", "lookup", "version", "summarize")
+# A local run uses at most this many worker processes per core.
+MAX_JOBS_PER_CORE = 8
+
+
+class ExperimentError(HarnessError):
+    """An experiment could not list its cells (the message names the experiment)."""
+
+
+
+# -- argument checks --------------------------------------------------------------------------------
+def default_jobs() -> int:
+    """All cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def _check_jobs(jobs: Any) -> int:
+    if jobs is None:
+        return default_jobs()
+    if isinstance(jobs, bool) or not isinstance(jobs, int | np.integer):
+        raise InputError(f"`jobs` must be a whole number >= 1, got {jobs!r}")
+    limit = MAX_JOBS_PER_CORE * default_jobs()
+    if jobs < 1 or jobs > limit:
+        raise InputError(f"`jobs` must be between 1 and {limit} ({MAX_JOBS_PER_CORE} per core), got {jobs}")
+    return int(jobs)
+
+
+_SCHEDULER = re.compile(r"^(tcp|tls|ucx|ws|wss|inproc)://[^\s/]+$")
+
+
+def _check_scheduler(value: Any) -> Any:
+    if value is None:
+        return None
+    try:
+        from distributed import Client
+    except ImportError:  # pragma: no cover - dask is in the pinned requirements
+        Client = ()  # type: ignore[assignment]
+    if Client and isinstance(value, Client):
+        return value
+    if not isinstance(value, str) or not _SCHEDULER.match(value):
+        raise InputError(
+            f"`scheduler` must be a Dask scheduler address like tcp://HOST:PORT, got {str(value)[:80]!r}"
+        )
+    return value
+
+
+def _check_names(kind: str, names: Any) -> list[str]:
+    from harness import registry
+
+    reg = registry.steppers if kind == "steppers" else registry.problems
+    if names is None:
+        return reg.names()
+    if isinstance(names, str):
+        names = [names]
+    if not isinstance(names, Iterable):
+        raise InputError(f"`{kind}` must be a list of names, got {type(names).__name__}")
+    out = []
+    for n in names:
+        if not isinstance(n, str) or not n:
+            raise InputError(f"`{kind}` must hold non-empty names (strings), got {n!r}")
+        reg.get(n)  # UnknownNameError with the closest names
+        out.append(n)
+    return list(dict.fromkeys(out))
+
+
+def _check_plugins(plugins: Any) -> list[str]:
+    if plugins is None:
+        return []
+    if isinstance(plugins, str | os.PathLike):
+        plugins = [plugins]
+    if not isinstance(plugins, Iterable):
+        raise InputError(f"`plugins` must be a list of .py file paths, got {type(plugins).__name__}")
+    out = []
+    for p in plugins:
+        if not isinstance(p, str | os.PathLike) or not os.fspath(p):
+            raise InputError(f"`plugins` must hold .py file paths, got {p!r}")
+        out.append(os.fspath(p))
+    return out
+
+
+def _resolve_experiment(experiment: Any) -> Experiment:
+    from harness.experiments.base import get_experiment
+
+    if isinstance(experiment, Experiment):
+        return experiment
+    if not isinstance(experiment, str) or not experiment:
+        raise InputError(f"`experiment` must be an experiment name, got {experiment!r}")
+    return get_experiment(experiment)
+
+
+def _resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
+    if config is not None and not isinstance(config, Mapping):
+        raise InputError(f"`config` must be a mapping of settings, got {type(config).__name__}")
+    if config and exp.default_config:
+        unknown = [k for k in config if k not in exp.default_config]
+        if unknown:
+            raise InputError(
+                f"`config` sets {', '.join(map(repr, unknown))}, not settings of experiment "
+                f"{exp.name!r}; known: {', '.join(sorted(exp.default_config))}"
+            )
+    return exp.config(dict(config or {}), quick=bool(quick))
+
+
+def _progress(progress: Any, desc: str) -> tuple[Progress, bool]:
+    """(progress display, whether this call owns and closes it)."""
+    if isinstance(progress, Progress):
+        return progress, False
+    if progress is None or progress is True:
+        return Progress(0, desc), True
+    if progress is False:
+        return Progress(0, desc, mode="off"), True
+    if isinstance(progress, str):
+        return Progress(0, desc, mode=progress), True
+    raise InputError(f"`progress` must be None, a bool, a mode name or a Progress, got {progress!r}")
+
+
+
+# -- the runner -------------------------------------------------------------------------------------
+def _skip_records(skips: Iterable[Skip]) -> list[dict]:
+    return [{"experiment": s.experiment, "stepper": s.stepper, "problem": s.problem,
+             "reason": s.reason} for s in skips]
+
+
+def no_cells_error(experiments: Sequence[str], skips: Sequence[Skip] | pd.DataFrame,
+                   steppers: Sequence[str], problems: Sequence[str]) -> NoApplicableCellsError:
+    """The error for a run over zero applicable cells: one line saying why each requested pair
+    does not apply (the experiments' skip reasons); every record is kept in `.skips`."""
+    records = (skips.to_dict("records") if isinstance(skips, pd.DataFrame)
+               else _skip_records(skips))
+    what = ", ".join(map(repr, experiments))
+    head = (f"no cell of {what} applies to the requested stepper(s) "
+            f"{_few(steppers)} x problem(s) {_few(problems)}")
+    if not records:
+        return NoApplicableCellsError(head + " (the experiment lists no pairs for them)", records)
+    reasons = [f"{r['stepper'] or '-'} x {r['problem'] or '-'}: {r['reason']}" for r in records[:4]]
+    more = f"; and {len(records) - 4} more pairs" if len(records) > 4 else ""
+    return NoApplicableCellsError(f"{head}: " + "; ".join(reasons) + more, records)
+
+
+def _few(names: Sequence[str], n: int = 4) -> str:
+    shown = ", ".join(names[:n]) if names else "(none)"
+    return shown + (f" (+{len(names) - n} more)" if len(names) > n else "")
+
+
+def _params_json(cell: Cell) -> str:
+    return json.dumps({str(k): v for k, v in cell.params}, sort_keys=True, default=repr)
+
+
+def _with_ids(rows: pd.DataFrame, cell: Cell) -> pd.DataFrame:
+    rows = rows.reset_index(drop=True)
+    front = {"experiment": cell.experiment, "cell": cell.label, "stepper": cell.stepper,
+             "problem": cell.problem}
+    for k, v in cell.params:
+        if isinstance(k, str) and k and isinstance(v, _SCALARS):
+            front.setdefault(k, v.item() if isinstance(v, np.generic) else v)
+    add = {k: v for k, v in front.items() if k not in rows.columns}
+    if not add:
+        return rows
+    ids = pd.DataFrame({k: [v] * len(rows) for k, v in add.items()})
+    return pd.concat([ids, rows], axis=1)
+
+
+def _roundtrip(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
+    """Rows as they come back from the cell file (so fresh and cached cells are identical), and
+    the file's bytes for the cache (`harness.store.encode_cell`)."""
+    try:
+        return encode_cell(key, rows, info)
+    except InputError as exc:
+        raise CellOutputError(f"rows {exc}") from None
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run cells, as one object: what `run_experiments` hands to each `run_experiment`
+    (and what a caller may pass as `options=` instead of the keywords of the same names)."""
+
+    quick: bool = False
+    jobs: int | None = None
+    scheduler: str | Any | None = None
+    fresh: bool = False
+    cache: bool = True
+    cache_dir: str | os.PathLike | None = None
+    plugins: tuple[str | os.PathLike, ...] = ()
+    cell_timeout: float | None = None
+
+
+def run_experiment(
+    experiment: str | Experiment,
+    steppers: Sequence[str] | None = None,
+    problems: Sequence[str] | None = None,
+    *,
+    config: Mapping[str, Any] | None = None,
+    options: RunOptions | None = None,
+    quick: bool = False,
+    jobs: int | None = None,
+    scheduler: str | Any | None = None,
+    fresh: bool = False,
+    cache: bool = True,
+    cache_dir: str | os.PathLike | None = None,
+    plugins: Sequence[str | os.PathLike] = (),
+    cell_timeout: float | None = None,
+    progress: Progress | bool | str | None = None,
+    allow_empty: bool = False,
+    _client: Any = None,
+    _counted: bool = False,
+) -> RunResult:
+    """Run one experiment over `steppers` x `problems` (None: the whole registry).
+
+    Arguments: `config` overrides the experiment's settings (`quick` starts from its quick
+    settings); `jobs` worker processes (None: all cores; 1: in this process); `scheduler` a Dask
+    scheduler address (`tcp://HOST:PORT`) or `distributed.Client`, instead of local processes;
+    `fresh` recomputes cached cells; `cache=False` neither reads nor writes the cache;
+    `cache_dir` the cache root (default `harness.cache.cache_dir()`); `plugins` .py files loaded
+    here and on every worker before names are looked up; `cell_timeout` seconds per cell;
+    `progress` None/True (bar on a terminal, plain lines otherwise), False (silent), a mode
+    ('bar', 'lines', 'off') or a shared `Progress`; `allow_empty=True` returns an empty result
+    instead of raising when no cell applies. `options` (a `RunOptions`), when given, supplies
+    `quick`, `jobs`, `scheduler`, `fresh`, `cache`, `cache_dir`, `plugins` and `cell_timeout`
+    in place of those keywords.
+
+    Raises `InputError` / `UnknownNameError` / `PluginError` (all `HarnessError`) for bad
+    arguments before any cell runs, `NoApplicableCellsError` (with every skip reason) when no
+    requested pair applies, `ExperimentError` when the experiment cannot list its
+    cells, `CorruptResultsError` for a damaged cache file. Failures of single cells never raise:
+    they are in `RunResult.failures`.
+    """
+    started = time.perf_counter()
+    if options is not None:
+        if not isinstance(options, RunOptions):
+            raise InputError(f"`options` must be a RunOptions, got {type(options).__name__}")
+        quick, jobs, scheduler, fresh = options.quick, options.jobs, options.scheduler, options.fresh
+        cache, cache_dir, plugins = options.cache, options.cache_dir, options.plugins
+        cell_timeout = options.cell_timeout
+    exp = _resolve_experiment(experiment)
+    jobs_n = _check_jobs(jobs)
+    timeout = _check_timeout(cell_timeout)
+    sched = _check_scheduler(scheduler)
+    plugin_paths = _check_plugins(plugins)
+    for name, flag in (("quick", quick), ("fresh", fresh), ("cache", cache)):
+        if not isinstance(flag, bool | np.bool_):
+            raise InputError(f"`{name}` must be True or False, got {flag!r}")
+    store = CellCache(cache_dir) if cache else None
+    from harness.registry import load_plugin
+
+    for p in plugin_paths:
+        load_plugin(p)
+    plugin_specs = [_plugin_spec(p) for p in plugin_paths]
+    stepper_names = _check_names("steppers", steppers)
+    problem_names = _check_names("problems", problems)
+    cfg = _resolve_config(exp, config, quick)
+
+    try:
+        listed = exp.cells(stepper_names, problem_names, cfg)
+        cells, skips = listed
+        cells, skips = list(cells), list(skips)
+    except HarnessError:
+        raise
+    except Exception as exc:
+        raise ExperimentError(
+            f"experiment {exp.name!r} could not list its cells: "
+            f"{type(exc).__name__}: {_one_line(str(exc), 300)}"
+        ) from None
+    bad = [c for c in cells if not isinstance(c, Cell)] + [s for s in skips if not isinstance(s, Skip)]
+    if bad:
+        raise ExperimentError(f"experiment {exp.name!r} listed {type(bad[0]).__name__} objects "
+                              "where Cell and Skip objects belong")
+    if not cells and not allow_empty:
+        raise no_cells_error([exp.name], skips, stepper_names, problem_names)
+    if sched is None and _client is None:
+        _guard_memory(exp, cells, cfg, jobs_n)
+    own_client = None
+    if sched is not None and _client is None:
+        # connect before looking at the cache: a bad address is an error even when every cell
+        # is cached
+        _client, own_client = _dask_client(sched)
+
+    exp_version = experiment_fingerprint(exp)
+    versions: dict[tuple[str, str], Any] = {}
+    failures: dict[int, dict] = {}
+    records: dict[int, dict] = {}
+    frames: dict[int, pd.DataFrame] = {}
+    tasks: list[_Task] = []
+    seen: dict[str, int] = {}
+    cached = 0
+    bar, own_bar = _progress(progress, exp.name)
+    if not _counted:
+        bar.add_total(len(cells))
+        if not own_bar:
+            bar.set_description(exp.name)
+
+    def record(i: int, cell: Cell, key: str, status: str, was_cached: bool, wall: float,
+               n_rows: int, worker: str) -> None:
+        records[i] = {"experiment": exp.name, "cell": cell.label, "stepper": cell.stepper,
+                      "problem": cell.problem, "params": _params_json(cell), "key": key,
+                      "status": status, "cached": was_cached, "wall_s": float(wall),
+                      "n_rows": int(n_rows), "worker": worker}
+
+    def fail(i: int, cell: Cell, key: str, kind: str, message: str, tb: str = "",
+             wall: float = 0.0, worker: str = "") -> None:
+        failures[i] = failed_record(cell, message, kind=kind, traceback=tb, key=key)
+        record(i, cell, key, "failed", False, wall, 0, worker)
+
+    try:
+        for i, cell in enumerate(cells):
+            pair = (cell.stepper, cell.problem)
+            if pair not in versions:
+                try:
+                    versions[pair] = code_version(*pair)
+                except Exception as exc:  # unknown name, or a fingerprint() that raises
+                    versions[pair] = exc
+            v = versions[pair]
+            if isinstance(v, Exception):
+                fail(i, cell, "", "lookup", _one_line(f"{type(v).__name__}: {v}"))
+                bar.update(1, failed=1)
+                continue
+            key = cell_key(cell, cfg, exp_version, v)
+            if key in seen:
+                raise ExperimentError(
+                    f"experiment {exp.name!r} lists cell {cell.label} twice"
+                )
+            seen[key] = i
+            hit = store.get(key) if (store is not None and not fresh) else None
+            if hit is not None:
+                rows, info = hit
+                frames[i] = rows
+                record(i, cell, key, "ok", True, float(info.get("wall_s", 0.0)), len(rows),
+                       str(info.get("worker", "")))
+                cached += 1
+                continue
+            payload = {"key": key, "cell": cell, "config": cfg, "experiment": exp,
+                       "plugins": plugin_specs, "timeout": timeout, "sp_version": v}
+            tasks.append(_Task(i, cell, key, payload))
+        if cached:
+            bar.update(cached, cached=cached)
+
+        def accept(t: _Task, out: dict) -> None:
+            if out["ok"]:
+                try:
+                    rows = _with_ids(out["rows"], t.cell)
+                    info = {"key": t.key, "experiment": exp.name, "cell": t.cell.label,
+                            "wall_s": out["wall_s"], "worker": out["worker"]}
+                    rows, data = _roundtrip(t.key, rows, info)
+                except CellOutputError as exc:
+                    fail(t.index, t.cell, t.key, "invalid", str(exc), wall=out["wall_s"],
+                         worker=out["worker"])
+                    bar.update(1, failed=1)
+                    return
+                if store is not None:
+                    store.put_encoded(t.key, data)  # atomic; OutputError names the file
+                frames[t.index] = rows
+                record(t.index, t.cell, t.key, "ok", False, out["wall_s"], len(rows), out["worker"])
+                bar.update(1)
+            else:
+                fail(t.index, t.cell, t.key, out["kind"], out["message"], out["traceback"],
+                     out["wall_s"], out["worker"])
+                bar.update(1, failed=1)
+
+        if tasks:
+            if _client is not None:
+                _run_dask(tasks, _client, accept)
+            elif jobs_n == 1:
+                _run_serial(tasks, accept)
+            else:
+                _run_loky(tasks, jobs_n, accept)
+    finally:
+        if own_client:
+            _client.close()
+        if own_bar:
+            bar.close()
+
+    order = sorted(frames)
+    if order:
+        with_rows = [frames[i] for i in order if len(frames[i].columns)]
+        rows_df = pd.concat(with_rows, ignore_index=True) if with_rows else pd.DataFrame(columns=ID_COLUMNS)
+    else:
+        rows_df = pd.DataFrame(columns=ID_COLUMNS)
+    summary = pd.DataFrame()
+    if order:
+        try:
+            summary = exp.summarize(rows_df.copy(), cfg)
+            if not isinstance(summary, pd.DataFrame):
+                raise CellOutputError(
+                    f"summarize returned {type(summary).__name__}, expected a pandas DataFrame"
+                )
+            summary = summary.reset_index(drop=True)
+        except Exception as exc:
+            summary = pd.DataFrame()
+            rec = failed_record(Cell(exp.name, "", ""), _one_line(f"{type(exc).__name__}: {exc}"),
+                                kind="summarize", traceback=_short_traceback(exc))
+            rec["cell"] = f"{exp.name}:summarize"
+            failures[len(cells)] = rec
+    fail_df = pd.DataFrame([failures[i] for i in sorted(failures)], columns=FAILURE_COLUMNS)
+    skip_df = pd.DataFrame(_skip_records(skips), columns=SKIP_COLUMNS)
+    cell_df = pd.DataFrame([records[i] for i in sorted(records)], columns=CELL_COLUMNS)
+    return RunResult(
+        experiment=exp.name,
+        description=str(getattr(exp, "description", "")),
+        config=cfg,
+        rows=rows_df,
+        summary=summary,
+        failures=fail_df,
+        skips=skip_df,
+        cells=cell_df,
+        wall_s=time.perf_counter() - started,
+        cached_cells=cached,
+        computed_cells=len(tasks),
+        options={"jobs": jobs_n if sched is None and _client is None else None,
+                 "scheduler": scheduler if isinstance(scheduler, str) else None,
+                 "fresh": bool(fresh), "cache": bool(cache), "quick": bool(quick),
+                 "cell_timeout": timeout, "plugins": plugin_paths,
+                 "steppers": stepper_names, "problems": problem_names},
+    )
+
+
+def run_experiments(
+    experiments: Sequence[str | Experiment] | None = None,
+    steppers: Sequence[str] | None = None,
+    problems: Sequence[str] | None = None,
+    *,
+    configs: Mapping[str, Mapping[str, Any]] | None = None,
+    quick: bool = False,
+    jobs: int | None = None,
+    scheduler: str | Any | None = None,
+    fresh: bool = False,
+    cache: bool = True,
+    cache_dir: str | os.PathLike | None = None,
+    plugins: Sequence[str | os.PathLike] = (),
+    cell_timeout: float | None = None,
+    progress: Progress | bool | str | None = None,
+) -> dict[str, RunResult]:
+    """`run_experiment` for several experiments (None: every registered one), in order, with one
+    progress display and one Dask connection; `configs` maps experiment name -> overrides.
+    Returns {experiment name: RunResult}; pass it to `harness.store.save_run`."""
+    from harness.experiments import EXPERIMENTS
+
+    if experiments is None:
+        experiments = list(EXPERIMENTS)
+    if isinstance(experiments, str | Experiment):
+        experiments = [experiments]
+    exps = [_resolve_experiment(e) for e in experiments]
+    if configs is not None and not isinstance(configs, Mapping):
+        raise InputError(f"`configs` must map experiment names to settings, got {type(configs).__name__}")
+    unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
+    if unknown:
+        raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
+    sched = _check_scheduler(scheduler)
+    from harness.registry import load_plugin
+
+    plugin_paths = _check_plugins(plugins)
+    for p in plugin_paths:
+        load_plugin(p)
+    options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
+                         cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
+    stepper_names = _check_names("steppers", steppers)
+    problem_names = _check_names("problems", problems)
+    bar, own_bar = _progress(progress, "cells")
+    sizes = []
+    for exp in exps:  # the whole run's size first, so the display's total does not grow
+        try:
+            cfg = _resolve_config(exp, (configs or {}).get(exp.name), quick)
+            sizes.append(len(list(exp.cells(stepper_names, problem_names, cfg)[0])))
+        except Exception:  # run_experiment reports it properly below
+            sizes = None
+            break
+    counted = sizes is not None
+    if counted:
+        bar.add_total(sum(sizes))
+    client = None
+    own_client = False
+    out: dict[str, RunResult] = {}
+    try:
+        if sched is not None:
+            client, own_client = _dask_client(sched)
+        for i, exp in enumerate(exps, 1):
+            bar.set_description(f"[{i}/{len(exps)}] {exp.name}")
+            out[exp.name] = run_experiment(
+                exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
+                options=options, progress=bar, _client=client, _counted=counted, allow_empty=True,
+            )
+            if sched is not None:
+                out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None
+    finally:
+        if own_client and client is not None:
+            client.close()
+        if own_bar:
+            bar.close()
+    if out and not any(r.n_cells for r in out.values()):
+        raise no_cells_error(list(out), pd.concat([r.skips for r in out.values()], ignore_index=True),
+                             stepper_names, problem_names)
+    return out
+

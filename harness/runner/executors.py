@@ -1,0 +1,185 @@
+"""Executing many cells: in this process, on local loky workers, or on a Dask cluster."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import sys
+import tempfile
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from harness.errors import (
+    InputError,
+)
+from harness.experiments.base import Cell
+from harness.runner import limits
+from harness.runner.workers import _claim_verdict, _clean_stale_claims, _execute, _one_line
+
+# Seconds to wait for a Dask scheduler to answer.
+DASK_CONNECT_TIMEOUT_S = 10
+# Seconds an idle loky worker waits for work before it exits (short: a worker is cheap to start,
+# and the workers of a run killed with SIGKILL should not linger).
+LOKY_IDLE_TIMEOUT_S = 30
+# A cell whose worker died in this many pool breakdowns is recorded as crashed, whatever the
+# claim files say (guarantees the run ends).
+MAX_CRASH_ROUNDS = 3
+
+
+@dataclass
+class _Task:
+    index: int
+    cell: Cell
+    key: str
+    payload: dict
+    crash_rounds: int = 0
+
+
+def _crash_outcome(task: _Task, message: str, kind: str = "crash") -> dict:
+    return {"key": task.key, "ok": False, "kind": kind, "message": _one_line(message),
+            "traceback": "", "rows": None, "wall_s": 0.0, "worker": ""}
+
+
+def _run_serial(tasks: Sequence[_Task], accept: Callable[[_Task, dict], None]) -> None:
+    for t in tasks:
+        accept(t, _execute(t.payload))
+
+
+def _loky_batch(batch: Sequence[_Task], n: int, accept) -> tuple[BaseException | None, list[_Task]]:
+    """Run `batch` on `n` loky workers. Returns (the pool's breakdown or None, unfinished tasks)."""
+    from joblib.externals.loky import get_reusable_executor
+
+    executor = get_reusable_executor(max_workers=n, timeout=LOKY_IDLE_TIMEOUT_S)
+    futures = {}
+    try:
+        for t in batch:
+            futures[executor.submit(_execute, t.payload)] = t
+        pending = set(futures)
+        broken: BaseException | None = None
+        while pending and broken is None:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                t = futures[fut]
+                exc = fut.exception()
+                if isinstance(exc, BrokenProcessPool):
+                    broken = exc
+                    pending.add(fut)
+                elif exc is not None:  # the task could not be sent or its result returned
+                    accept(t, _crash_outcome(t, f"could not run in a worker process: "
+                                                f"{type(exc).__name__}: {exc}", kind="error"))
+                else:
+                    accept(t, fut.result())
+    except BaseException:  # Ctrl-C, SIGTERM (the CLI raises SystemExit), anything unexpected
+        executor.shutdown(wait=False, kill_workers=True)
+        raise
+    if broken is None:
+        return None, []
+    wait(pending)  # the pool fails every pending future when it breaks
+    unfinished = []
+    for fut in pending:
+        t = futures[fut]
+        if fut.exception() is None:
+            accept(t, fut.result())
+        else:
+            unfinished.append(t)
+    return broken, unfinished
+
+
+def _run_loky(tasks: Sequence[_Task], jobs: int, accept) -> None:
+    _clean_stale_claims()
+    claim_dir = tempfile.mkdtemp(prefix="harness-claims-")
+    try:
+        for t in tasks:
+            t.payload["claim_dir"] = claim_dir
+            t.payload["parent_pid"] = os.getpid()
+            t.payload["hard_kill"] = True
+            t.payload["hard_grace"] = max(limits.HARD_TIMEOUT_GRACE_S, 0.2 * (t.payload["timeout"] or 0))
+        normal: list[_Task] = list(tasks)
+        suspects: list[_Task] = []
+        while normal or suspects:
+            alone = not normal
+            batch, normal = ([suspects.pop(0)], normal) if alone else (normal, [])
+            broken, unfinished = _loky_batch(batch, 1 if alone else min(jobs, len(batch)), accept)
+            if broken is None:
+                continue
+            claims: dict[str, str] = {}
+            for name in os.listdir(claim_dir):
+                with contextlib.suppress(OSError):
+                    claims[name] = Path(claim_dir, name).read_text(errors="replace")
+                    os.unlink(os.path.join(claim_dir, name))
+            codes = re.search(r"exit codes of the workers are (\{[^}]*\})", str(broken))
+            reason = f"exit codes {codes.group(1)}" if codes else _one_line(str(broken), 200)
+            verdicts = {t.key: _claim_verdict(claims[t.key]) for t in unfinished if t.key in claims}
+            known_culprit = any(v is not None for v in verdicts.values())
+            for t in unfinished:
+                t.crash_rounds += 1
+                verdict = verdicts.get(t.key)
+                if verdict is not None:
+                    accept(t, _crash_outcome(t, verdict[1], verdict[0]))
+                elif alone or t.crash_rounds >= MAX_CRASH_ROUNDS:
+                    accept(t, _crash_outcome(t, f"worker process died running this cell ({reason})"))
+                elif t.key in claims and not known_culprit:
+                    suspects.append(t)  # in flight when an unknown cell killed the pool
+                elif verdicts:
+                    normal.append(t)  # never started, or the victim of a known culprit
+                else:
+                    suspects.append(t)  # no claim at all tells who it was: try each alone
+    finally:
+        shutil.rmtree(claim_dir, ignore_errors=True)
+
+
+def _dask_client(scheduler: Any) -> tuple[Any, bool]:
+    from distributed import Client
+
+    if isinstance(scheduler, Client):
+        return scheduler, False
+    failure = None
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: None  # a half-built Client's destructor complains
+    try:
+        try:
+            client = Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s", set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            failure = f"{type(exc).__name__}: {_one_line(str(exc), 200)}"
+        if failure is not None:
+            import gc
+
+            gc.collect()  # the half-built client goes now, while its complaint is silenced
+    finally:
+        sys.unraisablehook = hook
+    if failure is not None:
+        raise InputError(
+            f"`scheduler` {scheduler!r}: cannot connect within {DASK_CONNECT_TIMEOUT_S} s ({failure})"
+        )
+    return client, True
+
+
+def _run_dask(tasks: Sequence[_Task], client: Any, accept) -> None:
+    import uuid
+
+    from distributed import as_completed
+
+    tag = uuid.uuid4().hex[:8]
+    futures = {}
+    try:
+        for t in tasks:
+            fut = client.submit(_execute, t.payload, key=f"harness-cell-{t.key}-{tag}", pure=False)
+            futures[fut] = t
+        for fut in as_completed(list(futures), loop=client.loop):
+            t = futures[fut]
+            try:
+                out = fut.result()
+            except Exception as exc:  # KilledWorker, a lost connection, an unpicklable result
+                out = _crash_outcome(t, f"Dask task failed: {type(exc).__name__}: {exc}")
+            accept(t, out)
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        raise
+
+

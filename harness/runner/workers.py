@@ -1,0 +1,223 @@
+"""One cell, wherever it runs: plugins, code-version check, claim file, time limit, rows.
+
+`_execute(task)` is the entry point of every worker (this process, loky, Dask); it never raises.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import faulthandler
+import hashlib
+import os
+import shutil
+import socket
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from harness.errors import (
+    StepperOutputError,
+    Terminated,
+)
+from harness.experiments.base import Cell
+from harness.keys import code_version
+from harness.runner.limits import HARD_TIMEOUT_GRACE_S, CellTimeout, _call_limited
+from harness.runner.validation import CellOutputError, validate_rows
+from harness.store import (
+    atomic_write_bytes,
+)
+
+# A worker process whose parent died (kill -9 of the run) notices within this many seconds and
+# exits (its parent pid changes when it is re-parented).
+ORPHAN_CHECK_S = 1.0
+# Claim directories of killed runs older than this (seconds) are removed by the next run.
+STALE_CLAIMS_S = 24 * 3600.0
+
+
+def _short_traceback(exc: BaseException, frames: int = 6) -> str:
+    te = traceback.TracebackException.from_exception(exc, limit=-frames)
+    text = "".join(te.format()).strip()
+    return text if len(text) <= 4000 else "..." + text[-3997:]
+
+
+def _one_line(text: str, limit: int = 500) -> str:
+    line = " ".join(str(text).split())
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
+def _plugin_spec(path: str | os.PathLike) -> dict:
+    p = Path(path).resolve()
+    data = p.read_bytes()
+    return {"path": str(p), "name": p.name, "sha256": hashlib.sha256(data).hexdigest(), "source": data}
+
+
+def _ensure_plugins(specs: Sequence[dict]) -> None:
+    """Load the run's plugin files in this process: from their path when it holds the same
+    content, else from a copy written to the temp directory."""
+    from harness.registry import load_plugin
+
+    for spec in specs:
+        path = Path(spec["path"])
+        try:
+            same = path.is_file() and hashlib.sha256(path.read_bytes()).hexdigest() == spec["sha256"]
+        except OSError:
+            same = False
+        if not same:
+            path = Path(tempfile.gettempdir()) / "harness-plugins" / spec["sha256"][:16] / spec["name"]
+            if not path.is_file():
+                atomic_write_bytes(path, spec["source"])
+        load_plugin(path, probe=False)  # the submitting process probed it
+
+
+def _worker_id() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _hard_exit(claim: str | None, seconds: float) -> None:  # pragma: no cover - ends the process
+    if claim:
+        with contextlib.suppress(OSError), open(claim, "a") as fh:
+            fh.write(f"{_HARD_TIMEOUT_MARK} {seconds:g}\n")
+    os._exit(70)
+
+
+_HARD_TIMEOUT_MARK = "harness: hard timeout after"
+_FATAL_MARK = "Fatal Python error:"
+
+
+def _claim_verdict(text: str) -> tuple[str, str] | None:
+    """(failure kind, message) when a claim file says why its worker died, else None."""
+    for line in text.splitlines():
+        if line.startswith(_HARD_TIMEOUT_MARK):
+            seconds = line[len(_HARD_TIMEOUT_MARK):].strip()
+            return ("timeout", f"timeout after {seconds} s (stuck in compiled code; worker "
+                               "process ended)")
+    if _FATAL_MARK in text:
+        fatal = text[text.index(_FATAL_MARK):]
+        first = fatal.splitlines()[0]
+        return ("crash", f"worker process crashed: {first}")
+    return None
+
+
+def _prepare_worker(task: Mapping[str, Any]) -> tuple[str, str] | None:
+    """Load the run's plugins here and check this process's stepper/problem code against the
+    submitter's. Returns (failure kind, message) or None."""
+    cell: Cell = task["cell"]
+    try:
+        _ensure_plugins(task.get("plugins", ()))
+        if task.get("sp_version") is not None:
+            here = code_version(cell.stepper, cell.problem)
+            if here != task["sp_version"]:
+                return ("version", f"this worker's code for stepper {cell.stepper!r} / problem "
+                        f"{cell.problem!r} differs from the submitting process's (install the "
+                        "same harness and plugins on every worker; a fingerprint must not "
+                        "contain memory addresses)")
+    except Exception as exc:
+        return ("lookup", f"{type(exc).__name__}: {exc}")
+    return None
+
+
+_orphan_watch: list[int] = []
+
+
+def _watch_for_orphaning(parent: int) -> None:
+    """In a worker process: exit when the process that started it is gone (re-parented), so the
+    workers of a run killed with SIGKILL do not linger. Started once per process."""
+    if _orphan_watch or parent == os.getpid():
+        return
+    _orphan_watch.append(parent)
+
+    def watch():  # pragma: no cover - ends the process
+        while True:
+            time.sleep(ORPHAN_CHECK_S)
+            if os.getppid() != parent:
+                os._exit(75)
+
+    threading.Thread(target=watch, name="harness-orphan-watch", daemon=True).start()
+
+
+def _execute(task: Mapping[str, Any]) -> dict:
+    """Run one cell and return its outcome; never raises (a worker's entry point). The time
+    limit and `wall_s` cover `run_cell` and the check of its rows, not the worker's set-up."""
+    cell: Cell = task["cell"]
+    timeout = task.get("timeout")
+    out: dict[str, Any] = {"key": task["key"], "ok": False, "kind": "error", "message": "",
+                           "traceback": "", "rows": None, "wall_s": 0.0, "worker": _worker_id()}
+    claim = os.path.join(task["claim_dir"], task["key"]) if task.get("claim_dir") else None
+    if task.get("parent_pid") is not None:
+        _watch_for_orphaning(task["parent_pid"])
+    watchdog = None
+    claim_fh = None
+    faults_were_on = faulthandler.is_enabled()
+    started = time.perf_counter()
+    try:
+        if claim:
+            # While the cell runs, its claim file holds this process's pid and, should the
+            # process die of a fatal signal (SIGSEGV, SIGFPE, SIGABRT, SIGBUS, SIGILL), the
+            # Python traceback faulthandler writes: the runner then knows which cell it was.
+            # Without a claim (its directory gone) the cell still runs; a crash is then found
+            # by rerunning the cells in flight alone.
+            try:
+                claim_fh = open(claim, "w")  # noqa: SIM115 - kept open for faulthandler
+                claim_fh.write(f"{os.getpid()}\n")
+                claim_fh.flush()
+                faulthandler.enable(file=claim_fh)
+            except OSError:
+                claim_fh, claim = None, None
+        with contextlib.redirect_stdout(sys.stderr):  # a plugin's print() stays off stdout
+            problem = _prepare_worker(task)
+        if problem is not None:
+            out.update(kind=problem[0], message=_one_line(problem[1]))
+            return out
+        if timeout is not None and task.get("hard_kill"):
+            grace = float(task.get("hard_grace", HARD_TIMEOUT_GRACE_S))
+            watchdog = threading.Timer(timeout + grace, _hard_exit, (claim, timeout))
+            watchdog.daemon = True
+            watchdog.start()
+        experiment = task["experiment"]
+        started = time.perf_counter()
+        with contextlib.redirect_stdout(sys.stderr):
+            rows = _call_limited(
+                lambda: validate_rows(experiment, experiment.run_cell(cell, task["config"])), timeout
+            )
+        out.update(ok=True, kind="", rows=rows)
+    except CellTimeout:
+        out.update(kind="timeout", message=f"timeout after {timeout:g} s")
+    except (CellOutputError, StepperOutputError) as exc:
+        out.update(kind="invalid", message=_one_line(str(exc)))
+    except (KeyboardInterrupt, Terminated):
+        raise
+    except BaseException as exc:  # the cell's own failure, whatever it is
+        out.update(kind="error", message=_one_line(f"{type(exc).__name__}: {exc}"),
+                   traceback=_short_traceback(exc))
+    finally:
+        if watchdog is not None:
+            watchdog.cancel()
+        if claim_fh is not None:
+            faulthandler.disable()
+            if faults_were_on:
+                faulthandler.enable()
+            claim_fh.close()
+        if claim:
+            with contextlib.suppress(OSError):
+                os.unlink(claim)
+        out["wall_s"] = time.perf_counter() - started
+    return out
+
+
+
+def _clean_stale_claims() -> None:
+    """Remove claim directories left by runs killed long ago (their process ended before its
+    `finally`); a live run touches its directory with every cell."""
+    base = Path(tempfile.gettempdir())
+    cutoff = time.time() - STALE_CLAIMS_S
+    for d in base.glob("harness-claims-*"):
+        with contextlib.suppress(OSError):
+            if d.is_dir() and d.stat().st_mtime < cutoff:
+                shutil.rmtree(d, ignore_errors=True)
+
+
