@@ -22,7 +22,6 @@ from harness.report.sections import (
     RunView,
     ScoreColumn,
     Section,
-    _summary_download,
     _yn,
     anchor,
     df_table,
@@ -138,12 +137,10 @@ def convergence(view: RunView, sec: Section) -> None:
                        "reference floor.")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("claimed_order", "claimed"),
             ("measured_order", "measured"), ("order_ci_low", "95% CI low"),
-            ("order_ci_high", "95% CI high"), ("fit_points", "fit points"), ("fit_h_min", "fit h min"),
-            ("fit_h_max", "fit h max"), ("local_exponent", "local exponent"),
-            ("verdict", "verdict"), ("reference_error", "reference error"), ("reason", "why")]
+            ("order_ci_high", "95% CI high"), ("fit_points", "fit points"),
+            ("local_exponent", "local exponent"), ("verdict", "verdict"), ("reason", "why")]
     sec.table(df_table(judged, cols, f"Per cell: {len(judged)} stepper × problem fits",
                        experiment="convergence", digits=4))
-    _summary_download(sec, view, "convergence")
 
 
 # -- stability ------------------------------------------------------------------------------------
@@ -191,7 +188,6 @@ def stability(view: RunView, sec: Section) -> None:
             ("agrees", "probe = formula"), ("verdict", "verdict"), ("message", "why")]
     sec.table(df_table(s, cols, "Per stepper: stability intervals, probe against formula (real "
                        "[−x, 0], imaginary [−y, y])", experiment="stability", digits=8))
-    _summary_download(sec, view, "stability")
 
 
 # -- claimed / measured properties ----------------------------------------------------------------
@@ -239,7 +235,6 @@ def reversibility(view: RunView, sec: Section) -> None:
             ("verdict", "verdict"), ("message", "why")]
     sec.table(df_table(summ, cols, f"Per round trip: {len(summ)} rows", experiment="reversibility",
                        key=("stepper", "problem", "steps")))
-    _summary_download(sec, view, "reversibility")
 
 
 def _energy_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bool]:
@@ -287,7 +282,6 @@ def energy(view: RunView, sec: Section) -> None:
             ("max_rel_angular_momentum_error", "max rel. L error"),
             ("angular_momentum_conserved", "L conserved"), ("verdict", "verdict"), ("message", "why")]
     sec.table(df_table(summ, cols, f"Per cell: {len(summ)} long runs", experiment="energy"))
-    _summary_download(sec, view, "energy")
 
 
 def _symplectic_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bool]:
@@ -318,7 +312,6 @@ def symplecticity(view: RunView, sec: Section) -> None:
                "Deviation from symplecticity of each stepper on each problem (log scale), with "
                "the finite-difference threshold.")
     sec.table(df_table(summ, cols, f"Per cell: {len(summ)} Jacobians", experiment="symplecticity"))
-    _summary_download(sec, view, "symplecticity")
 
 
 # -- work-precision -------------------------------------------------------------------------------
@@ -377,7 +370,6 @@ def work_precision(view: RunView, sec: Section) -> None:
                 ("wall_to_target", f"wall s to reach {F.WORK_TARGET_ERROR:g}"), ("unit", "evaluation unit")]
         sec.table(df_table(table, cols, f"Per stepper and problem: cost of reaching "
                            f"{F.WORK_TARGET_ERROR:g}", experiment=name, status=None, sort_failing=False))
-    _summary_download(sec, view, name)
 
 
 # -- roundoff -------------------------------------------------------------------------------------
@@ -398,4 +390,3 @@ def roundoff(view: RunView, sec: Section) -> None:
             ("floor_h", "at h"), ("floor_eps", "floor (ulps)"), ("rounding_limited", "rounding-limited"),
             ("verdict", "verdict"), ("message", "why")]
     sec.table(df_table(summ, cols, "Per stepper: the rounding floor", experiment="roundoff", status=None))
-    _summary_download(sec, view, "roundoff")

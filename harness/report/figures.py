@@ -56,7 +56,7 @@ EXCLUSION_STYLE = {
 }
 # Lines of long runs are thinned to about this many points per line (log-spaced in steps): on a
 # panel a few hundred pixels wide, more points add bytes, not detail.
-MAX_POINTS_PER_LINE = 120
+MAX_POINTS_PER_LINE = 60
 # Small multiples: at most this many methods share one panel, so every line can be told apart.
 MAX_LINES_PER_PANEL = 8
 # Coordinates in the SVG are rounded to this many decimals of a point (1/10 pt is far below
@@ -145,19 +145,28 @@ class Palette:
 
 
 def panels(steppers: Iterable[str], group: Mapping[str, str] | Any,
-           max_lines: int = MAX_LINES_PER_PANEL) -> list[tuple[str, list[str]]]:
+           max_lines: int = MAX_LINES_PER_PANEL, pack: bool = True) -> list[tuple[str, list[str]]]:
     """Split methods into panels of at most `max_lines`: one per group (family, drift class...),
-    a large group cut into numbered parts. `group` maps a method to its group's name."""
+    a large group cut into numbered parts, small groups sharing a panel while they fit (its
+    title names them all). `group` maps a method to its group's name."""
     by: dict[str, list[str]] = {}
     for s in dict.fromkeys(steppers):
         by.setdefault(str(group.get(s, "") if hasattr(group, "get") else group(s)) or "other",
                       []).append(s)
-    out = []
+    out: list[tuple[list[str], list[str]]] = []
     for name, members in by.items():
         chunks = [members[i:i + max_lines] for i in range(0, len(members), max_lines)]
-        for k, chunk in enumerate(chunks):
-            out.append((name if len(chunks) == 1 else f"{name} ({k + 1}/{len(chunks)})", chunk))
-    return out
+        if len(chunks) > 1:
+            out += [([f"{name} ({k + 1}/{len(chunks)})"], c) for k, c in enumerate(chunks)]
+            continue
+        home = next((p for p in out if pack and "/" not in p[0][0]
+                     and len(p[1]) + len(members) <= max_lines), None)
+        if home is None:
+            out.append(([name], list(members)))
+        else:
+            home[0].append(name)
+            home[1].extend(members)
+    return [(", ".join(names), members) for names, members in out]
 
 
 # -- SVG output -----------------------------------------------------------------------------------
@@ -247,6 +256,14 @@ def _shrink(svg: str, salt: str) -> str:
     root = ET.fromstring(svg)
     used = set(re.findall(r'(?:href="#|url\(#)([\w.-]+)', svg))
 
+    for el in root.iter():
+        if "id" in el.attrib and el.attrib["id"] not in used:
+            del el.attrib["id"]
+        if el.text is not None and not el.text.strip():
+            el.text = None
+        if el.tail is not None and not el.tail.strip():
+            el.tail = None
+
     def unwrap(parent: ET.Element) -> None:
         out = []
         for child in list(parent):
@@ -260,6 +277,8 @@ def _shrink(svg: str, salt: str) -> str:
         parent[:] = out
 
     unwrap(root)
+    _merge_marker_defs(root)
+    _merge_siblings(root)
     styles: dict[str, int] = {}
     for el in root.iter():
         for name in ("d", "x", "y", "points"):
@@ -269,8 +288,6 @@ def _shrink(svg: str, salt: str) -> str:
         tr = el.attrib.get("transform", "")
         if re.fullmatch(r"rotate\(-?0(?:\s[^)]*)?\)", tr):
             del el.attrib["transform"]
-        if "id" in el.attrib and el.attrib["id"] not in used:
-            del el.attrib["id"]
         st = el.attrib.get("style")
         if st is not None:
             st = re.sub(r"\s*([:;])\s*", r"\1", st).strip().rstrip(";")
@@ -292,7 +309,69 @@ def _shrink(svg: str, salt: str) -> str:
         if style is None:
             style = ET.SubElement(defs, f"{{{_NS}}}style")
         style.text = (style.text or "") + css
-    return ET.tostring(root, encoding="unicode")
+    text = ET.tostring(root, encoding="unicode").replace(" />", "/>")
+    # shorter ids (every marker use repeats one): salted, since ids are page-wide
+    ids = sorted(set(re.findall(r'\sid="([\w.-]+)"', text)), key=len, reverse=True)
+    for i, old in enumerate(ids):
+        text = text.replace(f'id="{old}"', f'id="{salt}i{i}"').replace(f'"#{old}"', f'"#{salt}i{i}"') \
+            .replace(f"url(#{old})", f"url(#{salt}i{i})")
+    return text
+
+
+def _merge_siblings(root: ET.Element) -> None:
+    """Paths with the same attributes but their data, separated only by text (grid lines
+    between tick labels, the segments of one style), become one path."""
+    for parent in root.iter():
+        kids = list(parent)
+        out: list[ET.Element] = []
+        last: dict[tuple, ET.Element] = {}
+        for child in kids:
+            tag = _local(child.tag)
+            if tag == "path" and "id" not in child.attrib and "d" in child.attrib:
+                key = tuple(sorted((k, v) for k, v in child.attrib.items() if k != "d"))
+                prev = last.get(key)
+                if prev is not None:
+                    prev.set("d", prev.attrib["d"] + child.attrib["d"])
+                    continue
+                last = {key: child}
+            elif tag != "text":
+                last = {}
+            out.append(child)
+        if len(out) != len(kids):
+            parent[:] = out
+
+
+def _merge_marker_defs(root: ET.Element) -> None:
+    """matplotlib defines one marker path per (shape, stroke style); keep one definition per
+    shape and move its style onto each use (a used element inherits from its <use>)."""
+    href = f"{{{_XLINK_NS}}}href"
+    defs = {}
+    for el in root.iter(f"{{{_NS}}}path"):
+        if "id" in el.attrib and "d" in el.attrib:
+            defs[el.attrib["id"]] = el
+    canonical: dict[str, ET.Element] = {}
+    style_of: dict[str, str] = {}
+    target: dict[str, str] = {}
+    for i, el in defs.items():
+        key = el.attrib["d"]
+        style_of[i] = el.attrib.get("style", "")
+        first = canonical.setdefault(key, el)
+        target[i] = first.attrib["id"]
+    for use in root.iter(f"{{{_NS}}}use"):
+        ref = use.attrib.get(href, "")[1:]
+        if ref in target:
+            # the definition's own style won over the use's: it goes last
+            merged = ";".join(s for s in (use.attrib.get("style", ""), style_of[ref]) if s)
+            if merged:
+                use.set("style", merged)
+            use.set(href, "#" + target[ref])
+    keep = {id(e) for e in canonical.values()}
+    for parent in root.iter():
+        for child in list(parent):
+            if child.attrib.get("id") in defs and id(child) not in keep:
+                parent.remove(child)
+    for el in canonical.values():
+        el.attrib.pop("style", None)
 
 
 def _attr(text: str) -> str:
@@ -465,7 +544,10 @@ def _panel_legend(ax: Any, handles: list | None = None, **kw: Any) -> None:
 
 
 def _small_ticks(ax: Any) -> None:
-    ax.tick_params(labelsize=6.5)
+    """Small labels; no tick marks and no vertical grid lines (the horizontal grid carries the
+    reading; each mark is a few dozen bytes of SVG, times hundreds of panels)."""
+    ax.tick_params(labelsize=6.5, length=0, pad=2)
+    ax.grid(False, axis="x")
     ax.title.set_fontsize(8)
 
 
@@ -474,9 +556,9 @@ def _small_ticks(ax: Any) -> None:
 def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                        reference_error: float | None) -> Figure | None:
     """Global error against h (log-log) on one problem, one panel per family (at most
-    MAX_LINES_PER_PANEL methods each): points used by the order fit filled, excluded points
-    hollow, the fitted slope drawn over exactly the range it used, the reference's certified
-    error as the floor every panel shares."""
+    MAX_LINES_PER_PANEL methods each): points used by the order fit marked, excluded points on
+    the thin line only (the CSV says why each was excluded), the fitted slope drawn over exactly
+    the range it used, the reference's certified error as the floor every panel shares."""
     from matplotlib.lines import Line2D
 
     from harness.experiments.convergence import fit_order
@@ -498,13 +580,9 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             h = s["h"].astype(float).to_numpy()
             ok = np.isfinite(err) & (err > 0) & (err <= LOG_CEILING)
             used = s["in_fit"].fillna(False).astype(bool).to_numpy() & ok
-            ax.plot(h[ok], err[ok], "-", color=c, lw=0.7, alpha=0.55)
+            ax.plot(h[ok], err[ok], "-", color=c, lw=0.8, alpha=0.7)
             ax.plot(h[used], err[used], linestyle="none", marker=palette.marker(stepper), color=c,
                     ms=3.2)
-            rest = ok & ~used
-            if rest.any():
-                ax.plot(h[rest], err[rest], linestyle="none", marker=palette.marker(stepper), ms=3.2,
-                        markerfacecolor="none", markeredgecolor=c, markeredgewidth=0.7)
             slope = math.nan
             if used.sum() >= tol.MIN_FIT_POINTS:
                 f = fit_order(h[used], err[used])
@@ -517,9 +595,8 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                                   label=label))
             excluded = s["excluded"].fillna("").astype(str).to_numpy() if "excluded" in s else \
                 np.array([""] * len(s))
-            data.append(pd.DataFrame({"problem": problem, "panel": title, "stepper": stepper,
-                                      "h": h, "error": err, "in_fit": used, "excluded": excluded,
-                                      "fitted_slope": slope}))
+            data.append(pd.DataFrame({"stepper": stepper, "h": h, "error": err,
+                                      "in_fit": used.astype(int), "excluded": excluded}))
         if floor is not None:
             ax.axhline(floor, color="k", lw=0.9, ls=":")
         _loglog(ax)
@@ -533,8 +610,6 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     fig.supylabel("global error at the final time", fontsize=8)
     fig.suptitle(f"Convergence on {_label(problem)}", fontsize=8.5)
     frame = pd.concat(data, ignore_index=True) if data else None
-    if frame is not None:
-        frame["reference_floor"] = floor
     return to_svg(fig, f"convergence-{problem}", f"error against step size on {problem}", frame)
 
 
@@ -577,8 +652,7 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | N
             ax.contourf(x, y, z, levels=[-1.0, 1.0], colors=[c], alpha=0.08)
             cs = ax.contour(x, y, z, levels=[1.0], colors=[c], linewidths=1.1)
             for seg in cs.allsegs[0]:
-                data.append(pd.DataFrame({"family": title, "stepper": stepper, "re": seg[:, 0],
-                                          "im": seg[:, 1]}))
+                data.append(pd.DataFrame({"stepper": stepper, "re": seg[:, 0], "im": seg[:, 1]}))
             handles.append(Line2D([], [], color=c, lw=1.1, label=_label(stepper)))
         ax.axhline(0, color="0.5", lw=0.5)
         ax.axvline(0, color="0.5", lw=0.5)
@@ -680,7 +754,7 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     order = {c: i for i, c in enumerate(("bounded", "sqrt", "linear", "unstable"))}
     steppers.sort(key=lambda s: order.get(classes.get(s, ""), len(order)))
     groups = panels(steppers, {s: f"drift class: {classes.get(s) or 'not classified'}"
-                               for s in steppers})
+                               for s in steppers}, pack=False)
     fig, axes = _multiples(len(groups), sharex=True, sharey=True)
     what = "energy" if quantity == "energy" else "angular momentum"
     data = []
@@ -690,8 +764,7 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             t = s["t"].astype(float).to_numpy()
             t0 = float(np.nanmin(t))
             x, y = _thin(t - t0, s["error"].astype(float).to_numpy())
-            data.append(pd.DataFrame({"problem": problem, "quantity": quantity, "stepper": stepper,
-                                      "drift_class": classes.get(stepper, ""), "t": x, "error": y}))
+            data.append(pd.DataFrame({"stepper": stepper, "t": x, "error": y}))
             sym = symplectic.get(stepper, False)
             ax.plot(x, _clip_log(y), "-" if sym else "--", color=palette.colour(stepper), lw=0.9,
                     label=f"{_label(stepper)}{' (symplectic)' if sym else ''}")
@@ -806,11 +879,9 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     axes[-1].legend(handles=handles, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0,
                     frameon=False, fontsize=6.5)
     fig.suptitle(f"Work–precision on {_label(problem)}", fontsize=8.5)
-    cols = [c for c in ("stepper", "problem", "kind", "h", "tol", "error", "rhs_evals", "evals_unit",
-                        "wall_s", "pareto_evals") if c in frame]
+    cols = [c for c in ("stepper", "h", "tol", "error", "rhs_evals", "wall_s") if c in frame]
     data = frame[cols].reset_index(drop=True).assign(
-        family=lambda d: d["stepper"].map(lambda s: palette.family(s)),
-        best_of_family=lambda d: d["stepper"].isin(bold))
+        best_of_family=lambda d: d["stepper"].isin(bold).astype(int))
     return to_svg(fig, f"work-{problem}", f"error against work on {problem}", data)
 
 

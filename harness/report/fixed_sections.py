@@ -28,7 +28,6 @@ from harness.report.sections import (
     TextCell,
     _cell,
     anchor,
-    csv_download,
     df_table,
     fmt,
     section_spec,
@@ -51,9 +50,10 @@ def verdicts_section(view: RunView, verdicts: pd.DataFrame, experiments: list[st
     exps = set(verdicts["experiment"]) - {"claims"} if n else set()
     fails = view.failures()
     course = " and the course material" if n and (verdicts["experiment"] == "claims").any() else ""
-    sec.blocks.append(Block("headline", text=(
-        f"{n} claims checked in {len(exps)} experiments{course}: {len(bad)} failed." + (f" {len(fails)} cells could not be measured (see Provenance)."
-                                 if fails else "")), cls="fail" if len(bad) or fails else "pass"))
+    text = f"{n} claims checked in {len(exps)} experiments{course}: {len(bad)} failed."
+    if fails:
+        text += f" {len(fails)} cells could not be measured (see Provenance)."
+    sec.blocks.append(Block("headline", text=text, cls="fail" if len(bad) or fails else "pass"))
     items = [(s, "#" + a) for s, a in zip(bad["sentence"], bad["anchor"], strict=True)]
     if items:
         sec.blocks.append(Block("list", items=items[:MAX_FAILURES_LISTED], cls="failing"))
@@ -114,9 +114,6 @@ def verdicts_section(view: RunView, verdicts: pd.DataFrame, experiments: list[st
              "slope over the asymptotic range; reversible measured = returns within what "
              "rounding explains; symplectic measured = ‖JᵀΩJ − Ω‖ at the finite-difference level; "
              "evaluations per step from the convergence runs' counters.")
-    dl = csv_download(verdicts.drop(columns=["anchor"]), "verdicts.csv")
-    if dl:
-        sec.blocks.append(Block("downloads", downloads=[dl]))
     return sec, statuses
 
 
@@ -141,16 +138,19 @@ def changes_section(view: RunView, verdicts: pd.DataFrame, previous: Any) -> Sec
     sec.table(prov)
     sec.blocks.append(Block("headline", text=diff.headline,
                             cls="fail" if len(diff.verdicts) or len(diff.moved) else "pass"))
+    def row_col(df: pd.DataFrame) -> list[tuple[str, str]]:
+        return [("where", "row")] if (df["where"].astype(str) != "").any() else []
+
     if len(diff.verdicts):
         sec.table(df_table(diff.verdicts, [("experiment", "experiment"), ("stepper", "stepper"),
-                                           ("problem", "problem"), ("where", "row"),
+                                           ("problem", "problem"), *row_col(diff.verdicts),
                                            ("before", "earlier verdict"), ("after", "verdict now"),
                                            ("sentence", "now")],
                            f"{len(diff.verdicts)} verdict(s) changed", status="passed_now",
                            folded=False, id="changed-verdicts", links={"where": "href", "stepper": "href"}))
     if len(diff.moved):
         sec.table(df_table(diff.moved, [("experiment", "experiment"), ("stepper", "stepper"),
-                                        ("problem", "problem"), ("where", "row"), ("figure", "figure"),
+                                        ("problem", "problem"), *row_col(diff.moved), ("figure", "figure"),
                                         ("before", "earlier"), ("after", "now"), ("bound", "moved beyond")],
                            f"{len(diff.moved)} measured figure(s) moved", status=None, folded=False,
                            id="moved-figures", digits=4, links={"stepper": "href"}))

@@ -198,7 +198,7 @@ def anchor(*parts: Any) -> str:
     """A stable, safe HTML id for a table row: readable slug plus a short hash of the exact
     key (names from plugins may hold any character)."""
     key = "\x1f".join(str(p) for p in parts)
-    slug = re.sub(r"[^a-z0-9]+", "-", key.lower()).strip("-")[:48]
+    slug = re.sub(r"[^a-z0-9]+", "-", key.lower()).strip("-")[:28]
     return f"r-{slug}-{hashlib.sha1(key.encode()).hexdigest()[:6]}"
 
 
@@ -212,12 +212,17 @@ def first_sentence(text: Any, limit: int = 220) -> str:
     return s if len(s) <= limit else s[:limit - 1] + "…"
 
 
+# Significant digits of the numbers in a figure's CSV: what the figure shows and more (the full
+# precision is in the run's saved tables, results/<run id>/).
+CSV_DIGITS = 4
+
+
 def csv_download(df: pd.DataFrame | None, filename: str) -> Download | None:
-    """`df` as an embedded CSV link (numbers with 7 significant digits; percent-encoding only
-    where a URL needs it, so the page grows by about the CSV's own size)."""
+    """`df` as an embedded CSV link (numbers with CSV_DIGITS significant digits; percent-encoding
+    only where a URL needs it, so the page grows by about the CSV's own size)."""
     if df is None or not len(df.columns):
         return None
-    text = df.to_csv(index=False, float_format="%.7g", lineterminator="\n")
+    text = df.to_csv(index=False, float_format=f"%.{CSV_DIGITS}g", lineterminator="\n")
     uri = "data:text/csv;charset=utf-8," + urllib.parse.quote(text, safe=",.-_:;=+/()[]*!~'@ ")\
         .replace(" ", "%20")
     safe_name = re.sub(r"[^A-Za-z0-9_.-]+", "-", filename)[:120]
@@ -261,9 +266,12 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
                 else:
                     cells.append(TextCell(""))
             else:
-                cells.append(_cell(v, digits, href=str(rec.get(links[col]) or "") if col in links else ""))
+                c = _cell(v, digits, href=str(rec.get(links[col]) or "") if col in links else "")
+                if folded and c.cls == "num":  # folded tables align numbers by their own CSS
+                    c.cls = ""
+                cells.append(c)
         rid = anchor(experiment, *(rec.get(c, "") for c in key)) if experiment else ""
-        rows.append(Row(cells, cls=rcls, stepper=str(rec.get("stepper", "")), id=rid))
+        rows.append(Row(cells, cls=rcls, id=rid))
     return Table(caption, headers, rows, cls=cls, id=table_id,
                  notes=[(n, t) for t, n in notes.items()], folded=folded)
 
@@ -409,7 +417,6 @@ def generic_section(view: RunView, sec: Section) -> None:
     cols = [(c, c.replace("_", " ")) for c in summ.columns if c not in ("passed", *HIDDEN_COLUMNS)]
     sec.table(df_table(summ, cols, f"{name}: one row per cell", experiment=name, key=key,
                        status="passed" if "passed" in summ else None))
-    _summary_download(sec, view, name)
 
 
 def _generic_key(summ: pd.DataFrame) -> tuple[str, ...]:
@@ -423,12 +430,6 @@ def _generic_key(summ: pd.DataFrame) -> tuple[str, ...]:
 def experiment_key(name: str, summ: pd.DataFrame) -> tuple[str, ...]:
     spec = SECTION_BUILDERS.get(name)
     return spec.key if spec is not None else _generic_key(summ)
-
-
-def _summary_download(sec: Section, view: RunView, name: str) -> None:
-    downloads = [d for d in (csv_download(view.summary(name), f"{name}-summary.csv"),) if d]
-    if downloads:
-        sec.blocks.append(Block("downloads", downloads=downloads))
 
 
 def missing(sec: Section, view: RunView, name: str) -> bool:
