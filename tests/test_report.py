@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import contextlib
 import html
+import io
 import json
 import math
 import re
+import urllib.parse
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -149,8 +151,8 @@ def test_every_scoreboard_link_points_at_a_row_of_the_page(report):
 
 def test_reasons_are_numbered_notes_written_once_per_table(report):
     text = report["html"]
-    tables = re.findall(r'<table class="[^"]*" id="([\w-]+)">(.*?)</table>\s*</div>\s*(<ol class="notes">.*?</ol>)?',
-                        text, re.DOTALL)
+    tables = re.findall(r'<table class="[^"]*" id="([\w-]+)">(.*?)</table>\s*</div>\s*'
+                        r'(<ol class="notes">.*?</ol>)?', text, re.DOTALL)
     assert tables
     n_notes = 0
     for tid, body, notes in tables:
@@ -173,26 +175,30 @@ def test_every_figure_offers_its_data_as_an_embedded_csv(report):
     figures = re.findall(r"<figure>(.*?)</figure>", report["html"], re.DOTALL)
     assert figures
     for fig in figures:
-        m = re.search(r'<a class="data" download="([\w.-]+\.csv)" href="data:text/csv;charset=utf-8,([^"]*)"', fig)
+        m = re.search(r'<a class="data" download="([\w.-]+\.csv)" '
+                      r'href="data:text/csv;charset=utf-8,([^"]*)"', fig)
         assert m, fig[-300:]
-        import urllib.parse
-
-        csv = urllib.parse.unquote(html.unescape(m.group(2)))
-        frame = pd.read_csv(__import__("io").StringIO(csv))
-        assert len(frame) > 0 and "stepper" in frame.columns or "benchmark" in frame.columns
+        frame = pd.read_csv(io.StringIO(urllib.parse.unquote(html.unescape(m.group(2)))))
+        assert len(frame) > 0
+        assert "stepper" in frame.columns or "benchmark" in frame.columns
 
 
-def test_small_multiples_have_at_most_eight_lines_a_panel(report):
-    """Convergence panels hold at most MAX_LINES_PER_PANEL methods (legend entries)."""
-    svg = re.search(r'<svg[^>]*data-slug="convergence-harmonic".*?</svg>', report["html"], re.DOTALL)
-    assert svg
+def test_small_multiples_hold_at_most_eight_methods_a_panel_and_every_method_once():
+    """Panels per family: a large family is cut into parts of at most MAX_LINES_PER_PANEL,
+    small families share a panel while they fit, no method is lost or repeated."""
+    from harness.report.figures import panels
+
+    family = {f"s{i}": "splitting" for i in range(15)}
+    family.update({"bdf2": "multistep", "ab2": "multistep", "taylor": "taylor", "gl4": "implicit-rk"})
+    groups = panels(list(family), family)
     assert MAX_LINES_PER_PANEL == 8
-    import urllib.parse
-
-    fig = report["html"].split('data-slug="convergence-harmonic"')[1].split("</figure>")[0]
-    csv = urllib.parse.unquote(html.unescape(re.search(r'href="data:text/csv;charset=utf-8,([^"]*)"', fig).group(1)))
-    frame = pd.read_csv(__import__("io").StringIO(csv))
-    assert frame.groupby("panel")["stepper"].nunique().max() <= MAX_LINES_PER_PANEL
+    assert all(0 < len(members) <= MAX_LINES_PER_PANEL for _, members in groups)
+    assert sorted(m for _, members in groups for m in members) == sorted(family)
+    titles = [title for title, _ in groups]
+    assert titles[:2] == ["splitting (1/2)", "splitting (2/2)"]
+    assert titles[2] == "multistep, taylor, implicit-rk"  # small families packed into one panel
+    # energy panels (one per drift class) are never packed together
+    assert len(panels(["a", "b"], {"a": "bounded", "b": "linear"}, pack=False)) == 2
 
 
 def test_every_registered_experiment_has_a_section_builder():
@@ -407,3 +413,69 @@ def test_performance_history_is_drawn_from_asv_results_when_there_are_any(monkey
     assert kinds == ["figure", "table"]
     assert drawn.blocks[0].figure.svg.startswith("<svg")
     assert len(drawn.blocks[1].table.rows) == 3  # latest value per (benchmark, params)
+
+
+# -- the section registry -------------------------------------------------------------------------
+def _view_with_extra_experiment(report, name: str):
+    """The module's run, plus an experiment no section was registered for (as a helper adding
+    a new experiment would leave it): its summary judges two cells, one failing."""
+    from harness.report import run_view
+
+    view = run_view(load_run(None, root=report["own"] / "results"))
+    view.summaries[name] = pd.DataFrame({
+        "stepper": ["euler", "rk4"], "problem": ["harmonic", "harmonic"],
+        "accepted_steps": [120, 40], "verdict": ["too-many-steps", "as-claimed"],
+        "passed": [False, True], "message": ["took 3x the steps of its order's estimate", ""]})
+    view.meta = dict(view.meta, experiments=dict(view.meta["experiments"], **{name: {}}))
+    return view
+
+
+def test_an_experiment_without_a_registered_section_gets_the_generic_table(report):
+    from harness.report.sections import _experiment_section, section_spec
+    from harness.report.verdicts import collect_verdicts
+
+    name = "made-up-step-control"
+    view = _view_with_extra_experiment(report, name)
+    assert name not in SECTION_BUILDERS
+    sec = _experiment_section(view, name, 99)
+    assert sec.title == section_spec(name).title and sec.intro
+    tables = [b.table for b in sec.blocks if b.kind == "table"]
+    assert len(tables) == 1 and len(tables[0].rows) == 2
+    assert "accepted steps" in tables[0].columns
+    assert [r.cells[0].text for r in tables[0].rows] == ["✗ FAIL", "✓ pass"]  # failing first
+    verdicts = collect_verdicts(view)
+    mine = verdicts[verdicts["experiment"] == name]
+    assert list(mine["passed"]) == [False, True] or sorted(mine["passed"]) == [False, True]
+    assert any("too-many-steps" in s for s in mine["sentence"])
+
+
+def test_one_registration_gives_an_experiment_its_own_section_and_scoreboard_column(report):
+    from harness.report.fixed_sections import verdicts_section
+    from harness.report.sections import ScoreColumn, _experiment_section, register_section
+    from harness.report.verdicts import collect_verdicts
+
+    name = "made-up-step-control"
+    view = _view_with_extra_experiment(report, name)
+
+    def steps(view, stepper):
+        s = view.summary(name)
+        s = s[s["stepper"] == stepper]
+        return ([(str(int(s["accepted_steps"].iloc[0])), "")], True) if len(s) else ([("—", "")], False)
+
+    @register_section(name, title="Step-size control", intro="Accepted steps. Fewer is better.",
+                      score=(ScoreColumn("accepted steps", steps),))
+    def build(view, sec):
+        sec.note("built by the registered builder")
+
+    try:
+        sec = _experiment_section(view, name, 99)
+        assert sec.title == "Step-size control"
+        assert [b.text for b in sec.blocks if b.kind == "note"] == ["built by the registered builder"]
+        head, _ = verdicts_section(view, collect_verdicts(view), [*view.meta["experiments"]])
+        board = next(b.table for b in head.blocks if b.kind == "table")
+        assert "accepted steps" in board.columns
+        col = board.columns.index("accepted steps")
+        cells = {r.stepper: r.cells[col].text for r in board.rows}
+        assert cells["euler"] == "120" and cells["rk4"] == "40"
+    finally:
+        SECTION_BUILDERS.pop(name, None)
