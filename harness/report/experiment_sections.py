@@ -131,14 +131,18 @@ def convergence(view: RunView, sec: Section) -> None:
         ref = judged.loc[judged["problem"] == problem, "reference_error"].astype(float)
         ref_err = float(ref.max()) if len(ref) and np.isfinite(ref).any() else None
         if len(g):
+            glob = g[g["kind"] == "global"] if "kind" in g else g
+            same = [" = ".join([k, *v]) for k, v in F.same_curves(glob).items() if v] if len(glob) else []
             sec.figure(F.convergence_figure(problem, g, view.palette, ref_err),
-                       f"Error against h on {problem}: filled markers used by the fit, hollow ones "
-                       "excluded; dashed, the fitted slope over the range it used; dotted, the "
-                       "reference floor.")
+                       f"Error against h on {problem}: markers on the points the order fit used, "
+                       "the thin line alone where points were excluded (pre-asymptotic, roundoff or "
+                       "reference floor; the CSV says which); dashed, the fitted slope over the "
+                       "range it used; dotted, the reference floor."
+                       + (f" Identical curves drawn once: {'; '.join(same)}." if same else ""))
     cols = [("stepper", "stepper"), ("problem", "problem"), ("claimed_order", "claimed"),
             ("measured_order", "measured"), ("order_ci_low", "95% CI low"),
-            ("order_ci_high", "95% CI high"), ("fit_points", "fit points"),
-            ("local_exponent", "local exponent"), ("verdict", "verdict"), ("reason", "why")]
+            ("order_ci_high", "95% CI high"), ("fit_points", "fit points"), ("verdict", "verdict"),
+            ("reason", "why")]
     sec.table(df_table(judged, cols, f"Per cell: {len(judged)} stepper × problem fits",
                        experiment="convergence", digits=4))
 

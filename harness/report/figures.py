@@ -42,6 +42,7 @@ __all__ = [
     "angular_momentum_figure",
     "work_precision_figure",
     "best_per_family",
+    "same_curves",
     "roundoff_figure",
     "symplecticity_figure",
     "perf_history_figure",
@@ -56,7 +57,7 @@ EXCLUSION_STYLE = {
 }
 # Lines of long runs are thinned to about this many points per line (log-spaced in steps): on a
 # panel a few hundred pixels wide, more points add bytes, not detail.
-MAX_POINTS_PER_LINE = 60
+MAX_POINTS_PER_LINE = 40
 # Small multiples: at most this many methods share one panel, so every line can be told apart.
 MAX_LINES_PER_PANEL = 8
 # Coordinates in the SVG are rounded to this many decimals of a point (1/10 pt is far below
@@ -552,6 +553,30 @@ def _small_ticks(ax: Any) -> None:
 
 
 # -- convergence ----------------------------------------------------------------------------------
+# Digits at which two methods' error curves count as the same curve (drawn once): far more than
+# a log-log figure resolves.
+SAME_CURVE_DIGITS = 6
+
+
+def same_curves(rows: pd.DataFrame) -> dict[str, list[str]]:
+    """Methods whose (h, error, used-by-the-fit) points agree to SAME_CURVE_DIGITS digits — the
+    same coefficients run by another implementation — are drawn as one curve: first method ->
+    the others, in the order given (a method drawn by another maps to nothing, is not a key)."""
+    keys: dict[tuple, str] = {}
+    out: dict[str, list[str]] = {}
+    for stepper, s in rows.groupby("stepper", sort=False):
+        s = s.sort_values("h")
+        key = tuple(zip(np.round(np.log10(s["h"].astype(float).abs() + 1e-300), SAME_CURVE_DIGITS),
+                        [float(f"{e:.{SAME_CURVE_DIGITS}g}") for e in s["error"].astype(float)],
+                        s["in_fit"].fillna(False).astype(bool), strict=True))
+        if key in keys:
+            out[keys[key]].append(stepper)
+        else:
+            keys[key] = stepper
+            out[stepper] = []
+    return out
+
+
 @_styled
 def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                        reference_error: float | None) -> Figure | None:
@@ -566,7 +591,9 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     g = rows[(rows["kind"] == "global") & np.isfinite(rows["h"].astype(float))]
     if g.empty:
         return None
-    groups = panels(list(dict.fromkeys(g["stepper"])), palette.families)
+    twins = same_curves(g)
+    shown = [s for s in dict.fromkeys(g["stepper"]) if s in twins]
+    groups = panels(shown, palette.families)
     fig, axes = _multiples(len(groups), sharey=True)
     floor = reference_error if reference_error is not None and np.isfinite(reference_error) \
         and reference_error > 0 else None
@@ -590,13 +617,15 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                 hh = np.array([h[used].min(), h[used].max()])
                 ax.plot(hh, np.exp(f["intercept"]) * hh ** f["order"], "--", color=c, lw=1.8)
             fit_text = f"slope {slope:.2f}" if np.isfinite(slope) else "no fit"
-            label = f"{_label(stepper)} ({fit_text})"
+            same = f" and {len(twins[stepper])} identical" if twins[stepper] else ""
+            label = f"{_label(stepper)}{same} ({fit_text})"
             handles.append(Line2D([], [], color=c, marker=palette.marker(stepper), ms=3, lw=0.8,
                                   label=label))
             excluded = s["excluded"].fillna("").astype(str).to_numpy() if "excluded" in s else \
                 np.array([""] * len(s))
-            data.append(pd.DataFrame({"stepper": stepper, "h": h, "error": err,
-                                      "in_fit": used.astype(int), "excluded": excluded}))
+            for name in (stepper, *twins[stepper]):
+                data.append(pd.DataFrame({"stepper": name, "h": h, "error": err,
+                                          "in_fit": used.astype(int), "excluded": excluded}))
         if floor is not None:
             ax.axhline(floor, color="k", lw=0.9, ls=":")
         _loglog(ax)
@@ -862,7 +891,7 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             strong = stepper in bold
             c = palette.colour(stepper)
             ax.plot(s["_x"], s["error"].astype(float), "--" if peer else "-",
-                    marker=palette.marker(stepper), ms=3.2 if strong else 2, lw=1.6 if strong else 0.6,
+                    marker=palette.marker(stepper) if strong else None, ms=3.2, lw=1.6 if strong else 0.6,
                     alpha=1.0 if strong else 0.3, color=c,
                     markerfacecolor="none" if peer else c, zorder=3 if strong else 2)
         _loglog(ax)
