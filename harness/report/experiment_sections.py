@@ -50,8 +50,8 @@ def _convergence_judged(view: RunView) -> pd.DataFrame:
     gate = view.gate()
     if not len(gate) or summ.empty:
         return summ.assign(passed=None, reason="")
-    return summ.merge(gate[["stepper", "problem", "passed", "reason"]], on=["stepper", "problem"],
-                      how="left")
+    cols = [c for c in ("stepper", "problem", "passed", "reason", "expected") if c in gate]
+    return summ.merge(gate[cols], on=["stepper", "problem"], how="left")
 
 
 def _convergence_verdicts(view: RunView) -> pd.DataFrame:

@@ -802,7 +802,7 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
         _loglog(ax)
         ax.set_title(title)
         _small_ticks(ax)
-        _panel_legend(ax, loc="upper left")
+        _panel_legend(ax, loc="best")
     fig.supxlabel("t", fontsize=8)
     fig.supylabel(f"relative {what} error (0 at {LOG_FLOOR:g})", fontsize=8)
     fig.suptitle(f"{what.capitalize()} error on {_label(problem)}", fontsize=8.5)

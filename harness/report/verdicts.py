@@ -46,6 +46,10 @@ def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
         values = [rec.get(c, "") for c in key]
         verdict = str(rec.get("verdict") or ("pass" if passed else "fail"))
         why = first_sentence(rec.get(reason)) if not _missing_value(rec.get(reason)) else ""
+        if why.startswith(f"verdict {verdict}"):  # the reason only repeats the verdict
+            why = why[len(f"verdict {verdict}"):].lstrip(":; ")
+        if not why and not passed and rec.get("expected") and str(rec.get("expected")) != verdict:
+            why = f"the claim needs {rec.get('expected')}"
         where = " on ".join(x for x in (str(rec.get("stepper", "")), str(rec.get("problem", ""))) if x)
         extra = ", ".join(f"{c}={rec.get(c)}" for c in key if c not in ("stepper", "problem"))
         sentence = (f"{name}: {where}{f' ({extra})' if extra else ''} — {verdict}"
