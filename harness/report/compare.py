@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
 from harness.report.sections import RunView, _missing_value, anchor, experiment_key, section_spec
@@ -210,7 +209,3 @@ def _moved(m: Any, rec: dict, x: float, x0: float) -> str:
     if abs(x - x0) > rtol * max(abs(x), abs(x0)):
         return f"relative change {rtol:g}"
     return ""
-
-
-def _finite(x: float) -> bool:
-    return bool(np.isfinite(x))
