@@ -57,7 +57,7 @@ EXCLUSION_STYLE = {
 }
 # Lines of long runs are thinned to about this many points per line (log-spaced in steps): on a
 # panel a few hundred pixels wide, more points add bytes, not detail.
-MAX_POINTS_PER_LINE = 40
+MAX_POINTS_PER_LINE = 32
 # Small multiples: at most this many methods share one panel, so every line can be told apart.
 MAX_LINES_PER_PANEL = 8
 # Coordinates in the SVG are rounded to this many decimals of a point (1/10 pt is far below
