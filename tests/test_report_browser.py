@@ -195,7 +195,7 @@ PAGE_FACTS = """(() => {
     headline: (() => { const h = document.querySelector('#verdicts p.headline');
       return h ? {text: h.textContent.trim(), top: h.getBoundingClientRect().top,
                   bottom: h.getBoundingClientRect().bottom} : null; })(),
-    failingListed: document.querySelectorAll('#verdicts ol.verdict-list li').length,
+    failingListed: document.querySelectorAll('#verdicts ol.verdict-list:not(.since) li').length,
     scoreboardTop: document.querySelector('#scoreboard-table').getBoundingClientRect().top,
     dataLinks: Array.from(document.querySelectorAll('figure a.data'))
       .map(a => a.getAttribute('href').slice(0, 30)),

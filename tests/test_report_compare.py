@@ -92,6 +92,14 @@ def test_both_runs_provenance_is_shown(two_runs):
     assert headline.startswith(f"Compared with run {first_id}:")
 
 
+def test_the_first_screen_says_what_changed(two_runs):
+    head = two_runs["html"].split('<section id="verdicts"')[1].split('id="scoreboard-table"')[0]
+    since = re.search(r'<ol class="verdict-list since"><li><a href="#changes">([^<]+)</a>', head)
+    assert since and html.unescape(since.group(1)).startswith("Compared with run ")
+    failing = re.search(r"\((\d+) now failing\)", html.unescape(since.group(1)))
+    assert failing and int(failing.group(1)) >= 1
+
+
 def test_the_first_report_says_there_was_nothing_to_compare_with(two_runs):
     text = two_runs["first"].read_text(encoding="utf-8")
     changes = text.split('<section id="changes"')[1].split("</section>")[0]

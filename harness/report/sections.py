@@ -490,8 +490,12 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
     out: list[Section] = [head]
     say("changes")
     names = dict(titles)
-    out.append(timer.run("changes", lambda: _guarded(
-        lambda v: X.changes_section(v, verdicts, previous), view, "changes", number, names)))
+    changes = timer.run("changes", lambda: _guarded(
+        lambda v: X.changes_section(v, verdicts, previous), view, "changes", number, names))
+    out.append(changes)
+    since = next((b for b in changes.blocks if b.kind == "headline"), None)
+    if since is not None:  # the first screen says what changed, too
+        head.blocks.insert(1, Block("list", items=[(since.text, "#changes")], cls="since"))
     for name in experiments:
         say(name)
         out.append(timer.run(name, lambda name=name: _guarded(
