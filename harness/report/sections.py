@@ -480,7 +480,7 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
 
     timer = SectionTimer()
     say = progress or (lambda _msg: None)
-    experiments = [e for e in view.meta.get("experiments", {})]
+    experiments = _in_registry_order(list(view.meta.get("experiments", {})))
     titles = section_titles(experiments)
     number = {k: i + 1 for i, (k, _) in enumerate(titles)}
     say("verdicts")
@@ -516,6 +516,15 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
                 "experiments": int(verdicts["experiment"].nunique()) if len(verdicts) else 0,
                 "verdicts": verdicts}
     return out, statuses, headline
+
+
+def _in_registry_order(names: list[str]) -> list[str]:
+    """The run's experiments in the registry's order (the order they finished in the run is
+    not the reader's), any the registry does not know at the end."""
+    from harness.experiments import EXPERIMENTS
+
+    order = {n: i for i, n in enumerate(EXPERIMENTS)}
+    return sorted(names, key=lambda n: (order.get(n, len(order)), names.index(n)))
 
 
 def _experiment_section(view: RunView, name: str, number: int) -> Section:
