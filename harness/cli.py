@@ -109,6 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("report", help="run every experiment and write the HTML report")
     _common(p)
     p.add_argument("--output", default=None, metavar="DIR", help="reports directory (default: reports/)")
+    p.add_argument("--compare", default=None, metavar="RUN",
+                   help="earlier run (id or path) for 'what changed' (default: the newest older run)")
     return parser
 
 
@@ -516,6 +518,7 @@ def _cmd_report(args) -> int:
         fresh=args.fresh,
         plugins=tuple(args.plugin),
         output=args.output,
+        compare=args.compare,
     )
     print(os.fspath(path), file=_out())
     return EXIT_OK

@@ -272,3 +272,12 @@ LONG_RUN_MARGIN = 10.0
 # ... or where the state (each block: positions, velocities) first grows past this factor of
 # its size over the span.
 REGIME_SIZE_FACTOR = 2.0
+# The report's "what changed since the last run": a measured figure without a confidence
+# interval counts as moved when it changed by more than this relative amount. Deterministic
+# quantities (stability intervals, evaluation counts) repeat to many digits on one machine;
+# 1e-6 leaves room for another BLAS or compiler, not for a changed method.
+REPORT_CHANGE_RTOL = 1e-6
+# ... and for quantities at the rounding level (return errors in ulps, energy errors of
+# symplectic methods, symplectic deviations), which move by small factors with the order of
+# floating-point operations: a change by more than this factor either way.
+REPORT_CHANGE_ROUNDING = 10.0

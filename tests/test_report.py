@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import contextlib
 import html
+import io
 import json
 import math
 import re
+import urllib.parse
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -23,10 +25,10 @@ from harness import registry
 from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.roundoff import RoundoffExperiment, step_sizes
-from harness.report import REPORT_EXPERIMENTS, build_report, write_report
+from harness.report import build_report, report_experiments, write_report
 from harness.report.claims import CLAIMS
-from harness.report.figures import UnsafeFigureError, check_svg
-from harness.report.sections import SECTION_TITLES
+from harness.report.figures import MAX_LINES_PER_PANEL, UnsafeFigureError, check_svg
+from harness.report.sections import SECTION_BUILDERS, section_titles
 from harness.store import load_run
 
 HOSTILE = "<script>alert(1)</script>"
@@ -100,21 +102,118 @@ def test_report_is_written_under_the_output_directory_and_latest_points_at_it(re
     run = load_run(None, root=own / "results")
     assert run.run_id == path.parent.name
     assert run.meta["config"]["run"]["quick"] is True
-    assert set(run.experiments) == set(REPORT_EXPERIMENTS)
+    assert run.experiments == report_experiments()
 
 
 def test_every_section_heading_is_present_in_order(report):
+    """One section per experiment of the registry (symplecticity included), in its order,
+    between the fixed ones; each experiment section opens with its two-sentence intro."""
+    titles = section_titles(report_experiments())
     headings = re.findall(r'<h2 id="h-([\w-]+)">(\d+) ([^<]+)</h2>', report["html"])
-    assert [(k, int(n)) for k, n, _ in headings] == [
-        (k, i + 1) for i, (k, _) in enumerate(SECTION_TITLES)]
-    for (_, _, text), (_, title) in zip(headings, SECTION_TITLES, strict=True):
+    assert [(k, int(n)) for k, n, _ in headings] == [(k, i + 1) for i, (k, _) in enumerate(titles)]
+    for (_, _, text), (_, title) in zip(headings, titles, strict=True):
         assert html.unescape(text) == title
+    assert "symplecticity" in [k for k, _, _ in headings]
     assert "could not be built" not in report["html"]
+    for name in report_experiments():
+        body = report["html"].split(f'<section id="{name}"')[1].split("</section>")[0]
+        intro = re.search(r'<p class="intro">([^<]+)</p>', body)
+        assert intro and intro.group(1).count(". ") >= 1, name
+
+
+def test_first_screen_leads_with_the_verdict_count_and_each_failing_claim(report):
+    """The page opens with the verdicts: how many claims were checked and failed, each failing
+    one in a sentence linking to its row, before the scoreboard; counts match the run's."""
+    from harness.report import run_view
+    from harness.report.verdicts import collect_verdicts
+
+    text = report["html"]
+    head = text.split('<section id="verdicts"')[1].split("</section>")[0]
+    verdicts = collect_verdicts(run_view(load_run(None, root=report["own"] / "results")))
+    n_bad = int((~verdicts["passed"]).sum())
+    m = re.search(r'<p class="headline (?:fail|pass)">(\d+) claims checked in (\d+) experiments', head)
+    assert m and int(m.group(1)) == len(verdicts) and len(verdicts) > 20
+    assert f": {n_bad} failed." in head
+    assert head.index('class="headline') < head.index('id="scoreboard-table"')
+    listed = [a for a in re.findall(r'<li><a href="#([\w-]+)">', head) if a != "changes"]
+    assert len(listed) == n_bad
+    ids = set(re.findall(r'<tr id="([\w-]+)"', text))
+    assert set(listed) <= ids
+
+
+def test_every_scoreboard_link_points_at_a_row_of_the_page(report):
+    table = report["html"].split('id="scoreboard-table"')[1].split("</table>")[0]
+    links = re.findall(r'<a href="#([\w-]+)">', table)
+    ids = set(re.findall(r'\bid="([\w-]+)"', report["html"]))
+    assert len(links) >= 4 * len([*STEPPERS, HOSTILE])
+    assert set(links) <= ids, set(links) - ids
+
+
+def test_reasons_are_numbered_notes_written_once_per_table(report):
+    text = report["html"]
+    tables = re.findall(r'<table class="[^"]*" id="([\w-]+)">(.*?)</table>\s*</div>\s*'
+                        r'(<ol class="notes">.*?</ol>)?', text, re.DOTALL)
+    assert tables
+    n_notes = 0
+    for tid, body, notes in tables:
+        refs = set(re.findall(rf'href="#{tid}-n(\d+)"', body))
+        items = re.findall(r'<li value="(\d+)" id="[\w-]+">([^<]*)</li>', notes or "")
+        assert refs == {n for n, _ in items}, tid
+        assert len({t for _, t in items}) == len(items), tid  # each reason once
+        n_notes += len(items)
+    assert n_notes > 0
+
+
+def test_per_cell_tables_are_folded(report):
+    text = report["html"]
+    for name in ("convergence", "stability", "reversibility", "energy", "symplecticity"):
+        body = text.split(f'<section id="{name}"')[1].split("</section>")[0]
+        assert '<details class="table"><summary>Per ' in body, name
+
+
+def test_every_figure_offers_its_data_as_an_embedded_csv(report):
+    figures = re.findall(r"<figure>(.*?)</figure>", report["html"], re.DOTALL)
+    assert figures
+    for fig in figures:
+        m = re.search(r'<a class="data" download="([\w.-]+\.csv)" '
+                      r'href="data:text/csv;charset=utf-8,([^"]*)"', fig)
+        assert m, fig[-300:]
+        frame = pd.read_csv(io.StringIO(urllib.parse.unquote(html.unescape(m.group(2)))))
+        assert len(frame) > 0
+        assert "stepper" in frame.columns or "benchmark" in frame.columns
+
+
+def test_small_multiples_hold_at_most_eight_methods_a_panel_and_every_method_once():
+    """Panels per family: a large family is cut into parts of at most MAX_LINES_PER_PANEL,
+    small families share a panel while they fit, no method is lost or repeated."""
+    from harness.report.figures import panels
+
+    family = {f"s{i}": "splitting" for i in range(15)}
+    family.update({"bdf2": "multistep", "ab2": "multistep", "taylor": "taylor", "gl4": "implicit-rk"})
+    groups = panels(list(family), family)
+    assert MAX_LINES_PER_PANEL == 8
+    assert all(0 < len(members) <= MAX_LINES_PER_PANEL for _, members in groups)
+    assert sorted(m for _, members in groups for m in members) == sorted(family)
+    titles = [title for title, _ in groups]
+    assert titles[:2] == ["splitting (1/2)", "splitting (2/2)"]
+    assert titles[2] == "multistep, taylor, implicit-rk"  # small families packed into one panel
+    # energy panels (one per drift class) are never packed together
+    assert len(panels(["a", "b"], {"a": "bounded", "b": "linear"}, pack=False)) == 2
+
+
+def test_every_registered_experiment_has_a_section_builder():
+    """Built-in experiments each have a registered section (a new one without falls back to the
+    generic table, which works but is not what a reader should get for a built-in)."""
+    from harness.report.sections import section_spec
+
+    for name in report_experiments():
+        section_spec(name)
+        assert name in SECTION_BUILDERS, name
 
 
 def test_scoreboard_has_one_row_per_stepper_failing_first_and_marked_in_text(report):
     table = report["html"].split('id="scoreboard-table"')[1].split("</table>")[0]
-    rows = re.findall(r'<tr class="stepper-row (fail|pass|none)" data-stepper="([^"]*)">', table)
+    rows = re.findall(r'<tr id="[\w-]+" class="stepper-row (fail|pass|none)" data-stepper="([^"]*)">', table)
     assert sorted(html.unescape(s) for _, s in rows) == sorted([*STEPPERS, HOSTILE])
     statuses = [s for s, _ in rows]
     order = {"fail": 0, "pass": 1, "none": 2}
@@ -127,9 +226,8 @@ def test_scoreboard_has_one_row_per_stepper_failing_first_and_marked_in_text(rep
 def test_figures_are_inline_svg_with_a_size(report):
     svgs = re.findall(r"<svg\b[^>]*>", report["html"])
     slugs = {re.search(r'data-slug="([^"]*)"', t).group(1) for t in svgs}
-    expected = {"stability-overlay", "stability-multiples", "stability-hw", "roundoff",
-                "angular_momentum-kepler-elliptic", "work-evals-kepler-elliptic",
-                "work-wall_s-kepler-elliptic"}
+    expected = {"stability-overlay", "stability-hw", "roundoff", "symplecticity",
+                "angular_momentum-kepler-elliptic", "work-kepler-elliptic"}
     expected |= {f"{kind}-{p}" for kind in ("convergence", "reversibility", "energy")
                  for p in PROBLEMS}
     assert expected <= slugs
@@ -171,7 +269,7 @@ def test_claims_section_lists_every_claim_with_its_course_source(report):
 
 def test_provenance_lists_each_experiment_with_its_time_and_the_configuration(report):
     prov = report["html"].split('id="provenance"')[1].split("</section>")[0]
-    for name in REPORT_EXPERIMENTS:
+    for name in report_experiments():
         assert f"<td>{name}</td>" in prov
     assert "full configuration (JSON)" in prov
     run = load_run(None, root=report["own"] / "results")
@@ -183,7 +281,7 @@ def test_rewriting_a_saved_run_gives_the_same_sections(report, tmp_path):
     again = write_report(run, output=tmp_path / "reports").read_text(encoding="utf-8")
     heads = re.compile(r'<h2 id="h-[\w-]+">[^<]+</h2>')
     assert heads.findall(again) == heads.findall(report["html"])
-    rows = re.compile(r'<tr class="stepper-row[^"]*" data-stepper="[^"]*">')
+    rows = re.compile(r'<tr id="[\w-]+" class="stepper-row[^"]*" data-stepper="[^"]*">')
     assert rows.findall(again) == rows.findall(report["html"])
 
 
@@ -291,7 +389,7 @@ def test_cli_report_prints_the_path(report, tmp_path, monkeypatch, capsys):
 
 def test_performance_history_is_drawn_from_asv_results_when_there_are_any(monkeypatch):
     from harness import perf_history
-    from harness.report.sections import performance_history
+    from harness.report.fixed_sections import performance_history
 
     monkeypatch.setattr(perf_history, "load_history",
                         lambda *a, **k: pd.DataFrame(columns=perf_history.HISTORY_COLUMNS))
@@ -315,3 +413,69 @@ def test_performance_history_is_drawn_from_asv_results_when_there_are_any(monkey
     assert kinds == ["figure", "table"]
     assert drawn.blocks[0].figure.svg.startswith("<svg")
     assert len(drawn.blocks[1].table.rows) == 3  # latest value per (benchmark, params)
+
+
+# -- the section registry -------------------------------------------------------------------------
+def _view_with_extra_experiment(report, name: str):
+    """The module's run, plus an experiment no section was registered for (as a helper adding
+    a new experiment would leave it): its summary judges two cells, one failing."""
+    from harness.report import run_view
+
+    view = run_view(load_run(None, root=report["own"] / "results"))
+    view.summaries[name] = pd.DataFrame({
+        "stepper": ["euler", "rk4"], "problem": ["harmonic", "harmonic"],
+        "accepted_steps": [120, 40], "verdict": ["too-many-steps", "as-claimed"],
+        "passed": [False, True], "message": ["took 3x the steps of its order's estimate", ""]})
+    view.meta = dict(view.meta, experiments=dict(view.meta["experiments"], **{name: {}}))
+    return view
+
+
+def test_an_experiment_without_a_registered_section_gets_the_generic_table(report):
+    from harness.report.sections import _experiment_section, section_spec
+    from harness.report.verdicts import collect_verdicts
+
+    name = "made-up-step-control"
+    view = _view_with_extra_experiment(report, name)
+    assert name not in SECTION_BUILDERS
+    sec = _experiment_section(view, name, 99)
+    assert sec.title == section_spec(name).title and sec.intro
+    tables = [b.table for b in sec.blocks if b.kind == "table"]
+    assert len(tables) == 1 and len(tables[0].rows) == 2
+    assert "accepted steps" in tables[0].columns
+    assert [r.cells[0].text for r in tables[0].rows] == ["✗ FAIL", "✓ pass"]  # failing first
+    verdicts = collect_verdicts(view)
+    mine = verdicts[verdicts["experiment"] == name]
+    assert list(mine["passed"]) == [False, True] or sorted(mine["passed"]) == [False, True]
+    assert any("too-many-steps" in s for s in mine["sentence"])
+
+
+def test_one_registration_gives_an_experiment_its_own_section_and_scoreboard_column(report):
+    from harness.report.fixed_sections import verdicts_section
+    from harness.report.sections import ScoreColumn, _experiment_section, register_section
+    from harness.report.verdicts import collect_verdicts
+
+    name = "made-up-step-control"
+    view = _view_with_extra_experiment(report, name)
+
+    def steps(view, stepper):
+        s = view.summary(name)
+        s = s[s["stepper"] == stepper]
+        return ([(str(int(s["accepted_steps"].iloc[0])), "")], True) if len(s) else ([("—", "")], False)
+
+    @register_section(name, title="Step-size control", intro="Accepted steps. Fewer is better.",
+                      score=(ScoreColumn("accepted steps", steps),))
+    def build(view, sec):
+        sec.note("built by the registered builder")
+
+    try:
+        sec = _experiment_section(view, name, 99)
+        assert sec.title == "Step-size control"
+        assert [b.text for b in sec.blocks if b.kind == "note"] == ["built by the registered builder"]
+        head, _ = verdicts_section(view, collect_verdicts(view), [*view.meta["experiments"]])
+        board = next(b.table for b in head.blocks if b.kind == "table")
+        assert "accepted steps" in board.columns
+        col = board.columns.index("accepted steps")
+        cells = {r.stepper: r.cells[col].text for r in board.rows}
+        assert cells["euler"] == "120" and cells["rk4"] == "40"
+    finally:
+        SECTION_BUILDERS.pop(name, None)

@@ -22,6 +22,7 @@ import base64
 import fcntl
 import json
 import os
+import re
 import select
 import shutil
 import subprocess
@@ -34,7 +35,8 @@ from typing import Any
 import pytest
 from test_report import HOSTILE, PROBLEMS, STEPPERS, build_quick_report, hostile_plugin, shared_dir
 
-from harness.report.sections import SECTION_TITLES
+from harness.report import report_experiments
+from harness.report.sections import section_titles
 
 ROOT = Path(__file__).resolve().parent.parent
 ARTIFACTS = ROOT / "test-artifacts"
@@ -189,7 +191,28 @@ PAGE_FACTS = """(() => {
       .filter(u => !u.startsWith('#') && !u.startsWith('data:')),
     pageWidth: document.documentElement.scrollWidth,
     title: document.title,
+    viewport: window.innerHeight,
+    headline: (() => { const h = document.querySelector('#verdicts p.headline');
+      return h ? {text: h.textContent.trim(), top: h.getBoundingClientRect().top,
+                  bottom: h.getBoundingClientRect().bottom} : null; })(),
+    failingListed: document.querySelectorAll('#verdicts ol.verdict-list:not(.since) li').length,
+    scoreboardTop: document.querySelector('#scoreboard-table').getBoundingClientRect().top,
+    dataLinks: Array.from(document.querySelectorAll('figure a.data'))
+      .map(a => a.getAttribute('href').slice(0, 30)),
   };
+})()"""
+
+
+# The first screen a reader sees (CSS pixels of a laptop window).
+FIRST_SCREEN_HEIGHT = 900
+# The first scoreboard link whose row sits in a folded (closed) per-cell table.
+FOLDED_TARGET = """(() => {
+  for (const a of document.querySelectorAll('#scoreboard-table a[href^="#"]')) {
+    const el = document.getElementById(a.getAttribute('href').slice(1));
+    const d = el && el.closest('details');
+    if (d && !d.open) return el.id;
+  }
+  return null;
 })()"""
 
 
@@ -209,13 +232,22 @@ def browser_report(tmp_path_factory):
     profile = Path(tempfile.mkdtemp(prefix="chromium-profile-", dir=own))
     tools = DevTools(binary, profile)
     try:
-        tools.open(path.resolve().as_uri())
+        # the first screen: a laptop-sized window
+        tools.open(path.resolve().as_uri(), width=1280, height=FIRST_SCREEN_HEIGHT)
         facts = tools.evaluate(PAGE_FACTS)
         requests = tools.requests()
         ARTIFACTS.mkdir(exist_ok=True)
         shot = ARTIFACTS / "report-browser.png"
         tools.screenshot(shot)
-        yield {"path": path, "facts": facts, "requests": requests, "screenshot": shot}
+        # a link from the scoreboard to a row inside a folded table
+        target = tools.evaluate(FOLDED_TARGET)
+        tools.send("Page.navigate", {"url": path.resolve().as_uri() + "#" + target})
+        time.sleep(0.5)
+        opened = tools.evaluate(f"(() => {{ const r = document.getElementById({target!r}); "
+                                "const d = r.closest('details'); const b = r.getBoundingClientRect(); "
+                                "return {open: d ? d.open : null, top: b.top, height: b.height}; })()")
+        yield {"path": path, "facts": facts, "requests": requests, "screenshot": shot,
+               "target": target, "opened": opened}
     finally:
         tools.close()
 
@@ -229,8 +261,9 @@ def test_page_made_no_network_request_but_loading_itself(browser_report):
 
 def test_every_section_heading_is_rendered(browser_report):
     headings = browser_report["facts"]["headings"]
-    assert [h[0] for h in headings] == [f"h-{key}" for key, _ in SECTION_TITLES]
-    assert [h[1] for h in headings] == [f"{i + 1} {title}" for i, (_, title) in enumerate(SECTION_TITLES)]
+    titles = section_titles(report_experiments())
+    assert [h[0] for h in headings] == [f"h-{key}" for key, _ in titles]
+    assert [h[1] for h in headings] == [f"{i + 1} {title}" for i, (_, title) in enumerate(titles)]
 
 
 def test_scoreboard_has_one_row_per_stepper_of_the_report(browser_report):
@@ -255,3 +288,30 @@ def test_every_figure_is_visible_with_a_size(browser_report):
 def test_screenshot_is_kept_as_an_artefact(browser_report):
     data = browser_report["screenshot"].read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+
+
+def test_first_screen_shows_the_verdict_summary(browser_report):
+    """The count of claims checked and failed is on the first screen, above the scoreboard,
+    with each failing claim listed (the screenshot is kept as an artefact)."""
+    facts = browser_report["facts"]
+    head = facts["headline"]
+    assert head is not None
+    assert re.fullmatch(r"\d+ claims checked in \d+ experiments( and the course material)?: \d+ failed\..*",
+                        head["text"]), head["text"]
+    assert 0 <= head["top"] and head["bottom"] <= facts["viewport"]
+    assert head["bottom"] <= facts["scoreboardTop"]
+    n_failed = int(re.search(r": (\d+) failed", head["text"]).group(1))
+    assert facts["failingListed"] == n_failed
+
+
+def test_every_figure_has_its_data_link(browser_report):
+    facts = browser_report["facts"]
+    assert len(facts["dataLinks"]) == len(facts["figures"])
+    assert all(u.startswith("data:text/csv") for u in facts["dataLinks"])
+
+
+def test_a_scoreboard_link_opens_the_folded_table_it_points_into(browser_report):
+    assert browser_report["target"], "no scoreboard link points into a folded table"
+    opened = browser_report["opened"]
+    assert opened["open"] is True
+    assert opened["height"] > 0

@@ -6,10 +6,13 @@ Steps of `build_report`:
    run after `kill -9`, recomputes only what is missing); one progress display for all of them.
 2. The results are saved with their provenance (`harness.store.save_run`) and read back
    (`load_run`), so the report shows exactly what the results directory holds.
-3. The sections (`harness.report.sections`) turn the tables into HTML tables and inline SVG
-   figures; Jinja2 renders `templates/report.html.j2` with autoescaping on.
+3. The sections (`harness.report.sections`, one per experiment of the registry) turn the tables
+   into HTML tables, inline SVG figures and embedded CSV links; the earlier run (the newest one
+   before this in the results directory, or `compare`) gives the "what changed" section
+   (`harness.report.compare`); Jinja2 renders `templates/report.html.j2` with autoescaping on.
 4. The report is assembled in a hidden staging directory and renamed into
-   `<reports>/<run id>/index.html` (run id = `<UTC timestamp>-<short git sha>`), then
+   `<reports>/<run id>/index.html` (run id = `<UTC timestamp>-<short git sha>`), with the
+   verdicts it judged beside it (`verdicts.csv`, what a later report compares with), then
    `<reports>/latest` is swapped to point at it (a relative symlink replaced with `os.replace`;
    where symlinks are not possible, a copied directory swapped by renames).
 
@@ -35,7 +38,15 @@ from harness.experiments import EXPERIMENT_NAMES as REPORT_EXPERIMENTS
 from harness.progress import Progress
 from harness.provenance import PROJECT_ROOT
 
-__all__ = ["build_report", "write_report", "REPORT_EXPERIMENTS", "reports_root", "render_html"]
+__all__ = ["build_report", "write_report", "report_experiments", "reports_root", "render_html",
+           "run_view"]
+
+
+
+def report_experiments() -> list[str]:
+    """The experiments a report runs, in the order of its sections: the one experiment list
+    (`harness.experiments.EXPERIMENT_NAMES`)."""
+    return list(REPORT_EXPERIMENTS)
 
 TEMPLATE = "report.html.j2"
 
@@ -80,9 +91,9 @@ def render_html(context: dict[str, Any]) -> str:
     return env.get_template(TEMPLATE).render(**context)
 
 
-def _write_report(root: Path, report_id: str, html: str) -> Path:
-    """Write `<root>/<report id>/index.html` atomically (staging directory, then rename) and
-    point `<root>/latest` at it. Returns the index.html path."""
+def _write_report(root: Path, report_id: str, html: str, extra: dict[str, str] | None = None) -> Path:
+    """Write `<root>/<report id>/index.html` (and the `extra` files) atomically (staging
+    directory, then rename) and point `<root>/latest` at it. Returns the index.html path."""
     root.mkdir(parents=True, exist_ok=True)
     final = root / report_id
     n = 2
@@ -99,6 +110,11 @@ def _write_report(root: Path, report_id: str, html: str) -> Path:
             fh.write(html)
             fh.flush()
             os.fsync(fh.fileno())
+        for name, text in (extra or {}).items():
+            with open(staging / name, "w", encoding="utf-8") as fh:
+                fh.write(text)
+                fh.flush()
+                os.fsync(fh.fileno())
         os.rename(staging, final)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
@@ -154,6 +170,7 @@ def build_report(
     results_root: str | os.PathLike | None = None,
     cell_timeout: float | None = None,
     progress: Progress | bool | str | None = None,
+    compare: str | os.PathLike | None = None,
 ) -> Path:
     """Run every report experiment over `steppers` x `problems` (None: the whole registry), save
     the run, and write the HTML report; return the path of its index.html.
@@ -161,8 +178,10 @@ def build_report(
     `quick` uses every experiment's CI-sized settings (every section is still there); `jobs`,
     `scheduler`, `fresh`, `plugins`, `cell_timeout` are as in `harness.runner.run_experiment`;
     `output` is the reports directory; `cache_dir` the cell cache, `results_root` where runs are
-    saved; `progress` as in the runner (None: a bar on a terminal, plain lines otherwise).
-    Failed cells do not stop the report: they are listed in it."""
+    saved; `progress` as in the runner (None: a bar on a terminal, plain lines otherwise);
+    `compare` the earlier run the "what changed" section compares with (default: the newest
+    older run in the results directory). Failed cells do not stop the report: they are listed
+    in it."""
     started = time.perf_counter()
     quick = _check_flag("quick", quick)
     fresh = _check_flag("fresh", fresh)
@@ -180,7 +199,11 @@ def build_report(
         raise InputError("`steppers` must name at least one stepper")
     if not problem_names:
         raise InputError("`problems` must name at least one problem")
-    experiments = [e for e in REPORT_EXPERIMENTS if e in EXPERIMENTS]
+    experiments = report_experiments()
+    if compare is not None:
+        from harness.store import resolve_run
+
+        resolve_run(compare, root=results_root)  # a bad --compare fails before anything runs
 
     if isinstance(progress, Progress):
         bar, own = progress, False
@@ -210,9 +233,35 @@ def build_report(
     t_save = time.perf_counter() - t0
     _say(bar, f"results saved in {run_dir}")
     path = write_report(stored, output=root, progress=bar, build_s={
-        "experiments (run or load from cache)": t_run, "save and reload results": t_save})
+        "experiments (run or load from cache)": t_run, "save and reload results": t_save},
+        compare=compare, compare_default=True)
     _say(bar, f"report written in {time.perf_counter() - started:.1f} s: {path}")
     return path
+
+
+def run_view(stored: Any, *, load_plugins: bool = True) -> Any:
+    """The RunView of a saved run: its tables, and the steppers, problems and mode of its own
+    configuration (plugins the run used are loaded again so their steppers can be shown)."""
+    from harness import registry
+    from harness.report import figures as F
+    from harness.report.sections import RunView
+
+    meta = stored.meta
+    cfg = meta.get("config", {}).get("run", {})
+    if load_plugins:
+        for p in cfg.get("plugins", []) or []:
+            registry.load_plugin(p)
+    stepper_names = list(cfg.get("steppers") or registry.steppers.names())
+    problem_names = list(cfg.get("problems") or registry.problems.names())
+    known = [n for n in stepper_names if n in registry.steppers]
+    infos = {n: registry.get_stepper(n).info for n in known}
+    return RunView(
+        rows=dict(stored.rows), summaries=dict(stored.summaries), meta=meta,
+        steppers=known, problems=[p for p in problem_names if p in registry.problems],
+        infos=infos, origins={n: registry.steppers.origin(n) for n in known},
+        quick=bool(cfg.get("quick", False)),
+        palette=F.Palette(known, {n: i.family for n, i in infos.items()}), run_id=stored.run_id,
+    )
 
 
 def write_report(
@@ -221,54 +270,51 @@ def write_report(
     output: str | os.PathLike | None = None,
     progress: Progress | None = None,
     build_s: dict[str, float] | None = None,
+    compare: str | os.PathLike | None = None,
+    compare_default: bool = True,
 ) -> Path:
     """Write the HTML report of a saved run (a `harness.store.StoredRun`, a run id, a path, or
     None for the newest) into the reports directory; return its index.html path. The steppers,
-    problems, plugins and mode are the run's own (from its meta.json); plugins the run used
-    are loaded again so their steppers' claims can be shown."""
-    from harness import __version__, registry
-    from harness.report import figures as F
-    from harness.report.sections import RunView, build_sections
+    problems, plugins and mode are the run's own (from its meta.json). `compare` names the
+    earlier run for "what changed"; without it, with `compare_default`, the newest older run
+    in the same results directory."""
+    from harness import __version__
+    from harness.report.compare import VERDICTS_FILE, load_previous
+    from harness.report.sections import build_sections
     from harness.store import StoredRun, load_run
 
     stored = run if isinstance(run, StoredRun) else load_run(run)
     root = reports_root(output)
     bar = progress if progress is not None else Progress(0, "report", mode="off")
     meta = stored.meta
-    cfg = meta.get("config", {}).get("run", {})
-    for p in cfg.get("plugins", []) or []:
-        registry.load_plugin(p)
-    stepper_names = list(cfg.get("steppers") or registry.steppers.names())
-    problem_names = list(cfg.get("problems") or registry.problems.names())
-    quick = bool(cfg.get("quick", False))
-    known = [n for n in stepper_names if n in registry.steppers]
-    view = RunView(
-        rows=dict(stored.rows), summaries=dict(stored.summaries), meta=meta,
-        steppers=known, problems=[p for p in problem_names if p in registry.problems],
-        infos={n: registry.get_stepper(n).info for n in known},
-        origins={n: registry.steppers.origin(n) for n in known},
-        quick=quick, palette=F.Palette(known),
-    )
+    view = run_view(stored)
+    previous = None
+    if compare is not None or compare_default:
+        previous = load_previous(compare, results_root=stored.path.parent, reports_root=root,
+                                 current=stored.run_id,
+                                 view_factory=lambda s: run_view(s, load_plugins=False))
+        if previous is not None:
+            _say(bar, f"comparing with run {previous.run_id}")
     t0 = time.perf_counter()
-    sections, statuses = build_sections(
+    sections, statuses, counts = build_sections(
         view, run_id=stored.run_id, results_path=str(stored.path), build_s=dict(build_s or {}),
-        progress=lambda name: _say(bar, f"section {name}"),
+        previous=previous, progress=lambda name: _say(bar, f"section {name}"),
     )
     t_sections = time.perf_counter() - t0
     git = meta["provenance"].get("git", {})
     totals = meta.get("totals", {})
-    headline = (f"{len(known)} steppers × {len(view.problems)} problems; "
+    headline = (f"{len(view.steppers)} steppers × {len(view.problems)} problems; "
                 f"{totals.get('cells', 0)} cells ({totals.get('computed', 0)} computed, "
                 f"{totals.get('cached', 0)} from cache, {totals.get('failed', 0)} failed) in "
                 f"{len(meta.get('experiments', {}))} experiments.")
     html = render_html({
         "sections": sections, "run_id": stored.run_id, "generated": meta.get("created_utc", ""),
         "commit": git.get("short_sha") or "unknown", "dirty": bool(git.get("dirty")),
-        "mode": "quick mode (CI-sized settings)" if quick else "full settings",
-        "headline": headline, "n_failed_cells": int(totals.get("failed", 0)),
-        "n_failing_steppers": sum(1 for s in statuses.values() if s == "fail"),
-        "version": __version__, "results_path": str(stored.path),
+        "mode": "quick mode (CI-sized settings)" if view.quick else "full settings",
+        "headline": headline, "version": __version__, "results_path": str(stored.path),
     })
-    path = _write_report(root, stored.run_id, html)
-    _say(bar, f"sections built in {t_sections:.1f} s")
+    verdicts_csv = counts["verdicts"].drop(columns=["anchor"]).to_csv(index=False)
+    path = _write_report(root, stored.run_id, html, {VERDICTS_FILE: verdicts_csv})
+    _say(bar, f"sections built in {t_sections:.1f} s; {counts['checked']} claims checked, "
+              f"{counts['failed']} failed; {len(html) / 1e6:.2f} MB")
     return path
