@@ -187,7 +187,6 @@ def build_report(
     fresh = _check_flag("fresh", fresh)
     root = reports_root(output)
     from harness import registry
-    from harness.experiments import EXPERIMENTS
     from harness.runner import _check_names, _check_plugins, run_experiments
 
     plugin_paths = _check_plugins(plugins)
