@@ -71,7 +71,9 @@ class StepDensity:
         for key in ("position_power", "momentum_power"):
             v = getattr(self, key)
             if not isinstance(v, int | float) or not math.isfinite(v):
-                raise CoefficientError(f"step density {self.name!r}: `{key}` must be a finite number, got {v!r}")
+                raise CoefficientError(
+                    f"step density {self.name!r}: `{key}` must be a finite number, got {v!r}"
+                )
 
     def radius_and_momentum(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """|q|^2, q.v and |q ^ v| per member (states shaped (nq, N))."""
@@ -227,7 +229,9 @@ class ControlledSplittingStepper(Stepper):
 
     def _step(self, dyn: Dynamics, c: Carry) -> None:
         if self._reversible:
-            self._apply(dyn, c, c.h / c.z)
+            # z = 1/sigma must stay positive: a fictive step too large for the recursion turns
+            # it over, and the step is then undefined (NaN, reported as a blow-up).
+            self._apply(dyn, c, np.where(c.z * np.sign(c.h) > 0.0, c.h / c.z, np.nan))
             c.z += c.h * self._g(c)
         else:
             self._apply(dyn, c, c.h * self._sigma(c))
