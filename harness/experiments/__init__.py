@@ -14,6 +14,7 @@ _MODULES = (
     "energy",
     "symplecticity",
     "work_precision",
+    "step_control",
 )
 
 for _name in _MODULES:
