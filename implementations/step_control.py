@@ -231,7 +231,7 @@ class ControlledSplittingStepper(Stepper):
         if self._reversible:
             # z = 1/sigma must stay positive: a fictive step too large for the recursion turns
             # it over, and the step is then undefined (NaN, reported as a blow-up).
-            self._apply(dyn, c, np.where(c.z * np.sign(c.h) > 0.0, c.h / c.z, np.nan))
+            self._apply(dyn, c, np.where(c.z > 0.0, c.h / c.z, np.nan))
             c.z += c.h * self._g(c)
         else:
             self._apply(dyn, c, c.h * self._sigma(c))
