@@ -11,8 +11,10 @@ coefficients found in the registry (by coefficients, never by name):
    is sampled on the energy experiment's grid and classified by its `classify_drift` (fit window
    from `fit_decades`; the first FIT_MIN_STEPS steps are never fitted).
 2. order: a sweep of the control parameter eps = span/n, n = n_start, 2 n_start, ... (span =
-   the problem's convergence span, read as fictive time), one member, error at the member's own
-   clock against the certified ground truth; points are classified and fitted by the
+   the problem's convergence span, read as fictive time) until at least `sweep_points` points
+   are taken and the error is a tenth of the work target, or n exceeds `control_budget`; one
+   member, error at the member's own clock against the certified ground truth; points are
+   classified and fitted by the
    convergence experiment's `classify_points` and `fit_order` (the gate's fit).
 3. work: to reach the final-time accuracy `target_error` x |y| the controlled stepper needs
    (log-log interpolation along its sweep) N_c force evaluations; the fixed stepper, run to the
@@ -91,14 +93,16 @@ class StepControlExperiment(Experiment):
         "samples_per_decade": 40,
         "uniform_samples": 1000,
         "n_start": 16,
-        "sweep_points": 9,
+        "sweep_points": 7,
+        "control_budget": 2**17,
         "target_error": 1e-4,
         "fixed_budget": 2**21,
     }
     quick_config: Mapping[str, Any] = {
         "problems": ["kepler-elliptic"],
         "energy_steps": 20_000,
-        "sweep_points": 7,
+        "sweep_points": 6,
+        "control_budget": 2**15,
         "fixed_budget": 2**18,
     }
 
@@ -108,7 +112,7 @@ class StepControlExperiment(Experiment):
         from harness.stepper import check_compatible
 
         check_config(config, counts=("energy_steps", "samples_per_decade", "uniform_samples",
-                                     "n_start", "sweep_points", "fixed_budget"),
+                                     "n_start", "sweep_points", "control_budget", "fixed_budget"),
                      positives=("energy_control", "fit_decades", "target_error"),
                      name_lists=("problems",))
         cells, skips = [], []
@@ -215,9 +219,12 @@ def _state_error(problem, tr) -> tuple[float, float, float]:
 
 def _order_rows(stepper, problem, config) -> pd.DataFrame:
     span = problem.convergence_t_end - problem.t0
+    target = float(config["target_error"]) * _state_scale(problem)
     records = []
     n = int(config["n_start"])
-    for _ in range(int(config["sweep_points"])):
+    while n <= int(config["control_budget"]):
+        if len(records) >= int(config["sweep_points"]) and records[-1]["error"] <= target / 10.0:
+            break
         tr = stepper.integrate(problem, h=span / n, n_steps=n)
         err, ref_err, scale = _state_error(problem, tr)
         records.append({"role": "controlled", "kind": "order", "h": span / n, "n_steps": n,
