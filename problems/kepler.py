@@ -185,9 +185,10 @@ def _eccentric(e: float) -> Problem:
         conservative=True,
         central_force=True,
         convergence_t_end=CONVERGENCE_PERIODS * _PERIOD_ELLIPTIC,
-        # The ensemble's relative perturbation must keep every member bound with a pericentre
-        # near the nominal one: 1e-2 of the speed at e = 0.99 changes the period by ~50 %.
-        perturbation=min(1e-2, (1.0 - e) / 10.0),
+        # The ensemble's perturbation p moves the energy by about v_p^2 p = p (1 + e)/(1 - e):
+        # this p keeps that within 10 % of |E| = 1/2, so every member stays bound near the
+        # nominal orbit (1e-2 would unbind members at e = 0.99).
+        perturbation=0.05 * (1.0 - e) / (1.0 + e),
         description=(
             f"Kepler problem on a highly eccentric orbit, e = {e:g}, a = 1 (start at pericentre "
             f"r = {1.0 - e:.3g}, period 2 pi), over 10 orbits: the pericentre passage lasts ~(1 - e)^1.5 "
