@@ -210,3 +210,9 @@ ADAPTIVE_MAX_EVALS = 100_000
 # number: at a whole period a periodic error term returns to zero, and conjugate-symplectic
 # methods (symplectic Euler, conjugate to velocity Verlet) then measure one order too high.
 CONVERGENCE_PERIODS = 1.3
+
+# Step-controlled steppers (h is a control parameter) keep their own clocks: a run whose clock
+# passes t0 + this many times the problem's t_span length has left the motion the problem
+# describes (a naive control lets an orbit escape, and its clock runs away: 7.8e6 after 16
+# steps on kepler-e0.99); its error counts as a blow-up, never compared with a reference.
+CLOCK_LIMIT_SPANS = 1.0

@@ -141,7 +141,10 @@ class ControlledSplittingStepper(Stepper):
     def __init__(self, record: ControlledScheme, *, reference: str, description: str = ""):
         if not isinstance(record, ControlledScheme):
             raise CoefficientError(f"`record` must be a ControlledScheme, got {type(record).__name__}")
-        self.coefficients = record
+        # The record is kept as `record`, not `coefficients`: harness.theory derives orders from
+        # coefficient objects it knows (tables, schemes), and this composite is not one of them
+        # yet; the claimed order below is derived from the scheme by the same theory.
+        self.record = record
         scheme = record.scheme
         seq = scheme.sequence
         self._fsal = len(seq) > 1 and seq[0][0] == "K" and seq[-1][0] == "K"
@@ -174,6 +177,9 @@ class ControlledSplittingStepper(Stepper):
             },
         )
 
+    def fingerprint(self) -> str:
+        return super().fingerprint() + "\n" + self.record.fingerprint()
+
     def incompatibility(self, problem: Problem) -> str | None:
         if not problem.central_force:
             return ("the step density is measured about the origin and needs a central force "
@@ -184,7 +190,7 @@ class ControlledSplittingStepper(Stepper):
 
     # -- the controller ----------------------------------------------------------------------------
     def _sigma(self, c: Carry) -> np.ndarray:
-        d = self.coefficients.density
+        d = self.record.density
         if self._reversible:  # positions only, |L| frozen at its start value: see `_start`
             r2 = np.einsum("ij,ij->j", c.q, c.q)
             return r2 ** (0.5 * d.position_power) * c.momentum_factor
@@ -194,7 +200,7 @@ class ControlledSplittingStepper(Stepper):
         """G = dz/dtau for z = 1/sigma and dt/dtau = sigma: -(d sigma/dt)/sigma."""
         r2 = np.einsum("ij,ij->j", c.q, c.q)
         qv = np.einsum("ij,ij->j", c.q, c.v)
-        return -self.coefficients.density.position_power * qv / r2
+        return -self.record.density.position_power * qv / r2
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         c = Carry(t0, h, np.ascontiguousarray(y0))
@@ -203,7 +209,7 @@ class ControlledSplittingStepper(Stepper):
         c.a = np.empty_like(c.q)
         c.force_valid = False
         c.time = np.full(c.y.shape[1], float(t0))
-        d = self.coefficients.density
+        d = self.record.density
         # sigma's |L| factor is taken at the start for the reversible controller: a function of
         # q alone keeps G force-free, and splittings keep |L| to rounding for central forces.
         _, _, L = d.radius_and_momentum(c.q, c.v)

@@ -269,9 +269,14 @@ def _step_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         try:
             tr = stepper.integrate(problem, h=span / n, n_steps=n, y0=y0, t0=T0)
             target, target_err = y_ref, ref_err
-            if tr.member_t is not None and tr.finite:  # h is a control parameter: own clocks
-                target, target_err = _reference_at_clocks(problem, tr.member_t[-1], y0, T0)
-            err = _errors(tr.final, target) if tr.finite else float("inf")
+            finite = tr.finite
+            if tr.member_t is not None and finite:  # h is a control parameter: own clocks
+                clocks = tr.member_t[-1]
+                finite = bool(np.all((clocks >= T0) & (clocks <= problem.t0 + tol.CLOCK_LIMIT_SPANS
+                                                        * (problem.t_end - problem.t0))))
+                if finite:
+                    target, target_err = _reference_at_clocks(problem, clocks, y0, T0)
+            err = _errors(tr.final, target) if finite else float("inf")
             evals = tr.evals
             msg = ""
         except StepFailure as exc:

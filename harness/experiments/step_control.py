@@ -64,7 +64,7 @@ FIT_MIN_STEPS = 1000
 def is_step_controlled(stepper) -> bool:
     """A stepper whose h is a control parameter: its clock is its own (`uniform_time` False)
     and its record wraps a splitting scheme."""
-    scheme = getattr(getattr(stepper, "coefficients", None), "scheme", None)
+    scheme = getattr(getattr(stepper, "record", None), "scheme", None)
     return (not stepper.info.extra.get("uniform_time", True)) and isinstance(scheme, SplittingScheme)
 
 
@@ -72,7 +72,7 @@ def fixed_peer(stepper):
     """The registered fixed-step stepper with the same splitting coefficients, or None."""
     from harness.registry import steppers
 
-    fingerprint = stepper.coefficients.scheme.fingerprint()
+    fingerprint = stepper.record.scheme.fingerprint()
     for other in steppers.all():
         coeffs = getattr(other, "coefficients", None)
         if (isinstance(coeffs, SplittingScheme) and coeffs.fingerprint() == fingerprint
@@ -183,12 +183,14 @@ def _energy_rows(stepper, peer, problem, config) -> list[pd.DataFrame]:
     eps = float(config["energy_control"])
     save = save_grid(n, int(config["samples_per_decade"]), int(config["uniform_samples"]))
     tr = stepper.integrate(problem, h=eps, n_steps=n, save_steps=save)
-    frames = [_energy_frame("controlled", tr, eps, _rel_energy(problem, tr.y))]
-    t_end = float(tr.t[-1])
-    if not (np.isfinite(t_end) and t_end > problem.t0):  # the controlled run broke down
-        t_end = float(np.nanmax(np.where(np.isfinite(tr.t), tr.t, np.nan), initial=problem.t0))
-    if t_end > problem.t0:
-        h = (t_end - problem.t0) / n
+    rel = _rel_energy(problem, tr.y)
+    frames = [_energy_frame("controlled", tr, eps, rel)]
+    # The fixed run takes as many steps per unit time as the controlled run did while its
+    # energy error stayed below the blow-up level (a runaway clock says nothing about work).
+    good = np.flatnonzero((rel < tol.ENERGY_BLOWUP_ERROR) & np.isfinite(tr.t) & (tr.steps > 0))
+    if good.size:
+        k = good[-1]
+        h = (float(tr.t[k]) - problem.t0) / float(tr.steps[k])
         fixed = peer.integrate(problem, h=h, n_steps=n, save_steps=save)
         frames.append(_energy_frame("fixed", fixed, h, _rel_energy(problem, fixed.y)))
     for f in frames:
@@ -209,8 +211,8 @@ def _state_error(problem, tr) -> tuple[float, float, float]:
     if not tr.finite:
         return float("inf"), float("nan"), float("nan")
     t_end = float(tr.t[-1])
-    if t_end <= problem.t0:
-        return float("inf"), float("nan"), float("nan")
+    if not problem.t0 < t_end <= problem.t0 + tol.CLOCK_LIMIT_SPANS * (problem.t_end - problem.t0):
+        return float("inf"), float("nan"), float("nan")  # the clock ran away: a blow-up
     ref = reference(problem, np.array([t_end]), problem.y0)
     y_ref = ref.y[-1][:, 0]
     return (float(np.max(np.abs(tr.final[:, 0] - y_ref))), float(np.max(ref.error[-1])),
