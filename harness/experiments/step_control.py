@@ -97,9 +97,7 @@ class StepControlExperiment(Experiment):
         "uniform_samples": 1000,
         "n_start": 16,
         "sweep_points": 7,
-        # e = 0.99 needs ~2^19 steps to reach the target at an end point 108 degrees past
-        # pericentre, where a phase error is amplified by the acceleration 1/r^2 ~ 1e3.
-        "control_budget": 2**19,
+        "control_budget": 2**18,
         "target_error": 1e-4,
         "fixed_budget": 2**21,
     }
