@@ -174,3 +174,16 @@ def test_eccentric_kepler_problems_have_their_elements(e):
     members = orbital_elements(p.ensemble(16, seed=0))
     assert np.all(members["energy"] < 0)
     assert np.all(members["a"] * (1 - members["e"]) > 0.5 * (1 - e))
+
+
+def test_the_convergence_experiment_compares_at_each_members_own_clock():
+    from harness.gate import gate_table
+    from harness.runner import run_experiment
+
+    result = run_experiment("convergence", [REVERSIBLE], ["kepler-elliptic"],
+                            config={"ensemble": 2, "work_budget": 2**14}, jobs=1, cache=False,
+                            progress=False)
+    row = result.summary.iloc[0]
+    assert row.verdict == "converged", row.to_dict()
+    assert abs(row.measured_order - 2.0) <= tol.GATE_ORDER_TOL
+    assert bool(gate_table(result.summary)["passed"].iloc[0])
