@@ -147,6 +147,7 @@ class Trajectory:
     evals: dict
     wall_s: float
     finite: bool
+    member_t: np.ndarray | None = None  # (saves, N) physical times when members' clocks differ
 
     @property
     def final(self) -> np.ndarray:
@@ -252,6 +253,11 @@ class Stepper(ABC):
         c.t0 = c.t
         c.n = 0
         c.h = -c.h
+
+    def _time(self, c: Carry) -> np.ndarray | None:
+        """Physical time of each member (N,) when it is not t0 + n h (step-controlled
+        steppers, whose h is a control parameter); None for uniform steps."""
+        return None
 
     def _advance(self, dyn: Dynamics, c: Carry, n: int) -> None:
         step = self._step
@@ -375,6 +381,8 @@ class Stepper(ABC):
                 raise InputError(f"`save_steps` must lie in [0, {n_steps}], got {save_steps!r}")
         shape = (problem.dim, y.shape[1])
         out = np.empty((save.size, *shape))
+        member_t = np.repeat((t0 + save * h)[:, None], y.shape[1], axis=1)
+        clocks = False
         finite = True
         started = time.perf_counter()
         with np.errstate(all="ignore"):
@@ -385,6 +393,9 @@ class Stepper(ABC):
                     self._advance(dyn, c, int(target - done))
                     done = int(target)
                 out[k] = self._checked_observe(dyn, c, shape, f"after step {done}")
+                own = self._time(c)
+                if own is not None:
+                    member_t[k], clocks = own, True
                 if not np.all(np.isfinite(out[k])):
                     finite = False
                     out[k + 1 :] = np.nan
@@ -397,11 +408,12 @@ class Stepper(ABC):
             problem=problem.name,
             h=h,
             steps=save,
-            t=t0 + save * h,
+            t=member_t[:, 0] if clocks else t0 + save * h,
             y=out,
             evals=dict(dyn.counts),
             wall_s=wall,
             finite=finite,
+            member_t=member_t if clocks else None,
         )
 
     def round_trip(

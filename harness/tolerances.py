@@ -281,3 +281,8 @@ REPORT_CHANGE_RTOL = 1e-6
 # symplectic methods, symplectic deviations), which move by small factors with the order of
 # floating-point operations: a change by more than this factor either way.
 REPORT_CHANGE_ROUNDING = 10.0
+# Step-controlled steppers (h is a control parameter) keep their own clocks: a run whose clock
+# passes t0 + this many times the problem's t_span length has left the motion the problem
+# describes (a naive control lets an orbit escape, and its clock runs away: 7.8e6 after 16
+# steps on kepler-e0.99); its error counts as a blow-up, never compared with a reference.
+CLOCK_LIMIT_SPANS = 1.0

@@ -17,6 +17,7 @@ FAMILY_MODULES = (
     "multistep",
     "external",
     "compiled",
+    "step_control",
 )
 
 

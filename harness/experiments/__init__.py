@@ -23,6 +23,7 @@ EXPERIMENT_MODULES = {
     "symplecticity": "symplecticity",
     "work-precision": "work_precision",
     "roundoff": "roundoff",
+    "step-control": "step_control",
 }
 EXPERIMENT_NAMES = tuple(EXPERIMENT_MODULES)
 

@@ -304,15 +304,24 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
             return records[n]
         spent += n
         started = time.perf_counter()
+        target_err = ref_err
         try:
             tr = stepper.integrate(problem, h=span / n, n_steps=n, y0=y0, t0=T0)
-            err = _errors(tr.final, y_ref) if tr.finite else float("inf")
+            target, target_err = y_ref, ref_err
+            finite = tr.finite
+            if tr.member_t is not None and finite:  # h is a control parameter: own clocks
+                clocks = tr.member_t[-1]
+                finite = bool(np.all((clocks >= T0) & (clocks <= problem.t0 + tol.CLOCK_LIMIT_SPANS
+                                                        * (problem.t_end - problem.t0))))
+                if finite:
+                    target, target_err = _reference_at_clocks(problem, clocks, y0, T0)
+            err = _errors(tr.final, target) if finite else float("inf")
             evals = tr.evals
             msg = ""
         except StepFailure as exc:
             err, evals, msg = float("nan"), {}, str(exc)
         rec = {
-            "n_steps": n, "h": span / n, "error": err, "reference_error": ref_err,
+            "n_steps": n, "h": span / n, "error": err, "reference_error": target_err,
             "rounding_level": math.sqrt(n) * tol.EPS * scale,
             "rhs_evals": float(evals.get("rhs", 0)), "force_evals": float(evals.get("accel", 0)),
             "wall_s": time.perf_counter() - started, "message": msg,
@@ -383,7 +392,9 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     frame["tol"] = np.nan
     frame["reference_precision"] = ref.precision
     rows = [frame]
-    if config.get("local", True):
+    # The local sweep compares one step with the truth at t0 + h: not defined for a stepper
+    # whose h is a control parameter (`uniform_time` False); its global sweep measures it.
+    if config.get("local", True) and stepper.info.extra.get("uniform_time", True):
         rows.append(_local_sweep(stepper, problem, y0, frame, config))
     out = pd.concat(rows, ignore_index=True)
     out["stepper"] = stepper.info.name
@@ -393,6 +404,18 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     out["perturbation"] = perturbation_used(problem, config) if y0.shape[1] > 1 else 0.0
     out.attrs["budget_ended"] = budget_ended
     return out
+
+
+def _reference_at_clocks(problem, times: np.ndarray, y0: np.ndarray, t0: float):
+    """The ground truth of each member at its own time (steppers whose h is a control
+    parameter report per-member clocks, `Trajectory.member_t`): (states, certified error)."""
+    out = np.empty_like(y0)
+    worst = 0.0
+    for i, t in enumerate(np.asarray(times, dtype=float)):
+        ref = _best_reference(problem, float(t), y0[:, i : i + 1])
+        out[:, i] = ref.y[-1][:, 0]
+        worst = max(worst, float(np.max(ref.error[-1])))
+    return out, worst
 
 
 def _frame(records: dict[int, dict]) -> pd.DataFrame:

@@ -1,0 +1,152 @@
+"""Report section "Step control: bounded orbits?" from the `step-control` experiment.
+
+Answers the course's Kepler question (course material 004_bfdbb1594143ed8b.txt, Practice
+Session #3: control the step so that Delta theta ~ const, and make sure the orbits stay
+bounded): the energy error against time for fixed, naive and reversible control (log axes),
+the work saved at each eccentricity, and the verdict on bounded orbits, all read from the run.
+
+Two entry points: `section(view)` returns a `harness.report.sections.Section` (the convention of
+the other section builders), `build_section(run_tables)` an HTML fragment from a mapping
+{"rows": DataFrame, "summary": DataFrame} (or a `RunView`) for pluggable section registries.
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness.report import figures as F
+from harness.report.sections import Section, _df_table
+
+__all__ = ["EXPERIMENT", "TITLE", "section", "build_section", "energy_control_figure"]
+
+EXPERIMENT = "step-control"
+TITLE = "Step control: bounded orbits?"
+_STYLE = {"fixed": "-", "naive": "--", "reversible": "-."}
+
+
+@F._styled
+def energy_control_figure(problem: str, rows: pd.DataFrame) -> F.Figure | None:
+    """Relative energy error against t (log-log) of the fixed-step peer and each controlled
+    stepper on one problem; the fixed peer is drawn once."""
+    g = rows[(rows["problem"] == problem) & (rows["kind"] == "energy")]
+    if g.empty:
+        return None
+    fig, axes = F._new(size=(7.4, 4.4))
+    ax = axes[0][0]
+    drawn_fixed = False
+    for stepper, s in g.groupby("stepper", sort=False):
+        for role, r in s.groupby("role", sort=False):
+            if role == "fixed" and drawn_fixed:
+                continue
+            label = (f"fixed steps ({r['peer'].iloc[0]})" if role == "fixed" else stepper)
+            kind = "fixed" if role == "fixed" else str(r["controller"].iloc[0] if "controller" in r else "")
+            t = r["t"].astype(float).to_numpy()
+            x, y = F._thin(t - float(np.nanmin(t)), r["error"].astype(float).to_numpy())
+            ax.plot(x, F._clip_log(y), _STYLE.get(kind, "-"), lw=1.0, label=F._label(label))
+            drawn_fixed = drawn_fixed or role == "fixed"
+    F._loglog(ax)
+    ax.set_xlabel("t")
+    ax.set_ylabel("relative energy error")
+    ax.set_title(f"Energy error on {F._label(problem)}: fixed, naive and reversible control")
+    F._legend_outside(ax)
+    return F.to_svg(fig, f"step-control-{problem}", f"relative energy error against time on {problem}")
+
+
+def _with_controller(rows: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
+    ctrl = dict(zip(summary["stepper"], summary["controller"], strict=False)) if len(summary) else {}
+    return rows.assign(controller=rows["stepper"].map(ctrl).fillna(""))
+
+
+def _verdict_text(summary: pd.DataFrame) -> str:
+    parts = []
+    for rec in summary.to_dict("records"):
+        parts.append(f"{rec['stepper']} on {rec['problem']}: energy error {rec['drift_class']} "
+                     f"(growth exponent {rec['drift_exponent']:.2g}); "
+                     f"{'bounded' if rec['bounded'] else 'NOT bounded'}")
+    bounded = summary[summary["bounded"].astype(bool)]
+    sym = summary[summary["symmetric"].astype(bool)]
+    naive = summary[~summary["symmetric"].astype(bool)]
+    head = (f"Bounded orbits (a bounded energy error over the run): {len(bounded)} of {len(summary)} "
+            f"controlled runs; symmetric (reversible) controllers bounded in "
+            f"{int(sym['bounded'].astype(bool).sum())} of {len(sym)}, naive ones in "
+            f"{int(naive['bounded'].astype(bool).sum())} of {len(naive)}.")
+    return head + " " + "; ".join(parts) + "."
+
+
+def section(view: Any, number: int = 0) -> Section:
+    """The section from a `RunView` (rows and summary of the step-control experiment)."""
+    sec = Section("step-control", number, TITLE)
+    sec.intro = ("The course's Kepler practice session (course file 004, Practice Session #3) asks "
+                 "for a step control with Δθ ≈ const that keeps orbits bounded. Each controlled "
+                 "stepper is run against the fixed-step stepper with the same splitting "
+                 "coefficients at equal work (same number of steps over the same time); the "
+                 "energy error's growth is classified by the energy experiment's classifier. The "
+                 "work ratio is the fixed stepper's force evaluations over the controlled one's to "
+                 "reach the same final-time accuracy.")
+    rows = view.rowtable(EXPERIMENT) if hasattr(view, "rowtable") else pd.DataFrame()
+    summ = view.summary(EXPERIMENT) if hasattr(view, "summary") else pd.DataFrame()
+    if summ is None or summ.empty:
+        sec.note("The step-control experiment has no results in this run.", cls="warning")
+        return sec
+    rows = _with_controller(rows, summ)
+    for problem in dict.fromkeys(summ["problem"]):
+        sec.figure(energy_control_figure(problem, rows),
+                   f"Relative energy error against time on {problem} (log axes).")
+    cols = [("stepper", "stepper"), ("problem", "problem"), ("controller", "controller"),
+            ("drift_class", "drift class"), ("drift_exponent", "growth exponent"),
+            ("drift_slope", "drift slope (per unit t)"), ("max_rel_energy_error", "max rel. energy error"),
+            ("fixed_drift_class", "fixed: drift class"),
+            ("fixed_max_rel_energy_error", "fixed: max rel. energy error"),
+            ("claimed_order", "claimed order"), ("measured_order", "order in control parameter"),
+            ("order_verdict", "order verdict"), ("verdict", "verdict")]
+    sec.table(_df_table(summ, cols, "Energy drift and order in the control parameter",
+                        status="bounded"))
+    work = [("stepper", "stepper"), ("problem", "problem"), ("target_error", "target error (x |y|)"),
+            ("controlled_evals", "controlled force evals"), ("fixed_evals", "fixed force evals"),
+            ("work_ratio", "work ratio (fixed / controlled)"),
+            ("work_ratio_is_lower_bound", "lower bound"), ("message", "message")]
+    sec.table(_df_table(summ, work, "Work saved at each eccentricity", status=None))
+    sec.note(_verdict_text(summ))
+    return sec
+
+
+class _Tables:
+    def __init__(self, rows: pd.DataFrame, summary: pd.DataFrame):
+        self._rows, self._summary = rows, summary
+
+    def rowtable(self, name: str) -> pd.DataFrame:
+        return self._rows if name == EXPERIMENT else pd.DataFrame()
+
+    def summary(self, name: str) -> pd.DataFrame:
+        return self._summary if name == EXPERIMENT else pd.DataFrame()
+
+
+def build_section(run_tables: Mapping[str, pd.DataFrame] | Any) -> str:
+    """The section as an HTML fragment; `run_tables` is {"rows": ..., "summary": ...} of the
+    step-control experiment, or a RunView. Text is escaped; figures are checked SVG."""
+    if isinstance(run_tables, Mapping):
+        view = _Tables(run_tables.get("rows", pd.DataFrame()), run_tables.get("summary", pd.DataFrame()))
+    else:
+        view = run_tables
+    sec = section(view)
+    e = html.escape
+    out = [f'<section id="{e(sec.id)}"><h2>{e(sec.title)}</h2><p class="intro">{e(sec.intro)}</p>']
+    for b in sec.blocks:
+        if b.kind == "figure" and b.figure is not None:
+            out.append(f"<figure>{F.check_svg(b.figure.svg)}<figcaption>{e(b.text)}</figcaption></figure>")
+        elif b.kind == "table" and b.table is not None:
+            t = b.table
+            head = "".join(f"<th>{e(c)}</th>" for c in t.columns)
+            body = "".join("<tr>" + "".join(f"<td>{e(c.text)}</td>" for c in r.cells) + "</tr>"
+                           for r in t.rows)
+            out.append(f"<table><caption>{e(t.caption)}</caption><thead><tr>{head}</tr></thead>"
+                       f"<tbody>{body}</tbody></table>")
+        else:
+            out.append(f'<p class="{e(b.cls)}">{e(b.text)}</p>')
+    out.append("</section>")
+    return "\n".join(out)
