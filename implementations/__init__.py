@@ -6,7 +6,7 @@ Every built-in stepper is registered here, in one place: each family module expo
 
 from importlib import import_module
 
-__all__ = ["builtin_steppers", "FAMILY_MODULES"]
+__all__ = ["builtin_steppers", "unavailable_steppers", "FAMILY_MODULES"]
 
 FAMILY_MODULES = (
     "runge_kutta",
@@ -17,6 +17,7 @@ FAMILY_MODULES = (
     "multistep",
     "external",
     "compiled",
+    "rebound_adapter",
 )
 
 
@@ -30,4 +31,19 @@ def builtin_steppers() -> list:
                 raise
             continue
         out.extend(module.STEPPERS)
+    return out
+
+
+def unavailable_steppers() -> dict[str, str]:
+    """Optional adapters whose library is not installed: library -> how to install it. A module
+    says so in `UNAVAILABLE` and registers no steppers, instead of failing to import."""
+    out: dict[str, str] = {}
+    for name in FAMILY_MODULES:
+        try:
+            module = import_module(f"implementations.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"implementations.{name}":
+                raise
+            continue
+        out.update(getattr(module, "UNAVAILABLE", {}))
     return out

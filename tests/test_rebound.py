@@ -1,0 +1,119 @@
+"""The REBOUND adapter (implementations/rebound_adapter.py): REBOUND's integrators run with its own
+gravity on problems that declare an N-body structure; absent REBOUND, the adapter registers
+nothing and says how to install it."""
+
+from __future__ import annotations
+
+import builtins
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from harness.errors import IncompatibleError
+from harness.ground_truth import reference
+from harness.registry import get_problem, get_stepper
+from harness.stepper import check_compatible
+
+ADAPTER = Path(__file__).resolve().parents[1] / "implementations" / "rebound_adapter.py"
+HAVE_REBOUND = importlib.util.find_spec("rebound") is not None
+needs_rebound = pytest.mark.skipif(
+    not HAVE_REBOUND, reason="REBOUND is not installed (optional extra: pip install .[rebound])"
+)
+
+
+def test_without_rebound_the_adapter_registers_nothing_and_says_how_to_install(monkeypatch):
+    real_import = builtins.__import__
+
+    def no_rebound(name, *args, **kwargs):
+        if name == "rebound" or name.startswith("rebound."):
+            raise ImportError("No module named 'rebound'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_rebound)
+    monkeypatch.delitem(sys.modules, "rebound", raising=False)
+    spec = importlib.util.spec_from_file_location("rebound_adapter_without_rebound", ADAPTER)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.STEPPERS == []
+    assert "pip install rebound==" in module.UNAVAILABLE["rebound"]
+
+
+def _errors(name: str, problem: str, steps: list[int], members: int = 2) -> np.ndarray:
+    P = get_problem(problem)
+    T = P.convergence_t_end
+    y0 = P.ensemble(members)
+    exact = reference(P, np.array([T]), y0).y[-1]
+    s = get_stepper(name)
+    return np.array([np.max(np.abs(s.integrate(P, h=(T - P.t0) / n, n_steps=n, y0=y0).final - exact))
+                     for n in steps])
+
+
+def _slopes(errors: np.ndarray) -> np.ndarray:
+    return -np.diff(np.log2(errors))
+
+
+@needs_rebound
+@pytest.mark.parametrize(
+    "name, problem, steps, order",
+    [
+        ("rebound-leapfrog", "kepler-circular", [200, 400, 800], 2.0),
+        ("rebound-whfast", "outer-solar-system", [200, 400, 800], 2.0),
+        ("rebound-mercurius", "planets-encounter", [400, 800, 1600], 2.0),
+        ("rebound-sabacl4", "planets-encounter", [400, 800, 1600], 4.0),
+    ],
+)
+def test_fixed_step_orders(name, problem, steps, order):
+    slopes = _slopes(_errors(name, problem, steps))
+    assert np.all(np.abs(slopes - order) < 0.1), slopes
+
+
+@needs_rebound
+@pytest.mark.parametrize("name", ["rebound-whfast", "rebound-saba4", "rebound-mercurius"])
+def test_kepler_split_maps_are_exact_on_an_unperturbed_orbit(name):
+    """A Wisdom-Holman-type map's drift is the Kepler flow: on the two-body problem only rounding
+    remains, at every step size (the fact `kepler_flow_exact` records)."""
+    assert get_stepper(name).info.extra["kepler_flow_exact"]
+    assert np.all(_errors(name, "kepler-elliptic", [8, 64]) < 1e-12)
+    assert np.all(_errors("rebound-leapfrog", "kepler-elliptic", [8, 64]) > 1e-3)
+
+
+@needs_rebound
+@pytest.mark.parametrize("problem", ["kepler-elliptic", "outer-solar-system"])
+def test_state_round_trips_through_a_simulation(problem):
+    """Zero steps: the state read back from REBOUND is the state put in (frame and order)."""
+    P = get_problem(problem)
+    y0 = P.ensemble(3)
+    tr = get_stepper("rebound-whfast").integrate(P, h=1.0, n_steps=1, y0=y0, save_steps=[0])
+    assert np.array_equal(tr.y[0], y0)
+
+
+@needs_rebound
+def test_members_are_separate_simulations():
+    P = get_problem("outer-solar-system")
+    y0 = P.ensemble(3)
+    s = get_stepper("rebound-saba4")
+    together = s.integrate(P, h=50.0, n_steps=20, y0=y0).final
+    for m in range(3):
+        alone = s.integrate(P, h=50.0, n_steps=20, y0=y0[:, m]).final[:, 0]
+        assert np.array_equal(together[:, m], alone)
+
+
+@needs_rebound
+def test_symmetric_maps_return_and_ias15_meets_its_tolerance():
+    P = get_problem("outer-solar-system")
+    start, back = get_stepper("rebound-whfast").round_trip(P, h=43.0, n_steps=500)
+    assert np.max(np.abs(back - start)) < 1e-10 * np.max(np.abs(start))
+    K = get_problem("kepler-elliptic")
+    exact = reference(K, np.array([K.convergence_t_end]), K.y0[:, None]).y[-1]
+    ias15 = get_stepper("rebound-ias15").with_tolerance(1e-9)
+    tr = ias15.integrate(K, h=K.convergence_t_end, n_steps=1)
+    assert np.max(np.abs(tr.final - exact)) < 1e-9 and tr.evals["internal_steps"] > 10
+
+
+@needs_rebound
+def test_a_problem_without_nbody_structure_is_incompatible_with_a_reason():
+    with pytest.raises(IncompatibleError, match="declares its masses, G and central body"):
+        check_compatible(get_stepper("rebound-whfast"), get_problem("harmonic"))
