@@ -39,6 +39,17 @@ def test_without_rebound_the_adapter_registers_nothing_and_says_how_to_install(m
     spec.loader.exec_module(module)
     assert module.STEPPERS == []
     assert "pip install rebound==" in module.UNAVAILABLE["rebound"]
+    monkeypatch.setitem(sys.modules, "implementations.rebound_adapter", module)
+    from implementations import unavailable_steppers
+
+    assert "pip install rebound==" in unavailable_steppers()["rebound"]
+
+
+@needs_rebound
+def test_with_rebound_nothing_is_listed_unavailable():
+    from implementations import unavailable_steppers
+
+    assert "rebound" not in unavailable_steppers()
 
 
 def _errors(name: str, problem: str, steps: list[int], members: int = 2) -> np.ndarray:
