@@ -104,6 +104,16 @@ class NBody:
         object.__setattr__(self, "names", names)
 
     @property
+    def perturbation_free(self) -> bool:
+        """True when every body but the central one moves on an unperturbed Kepler orbit about it:
+        at most one other body has mass, and the massless ones feel only the central mass (a
+        single planet, or test particles). A Wisdom-Holman-type map, whose drift is the Kepler
+        flow and whose kicks are the interactions, then has nothing to approximate: only
+        rounding remains."""
+        others = [m for i, m in enumerate(self.masses) if i != self.central]
+        return len(others) == 1 or all(m == 0.0 for m in others)
+
+    @property
     def state_bodies(self) -> tuple[int, ...]:
         """Indices of the bodies held in the state, in state order."""
         n = len(self.masses)

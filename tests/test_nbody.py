@@ -90,3 +90,11 @@ def test_a_structure_must_describe_the_problems_state():
     with pytest.raises(InputError, match="`structure` must be an NBody"):
         Problem("mismatch", variables=kepler.variables, newtonian=kepler.newtonian, y0=kepler.y0,
                 t_span=(0.0, 1.0), structure={"masses": (1.0, 0.0)}, reference="test")
+
+
+def test_perturbation_free_structures():
+    assert get_problem("kepler-elliptic").structure.perturbation_free
+    assert not get_problem("outer-solar-system").structure.perturbation_free
+    assert not get_problem("planets-encounter").structure.perturbation_free
+    assert NBody(masses=(1.0, 0.0, 0.0), G=1.0).perturbation_free
+    assert not NBody(masses=(1.0, 1e-3, 0.0), G=1.0).perturbation_free
