@@ -13,7 +13,6 @@ PROBLEM_MODULES = (
     "kepler",
     "many_body",
     "stiff",
-    "planetary",
 )
 
 

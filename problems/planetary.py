@@ -9,6 +9,14 @@ hundredfold for a fraction of an orbit, the regime for which hybrid schemes swit
 Wisdom-Holman map to a direct integrator. Span [0, 4 pi] (two inner orbits) holds the encounter;
 the convergence experiment uses the whole span, so every step-size sweep has to resolve it.
 
+Not in the default catalogue (`problems.PROBLEM_MODULES`): load it with
+`--plugin problems/planetary.py` (or `load_plugin`). Measured on the convergence experiment's full
+settings, the encounter leaves euler, symplectic Euler, backward Euler, rk38, yoshida6, yoshida8
+and SABAC4 `insufficient-range` (the encounter amplifies rounding above the sweep's rounding level
+sqrt(n) eps |y|, so the floor is read as a pre-asymptotic range) and scipy's RK45 and BDF miss their
+tolerance by 2e4 and 2e5 x tol: every registry-wide gate would fail on it until the gate's rules
+account for flow-amplified rounding.
+
 Initial state: heliocentric orbital elements converted to Cartesian coordinates with
 mu = G (M + m_i) (Murray & Dermott, Solar System Dynamics, 1999, 2.8), then shifted to the
 barycentre, so the system's centre of mass rests at the origin.

@@ -3,6 +3,8 @@ central body; the catalogue's N-body problems declare it; bad structures are one
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -10,12 +12,18 @@ from harness.errors import InputError
 from harness.ground_truth import reference
 from harness.problem import NBody, Problem
 from harness.registry import get_problem
+from problems.planetary import PLANETS_ENCOUNTER
+
+
+def _problem(name: str) -> Problem:
+    """A catalogue problem, or the opt-in planetary system (a plugin file, not registered)."""
+    return PLANETS_ENCOUNTER if name == PLANETS_ENCOUNTER.name else get_problem(name)
 
 
 @pytest.mark.parametrize("name", ["kepler-circular", "kepler-elliptic", "outer-solar-system",
                                   "planets-encounter"])
 def test_catalogue_nbody_problems_declare_the_structure_their_rhs_comes_from(name):
-    problem = get_problem(name)
+    problem = _problem(name)
     s = problem.structure
     assert isinstance(s, NBody)
     variables, form, _ = s.derive()
@@ -95,6 +103,23 @@ def test_a_structure_must_describe_the_problems_state():
 def test_perturbation_free_structures():
     assert get_problem("kepler-elliptic").structure.perturbation_free
     assert not get_problem("outer-solar-system").structure.perturbation_free
-    assert not get_problem("planets-encounter").structure.perturbation_free
+    assert not PLANETS_ENCOUNTER.structure.perturbation_free
     assert NBody(masses=(1.0, 0.0, 0.0), G=1.0).perturbation_free
     assert not NBody(masses=(1.0, 1e-3, 0.0), G=1.0).perturbation_free
+
+
+def test_the_planetary_system_is_a_plugin_file_with_its_encounter():
+    from harness.registry import load_plugin, problems
+
+    path = Path(__file__).resolve().parents[1] / "problems" / "planetary.py"
+    assert "planets-encounter" not in problems
+    try:
+        assert load_plugin(path) == ["planets-encounter"]
+        P = problems.get("planets-encounter")
+        times = np.linspace(8.3, 8.6, 31)
+        y = reference(P, times, P.y0[:, None], t0=P.t0).y[:, :, 0]
+        closest = np.min(np.linalg.norm(y[:, 3:6] - y[:, 6:9], axis=1))
+        hill = (1e-3 / 3.0) ** (1.0 / 3.0)
+        assert 0.5 * hill < closest < 0.7 * hill
+    finally:
+        problems.unregister("planets-encounter")

@@ -16,6 +16,7 @@ from harness.errors import IncompatibleError
 from harness.ground_truth import reference
 from harness.registry import get_problem, get_stepper
 from harness.stepper import check_compatible
+from problems.planetary import PLANETS_ENCOUNTER
 
 ADAPTER = Path(__file__).resolve().parents[1] / "implementations" / "rebound_adapter.py"
 HAVE_REBOUND = importlib.util.find_spec("rebound") is not None
@@ -53,7 +54,7 @@ def test_with_rebound_nothing_is_listed_unavailable():
 
 
 def _errors(name: str, problem: str, steps: list[int], members: int = 2) -> np.ndarray:
-    P = get_problem(problem)
+    P = PLANETS_ENCOUNTER if problem == PLANETS_ENCOUNTER.name else get_problem(problem)
     T = P.convergence_t_end
     y0 = P.ensemble(members)
     exact = reference(P, np.array([T]), y0).y[-1]
