@@ -1,7 +1,17 @@
 """REBOUND's N-body integrators, driven as REBOUND's users drive them, as harness steppers.
 
-A plugin like any user's: registered only when `rebound` imports; otherwise `STEPPERS` is empty and
-`UNAVAILABLE` says how to install it (`pip install .[rebound]`, which pins rebound==5.2.2).
+A plugin like any user's: `--plugin implementations/rebound_adapter.py` (or `load_plugin`) registers
+its steppers when `rebound` imports; without REBOUND, loading it as a plugin fails with one line
+naming the install command, and `implementations.unavailable_steppers()` lists it (importing the
+module itself never fails: `STEPPERS` is then empty). Install: `pip install .[rebound]` (pins
+rebound==5.2.2; requirements.txt pins it too).
+
+Not yet in the default registry (`implementations.FAMILY_MODULES`): on the unperturbed Kepler
+problems the Wisdom-Holman-type maps are exact (`exact`, or `insufficient-range` where the
+17th-order corrector's or MERCURIUS's extra drifts put the rounding floor above the sweep's
+rounding level), and SABAC4 on `outer-solar-system` is at its rounding floor from the coarsest
+step: the registry-wide gate fails these cells until its rules read the facts this module and
+`NBody.perturbation_free` provide. Adding "rebound_adapter" to FAMILY_MODULES registers it.
 
 Each ensemble member is its own `rebound.Simulation`, built from the problem's declared N-body
 structure (`harness.problem.NBody`: masses, G, the central body, the frame), with REBOUND's own
@@ -300,3 +310,6 @@ class ReboundIAS15(_ReboundBase, AdaptiveStepper):
 STEPPERS: list[Stepper] = (
     [ReboundStepper(name) for name in _FIXED] + [ReboundIAS15()] if rebound is not None else []
 )
+if rebound is None and __name__ != "implementations.rebound_adapter":
+    # loaded as a plugin file: say what is missing instead of "defines no steppers"
+    raise ImportError(UNAVAILABLE["rebound"])

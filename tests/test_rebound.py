@@ -12,10 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.errors import IncompatibleError
+from harness.errors import IncompatibleError, PluginError
 from harness.ground_truth import reference
-from harness.registry import get_problem, get_stepper
+from harness.registry import get_problem, load_plugin, steppers
 from harness.stepper import check_compatible
+from implementations import rebound_adapter
 from problems.planetary import PLANETS_ENCOUNTER
 
 ADAPTER = Path(__file__).resolve().parents[1] / "implementations" / "rebound_adapter.py"
@@ -23,6 +24,11 @@ HAVE_REBOUND = importlib.util.find_spec("rebound") is not None
 needs_rebound = pytest.mark.skipif(
     not HAVE_REBOUND, reason="REBOUND is not installed (optional extra: pip install .[rebound])"
 )
+ADAPTED = {s.info.name: s for s in rebound_adapter.STEPPERS}
+
+
+def get_stepper(name: str):
+    return ADAPTED[name]
 
 
 def test_without_rebound_the_adapter_registers_nothing_and_says_how_to_install(monkeypatch):
@@ -35,7 +41,7 @@ def test_without_rebound_the_adapter_registers_nothing_and_says_how_to_install(m
 
     monkeypatch.setattr(builtins, "__import__", no_rebound)
     monkeypatch.delitem(sys.modules, "rebound", raising=False)
-    spec = importlib.util.spec_from_file_location("rebound_adapter_without_rebound", ADAPTER)
+    spec = importlib.util.spec_from_file_location("implementations.rebound_adapter", ADAPTER)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert module.STEPPERS == []
@@ -44,6 +50,19 @@ def test_without_rebound_the_adapter_registers_nothing_and_says_how_to_install(m
     from implementations import unavailable_steppers
 
     assert "pip install rebound==" in unavailable_steppers()["rebound"]
+    with pytest.raises(PluginError, match=r"ImportError: REBOUND is not installed.*pip install rebound"):
+        load_plugin(ADAPTER)
+
+
+@needs_rebound
+def test_loaded_as_a_plugin_it_registers_every_rebound_integrator():
+    names = load_plugin(ADAPTER)
+    try:
+        assert names == [s.info.name for s in rebound_adapter.STEPPERS] and len(names) == 7
+        assert all(steppers.origin(n) == "plugin rebound_adapter.py" for n in names)
+    finally:
+        for n in names:
+            steppers.unregister(n)
 
 
 @needs_rebound
