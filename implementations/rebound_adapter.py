@@ -36,7 +36,8 @@ Claims are REBOUND's documented ones (docstrings of rebound 5.2 and the papers t
   switching to IAS15 near close encounters; order 2, symplectic (Rein et al. 2019).
 - `rebound-ias15`: 15th-order Gauss-Radau, adaptive, not symplectic; its truncation error is kept
   below rounding (Rein & Spiegel 2015), so it is claimed symmetric to rounding.
-`info.extra['perturbation_error']` records the WH-type error law (exponents of h for eps and eps^2);
+`info.extra['perturbation_error']` records the WH-type error law as [eps power, h power] terms
+(WHFast: [[1, 2]], eps h^2; SABA4: [[1, 8], [2, 2]]);
 `info.extra['kepler_flow_exact']` says the map integrates each unperturbed Kepler orbit exactly
 (its drift is the Kepler flow), so on a two-body problem only rounding remains.
 Force evaluations: one per kick (declared per step, in ensemble units); IAS15's internal steps are
@@ -81,30 +82,30 @@ _FIXED = {
         "REBOUND's leapfrog (drift-kick-drift, order 2) with its own direct-summation gravity.",
     ),
     "rebound-whfast": (
-        {"integrator": "whfast", "corrector": 0}, 2, True, True, 1.0, (2,),
+        {"integrator": "whfast", "corrector": 0}, 2, True, True, 1.0, ((1, 2),),
         f"J. Wisdom, M. Holman, AJ 102 (1991) 1528; {_RT15}",
         "WHFast: Wisdom-Holman map in Jacobi coordinates (Kepler drifts, interaction kicks), "
         "no symplectic corrector; error O(eps h^2).",
     ),
     "rebound-whfast-c17": (
-        {"integrator": "whfast", "corrector": 17}, 2, True, True, 1.0, (18, 2),
+        {"integrator": "whfast", "corrector": 17}, 2, True, True, 1.0, ((1, 18), (2, 2)),
         f"J. Wisdom, M. Holman, J. Touma, Fields Inst. Commun. 10 (1996) 217; {_RT15}",
         "WHFast with the 17th-order symplectic corrector: error O(eps h^18 + eps^2 h^2).",
     ),
     "rebound-saba4": (
-        {"integrator": "saba", "type": "4"}, 2, True, True, 3.0, (8, 2),
+        {"integrator": "saba", "type": "4"}, 2, True, True, 3.0, ((1, 8), (2, 2)),
         f"{_LR01}; {_RTB19}",
         "SABA4: symmetric four-drift, three-kick splitting of Kepler and interaction parts; "
         "error O(eps h^8 + eps^2 h^2).",
     ),
     "rebound-sabacl4": (
-        {"integrator": "saba", "type": "CL_4"}, 4, True, True, 5.0, (8, 4),
+        {"integrator": "saba", "type": "CL_4"}, 4, True, True, 5.0, ((1, 8), (2, 4)),
         f"{_LR01}; {_RTB19}",
         "SABAC4 with the lazy implementer's corrector (two extra kicks): error "
         "O(eps h^8 + eps^2 h^4).",
     ),
     "rebound-mercurius": (
-        {"integrator": "mercurius"}, 2, True, True, 1.0, (2,),
+        {"integrator": "mercurius"}, 2, True, True, 1.0, ((1, 2),),
         f"H. Rein, D. M. Hernandez, D. Tamayo, G. Brown, et al., MNRAS 485 (2019) 5490-5497 "
         f"(MERCURIUS); J. E. Chambers, MNRAS 304 (1999) 793; {_REBOUND}",
         "MERCURIUS: Wisdom-Holman map in democratic heliocentric coordinates with a smooth "
@@ -211,7 +212,7 @@ class ReboundStepper(_ReboundBase, Stepper):
             implementation="rebound",
             extra={"rebound_version": getattr(rebound, "__version__", None),
                    "rebound_settings": repr(sorted(self.settings.items())),
-                   "perturbation_error": None if law is None else list(law),
+                   "perturbation_error": None if law is None else [list(t) for t in law],
                    "kepler_flow_exact": law is not None,
                    "evals_unit": "kicks (direct-summation force evaluations) per step"},
         )

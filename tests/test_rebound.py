@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import builtins
 import importlib.util
+import math
 import sys
 from pathlib import Path
 
@@ -14,6 +15,7 @@ import pytest
 
 from harness.errors import IncompatibleError, PluginError
 from harness.ground_truth import reference
+from harness.problem import NBody, Problem
 from harness.registry import get_problem, load_plugin, steppers
 from harness.stepper import check_compatible
 from implementations import rebound_adapter
@@ -99,6 +101,37 @@ def _slopes(errors: np.ndarray) -> np.ndarray:
 def test_fixed_step_orders(name, problem, steps, order):
     slopes = _slopes(_errors(name, problem, steps))
     assert np.all(np.abs(slopes - order) < 0.1), slopes
+
+
+def _two_planets(mu: float) -> Problem:
+    """Two planets of mass mu on near-circular orbits (a = 1 and 1.6) about a unit mass."""
+    s = NBody(masses=(1.0, mu, mu), G=1.0, frame="heliocentric", names=("star", "b", "c"))
+    variables, form, invariants = s.derive()
+    y0 = [1.0, 0.0, 0.0, 0.0, 1.6, 0.02, 0.0, math.sqrt(1 + mu), 0.0, -math.sqrt((1 + mu) / 1.6), 0.0, 0.0]
+    return Problem(f"two-planets-{mu:g}", variables=variables, newtonian=form, y0=y0,
+                   t_span=(0.0, 20.0), invariants=invariants, structure=s, reference="test system")
+
+
+@needs_rebound
+def test_error_scales_with_the_perturbation_as_documented():
+    """At h = 0.1 over 20 time units, masses 1e-3 -> 1e-4 -> 1e-5: leapfrog's error does not
+    depend on the perturbation eps, WHFast's and MERCURIUS's scale as eps (eps h^2), the
+    corrected WHFast's and SABA4's as eps^2 (their eps h^18, eps h^8 terms are far smaller)."""
+    expected = {"rebound-leapfrog": 0.0, "rebound-whfast": 1.0, "rebound-mercurius": 1.0,
+                "rebound-whfast-c17": 2.0, "rebound-saba4": 2.0}
+    errors = {name: [] for name in expected}
+    for mu in (1e-3, 1e-4, 1e-5):
+        P = _two_planets(mu)
+        exact = reference(P, np.array([20.0]), P.y0[:, None]).y[-1]
+        for name in expected:
+            errors[name].append(np.max(np.abs(get_stepper(name).integrate(P, h=0.1, n_steps=200).final
+                                              - exact)))
+    for name, power in expected.items():
+        exponents = np.diff(np.log10(errors[name])) / np.diff(np.log10([1e-3, 1e-4, 1e-5]))
+        assert np.all(np.abs(exponents - power) < 0.15), (name, errors[name], exponents)
+        law = get_stepper(name).info.extra["perturbation_error"]
+        if law is not None:
+            assert min(t[0] for t in law if t[1] <= 2) == power
 
 
 @needs_rebound
