@@ -100,3 +100,33 @@ def test_bad_problems_and_functions_are_input_errors():
         FunctionStepper(42)
     with pytest.raises(InputError, match="`form` must be one of"):
         FunctionStepper(_symplectic_euler, form="second")
+
+
+def _fake_installed_harness(where: Path) -> Path:
+    """A distribution whose metadata declares the `pytest11` entry point exactly as pyproject.toml
+    does, as an installed wheel would: pytest then loads the plugin with no `-p`."""
+    import tomllib
+
+    entry = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]["pytest11"]
+    dist = where / "site" / "integrator_harness_entrypoint-0.0.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: integrator-harness-entrypoint\nVersion: 0.0\n")
+    lines = "".join(f"{name} = {value}\n" for name, value in entry.items())
+    (dist / "entry_points.txt").write_text(f"[pytest11]\n{lines}")
+    return where / "site"
+
+
+@pytest.mark.parametrize("extra_args", [[], ["-p", "harness.pytest_plugin"]])
+def test_the_entry_point_loads_the_fixture_once(tmp_path, extra_args):
+    site = _fake_installed_harness(tmp_path)
+    (tmp_path / "test_fixture.py").write_text(
+        "def test_fixture_is_there(integrator_claims):\n    assert callable(integrator_claims)\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(ROOT)])}
+    out = subprocess.run(
+        [sys.executable, "-m", "pytest", *extra_args, "-p", "no:cacheprovider", "-q",
+         "--rootdir", str(tmp_path), str(tmp_path / "test_fixture.py")],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "1 passed" in out.stdout
