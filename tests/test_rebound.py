@@ -181,3 +181,16 @@ def test_symmetric_maps_return_and_ias15_meets_its_tolerance():
 def test_a_problem_without_nbody_structure_is_incompatible_with_a_reason():
     with pytest.raises(IncompatibleError, match="declares its masses, G and central body"):
         check_compatible(get_stepper("rebound-whfast"), get_problem("harmonic"))
+
+
+@needs_rebound
+def test_rebound_claims_through_the_public_api():
+    """The gate in another project's suite, on an outside integrator: WHFast's documented claims
+    hold on the outer solar system; claiming order 4 for it fails with the measured table."""
+    from harness.api import ClaimError, check
+
+    report = check(get_stepper("rebound-whfast"), ["outer-solar-system"], order=2, symmetric=True,
+                   energy="bounded")
+    assert report.passed and len(report.table) == 3
+    with pytest.raises(ClaimError, match=r"measured order 2\.\d+ differs from claimed 4"):
+        check(get_stepper("rebound-whfast"), ["outer-solar-system"], order=4)
