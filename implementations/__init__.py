@@ -6,7 +6,7 @@ Every built-in stepper is registered here, in one place: each family module expo
 
 from importlib import import_module
 
-__all__ = ["builtin_steppers", "build_stepper", "FAMILY_MODULES"]
+__all__ = ["builtin_steppers", "build_stepper", "unavailable_steppers", "FAMILY_MODULES", "OPTIONAL_MODULES"]
 
 FAMILY_MODULES = (
     "runge_kutta",
@@ -19,6 +19,9 @@ FAMILY_MODULES = (
     "compiled",
     "step_control",
 )
+# Adapters of outside libraries, registered with `--plugin implementations/<module>.py` (or by
+# adding them to FAMILY_MODULES once the gate's rules cover what they measure; see each module).
+OPTIONAL_MODULES = ("rebound_adapter",)
 
 
 def builtin_steppers() -> list:
@@ -77,3 +80,18 @@ def build_stepper(method):
     if stability is not None:
         stepper.info.extra["stability"] = stability
     return stepper
+
+
+def unavailable_steppers() -> dict[str, str]:
+    """Optional adapters whose library is not installed: library -> how to install it. A module
+    says so in `UNAVAILABLE` and registers no steppers, instead of failing to import."""
+    out: dict[str, str] = {}
+    for name in FAMILY_MODULES + OPTIONAL_MODULES:
+        try:
+            module = import_module(f"implementations.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"implementations.{name}":
+                raise
+            continue
+        out.update(getattr(module, "UNAVAILABLE", {}))
+    return out

@@ -21,11 +21,10 @@ from __future__ import annotations
 
 import math
 
-import heyoka as hy
 import numpy as np
 
 from harness.errors import InputError
-from harness.problem import NewtonianForm, Problem
+from harness.problem import NBody, Problem
 from harness.tolerances import CONVERGENCE_PERIODS
 
 __all__ = [
@@ -39,15 +38,16 @@ _COURSE_ODE = (
     "GM = 1, start at (4, 0) with the velocity along y, circular and elliptic orbits, 10 orbits)"
 )
 
-_x, _y, _vx, _vy = hy.make_vars("x", "y", "vx", "vy")
+# A massless body about a fixed unit mass (G M = 1): the heliocentric two-body structure from
+# which the right-hand side r'' = -r/|r|^3 is derived, and which Kepler-splitting integrators read.
+_STRUCTURE = NBody(masses=(1.0, 0.0), G=1.0, central=0, frame="heliocentric", dimension=2,
+                   names=("centre", ""))
+_VARIABLES, _NEWTONIAN, _ = _STRUCTURE.derive()
+_x, _y, _vx, _vy = _VARIABLES
 _r2 = _x * _x + _y * _y
-_inv_r3 = _r2 ** (-1.5)
 _inv_r = _r2 ** (-0.5)
 _L = _x * _vy - _y * _vx
 
-_NEWTONIAN = NewtonianForm(
-    positions=(_x, _y), velocities=(_vx, _vy), acceleration=(-_x * _inv_r3, -_y * _inv_r3)
-)
 _INVARIANTS = {
     "energy": (_vx * _vx + _vy * _vy) / 2.0 - _inv_r,
     "angular_momentum": _L,
@@ -120,8 +120,9 @@ _PERIOD_ELLIPTIC = 2.0 * math.pi  # a = 1
 
 KEPLER_CIRCULAR = Problem(
     "kepler-circular",
-    variables=[_x, _y, _vx, _vy],
+    variables=_VARIABLES,
     newtonian=_NEWTONIAN,
+    structure=_STRUCTURE,
     y0=[4.0, 0.0, 0.0, 0.5],
     t_span=(0.0, 10.0 * _PERIOD_CIRCULAR),
     period=_PERIOD_CIRCULAR,
@@ -144,8 +145,9 @@ KEPLER_CIRCULAR = Problem(
 
 KEPLER_ELLIPTIC = Problem(
     "kepler-elliptic",
-    variables=[_x, _y, _vx, _vy],
+    variables=_VARIABLES,
     newtonian=_NEWTONIAN,
+    structure=_STRUCTURE,
     y0=[0.4, 0.0, 0.0, 2.0],
     t_span=(0.0, 10.0 * _PERIOD_ELLIPTIC),
     period=_PERIOD_ELLIPTIC,

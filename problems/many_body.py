@@ -10,11 +10,10 @@ its base).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import heyoka as hy
 
-from harness.problem import NewtonianForm, Problem
+from harness.problem import NBody, NewtonianForm, Problem
 
 __all__ = [
     "PROBLEMS",
@@ -91,42 +90,6 @@ HENON_HEILES_CHAOTIC = Problem(
 
 
 # -- gravitational N-body -------------------------------------------------------------------------
-def _nbody(
-    masses: Sequence[float], G: float, names: Sequence[str]
-) -> tuple[list[hy.expression], NewtonianForm, dict[str, hy.expression]]:
-    """Variables, Newtonian form and invariants of a 3-D gravitational N-body system."""
-    n = len(masses)
-    q = [hy.make_vars(*(f"{b}_{c}" for c in "xyz")) for b in names]
-    v = [hy.make_vars(*(f"{b}_v{c}" for c in "xyz")) for b in names]
-    acc = [[hy.expression(0.0)] * 3 for _ in range(n)]
-    potential = hy.expression(0.0)
-    for i in range(n):
-        for j in range(i + 1, n):
-            d = [q[j][c] - q[i][c] for c in range(3)]
-            r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-            inv_r3 = r2 ** (-1.5)
-            for c in range(3):
-                acc[i][c] = acc[i][c] + (G * masses[j]) * d[c] * inv_r3
-                acc[j][c] = acc[j][c] - (G * masses[i]) * d[c] * inv_r3
-            potential = potential - (G * masses[i] * masses[j]) * r2 ** (-0.5)
-    kinetic = hy.expression(0.0)
-    for i in range(n):
-        kinetic = kinetic + (masses[i] / 2.0) * sum((v[i][c] * v[i][c] for c in range(3)), hy.expression(0.0))
-    invariants = {"energy": kinetic + potential}
-    for c, axis in enumerate("xyz"):
-        invariants[f"momentum_{axis}"] = sum((masses[i] * v[i][c] for i in range(n)), hy.expression(0.0))
-    for c, axis in enumerate("xyz"):
-        a, b = (c + 1) % 3, (c + 2) % 3
-        invariants[f"angular_momentum_{axis}"] = sum(
-            (masses[i] * (q[i][a] * v[i][b] - q[i][b] * v[i][a]) for i in range(n)), hy.expression(0.0)
-        )
-    positions = tuple(x for body in q for x in body)
-    velocities = tuple(x for body in v for x in body)
-    accel = tuple(a for body in acc for a in body)
-    nf = NewtonianForm(positions=positions, velocities=velocities, acceleration=accel)
-    return list(positions + velocities), nf, invariants
-
-
 # Hairer, Lubich & Wanner, GNI section I.2.4, Table 2.1: masses relative to the Sun (the Sun's
 # includes the inner planets), heliocentric positions in AU, velocities in AU/day; G in
 # AU^3 / (solar mass day^2). The same table is reproduced in
@@ -156,14 +119,15 @@ _SOLAR_BODIES = (
     ),
     ("pluto", 1.0 / 1.3e8, (-15.5387357, -25.2225594, -3.1902382), (0.00276725, -0.00170702, -0.00136504)),
 )
-_solar_vars, _solar_nf, _solar_inv = _nbody(
-    [b[1] for b in _SOLAR_BODIES], _SOLAR_G, [b[0] for b in _SOLAR_BODIES]
-)
+_SOLAR_STRUCTURE = NBody(masses=tuple(b[1] for b in _SOLAR_BODIES), G=_SOLAR_G, central=0,
+                         frame="inertial", names=tuple(b[0] for b in _SOLAR_BODIES))
+_solar_vars, _solar_nf, _solar_inv = _SOLAR_STRUCTURE.derive()
 
 OUTER_SOLAR_SYSTEM = Problem(
     "outer-solar-system",
     variables=_solar_vars,
     newtonian=_solar_nf,
+    structure=_SOLAR_STRUCTURE,
     y0=[c for b in _SOLAR_BODIES for c in b[2]] + [c for b in _SOLAR_BODIES for c in b[3]],
     t_span=(0.0, 20000.0),
     invariants=_solar_inv,
