@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from harness.registry import steppers
+
 
 @pytest.fixture(autouse=True)
 def _results_in_tmp(tmp_path_factory, monkeypatch):
@@ -42,3 +44,18 @@ def plugin_file(tmp_path):
             reg.unregister(n)
     for path in written:
         registry._plugins.pop(str(path.resolve()), None)
+
+
+@pytest.fixture
+def registered():
+    """Register steppers for one test: `registered(stepper) -> name`; unregistered afterwards."""
+    added = []
+
+    def add(stepper):
+        steppers.register(stepper, origin="test")
+        added.append(stepper.info.name)
+        return stepper.info.name
+
+    yield add
+    for name in added:
+        steppers.unregister(name)

@@ -8,12 +8,10 @@ angular momentum of a central force to rounding (GNI IV.2).
 
 from __future__ import annotations
 
-import copy
-import dataclasses
-
 import numpy as np
 import pandas as pd
 import pytest
+from mislabelled import PlainEulerLabelledSymplectic, relabelled
 
 from harness import tolerances as tol
 from harness.errors import InputError, UnknownNameError
@@ -25,7 +23,7 @@ from harness.experiments.energy import (
 )
 from harness.registry import get_problem, problems, steppers
 from harness.runner import run_experiment
-from harness.stepper import AdaptiveStepper, Carry, Stepper, StepperInfo
+from harness.stepper import AdaptiveStepper
 
 EXP = get_experiment("energy")
 STEPPERS = steppers.names()
@@ -50,49 +48,6 @@ def run(stepper_names, problem_names, **overrides):
                             jobs=1, cache=False, progress=False)
     assert not len(result.failures), result.failures
     return result.summary.set_index(["stepper", "problem"])
-
-
-class PlainEulerLabelledSymplectic(Stepper):
-    """Explicit Euler on (q, v): q1 = q0 + h v0, v1 = v0 + h a(q0). It has the right order, but
-    the label "symplectic" is false: the symplectic Euler method kicks with the new position
-    (GNI I.1.2). The deliberate mislabel the experiments must catch."""
-
-    def __init__(self, name: str = "mislabelled-symplectic-euler"):
-        self.info = StepperInfo(
-            name=name, family="splitting", claimed_order=1, explicit=True, symplectic=True,
-            symmetric=False, evals_per_step=1, form="newtonian", velocity_dependent=False,
-            reference="Hairer, Lubich & Wanner, Geometric Numerical Integration, I.1.2 (mislabelled)",
-        )
-
-    def _start(self, dyn, t0, y0, h):
-        return Carry(t0, h, y0)
-
-    def _step(self, dyn, c):
-        q, v = c.y[: dyn.nq], c.y[dyn.nq :]
-        a = dyn.accel(c.t, q)
-        q += c.h * v
-        v += c.h * a
-
-
-def relabelled(name: str, **claims) -> Stepper:
-    original = steppers.get(name)
-    clone = copy.copy(original)
-    clone.info = dataclasses.replace(original.info, name=f"{name}-relabelled", **claims)
-    return clone
-
-
-@pytest.fixture
-def registered():
-    added = []
-
-    def add(stepper):
-        steppers.register(stepper, origin="test")
-        added.append(stepper.info.name)
-        return stepper.info.name
-
-    yield add
-    for name in added:
-        steppers.unregister(name)
 
 
 # -- the classifier on envelopes of known shape ---------------------------------------------------

@@ -56,20 +56,6 @@ class DropsLastStage(ExplicitRungeKutta):
         super()._step(_ReuseLastStage(dyn, self.coefficients.stages), c)
 
 
-@pytest.fixture
-def registered():
-    added = []
-
-    def add(stepper):
-        steppers.register(stepper, origin="test")
-        added.append(stepper.info.name)
-        return stepper
-
-    yield add
-    for name in added:
-        steppers.unregister(name)
-
-
 def _measure(name: str, problem: str = PROBLEM) -> pd.DataFrame:
     exp = ConvergenceExperiment()
     config = exp.config({"local": False})

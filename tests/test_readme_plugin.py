@@ -38,6 +38,14 @@ def test_readme_plugin_passes_the_gate_on_every_catalogue_problem(tmp_path):
         assert (table.outcome == "pass").sum() >= len(catalogue) - 1
         free_fall = table[table.problem == "free-fall"].iloc[0]
         assert free_fall.verdict == "exact" and free_fall.outcome == "pass"
+        # The user's problem gets every experiment that applies to it: it has an energy
+        # invariant and a velocity-free Newtonian form.
+        from harness.experiments import EXPERIMENTS
+
+        for name in ("energy", "reversibility", "symplecticity", "work-precision"):
+            exp = EXPERIMENTS[name]
+            cells, skips = exp.cells(["velocity-verlet", "my-rk"], ["my-quartic"], exp.config(quick=True))
+            assert len(cells) == 2, (name, [s.reason for s in skips])
     finally:
         for n in names:
             (steppers if n in steppers else problems).unregister(n)

@@ -7,12 +7,10 @@ a non-symmetric one misses by ~h^p T (Hairer, Lubich & Wanner, GNI II.3 and V.1)
 
 from __future__ import annotations
 
-import copy
-import dataclasses
-
 import numpy as np
 import pandas as pd
 import pytest
+from mislabelled import relabelled
 
 from harness import tolerances as tol
 from harness.cli import main
@@ -22,7 +20,7 @@ from harness.experiments.common import long_run_steps
 from harness.experiments.reversibility import SUMMARY_COLUMNS, flow_amplification, rounding_bound_ulps
 from harness.registry import get_problem, problems, steppers
 from harness.runner import run_experiment
-from harness.stepper import AdaptiveStepper, Stepper
+from harness.stepper import AdaptiveStepper
 
 EXP = get_experiment("reversibility")
 STEPPERS = steppers.names()
@@ -44,27 +42,6 @@ def run(stepper_names, problem_names, **overrides):
                             jobs=1, cache=False, progress=False)
     assert not len(result.failures), result.failures
     return result.summary
-
-
-def relabelled(name: str, **claims) -> Stepper:
-    original = steppers.get(name)
-    clone = copy.copy(original)
-    clone.info = dataclasses.replace(original.info, name=f"{name}-relabelled", **claims)
-    return clone
-
-
-@pytest.fixture
-def registered():
-    added = []
-
-    def add(stepper):
-        steppers.register(stepper, origin="test")
-        added.append(stepper.info.name)
-        return stepper.info.name
-
-    yield add
-    for name in added:
-        steppers.unregister(name)
 
 
 @pytest.fixture(scope="module")
