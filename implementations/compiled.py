@@ -672,6 +672,18 @@ _variants: weakref.WeakKeyDictionary[Stepper, Stepper | None] = weakref.WeakKeyD
 _variants_lock = threading.Lock()
 
 
+def _family_loops() -> tuple[type, ...]:
+    """The NumPy loop classes the compiled families mirror step for step."""
+    from implementations.implicit_rk import ImplicitRungeKutta
+    from implementations.multistep import LinearMultistepStepper
+    from implementations.runge_kutta import ExplicitRungeKutta
+    from implementations.splitting import SplittingStepper
+    from implementations.verlet import TwoStepVerlet
+
+    return (ExplicitRungeKutta, ImplicitRungeKutta, SplittingStepper, StaggeredLeapfrog,
+            LinearMultistepStepper, TwoStepVerlet)
+
+
 def fastest(stepper: Stepper, problem: Problem) -> Stepper:
     """The fastest correct implementation of `stepper`'s method on `problem`: its compiled
     variant (agreeing with the NumPy loop to rounding, tested over the registry) when the method

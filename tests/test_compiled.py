@@ -452,3 +452,20 @@ def test_cold_compile_and_cached_load_are_recorded(tmp_path):
         f"{runs['cold']['first_call_s']:.2f} s, cached {runs['cached']['first_call_s']:.2f} s; "
         f"10^6 steps {runs['cached']['steps_1e6_s']:.3f} s (load average {runs['load_average'][0]:.1f})"
     )
+
+
+def test_fastest_never_replaces_a_changed_loop():
+    """A subclass that changes the step (here: the last stage silently reuses the third) is run
+    as written: its coefficients alone do not say what it computes."""
+    from implementations.compiled import fastest
+    from implementations.runge_kutta import ExplicitRungeKutta
+
+    class Changed(ExplicitRungeKutta):
+        def _step(self, dyn, c):
+            super()._step(dyn, c)
+
+    base = get_stepper("rk4")
+    changed = Changed(base.coefficients, claimed_order=4, reference="a changed loop")
+    problem = get_problem("harmonic")
+    assert fastest(changed, problem) is changed
+    assert fastest(base, problem).info.implementation == "compiled"

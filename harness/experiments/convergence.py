@@ -48,13 +48,13 @@ __all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS
 ROW_COLUMNS = [
     "stepper", "problem", "kind", "h", "tol", "n_steps", "t_end", "error", "reference_error",
     "rounding_level", "excluded", "in_fit", "rhs_evals", "force_evals", "wall_s",
-    "ensemble_size", "perturbation",
+    "ensemble_size", "perturbation", "implementation",
 ]
 SUMMARY_COLUMNS = [
     "stepper", "problem", "claimed_order", "measured_order", "order_ci_low", "order_ci_high",
     "fit_residual", "fit_points", "fit_h_min", "fit_h_max", "fit_error_min", "fit_error_max",
     "local_exponent", "local_exponent_q", "verdict", "reference_error", "reference_precision",
-    "points", "total_steps", "perturbation", "wall_s", "message",
+    "points", "total_steps", "perturbation", "implementation", "wall_s", "message",
 ]
 
 
@@ -285,7 +285,9 @@ def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
 
 
 def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
+    from implementations.compiled import fastest  # the compiled loop where it is the same method
 
+    runner = fastest(stepper, problem)
     T0 = problem.t0
     span = T - T0
     y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]), scale=config.get("perturbation"))
@@ -306,7 +308,7 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
         started = time.perf_counter()
         target_err = ref_err
         try:
-            tr = stepper.integrate(problem, h=span / n, n_steps=n, y0=y0, t0=T0)
+            tr = runner.integrate(problem, h=span / n, n_steps=n, y0=y0, t0=T0)
             target, target_err = y_ref, ref_err
             finite = tr.finite
             if tr.member_t is not None and finite:  # h is a control parameter: own clocks
@@ -395,11 +397,12 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     # The local sweep compares one step with the truth at t0 + h: not defined for a stepper
     # whose h is a control parameter (`uniform_time` False); its global sweep measures it.
     if config.get("local", True) and stepper.info.extra.get("uniform_time", True):
-        rows.append(_local_sweep(stepper, problem, y0, frame, config))
+        rows.append(_local_sweep(runner, problem, y0, frame, config))
     out = pd.concat(rows, ignore_index=True)
     out["stepper"] = stepper.info.name
     out["problem"] = problem.name
     out["t_end"] = T
+    out["implementation"] = runner.info.implementation
     out["ensemble_size"] = y0.shape[1]
     out["perturbation"] = perturbation_used(problem, config) if y0.shape[1] > 1 else 0.0
     out.attrs["budget_ended"] = budget_ended

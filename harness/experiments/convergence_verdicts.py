@@ -48,6 +48,8 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         "points": int((g.kind.isin(["global", "tolerance"])).sum()),
         "total_steps": int(g.loc[g.kind == "global", "n_steps"].sum()),
         "wall_s": float(g.wall_s.sum(skipna=True)) if "wall_s" in g else np.nan,
+        "implementation": str(g["implementation"].dropna().iloc[0])
+        if "implementation" in g and g["implementation"].notna().any() else "numpy",
         "perturbation": float(g["perturbation"].iloc[0]) if "perturbation" in g else np.nan,
         "message": "",
     }
