@@ -2,7 +2,8 @@
 
 Layout (one job per module; everything public is re-exported here):
 
-    harness/runner/__init__.py    argument checks and orchestration: run_experiment(s)
+    harness/runner/__init__.py    orchestration: run_experiment(s), RunOptions
+    harness/runner/checks.py      argument checks (jobs, scheduler, names, plugins, config)
     harness/runner/limits.py      a cell's time limit (SIGALRM, or an abandoned helper thread)
     harness/runner/validation.py  checking a cell's rows (validate_rows)
     harness/runner/memory.py      the memory guard (estimate_bytes, check_memory)
@@ -88,7 +89,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -106,6 +106,17 @@ from harness.errors import (
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
 from harness.keys import MEASURING_MODULES, cell_key, code_version, experiment_fingerprint
 from harness.progress import Progress
+from harness.runner.checks import (  # noqa: F401  (re-exported)
+    MAX_JOBS_PER_CORE,
+    _check_jobs,
+    _check_names,
+    _check_plugins,
+    _check_scheduler,
+    _progress,
+    _resolve_config,
+    _resolve_experiment,
+    default_jobs,
+)
 from harness.runner.executors import (  # noqa: F401  (re-exported)
     DASK_CONNECT_TIMEOUT_S,
     LOKY_IDLE_TIMEOUT_S,
@@ -180,122 +191,10 @@ __all__ = [
 
 
 FAILURE_KINDS = ("error", "invalid", "timeout", "crash", "lookup", "version", "summarize")
-# A local run uses at most this many worker processes per core.
-MAX_JOBS_PER_CORE = 8
 
 
 class ExperimentError(HarnessError):
     """An experiment could not list its cells (the message names the experiment)."""
-
-
-
-# -- argument checks --------------------------------------------------------------------------------
-def default_jobs() -> int:
-    """All cores this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
-
-
-def _check_jobs(jobs: Any) -> int:
-    if jobs is None:
-        return default_jobs()
-    if isinstance(jobs, bool) or not isinstance(jobs, int | np.integer):
-        raise InputError(f"`jobs` must be a whole number >= 1, got {jobs!r}")
-    limit = MAX_JOBS_PER_CORE * default_jobs()
-    if jobs < 1 or jobs > limit:
-        raise InputError(f"`jobs` must be between 1 and {limit} ({MAX_JOBS_PER_CORE} per core), got {jobs}")
-    return int(jobs)
-
-
-_SCHEDULER = re.compile(r"^(tcp|tls|ucx|ws|wss|inproc)://[^\s/]+$")
-
-
-def _check_scheduler(value: Any) -> Any:
-    if value is None:
-        return None
-    try:
-        from distributed import Client
-    except ImportError:  # pragma: no cover - dask is in the pinned requirements
-        Client = ()  # type: ignore[assignment]
-    if Client and isinstance(value, Client):
-        return value
-    if not isinstance(value, str) or not _SCHEDULER.match(value):
-        raise InputError(
-            f"`scheduler` must be a Dask scheduler address like tcp://HOST:PORT, got {str(value)[:80]!r}"
-        )
-    return value
-
-
-def _check_names(kind: str, names: Any) -> list[str]:
-    from harness import registry
-
-    reg = registry.steppers if kind == "steppers" else registry.problems
-    if names is None:
-        return reg.names()
-    if isinstance(names, str):
-        names = [names]
-    if not isinstance(names, Iterable):
-        raise InputError(f"`{kind}` must be a list of names, got {type(names).__name__}")
-    out = []
-    for n in names:
-        if not isinstance(n, str) or not n:
-            raise InputError(f"`{kind}` must hold non-empty names (strings), got {n!r}")
-        reg.get(n)  # UnknownNameError with the closest names
-        out.append(n)
-    return list(dict.fromkeys(out))
-
-
-def _check_plugins(plugins: Any) -> list[str]:
-    if plugins is None:
-        return []
-    if isinstance(plugins, str | os.PathLike):
-        plugins = [plugins]
-    if not isinstance(plugins, Iterable):
-        raise InputError(f"`plugins` must be a list of .py file paths, got {type(plugins).__name__}")
-    out = []
-    for p in plugins:
-        if not isinstance(p, str | os.PathLike) or not os.fspath(p):
-            raise InputError(f"`plugins` must hold .py file paths, got {p!r}")
-        out.append(os.fspath(p))
-    return out
-
-
-def _resolve_experiment(experiment: Any) -> Experiment:
-    from harness.experiments.base import get_experiment
-
-    if isinstance(experiment, Experiment):
-        return experiment
-    if not isinstance(experiment, str) or not experiment:
-        raise InputError(f"`experiment` must be an experiment name, got {experiment!r}")
-    return get_experiment(experiment)
-
-
-def _resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
-    if config is not None and not isinstance(config, Mapping):
-        raise InputError(f"`config` must be a mapping of settings, got {type(config).__name__}")
-    if config and exp.default_config:
-        unknown = [k for k in config if k not in exp.default_config]
-        if unknown:
-            raise InputError(
-                f"`config` sets {', '.join(map(repr, unknown))}, not settings of experiment "
-                f"{exp.name!r}; known: {', '.join(sorted(exp.default_config))}"
-            )
-    return exp.config(dict(config or {}), quick=bool(quick))
-
-
-def _progress(progress: Any, desc: str) -> tuple[Progress, bool]:
-    """(progress display, whether this call owns and closes it)."""
-    if isinstance(progress, Progress):
-        return progress, False
-    if progress is None or progress is True:
-        return Progress(0, desc), True
-    if progress is False:
-        return Progress(0, desc, mode="off"), True
-    if isinstance(progress, str):
-        return Progress(0, desc, mode=progress), True
-    raise InputError(f"`progress` must be None, a bool, a mode name or a Progress, got {progress!r}")
 
 
 
