@@ -80,8 +80,14 @@ _probed: dict[str, str | None] = {}
 
 
 def _is_variant(obj: Any) -> bool:
+    """Listed on request only: a second implementation of a registered method (a compiled
+    variant), or an entry that declares itself on request (a stepper's `info.extra['on_request']`,
+    a problem's tag `on-request`: the step-controlled steppers and the highly eccentric orbits the
+    step-control experiment studies, which the gate's fixed-step rules were not built for)."""
     info = getattr(obj, "info", None)
-    return bool(getattr(info, "extra", None)) and "numpy_implementation" in info.extra
+    extra = getattr(info, "extra", None) or {}
+    return "numpy_implementation" in extra or bool(extra.get("on_request")) or (
+        "on-request" in getattr(obj, "tags", ()))
 
 
 class Registry(Generic[T]):
@@ -162,10 +168,9 @@ class Registry(Generic[T]):
         return self._origin[name]
 
     def names(self, *, variants: bool = False) -> list[str]:
-        """Registered names. A second implementation of a registered method (a compiled variant,
-        `info.extra['numpy_implementation']`) has the same facts and verdicts as the method it
-        implements: it is looked up by name but listed, and scheduled by default, only with
-        `variants=True` (the test suite compares every variant with its NumPy loop)."""
+        """Registered names. Entries listed on request (`_is_variant`: a compiled variant has the
+        same facts and verdicts as the method it implements; experiment-specific entries) are
+        looked up by name but listed, and scheduled by default, only with `variants=True`."""
         self._ensure()
         return [n for n, obj in self._items.items() if variants or not _is_variant(obj)]
 

@@ -174,6 +174,9 @@ class ControlledSplittingStepper(Stepper):
                 "keeps_constant": d.keeps_constant,
                 "order_in": "control parameter",
                 "uniform_time": False,
+                # studied by the step-control experiment; listed (and scheduled by the gate and
+                # the other experiments) only on request
+                "on_request": True,
             },
         )
 
@@ -236,8 +239,9 @@ class ControlledSplittingStepper(Stepper):
     def _step(self, dyn: Dynamics, c: Carry) -> None:
         if self._reversible:
             # z = 1/sigma must stay positive: a fictive step too large for the recursion turns
-            # it over, and the step is then undefined (NaN, reported as a blow-up).
-            self._apply(dyn, c, np.where(c.z > 0.0, c.h / c.z, np.nan))
+            # it over, and the physical step is then unbounded (inf: a blow-up, not a NaN the
+            # stepper made from a finite state).
+            self._apply(dyn, c, np.where(c.z > 0.0, c.h / c.z, np.inf))
             c.z += c.h * self._g(c)
         else:
             self._apply(dyn, c, c.h * self._sigma(c))

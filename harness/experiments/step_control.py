@@ -81,6 +81,26 @@ def fixed_peer(stepper):
     return None
 
 
+def _with_related(steppers: list[str], problems: list[str], config) -> tuple[list[str], list[str]]:
+    """The step-controlled steppers and the orbits of this experiment's problem set are listed on
+    request only (see `harness.registry`): asked for the fixed-step method a controller runs, or
+    for one problem of the set, the experiment adds the related entries: the controlled versions
+    of the requested fixed-step schemes, and the rest of its problem set."""
+    from harness.registry import problems as problem_registry
+    from harness.registry import steppers as stepper_registry
+
+    names = set(steppers)
+    for other in stepper_registry.all(variants=True):
+        if other.info.name in names or not is_step_controlled(other):
+            continue
+        peer = fixed_peer(other)
+        if peer is not None and peer.info.name in names:
+            steppers.append(other.info.name)
+    if set(problems) & set(config["problems"]):
+        problems += [p for p in config["problems"] if p not in problems and p in problem_registry]
+    return steppers, problems
+
+
 class StepControlExperiment(Experiment):
     name = "step-control"
     description = ("Fixed steps against naive and reversible step control: energy drift, order in "
@@ -120,6 +140,7 @@ class StepControlExperiment(Experiment):
                                      "n_start", "sweep_points", "control_budget", "fixed_budget"),
                      positives=("energy_control", "fit_decades", "target_error"),
                      name_lists=("problems",))
+        steppers, problems = _with_related(list(steppers), list(problems), config)
         cells, skips = [], []
         for p in problems:
             problem = get_problem(p)

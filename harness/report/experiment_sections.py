@@ -394,3 +394,6 @@ def roundoff(view: RunView, sec: Section) -> None:
             ("floor_h", "at h"), ("floor_eps", "floor (ulps)"), ("rounding_limited", "rounding-limited"),
             ("verdict", "verdict"), ("message", "why")]
     sec.table(df_table(summ, cols, "Per stepper: the rounding floor", experiment="roundoff", status=None))
+
+
+from harness.report import step_control  # noqa: E402,F401  (registers the step-control section)

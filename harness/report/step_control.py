@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from harness.report import figures as F
-from harness.report.sections import Section, _df_table
+from harness.report.sections import Section, df_table, register_section
 
 __all__ = ["EXPERIMENT", "TITLE", "section", "build_section", "energy_control_figure"]
 
@@ -78,21 +78,22 @@ def _verdict_text(summary: pd.DataFrame) -> str:
     return head + " " + "; ".join(parts) + "."
 
 
-def section(view: Any, number: int = 0) -> Section:
-    """The section from a `RunView` (rows and summary of the step-control experiment)."""
-    sec = Section("step-control", number, TITLE)
-    sec.intro = ("The course's Kepler practice session (course file 004, Practice Session #3) asks "
-                 "for a step control with Δθ ≈ const that keeps orbits bounded. Each controlled "
-                 "stepper is run against the fixed-step stepper with the same splitting "
-                 "coefficients at equal work (same number of steps over the same time); the "
-                 "energy error's growth is classified by the energy experiment's classifier. The "
-                 "work ratio is the fixed stepper's force evaluations over the controlled one's to "
-                 "reach the same final-time accuracy.")
+INTRO = ("The course's Kepler practice session (course file 004, Practice Session #3) asks for a "
+         "step control with Δθ ≈ const that keeps orbits bounded. Each controlled stepper is run "
+         "against the fixed-step stepper with the same splitting coefficients at equal work (same "
+         "number of steps over the same time); the energy error's growth is classified by the "
+         "energy experiment's classifier, and the work ratio is the fixed stepper's force "
+         "evaluations over the controlled one's to reach the same final-time accuracy.")
+
+
+@register_section("step-control", title=TITLE, intro=INTRO)
+def build(view: Any, sec: Section) -> None:
+    """Figures and tables of the step-control experiment into `sec`."""
     rows = view.rowtable(EXPERIMENT) if hasattr(view, "rowtable") else pd.DataFrame()
     summ = view.summary(EXPERIMENT) if hasattr(view, "summary") else pd.DataFrame()
     if summ is None or summ.empty:
         sec.note("The step-control experiment has no results in this run.", cls="warning")
-        return sec
+        return
     rows = _with_controller(rows, summ)
     for problem in dict.fromkeys(summ["problem"]):
         sec.figure(energy_control_figure(problem, rows),
@@ -104,14 +105,22 @@ def section(view: Any, number: int = 0) -> Section:
             ("fixed_max_rel_energy_error", "fixed: max rel. energy error"),
             ("claimed_order", "claimed order"), ("measured_order", "order in control parameter"),
             ("order_verdict", "order verdict"), ("verdict", "verdict")]
-    sec.table(_df_table(summ, cols, "Energy drift and order in the control parameter",
-                        status="bounded"))
+    sec.table(df_table(summ, cols, "Energy drift and order in the control parameter",
+                       experiment=EXPERIMENT, status="bounded"))
     work = [("stepper", "stepper"), ("problem", "problem"), ("target_error", "target error (x |y|)"),
             ("controlled_evals", "controlled force evals"), ("fixed_evals", "fixed force evals"),
             ("work_ratio", "work ratio (fixed / controlled)"),
             ("work_ratio_is_lower_bound", "lower bound"), ("message", "message")]
-    sec.table(_df_table(summ, work, "Work saved at each eccentricity", status=None))
+    sec.table(df_table(summ, work, "Work saved at each eccentricity", experiment=EXPERIMENT,
+                       status=None))
     sec.note(_verdict_text(summ))
+
+
+def section(view: Any, number: int = 0) -> Section:
+    """The section from a `RunView` (rows and summary of the step-control experiment)."""
+    sec = Section("step-control", number, TITLE)
+    sec.intro = INTRO
+    build(view, sec)
     return sec
 
 
