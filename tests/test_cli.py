@@ -143,11 +143,11 @@ def test_one_list_of_experiments_builds_the_cli_runner_and_report(capsys, tmp_pa
     """Every experiment in harness/experiments/__init__.py is listed, runnable on its own, and a
     report section, in that order (roundoff used to be registered only by building a report)."""
     from harness.experiments import EXPERIMENT_NAMES, EXPERIMENTS
-    from harness.report import REPORT_EXPERIMENTS
+    from harness.report import report_experiments
 
     code, out, _ = run_cli(capsys, "list", "experiments", "--json")
     assert code == 0 and [r["name"] for r in json.loads(out)] == list(EXPERIMENT_NAMES)
-    assert tuple(REPORT_EXPERIMENTS) == EXPERIMENT_NAMES and list(EXPERIMENTS) == list(EXPERIMENT_NAMES)
+    assert tuple(report_experiments()) == EXPERIMENT_NAMES and list(EXPERIMENTS) == list(EXPERIMENT_NAMES)
     monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
     code, out, err = run_cli(capsys, "run", "roundoff", "--stepper", "leapfrog", "--problem",
                              "harmonic", "--quick", "--jobs", "1", "--json")
