@@ -40,6 +40,9 @@ ROUNDOFF_MARGIN = 100.0
 # in the last points shows more.
 PLATEAU_SLOPE_TOL = 0.15
 PLATEAU_SLOPE_RTOL = 0.03
+# ... and local slopes that rise or fall monotonically by more than this across the window are
+# still drifting: half the gate's order tolerance, the most a fit over them may be off by.
+PLATEAU_DRIFT_TOL = 0.1
 # A state whose max-norm is below this is measured against this instead (no division by 0).
 SCALE_FLOOR = 1e-300
 # The fit needs at least this many points in the asymptotic range: three local slopes that agree

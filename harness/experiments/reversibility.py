@@ -63,6 +63,7 @@ from harness.experiments.common import (
     problem_cells,
     reversible_reason,
 )
+from harness.scales import flow_amplification
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["ReversibilityExperiment", "flow_amplification", "rounding_bound_ulps", "ROW_COLUMNS",
@@ -86,32 +87,6 @@ def rounding_bound_ulps(n_steps: int, amplification: float) -> float:
     return tol.REVERSIBILITY_ULPS_PER_STEP * n_steps * max(1.0, a)
 
 
-def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> float:
-    """||d Phi_span(y0)||_inf (the largest row sum of the flow's Jacobian): how many ulps of the
-    state an error of one ulp in every component becomes after `span`. Central differences of
-    relative size REVERSIBILITY_FLOW_DELTA on float64 Taylor orbits (`harness.scales`): the
-    signal delta A exceeds their own error, ~eps A, by delta / eps ~ 1e9, so no certified
-    reference (minutes for a many-body problem over 10^5 steps) is needed."""
-    from harness.scales import states_at
-
-    base = np.asarray(problem.y0 if y0 is None else y0, dtype=float).reshape(problem.dim)
-    key = (problem.fingerprint(), float(span), base.tobytes())
-    if key in _amplifications:  # every stepper's cell of one (problem, N) asks for the same
-        return _amplifications[key]
-    scale = np.where(base != 0.0, np.abs(base), 1.0)
-    delta = tol.REVERSIBILITY_FLOW_DELTA * scale
-    end = [problem.t0 + span]
-    J = np.empty((problem.dim, problem.dim))
-    for j in range(problem.dim):
-        plus, minus = base.copy(), base.copy()
-        plus[j] += delta[j]
-        minus[j] -= delta[j]
-        J[:, j] = (states_at(problem, end, plus) - states_at(problem, end, minus))[:, 0] / (2.0 * delta[j])
-    _amplifications[key] = float(np.max(np.sum(np.abs(J), axis=1)))
-    return _amplifications[key]
-
-
-_amplifications: dict[tuple[str, float, bytes], float] = {}
 
 
 class ReversibilityExperiment(Experiment):
