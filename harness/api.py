@@ -345,9 +345,7 @@ def check(
         if energy is not None:
             plan.append(("energy", "energy", energy))
         for experiment, claim, claimed in plan:
-            config = dict(configs.get(experiment, {}))
-            if experiment != "convergence":
-                config.setdefault("problems", names)
+            config = dict(configs.get(experiment, {}))  # experiments apply by facts, to `names`
             result = run_experiment(experiment, [name], names, config=config, **options)
             summary = result.summary
             summaries[experiment] = summary

@@ -688,8 +688,13 @@ def fastest(stepper: Stepper, problem: Problem) -> Stepper:
     """The fastest correct implementation of `stepper`'s method on `problem`: its compiled
     variant (agreeing with the NumPy loop to rounding, tested over the registry) when the method
     is a coefficient object and the problem's functions translate, else `stepper` itself. Read
-    `.info.implementation` of the result to record which one ran."""
+    `.info.implementation` of the result to record which one ran. Only a stepper whose loop is
+    exactly its family's own NumPy loop is replaced: a subclass that changes the step (a user's
+    variant, a deliberately broken test stepper) runs as written, since its coefficients alone
+    do not describe what it computes."""
     if stepper.info.implementation == "compiled":
+        return stepper
+    if type(stepper) not in _family_loops():
         return stepper
     with _variants_lock:
         known = stepper in _variants

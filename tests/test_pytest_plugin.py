@@ -49,10 +49,11 @@ def test_example_fails_readably_for_a_mutant(tmp_path):
     out = _run_example(copy)
     assert out.returncode == 1, out.stdout + out.stderr
     text = out.stdout
-    assert "stepper 'yoshida4-example': 2 of 6 claims false" in text
+    # Two measured order rows fail, and the gate adds that no cell measured the claim.
+    assert "stepper 'yoshida4-example': 3 of 7 claims false" in text
     order_rows = [line for line in text.splitlines() if line.strip().startswith("order ")]
-    assert len(order_rows) == 2 and all(" NO " in line for line in order_rows), text
-    assert "differs from claimed 4" in text
+    assert len(order_rows) == 3 and all(" NO " in line for line in order_rows), text
+    assert "differs from the expected 4" in text and "no cell measured the claim" in text
     assert "Traceback" not in text  # the table, not a trace into the harness
 
 

@@ -12,6 +12,7 @@ the other section builders), `build_section(run_tables)` an HTML fragment from a
 
 from __future__ import annotations
 
+import dataclasses
 import html
 from collections.abc import Mapping
 from typing import Any
@@ -54,7 +55,11 @@ def energy_control_figure(problem: str, rows: pd.DataFrame) -> F.Figure | None:
     ax.set_ylabel("relative energy error")
     ax.set_title(f"Energy error on {F._label(problem)}: fixed, naive and reversible control")
     F._legend_outside(ax)
-    return F.to_svg(fig, f"step-control-{problem}", f"relative energy error against time on {problem}")
+    out = F.to_svg(fig, f"step-control-{problem}", f"relative energy error against time on {problem}")
+    if out is not None and out.data is None:
+        keep = [c for c in ("stepper", "role", "controller", "problem", "t", "error") if c in g]
+        out = dataclasses.replace(out, data=g[keep].reset_index(drop=True))
+    return out
 
 
 def _with_controller(rows: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
