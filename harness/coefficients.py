@@ -268,6 +268,16 @@ class SplittingScheme:
         return cls(name, seq)
 
 
+def _palindromic(alpha: np.ndarray, beta: np.ndarray, *, alpha_sign: float) -> bool:
+    """alpha_j = alpha_sign * alpha_{k-j} and beta_j = beta_{k-j}, to the rounding of the
+    coefficients: the symmetry of a multistep method (first order: alpha_sign = -1; second
+    order: +1)."""
+    size = max(1.0, float(np.abs(alpha).sum() + np.abs(beta).sum()))
+    tol_ = COEFFICIENT_ULPS * EPS * size
+    return bool(np.max(np.abs(alpha - alpha_sign * alpha[::-1])) <= tol_
+                and np.max(np.abs(beta - beta[::-1])) <= tol_)
+
+
 @dataclass(frozen=True, eq=False)
 class LinearMultistep:
     """A k-step method sum_{j=0}^{k} alpha_j y_{n+j} = h sum_{j=0}^{k} beta_j f_{n+j}.
@@ -324,10 +334,7 @@ class LinearMultistep:
     @property
     def symmetric(self) -> bool:
         """alpha_j = -alpha_{k-j} and beta_j = beta_{k-j} (HLW XV.1)."""
-        size = max(1.0, float(np.abs(self.alpha).sum() + np.abs(self.beta).sum()))
-        tol_ = COEFFICIENT_ULPS * EPS * size
-        return bool(np.max(np.abs(self.alpha + self.alpha[::-1])) <= tol_
-                    and np.max(np.abs(self.beta - self.beta[::-1])) <= tol_)
+        return _palindromic(self.alpha, self.beta, alpha_sign=-1.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -391,7 +398,4 @@ class SecondOrderMultistep:
     @property
     def symmetric(self) -> bool:
         """alpha_j = alpha_{k-j} and beta_j = beta_{k-j} (HNW I, III.10)."""
-        size = max(1.0, float(np.abs(self.alpha).sum() + np.abs(self.beta).sum()))
-        tol_ = COEFFICIENT_ULPS * EPS * size
-        return bool(np.max(np.abs(self.alpha - self.alpha[::-1])) <= tol_
-                    and np.max(np.abs(self.beta - self.beta[::-1])) <= tol_)
+        return _palindromic(self.alpha, self.beta, alpha_sign=1.0)
