@@ -69,6 +69,14 @@ ENSEMBLE_PERTURBATION = 1e-2
 # stepper's steps = this / its evaluations per step), so a slow method on a long span reports
 # `insufficient-range` instead of running for minutes. 2^19 lets Euler reach n = 2^18 steps.
 SWEEP_WORK_BUDGET = 524_288
+# Tolerance sweeps of adaptive steppers: the solvers are per-member black boxes whose cost grows
+# like tol^(-1/p), so the sweep runs loose to tight and stops before a tolerance whose predicted
+# cost (the last one's internal steps times the last growth factor) would take the sweep past
+# this many internal steps per member. The tolerances not run are recorded with that reason.
+TOLERANCE_SWEEP_STEPS = 2_500
+# Members of a tolerance sweep: the verdict is the worst member's error against its tolerance,
+# which a few members already bound; every member is a separate solve of a black-box solver.
+TOLERANCE_SWEEP_ENSEMBLE = 4
 # An implicit step also solves Newton systems (a batched Jacobian and LU per iteration, ~2
 # iterations per step): it counts as this many of its declared evaluations.
 IMPLICIT_STEP_COST = 4.0

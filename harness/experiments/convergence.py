@@ -503,12 +503,22 @@ def _local_sweep(stepper: Stepper, problem, y0: np.ndarray, global_frame: pd.Dat
 
 def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     T0, T = problem.t0, config.get("t_end") or problem.convergence_t_end
-    y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]), scale=config.get("perturbation"))
+    members = min(int(config["ensemble"]), tol.TOLERANCE_SWEEP_ENSEMBLE)
+    y0 = problem.ensemble(members, seed=int(config["seed"]), scale=config.get("perturbation"))
     ref = _best_reference(problem, T, y0)
     y_ref = ref.y[-1]
     scale = _scale(y0, y_ref)
     records = []
+    spent, costs = 0.0, []  # internal steps per member: summed, and per tolerance run
     for tolerance in config["tolerances"]:
+        predicted = costs[-1] * costs[-1] / costs[-2] if len(costs) >= 2 and costs[-2] > 0 else 0.0
+        if spent + predicted > tol.TOLERANCE_SWEEP_STEPS:
+            records.append({
+                "tol": tolerance, "h": np.nan, "n_steps": 0, "error": np.nan,
+                "reference_error": float(np.max(ref.error[-1])), "rounding_level": tol.EPS * scale,
+                "rhs_evals": 0.0, "force_evals": 0.0, "wall_s": 0.0, "message": "", "not_run": True,
+            })
+            continue
         started = time.perf_counter()
         s = stepper.with_tolerance(tolerance)
         try:
@@ -522,14 +532,22 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
             "error": err, "reference_error": float(np.max(ref.error[-1])),
             "rounding_level": tol.EPS * scale, "rhs_evals": float(evals.get("rhs", 0)),
             "force_evals": float(evals.get("accel", 0)),
-            "wall_s": time.perf_counter() - started, "message": msg,
+            "wall_s": time.perf_counter() - started, "message": msg, "not_run": False,
         })
+        costs.append(int(evals.get("internal_steps", 0)) / members)
+        spent += costs[-1]
     frame = pd.DataFrame(records)
     frame["excluded"] = np.where(~np.isfinite(frame.error), "blow-up",
                                  np.where(frame.error < tol.REFERENCE_MARGIN * frame.reference_error,
                                           "reference", ""))
     frame["in_fit"] = frame["excluded"] == ""
     frame["kind"] = "tolerance"
+    # A tolerance the cost cap left out is a row of its own kind, with the reason, so the verdict
+    # judges only the tolerances that ran and the tables say which were not run and why.
+    skipped = frame.pop("not_run").astype(bool)
+    frame.loc[skipped, "excluded"] = "cost-cap"
+    frame.loc[skipped, "in_fit"] = False
+    frame.loc[skipped, "kind"] = "tolerance-not-run"
     frame["reference_precision"] = ref.precision
     frame["stepper"] = stepper.info.name
     frame["problem"] = problem.name

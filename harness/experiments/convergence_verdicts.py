@@ -70,6 +70,12 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
             base["message"] = (f"error up to {worst:.3g} x tol x |y| (limit {tol.TOLERANCE_FACTOR:g}); "
                                f"tolerance exponent {base['measured_order']:.3g} "
                                f"(minimum {tol.MIN_TOLERANCE_EXPONENT:g})")
+        capped = g[g.kind == "tolerance-not-run"]
+        if len(capped):
+            listed = ", ".join(f"{t:.0e}" for t in sorted(capped.tol, reverse=True))
+            base["message"] = "; ".join(filter(None, [base["message"], (
+                f"tolerance{'s' if len(capped) > 1 else ''} {listed} not run: the predicted cost would pass "
+                f"the sweep's cap of {tol.TOLERANCE_SWEEP_STEPS} internal steps per member")]))
         if messages:
             base["verdict"], base["message"] = "failed", messages[0]
         return base
