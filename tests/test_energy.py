@@ -8,10 +8,13 @@ angular momentum of a central force to rounding (GNI IV.2).
 
 from __future__ import annotations
 
+from functools import partial
+
+import helpers
 import numpy as np
 import pandas as pd
 import pytest
-from mislabelled import PlainEulerLabelledSymplectic, relabelled
+from helpers import PlainEulerLabelledSymplectic, cells_or_reasons, relabelled
 
 from harness import tolerances as tol
 from harness.errors import InputError, UnknownNameError
@@ -22,7 +25,6 @@ from harness.experiments.energy import (
     conserves_quadratic_invariants,
 )
 from harness.registry import get_problem, problems, steppers
-from harness.runner import run_experiment
 from harness.stepper import AdaptiveStepper
 
 EXP = get_experiment("energy")
@@ -32,22 +34,12 @@ STEPPERS = steppers.names()
 SMALL = {"steps": 2_000, "implicit_steps": 1_000, "adaptive_outputs": 40, "adaptive_periods": 4,
          "ensemble": 1}
 
-
-def run_direct(stepper_names, problem_names, **overrides):
-    """The experiment's own cells, run_cell and summarize in this process (no runner), for the
-    large registry tables: the runner's per-cell bookkeeping would dominate their time."""
-    config = EXP.config(overrides, quick=True)
-    cells, _ = EXP.cells(stepper_names, problem_names, config)
-    rows = pd.concat([EXP.run_cell(c, config) for c in cells], ignore_index=True)
-    return EXP.summarize(rows, config)
+run_direct = partial(helpers.run_direct, EXP)
 
 
 def run(stepper_names, problem_names, **overrides):
-    """Through the runner (in this process, no cache), as `harness run` does."""
-    result = run_experiment(EXP, stepper_names, problem_names, quick=True, config=overrides,
-                            jobs=1, cache=False, progress=False)
-    assert not len(result.failures), result.failures
-    return result.summary.set_index(["stepper", "problem"])
+    summary = helpers.run_through_runner(EXP, stepper_names, problem_names, **overrides)
+    return summary.set_index(["stepper", "problem"])
 
 
 # -- the classifier on envelopes of known shape ---------------------------------------------------
@@ -106,11 +98,7 @@ def test_summarize_of_no_rows_has_the_promised_columns():
 # -- the registry ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", STEPPERS)
 def test_every_stepper_gets_a_cell_or_a_reason_on_every_problem(name):
-    cfg = EXP.config()
-    cells, skips = EXP.cells([name], problems.names(), cfg)
-    covered = {c.problem for c in cells} | {s.problem for s in skips}
-    assert covered == set(problems.names())
-    assert all(s.reason for s in skips)
+    cells, skips = cells_or_reasons(EXP, name)
     stepper = steppers.get(name)
     for c in cells:
         assert get_problem(c.problem).invariants

@@ -10,11 +10,13 @@ Wanner, GNI VI.3-VI.4.
 from __future__ import annotations
 
 import json
+from functools import partial
 
+import helpers
 import numpy as np
 import pandas as pd
 import pytest
-from mislabelled import PlainEulerLabelledSymplectic, relabelled
+from helpers import PlainEulerLabelledSymplectic, cells_or_reasons, relabelled
 
 from harness import tolerances as tol
 from harness.cli import main
@@ -26,28 +28,15 @@ from harness.experiments.symplecticity import (
     one_step_jacobians,
     symplectic_deviation,
 )
-from harness.registry import get_problem, problems, steppers
-from harness.runner import run_experiment
+from harness.registry import get_problem, steppers
 
 EXP = get_experiment("symplecticity")
 STEPPERS = steppers.names()
 PROBLEMS = ["harmonic", "kepler-elliptic"]
 
+run_direct = partial(helpers.run_direct, EXP)
 
-def run_direct(stepper_names, problem_names, **overrides):
-    """The experiment's own cells, run_cell and summarize in this process (no runner)."""
-    config = EXP.config(overrides, quick=True)
-    cells, _ = EXP.cells(stepper_names, problem_names, config)
-    rows = pd.concat([EXP.run_cell(c, config) for c in cells], ignore_index=True)
-    return EXP.summarize(rows, config)
-
-
-def run(stepper_names, problem_names, **overrides):
-    """Through the runner (in this process, no cache), as `harness run` does."""
-    result = run_experiment(EXP, stepper_names, problem_names, quick=True, config=overrides,
-                            jobs=1, cache=False, progress=False)
-    assert not len(result.failures), result.failures
-    return result.summary
+run = partial(helpers.run_through_runner, EXP)
 
 
 # -- the machinery on maps with a known Jacobian ---------------------------------------------------
@@ -78,11 +67,7 @@ def test_finite_difference_jacobian_of_a_linear_map_is_exact_to_rounding(registe
 # -- the registry ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", STEPPERS)
 def test_every_stepper_gets_a_cell_or_a_reason_on_every_problem(name):
-    cfg = EXP.config()
-    cells, skips = EXP.cells([name], problems.names(), cfg)
-    covered = {c.problem for c in cells} | {s.problem for s in skips}
-    assert covered == set(problems.names())
-    assert all(s.reason for s in skips)
+    cells, skips = cells_or_reasons(EXP, name)
     stepper = steppers.get(name)
     if stepper.history_length > 1 and stepper.info.family != "stormer":
         assert not cells
