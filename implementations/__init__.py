@@ -24,17 +24,16 @@ FAMILY_MODULES = (
 OPTIONAL_MODULES = ("rebound_adapter",)
 
 
+def _modules(names: tuple[str, ...]) -> list:
+    """The family modules `names`, imported. A module that cannot be imported (deleted, renamed)
+    is an error, never a silently smaller registry; an optional adapter whose library is missing
+    still imports and says so in its `UNAVAILABLE`."""
+    return [import_module(f"implementations.{name}") for name in names]
+
+
 def builtin_steppers() -> list:
-    out = []
-    for name in FAMILY_MODULES:
-        try:
-            module = import_module(f"implementations.{name}")
-        except ModuleNotFoundError as exc:  # a family not written yet; never hides other errors
-            if exc.name != f"implementations.{name}":
-                raise
-            continue
-        out.extend(module.STEPPERS)
-    return out
+    """Every stepper of the modules in FAMILY_MODULES, in that order."""
+    return [s for module in _modules(FAMILY_MODULES) for s in module.STEPPERS]
 
 
 def build_stepper(method):
@@ -86,12 +85,6 @@ def unavailable_steppers() -> dict[str, str]:
     """Optional adapters whose library is not installed: library -> how to install it. A module
     says so in `UNAVAILABLE` and registers no steppers, instead of failing to import."""
     out: dict[str, str] = {}
-    for name in FAMILY_MODULES + OPTIONAL_MODULES:
-        try:
-            module = import_module(f"implementations.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"implementations.{name}":
-                raise
-            continue
+    for module in _modules(FAMILY_MODULES + OPTIONAL_MODULES):
         out.update(getattr(module, "UNAVAILABLE", {}))
     return out

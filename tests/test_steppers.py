@@ -32,6 +32,21 @@ def ids(items):
     return [s.info.name for s in items]
 
 
+@pytest.mark.parametrize("listing, modules", [
+    ("builtin_steppers", "FAMILY_MODULES"),
+    ("unavailable_steppers", "FAMILY_MODULES"),
+    ("unavailable_steppers", "OPTIONAL_MODULES"),
+])
+def test_a_missing_family_module_is_an_error_not_a_smaller_registry(monkeypatch, listing, modules):
+    """Only an optional adapter's library may be absent (then it is listed as unavailable, with
+    its install command); a deleted or renamed module is an error wherever it is listed."""
+    import implementations
+
+    monkeypatch.setattr(implementations, modules, (*getattr(implementations, modules), "renamed_family"))
+    with pytest.raises(ModuleNotFoundError, match="implementations.renamed_family"):
+        getattr(implementations, listing)()
+
+
 def counted(stepper, evals):
     return evals["accel"] if stepper.info.form == "newtonian" else evals["rhs"]
 
