@@ -44,6 +44,9 @@ class ProblemCache:
                 self._items[key] = build()
             return self._items[key]
 
+    def __len__(self) -> int:
+        return len(self._items)
+
     def __reduce__(self):
         return (ProblemCache, ())
 

@@ -73,9 +73,8 @@ def loaded_plugin(path: Path, source: str) -> Iterator[Path]:
         yield path
     finally:
         for n in names:
-            for reg in (registry.steppers, registry.problems):
-                if n in reg:
-                    reg.unregister(n)
+            registry.steppers.unregister(n)
+            registry.problems.unregister(n)
         registry._plugins.pop(str(path.resolve()), None)
 
 

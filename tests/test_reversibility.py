@@ -17,7 +17,6 @@ from helpers import cells_or_reasons, relabelled
 
 from harness import tolerances as tol
 from harness.cli import main
-from harness.errors import InputError
 from harness.experiments import get_experiment
 from harness.experiments.common import long_run_steps
 from harness.experiments.reversibility import SUMMARY_COLUMNS, flow_amplification, rounding_bound_ulps
@@ -116,16 +115,6 @@ def test_velocity_verlet_labelled_not_symmetric_fails(registered):
 
 
 # -- settings and the command line ----------------------------------------------------------------
-@pytest.mark.parametrize("bad, match", [
-    ({"steps": []}, r"config `steps` must be a non-empty list of whole numbers >= 1"),
-    ({"steps": [100, -1]}, r"config `steps` must be a non-empty list"),
-    ({"adaptive_tol": 0.0}, r"config `adaptive_tol` must be a positive finite number"),
-    ({"ensemble": 0}, r"config `ensemble` must be a whole number >= 1, got 0"),
-])
-def test_bad_settings_are_refused_with_the_setting_named(bad, match):
-    with pytest.raises(InputError, match=match):
-        EXP.cells(["leapfrog"], ["harmonic"], EXP.config(bad, quick=True))
-
 
 def test_cli_json_records(capsys):
     code = main(["run", "reversibility", "--quick", "--stepper", "leapfrog", "--stepper", "rk4",

@@ -20,7 +20,6 @@ from helpers import PlainEulerLabelledSymplectic, cells_or_reasons, relabelled
 
 from harness import tolerances as tol
 from harness.cli import main
-from harness.errors import InputError
 from harness.experiments import get_experiment
 from harness.experiments.symplecticity import (
     SUMMARY_COLUMNS,
@@ -132,15 +131,6 @@ def test_velocity_verlet_labelled_not_symplectic_fails(registered):
 
 
 # -- settings and the command line ----------------------------------------------------------------
-@pytest.mark.parametrize("bad, match", [
-    ({"states": 0}, r"config `states` must be a whole number >= 1, got 0"),
-    ({"adaptive_tol": -1e-6}, r"config `adaptive_tol` must be a positive finite number"),
-    ({"h": 0.0}, r"config `h` must be a positive finite number \(or unset\)"),
-])
-def test_bad_settings_are_refused_with_the_setting_named(bad, match):
-    with pytest.raises(InputError, match=match):
-        EXP.cells(["leapfrog"], ["harmonic"], EXP.config(bad, quick=True))
-
 
 def test_cli_json_records(capsys):
     code = main(["run", "symplecticity", "--quick", "--stepper", "leapfrog", "--stepper", "rk4",
