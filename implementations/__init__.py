@@ -4,9 +4,13 @@ Every built-in stepper is registered here, in one place: each family module expo
 `STEPPERS`, and `builtin_steppers()` concatenates them in the order below.
 """
 
+import threading
 from importlib import import_module
 
-__all__ = ["builtin_steppers", "build_stepper", "unavailable_steppers", "FAMILY_MODULES", "OPTIONAL_MODULES"]
+__all__ = [
+    "ProblemCache", "builtin_steppers", "build_stepper", "coefficient_info", "unavailable_steppers",
+    "FAMILY_MODULES", "OPTIONAL_MODULES",
+]
 
 FAMILY_MODULES = (
     "runge_kutta",
@@ -24,17 +28,56 @@ FAMILY_MODULES = (
 OPTIONAL_MODULES = ("rebound_adapter",)
 
 
+class ProblemCache:
+    """What a stepper builds once per problem (and settings) and its runs share, behind a lock.
+    Pickled empty: a worker process rebuilds what it needs instead of receiving compiled objects
+    (heyoka integrators are not picklable)."""
+
+    def __init__(self):
+        self._items: dict = {}
+        self._lock = threading.Lock()
+
+    def get(self, key, build):
+        """The object stored under `key`, built by `build()` on first use (once, under the lock)."""
+        with self._lock:
+            if key not in self._items:
+                self._items[key] = build()
+            return self._items[key]
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __reduce__(self):
+        return (ProblemCache, ())
+
+
+def _modules(names: tuple[str, ...]) -> list:
+    """The family modules `names`, imported. A module that cannot be imported (deleted, renamed)
+    is an error, never a silently smaller registry; an optional adapter whose library is missing
+    still imports and says so in its `UNAVAILABLE`."""
+    return [import_module(f"implementations.{name}") for name in names]
+
+
 def builtin_steppers() -> list:
-    out = []
-    for name in FAMILY_MODULES:
-        try:
-            module = import_module(f"implementations.{name}")
-        except ModuleNotFoundError as exc:  # a family not written yet; never hides other errors
-            if exc.name != f"implementations.{name}":
-                raise
-            continue
-        out.extend(module.STEPPERS)
-    return out
+    """Every stepper of the modules in FAMILY_MODULES, in that order."""
+    return [s for module in _modules(FAMILY_MODULES) for s in module.STEPPERS]
+
+
+def coefficient_info(coefficients, *, family: str, form: str = "first-order", **fields):
+    """The `StepperInfo` of a stepper that runs `coefficients`: its name, symplecticity and
+    symmetry are asked of the coefficients (False where the family has no such notion, as for
+    linear multistep methods' symplecticity), never typed by hand; a Newtonian form is for
+    velocity-independent forces. `fields` gives the rest (claimed order, cost, reference) and
+    may override a derived value."""
+    from harness.stepper import StepperInfo
+
+    derived = {
+        "name": coefficients.name,
+        "symplectic": bool(getattr(coefficients, "symplectic", False)),
+        "symmetric": bool(getattr(coefficients, "symmetric", False)),
+        "velocity_dependent": form != "newtonian",
+    }
+    return StepperInfo(family=family, form=form, **{**derived, **fields})
 
 
 def build_stepper(method):
@@ -86,12 +129,6 @@ def unavailable_steppers() -> dict[str, str]:
     """Optional adapters whose library is not installed: library -> how to install it. A module
     says so in `UNAVAILABLE` and registers no steppers, instead of failing to import."""
     out: dict[str, str] = {}
-    for name in FAMILY_MODULES + OPTIONAL_MODULES:
-        try:
-            module = import_module(f"implementations.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"implementations.{name}":
-                raise
-            continue
+    for module in _modules(FAMILY_MODULES + OPTIONAL_MODULES):
         out.update(getattr(module, "UNAVAILABLE", {}))
     return out

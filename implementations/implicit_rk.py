@@ -30,8 +30,9 @@ from harness.coefficients import ButcherTableau
 from harness.errors import InputError
 from harness.methods import Method
 from harness.problem import Dynamics
-from harness.stepper import Carry, StepFailure, Stepper, StepperInfo
+from harness.stepper import Carry, StepFailure, Stepper
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
+from implementations import coefficient_info
 
 __all__ = [
     "METHODS",
@@ -85,6 +86,17 @@ class NewtonSettings:
 
     def describe(self) -> str:
         return f"{self.mode} Newton, tolerance {self.tol:.0e}, at most {self.max_iter} iterations"
+
+    def keywords(
+        self, mode: str | None = None, tol: float | None = None, max_iter: int | None = None
+    ) -> dict:
+        """These settings as a stepper's constructor keywords, with `mode`, `tol` and `max_iter`
+        replacing them where given (how `with_newton` and its kin rebuild a stepper)."""
+        return {
+            "newton": self.mode if mode is None else mode,
+            "newton_tol": self.tol if tol is None else tol,
+            "newton_max_iter": self.max_iter if max_iter is None else max_iter,
+        }
 
 
 def scaled_norm(dx: np.ndarray, inv_scale: np.ndarray) -> float:
@@ -254,9 +266,10 @@ class ImplicitRungeKutta(Stepper):
             if newton == "full"
             else "1 Jacobian evaluation per step"
         )
-        self.info = StepperInfo(
-            name=name,
+        self.info = coefficient_info(
+            tableau,
             family="implicit-rk",
+            name=name,
             claimed_order=claimed_order,
             explicit=False,
             symplectic=symplectic,
@@ -264,8 +277,6 @@ class ImplicitRungeKutta(Stepper):
             # typical figure: two Newton iterations (the second confirms the first); the measured
             # count is in the run's `evals`.
             evals_per_step=float(TYPICAL_NEWTON_ITERATIONS * per_iter + explicit_evals),
-            form="first-order",
-            velocity_dependent=True,
             reference=reference,
             description=" ".join(
                 part
@@ -296,13 +307,8 @@ class ImplicitRungeKutta(Stepper):
         self, mode: str | None = None, tol: float | None = None, max_iter: int | None = None
     ) -> ImplicitRungeKutta:
         """The same method with other Newton settings (unchanged where None)."""
-        return ImplicitRungeKutta(
-            self.coefficients,
-            newton=self.newton.mode if mode is None else mode,
-            newton_tol=self.newton.tol if tol is None else tol,
-            newton_max_iter=self.newton.max_iter if max_iter is None else max_iter,
-            **self._construct,
-        )
+        return ImplicitRungeKutta(self.coefficients, **self.newton.keywords(mode, tol, max_iter),
+                                  **self._construct)
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         return Carry(t0, h, y0, f_start=None, z_prev=None)

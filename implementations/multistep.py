@@ -29,8 +29,9 @@ from harness.coefficients import LinearMultistep
 from harness.errors import IncompatibleError, InputError, UnknownNameError
 from harness.methods import Method
 from harness.problem import Dynamics
-from harness.stepper import Carry, Stepper, StepperInfo, check_compatible
+from harness.stepper import Carry, Stepper, check_compatible
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
+from implementations import coefficient_info
 from implementations.implicit_rk import NewtonSettings, newton_solve
 
 __all__ = ["METHODS", "STEPPERS", "LinearMultistepStepper", "AB2", "AB3", "AB4", "AM3", "BDF2"]
@@ -121,16 +122,13 @@ class LinearMultistepStepper(Stepper):
             if starter_name == "reference"
             else f"the one-step method {starter_name!r}"
         )
-        self.info = StepperInfo(
-            name=name,
+        self.info = coefficient_info(
+            table,
             family="multistep",
+            name=name,
             claimed_order=claimed_order,
             explicit=explicit,
-            symplectic=False,
-            symmetric=False,
             evals_per_step=evals,
-            form="first-order",
-            velocity_dependent=True,
             reference=reference,
             description=(
                 f"{description} {k}-step; {cost}. {_starting_values_text(k)} from {start} "
@@ -146,27 +144,15 @@ class LinearMultistepStepper(Stepper):
 
     def with_starter(self, starter: str | Stepper) -> LinearMultistepStepper:
         """The same method with another source of starting values."""
-        return LinearMultistepStepper(
-            self.coefficients,
-            starter=starter,
-            newton=self.newton.mode,
-            newton_tol=self.newton.tol,
-            newton_max_iter=self.newton.max_iter,
-            **self._construct,
-        )
+        return LinearMultistepStepper(self.coefficients, starter=starter, **self.newton.keywords(),
+                                      **self._construct)
 
     def with_newton(
         self, mode: str | None = None, tol: float | None = None, max_iter: int | None = None
     ) -> LinearMultistepStepper:
         """The same method with other Newton settings (unchanged where None)."""
-        return LinearMultistepStepper(
-            self.coefficients,
-            starter=self.starter,
-            newton=self.newton.mode if mode is None else mode,
-            newton_tol=self.newton.tol if tol is None else tol,
-            newton_max_iter=self.newton.max_iter if max_iter is None else max_iter,
-            **self._construct,
-        )
+        return LinearMultistepStepper(self.coefficients, starter=self.starter,
+                                      **self.newton.keywords(mode, tol, max_iter), **self._construct)
 
     def incompatibility(self, problem) -> str | None:
         if self.starter_name == "reference":

@@ -21,7 +21,8 @@ from harness.coefficients import ButcherTableau
 from harness.errors import CoefficientError
 from harness.methods import Method
 from harness.problem import Dynamics
-from harness.stepper import Carry, Stepper, StepperInfo
+from harness.stepper import Carry, Stepper
+from implementations import coefficient_info
 
 __all__ = ["ExplicitRungeKutta", "METHODS", "STEPPERS"]
 
@@ -51,18 +52,9 @@ class ExplicitRungeKutta(Stepper):
                 "triangular stage matrix A"
             )
         self.coefficients = tableau
-        self.info = StepperInfo(
-            name=tableau.name,
-            family="explicit-rk",
-            claimed_order=claimed_order,
-            explicit=True,
-            symplectic=False,
-            symmetric=False,
-            evals_per_step=float(tableau.stages),
-            form="first-order",
-            velocity_dependent=True,
-            reference=reference,
-            description=description,
+        self.info = coefficient_info(
+            tableau, family="explicit-rk", claimed_order=claimed_order, explicit=True,
+            evals_per_step=float(tableau.stages), reference=reference, description=description,
         )
         A, b = tableau.A, tableau.b
         # For each stage: the indices of its nonzero coefficients (none for the first).

@@ -25,6 +25,7 @@ from harness.errors import CoefficientError
 from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, Stepper, StepperInfo
+from implementations import coefficient_info
 
 __all__ = ["SplittingStepper", "StaggeredLeapfrog", "METHODS", "STEPPERS"]
 
@@ -41,6 +42,13 @@ def _newtonian_carry(t0: float, h: float, y0: np.ndarray, dyn: Dynamics) -> Carr
     c.a = np.empty_like(c.q)
     c.a_flat = c.a.reshape(-1)
     return c
+
+
+def _splitting_info(scheme: SplittingScheme, **fields) -> StepperInfo:
+    """What both loops of a splitting scheme declare: explicit, Newtonian, and the scheme's own
+    force evaluations per step, symplecticity and symmetry."""
+    return coefficient_info(scheme, family="splitting", form="newtonian", explicit=True,
+                            evals_per_step=float(scheme.force_evals), **fields)
 
 
 class SplittingStepper(Stepper):
@@ -75,19 +83,8 @@ class SplittingStepper(Stepper):
         if ops and ops[-1][0]:
             ops[-1] = (True, ops[-1][1], 1.0)  # the drifts sum to one: end the step exactly at t + h
         self._ops = tuple(ops)
-        self.info = StepperInfo(
-            name=scheme.name,
-            family="splitting",
-            claimed_order=claimed_order,
-            explicit=True,
-            symplectic=scheme.symplectic,
-            symmetric=scheme.symmetric,
-            evals_per_step=float(scheme.force_evals),
-            form="newtonian",
-            velocity_dependent=False,
-            reference=reference,
-            description=description,
-        )
+        self.info = _splitting_info(scheme, claimed_order=claimed_order, reference=reference,
+                                    description=description)
 
     def _scale(self, c: Carry) -> None:
         """Refresh what depends on the signed step size (at the start and on reversal): each
@@ -144,19 +141,8 @@ class StaggeredLeapfrog(Stepper):
         self._half = seq[0][1]
         self._drift = seq[1][1]
         self._kick = seq[0][1] + seq[2][1]
-        self.info = StepperInfo(
-            name=name,
-            family="splitting",
-            claimed_order=2,
-            explicit=True,
-            symplectic=scheme.symplectic,
-            symmetric=scheme.symmetric,
-            evals_per_step=float(scheme.force_evals),
-            form="newtonian",
-            velocity_dependent=False,
-            reference=reference,
-            description=description,
-        )
+        self.info = _splitting_info(scheme, name=name, claimed_order=2, reference=reference,
+                                    description=description)
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         c = _newtonian_carry(t0, h, y0, dyn)  # c.v holds v_{n+1/2}

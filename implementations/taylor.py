@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import threading
 
 import heyoka as hy
 import numpy as np
@@ -20,6 +19,7 @@ from harness import cache
 from harness.problem import Dynamics, Problem
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
 from harness.tolerances import ADAPTIVE_MAX_EVALS, EPS
+from implementations import ProblemCache
 
 __all__ = ["TaylorStepper", "STEPPERS"]
 
@@ -35,8 +35,7 @@ class TaylorStepper(AdaptiveStepper):
     def __init__(self, tol: float = EPS, *, high_accuracy: bool = True):
         self.tol = float(tol)
         self.high_accuracy = high_accuracy
-        self._templates: dict[tuple, hy.taylor_adaptive] = {}
-        self._lock = threading.Lock()
+        self._templates = ProblemCache()  # key: (problem fingerprint, tol, high_accuracy)
         self.info = StepperInfo(
             name="taylor",
             family="taylor",
@@ -66,31 +65,18 @@ class TaylorStepper(AdaptiveStepper):
         clone.info = dataclasses.replace(clone.info, extra={**clone.info.extra, "tol": clone.tol})
         return clone
 
-    def __getstate__(self):
-        state = dict(self.__dict__)
-        state.pop("_lock", None)
-        state["_templates"] = {}
-        return state
-
-    def __setstate__(self, state):
-        self.__dict__.update(state)
-        self._lock = threading.Lock()
-
     def _template(self, problem: Problem) -> hy.taylor_adaptive:
-        key = (problem.fingerprint(), self.tol, self.high_accuracy)
-        with self._lock:
-            ta = self._templates.get(key)
-            if ta is None:
-                cache.configure_heyoka_cache()
-                ta = hy.taylor_adaptive(
-                    list(zip(problem.variables, problem.rhs, strict=True)),
-                    problem.y0.tolist(),
-                    tol=self.tol,
-                    high_accuracy=self.high_accuracy,
-                    pars=problem.parameter_values.tolist(),
-                )
-                self._templates[key] = ta
-        return ta
+        def build() -> hy.taylor_adaptive:
+            cache.configure_heyoka_cache()
+            return hy.taylor_adaptive(
+                list(zip(problem.variables, problem.rhs, strict=True)),
+                problem.y0.tolist(),
+                tol=self.tol,
+                high_accuracy=self.high_accuracy,
+                pars=problem.parameter_values.tolist(),
+            )
+
+        return self._templates.get((problem.fingerprint(), self.tol, self.high_accuracy), build)
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         c = Carry(t0, h, y0)

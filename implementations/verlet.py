@@ -20,8 +20,6 @@ Reversing time swaps x_{n-1} and x_{n+1} and negates h, so the recurrence runs b
 
 from __future__ import annotations
 
-import threading
-
 import heyoka as hy
 import numpy as np
 from scipy.linalg.blas import daxpy as _axpy
@@ -31,6 +29,7 @@ from harness.errors import CoefficientError
 from harness.problem import Dynamics, Problem
 from harness.stepper import Carry, StepFailure, Stepper, StepperInfo
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
+from implementations import ProblemCache
 
 __all__ = ["TwoStepVerlet", "STORMER", "STEPPERS"]
 
@@ -95,8 +94,7 @@ class TwoStepVerlet(Stepper):
         self._alpha0, self._alpha1 = float(table.alpha[0]), float(table.alpha[1])
         self._beta1 = float(table.beta[1])
         self._implicit_velocity = implicit_velocity
-        self._structures: dict[str, _VelocityStructure] = {}
-        self._lock = threading.Lock()
+        self._structures = ProblemCache()  # key: problem fingerprint
         self.info = StepperInfo(
             name=name,
             family="stormer",
@@ -115,25 +113,8 @@ class TwoStepVerlet(Stepper):
             },
         )
 
-    def __getstate__(self):
-        state = dict(self.__dict__)
-        state.pop("_lock", None)
-        state["_structures"] = {}
-        return state
-
-    def __setstate__(self, state):
-        self.__dict__.update(state)
-        self._lock = threading.Lock()
-
     def _structure(self, problem: Problem) -> _VelocityStructure:
-        key = problem.fingerprint()
-        with self._lock:
-            found = self._structures.get(key)
-        if found is None:
-            found = _VelocityStructure(problem)
-            with self._lock:
-                self._structures[key] = found
-        return found
+        return self._structures.get(problem.fingerprint(), lambda: _VelocityStructure(problem))
 
     # -- private math -----------------------------------------------------------------------------
     #: The recurrence uses two past positions (x_{n-1}, x_n); see `_start_from_history`.

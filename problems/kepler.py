@@ -118,55 +118,50 @@ def kepler_exact(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None = 
 _PERIOD_CIRCULAR = 2.0 * math.pi * 4.0**1.5  # a = 4
 _PERIOD_ELLIPTIC = 2.0 * math.pi  # a = 1
 
-KEPLER_CIRCULAR = Problem(
+
+def _kepler_orbit(name: str, y0: list[float], period: float, description: str, reference: str) -> Problem:
+    """A bound Kepler orbit (GM = 1) from `y0` over 10 periods; the convergence sweep runs
+    CONVERGENCE_PERIODS orbits: 10 orbits at the finest step sizes of low-order methods exceed
+    the sweep budget and add nothing to the measured order."""
+    return Problem(
+        name,
+        variables=_VARIABLES,
+        newtonian=_NEWTONIAN,
+        structure=_STRUCTURE,
+        y0=y0,
+        t_span=(0.0, 10.0 * period),
+        period=period,
+        invariants=_INVARIANTS,
+        exact=kepler_exact,
+        conservative=True,
+        central_force=True,
+        convergence_t_end=CONVERGENCE_PERIODS * period,
+        description=description,
+        reference=reference,
+        tags=("newtonian", "central-force", "hamiltonian"),
+    )
+
+
+KEPLER_CIRCULAR = _kepler_orbit(
     "kepler-circular",
-    variables=_VARIABLES,
-    newtonian=_NEWTONIAN,
-    structure=_STRUCTURE,
-    y0=[4.0, 0.0, 0.0, 0.5],
-    t_span=(0.0, 10.0 * _PERIOD_CIRCULAR),
-    period=_PERIOD_CIRCULAR,
-    invariants=_INVARIANTS,
-    exact=kepler_exact,
-    conservative=True,
-    central_force=True,
-    # 1 orbit: 10 orbits at the finest step sizes of low-order methods exceed the sweep budget
-    # and add nothing to the measured order.
-    convergence_t_end=CONVERGENCE_PERIODS * _PERIOD_CIRCULAR,
-    description=(
-        "Kepler problem r'' = -r/|r|^3 on the circular orbit of radius 4 (r = (4, 0), "
-        "v = (0, 1/2), period 16 pi) over 10 orbits. Exact solution from Kepler's equation; "
-        "energy, angular momentum and the Runge-Lenz vector are conserved."
-    ),
-    reference=_COURSE_ODE + "; exact solution: Lagrange's f and g functions (Danby, Fundamentals of "
+    [4.0, 0.0, 0.0, 0.5],
+    _PERIOD_CIRCULAR,
+    "Kepler problem r'' = -r/|r|^3 on the circular orbit of radius 4 (r = (4, 0), "
+    "v = (0, 1/2), period 16 pi) over 10 orbits. Exact solution from Kepler's equation; "
+    "energy, angular momentum and the Runge-Lenz vector are conserved.",
+    _COURSE_ODE + "; exact solution: Lagrange's f and g functions (Danby, Fundamentals of "
     "Celestial Mechanics, 1988).",
-    tags=("newtonian", "central-force", "hamiltonian"),
 )
 
-KEPLER_ELLIPTIC = Problem(
+KEPLER_ELLIPTIC = _kepler_orbit(
     "kepler-elliptic",
-    variables=_VARIABLES,
-    newtonian=_NEWTONIAN,
-    structure=_STRUCTURE,
-    y0=[0.4, 0.0, 0.0, 2.0],
-    t_span=(0.0, 10.0 * _PERIOD_ELLIPTIC),
-    period=_PERIOD_ELLIPTIC,
-    invariants=_INVARIANTS,
-    exact=kepler_exact,
-    conservative=True,
-    central_force=True,
-    # 1 orbit, as for `kepler-circular`.
-    convergence_t_end=CONVERGENCE_PERIODS * _PERIOD_ELLIPTIC,
-    description=(
-        "Kepler problem on an eccentric orbit, e = 0.6, a = 1 (start at pericentre r = (0.4, 0), "
-        "v = (0, 2), period 2 pi), over 10 orbits; the close pericentre passage makes it much "
-        "harder for fixed steps than the circular orbit."
-    ),
-    reference=(
-        _COURSE_ODE + "; Hairer, Lubich & Wanner, Geometric Numerical Integration (2nd ed. 2006), "
-        "section I.2.3 (Kepler problem, e = 0.6); exact solution: f and g functions (Danby 1988)."
-    ),
-    tags=("newtonian", "central-force", "hamiltonian"),
+    [0.4, 0.0, 0.0, 2.0],
+    _PERIOD_ELLIPTIC,
+    "Kepler problem on an eccentric orbit, e = 0.6, a = 1 (start at pericentre r = (0.4, 0), "
+    "v = (0, 2), period 2 pi), over 10 orbits; the close pericentre passage makes it much "
+    "harder for fixed steps than the circular orbit.",
+    _COURSE_ODE + "; Hairer, Lubich & Wanner, Geometric Numerical Integration (2nd ed. 2006), "
+    "section I.2.3 (Kepler problem, e = 0.6); exact solution: f and g functions (Danby 1988).",
 )
 
 

@@ -48,44 +48,39 @@ _HH_ENERGY = {
 }
 _HH_REF = f"M. Hénon, C. Heiles, Astron. J. 69 (1964) 73-79; energies 1/12 and 1/8 as in {_GNI}, section I.3."
 
-HENON_HEILES = Problem(
-    "henon-heiles",
-    variables=[_hx, _hy, _hpx, _hpy],
-    newtonian=_HH_NEWTONIAN,
-    y0=henon_heiles_start(1.0 / 12.0, 0.1),
-    t_span=(0.0, 50.0),
-    # A shorter horizon for the convergence sweep: over 50 time units first-order methods need
-    # more steps than the sweep's budget to bring the error below 1e-2 of the state.
-    convergence_t_end=10.3,
-    invariants=_HH_ENERGY,
-    conservative=True,
-    description=(
-        "Hénon-Heiles Hamiltonian H = (px^2 + py^2)/2 + (x^2 + y^2)/2 + x^2 y - y^3/3 at energy "
-        "1/12, start x = 0, y = 0.1, py = 0 on a regular (quasi-periodic) orbit: the finite-time "
-        "Lyapunov exponent over t = 3000 is below 1e-4. Span [0, 50]."
-    ),
-    reference=_HH_REF,
-    tags=("newtonian", "hamiltonian", "regular"),
+def _henon_heiles(name: str, energy: float, y: float, description: str, orbit: str) -> Problem:
+    """The Hénon-Heiles orbit of the given energy from x = 0, `y`, py = 0 (henon_heiles_start)
+    over [0, 50]. The convergence sweep runs a shorter horizon: over 50 time units first-order
+    methods need more steps than the sweep's budget to bring the error below 1e-2 of the state."""
+    return Problem(
+        name,
+        variables=[_hx, _hy, _hpx, _hpy],
+        newtonian=_HH_NEWTONIAN,
+        y0=henon_heiles_start(energy, y),
+        t_span=(0.0, 50.0),
+        convergence_t_end=10.3,
+        invariants=_HH_ENERGY,
+        conservative=True,
+        description=description,
+        reference=_HH_REF,
+        tags=("newtonian", "hamiltonian", orbit),
+    )
+
+
+HENON_HEILES = _henon_heiles(
+    "henon-heiles", 1.0 / 12.0, 0.1,
+    "Hénon-Heiles Hamiltonian H = (px^2 + py^2)/2 + (x^2 + y^2)/2 + x^2 y - y^3/3 at energy "
+    "1/12, start x = 0, y = 0.1, py = 0 on a regular (quasi-periodic) orbit: the finite-time "
+    "Lyapunov exponent over t = 3000 is below 1e-4. Span [0, 50].",
+    "regular",
 )
 
-HENON_HEILES_CHAOTIC = Problem(
-    "henon-heiles-chaotic",
-    variables=[_hx, _hy, _hpx, _hpy],
-    newtonian=_HH_NEWTONIAN,
-    y0=henon_heiles_start(1.0 / 8.0, -0.2),
-    t_span=(0.0, 50.0),
-    # A shorter horizon for the convergence sweep: over 50 time units first-order methods need
-    # more steps than the sweep's budget to bring the error below 1e-2 of the state.
-    convergence_t_end=10.3,
-    invariants=_HH_ENERGY,
-    conservative=True,
-    description=(
-        "Hénon-Heiles at energy 1/8, start x = 0, y = -0.2, py = 0 in the chaotic sea (finite-time "
-        "Lyapunov exponent ~0.07 over t = 3000): errors grow ~30x over the span [0, 50], so the "
-        "reference's own error is what limits how far a method can be judged."
-    ),
-    reference=_HH_REF,
-    tags=("newtonian", "hamiltonian", "chaotic"),
+HENON_HEILES_CHAOTIC = _henon_heiles(
+    "henon-heiles-chaotic", 1.0 / 8.0, -0.2,
+    "Hénon-Heiles at energy 1/8, start x = 0, y = -0.2, py = 0 in the chaotic sea (finite-time "
+    "Lyapunov exponent ~0.07 over t = 3000): errors grow ~30x over the span [0, 50], so the "
+    "reference's own error is what limits how far a method can be judged.",
+    "chaotic",
 )
 
 

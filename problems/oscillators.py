@@ -132,48 +132,47 @@ _pendulum_energy = {"energy": _omega * _omega / 2.0 + (1.0 - hy.cos(_theta))}
 _PERIOD_LARGE = pendulum_period(math.pi / 4.0)
 _PERIOD_SMALL = pendulum_period(math.pi / 40.0)
 
-PENDULUM = Problem(
+def _pendulum(name: str, theta0: float, period: float, description: str, reference: str, **extra) -> Problem:
+    """The pendulum released from rest at `theta0` over 50 true periods; the convergence sweep
+    runs 5 periods: 50 periods at the finest step sizes of first-order methods would exceed the
+    sweep's step budget without changing the measured order."""
+    return Problem(
+        name,
+        variables=[_theta, _omega],
+        newtonian=_pendulum_nf,
+        y0=[theta0, 0.0],
+        t_span=(0.0, 50.0 * period),
+        period=period,
+        invariants=_pendulum_energy,
+        exact=pendulum_exact,
+        conservative=True,
+        convergence_t_end=(4.0 + CONVERGENCE_PERIODS - 1.0) * period,
+        description=description,
+        reference=reference,
+        tags=("newtonian", "nonlinear", "hamiltonian"),
+        **extra,
+    )
+
+
+PENDULUM = _pendulum(
     "pendulum",
-    variables=[_theta, _omega],
-    newtonian=_pendulum_nf,
-    y0=[math.pi / 4.0, 0.0],
-    t_span=(0.0, 50.0 * _PERIOD_LARGE),
-    period=_PERIOD_LARGE,
-    invariants=_pendulum_energy,
-    exact=pendulum_exact,
-    conservative=True,
-    # 5 periods: 50 periods at the finest step sizes of first-order methods would exceed the
-    # sweep's step budget without changing the measured order.
-    convergence_t_end=(4.0 + CONVERGENCE_PERIODS - 1.0) * _PERIOD_LARGE,
-    description=(
-        "Simple pendulum theta'' = -sin(theta) (g/L = 1), theta = pi/4, omega = 0, over 50 true "
-        f"(amplitude-dependent) periods, T = 4K(sin^2(theta0/2)) = {_PERIOD_LARGE:.6f}. Exact "
-        "solution through Jacobi elliptic functions for any librating start."
-    ),
-    reference=_PENDULUM_REF + "; NIST DLMF section 22.19(i) (the pendulum via elliptic functions).",
-    tags=("newtonian", "nonlinear", "hamiltonian"),
+    math.pi / 4.0,
+    _PERIOD_LARGE,
+    "Simple pendulum theta'' = -sin(theta) (g/L = 1), theta = pi/4, omega = 0, over 50 true "
+    f"(amplitude-dependent) periods, T = 4K(sin^2(theta0/2)) = {_PERIOD_LARGE:.6f}. Exact "
+    "solution through Jacobi elliptic functions for any librating start.",
+    _PENDULUM_REF + "; NIST DLMF section 22.19(i) (the pendulum via elliptic functions).",
 )
 
-PENDULUM_SMALL = Problem(
+PENDULUM_SMALL = _pendulum(
     "pendulum-small",
-    variables=[_theta, _omega],
-    newtonian=_pendulum_nf,
-    y0=[math.pi / 40.0, 0.0],
-    t_span=(0.0, 50.0 * _PERIOD_SMALL),
-    period=_PERIOD_SMALL,
-    invariants=_pendulum_energy,
-    exact=pendulum_exact,
+    math.pi / 40.0,
+    _PERIOD_SMALL,
+    "Simple pendulum at small amplitude, theta = pi/40, omega = 0, over 50 true periods "
+    f"(T = {_PERIOD_SMALL:.6f}); exact elliptic-function solution, and the small-angle "
+    "solution theta0 cos t + omega0 sin t as an approximation to compare against.",
+    _PENDULUM_REF + ".",
     approximations={"small-angle": small_angle},
-    conservative=True,
-    # 5 periods, as for `pendulum`.
-    convergence_t_end=(4.0 + CONVERGENCE_PERIODS - 1.0) * _PERIOD_SMALL,
-    description=(
-        "Simple pendulum at small amplitude, theta = pi/40, omega = 0, over 50 true periods "
-        f"(T = {_PERIOD_SMALL:.6f}); exact elliptic-function solution, and the small-angle "
-        "solution theta0 cos t + omega0 sin t as an approximation to compare against."
-    ),
-    reference=_PENDULUM_REF + ".",
-    tags=("newtonian", "nonlinear", "hamiltonian"),
 )
 
 

@@ -8,13 +8,16 @@ angular momentum of a central force to rounding (GNI IV.2).
 
 from __future__ import annotations
 
+from functools import partial
+
+import helpers
 import numpy as np
 import pandas as pd
 import pytest
-from mislabelled import PlainEulerLabelledSymplectic, relabelled
+from helpers import PlainEulerLabelledSymplectic, cells_or_reasons, relabelled
 
 from harness import tolerances as tol
-from harness.errors import InputError, UnknownNameError
+from harness.errors import UnknownNameError
 from harness.experiments import get_experiment
 from harness.experiments.energy import (
     SUMMARY_COLUMNS,
@@ -22,7 +25,6 @@ from harness.experiments.energy import (
     conserves_quadratic_invariants,
 )
 from harness.registry import get_problem, problems, steppers
-from harness.runner import run_experiment
 from harness.stepper import AdaptiveStepper
 
 EXP = get_experiment("energy")
@@ -32,22 +34,12 @@ STEPPERS = steppers.names()
 SMALL = {"steps": 2_000, "implicit_steps": 1_000, "adaptive_outputs": 40, "adaptive_periods": 4,
          "ensemble": 1}
 
-
-def run_direct(stepper_names, problem_names, **overrides):
-    """The experiment's own cells, run_cell and summarize in this process (no runner), for the
-    large registry tables: the runner's per-cell bookkeeping would dominate their time."""
-    config = EXP.config(overrides, quick=True)
-    cells, _ = EXP.cells(stepper_names, problem_names, config)
-    rows = pd.concat([EXP.run_cell(c, config) for c in cells], ignore_index=True)
-    return EXP.summarize(rows, config)
+run_direct = partial(helpers.run_direct, EXP)
 
 
 def run(stepper_names, problem_names, **overrides):
-    """Through the runner (in this process, no cache), as `harness run` does."""
-    result = run_experiment(EXP, stepper_names, problem_names, quick=True, config=overrides,
-                            jobs=1, cache=False, progress=False)
-    assert not len(result.failures), result.failures
-    return result.summary.set_index(["stepper", "problem"])
+    summary = helpers.run_through_runner(EXP, stepper_names, problem_names, **overrides)
+    return summary.set_index(["stepper", "problem"])
 
 
 # -- the classifier on envelopes of known shape ---------------------------------------------------
@@ -78,17 +70,6 @@ def test_linear_drift_slope_is_the_drift_per_unit_time():
     assert out["drift_exponent"] == pytest.approx(1.0, abs=1e-6)
 
 
-@pytest.mark.parametrize("bad, match", [
-    ({"steps": 0}, r"config `steps` must be a whole number >= 1, got 0"),
-    ({"ensemble": 1.5}, r"config `ensemble` must be a whole number >= 1"),
-    ({"fit_decades": -1.0}, r"config `fit_decades` must be a positive finite number"),
-    ({"h": -0.1}, r"config `h` must be a positive finite number \(or unset\), got -0.1"),
-    ({"perturbation": float("nan")}, r"config `perturbation` must be a positive finite number"),
-])
-def test_bad_settings_are_refused_with_the_setting_named(bad, match):
-    with pytest.raises(InputError, match=match):
-        EXP.cells(["velocity-verlet"], ["harmonic"], EXP.config(bad, quick=True))
-
 
 def test_unknown_names_are_refused():
     with pytest.raises(UnknownNameError, match=r"unknown problem 'kepler'"):
@@ -106,11 +87,7 @@ def test_summarize_of_no_rows_has_the_promised_columns():
 # -- the registry ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", STEPPERS)
 def test_every_stepper_gets_a_cell_or_a_reason_on_every_problem(name):
-    cfg = EXP.config()
-    cells, skips = EXP.cells([name], problems.names(), cfg)
-    covered = {c.problem for c in cells} | {s.problem for s in skips}
-    assert covered == set(problems.names())
-    assert all(s.reason for s in skips)
+    cells, skips = cells_or_reasons(EXP, name)
     stepper = steppers.get(name)
     for c in cells:
         assert get_problem(c.problem).invariants

@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import math
 
-import heyoka as hy
 import numpy as np
 import pytest
+from helpers import BLOWUP
 
 from harness.errors import InputError
-from harness.problem import Problem
 from harness.registry import get_problem, get_stepper
 from harness.stepper import StepFailure
 from harness.tolerances import SCIPY_MIN_RTOL
@@ -119,17 +118,6 @@ def test_members_with_their_own_parameters():
     for stepper in PEERS:
         tr = stepper.with_tolerance(1e-10).integrate(P, h=0.5, n_steps=2, y0=y0, pars=pars)
         assert np.max(np.abs(tr.final - exact)) <= 1e3 * 1e-10, stepper.info.name
-
-
-_y = hy.make_vars("y")
-BLOWUP = Problem(
-    "test-blowup",
-    variables=[_y],
-    rhs=[_y * _y],
-    y0=[1.0],
-    t_span=(0.0, 2.0),
-    reference="y' = y^2: exact solution 1/(1 - t), finite-time blow-up at t = 1",
-)
 
 
 @pytest.mark.parametrize("stepper", PEERS, ids=ids(PEERS))

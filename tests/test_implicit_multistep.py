@@ -15,6 +15,7 @@ import math
 import heyoka as hy
 import numpy as np
 import pytest
+from helpers import BLOWUP
 
 from harness.errors import IncompatibleError, InputError
 from harness.problem import Problem
@@ -54,18 +55,6 @@ def stiff_exact(t: float, y0: float) -> float:
     lam = STIFF_LAMBDA
     a, b = lam * lam / (1 + lam * lam), lam / (1 + lam * lam)
     return a * math.cos(t) + b * math.sin(t) + (y0 - a) * math.exp(-lam * t)
-
-
-# y' = y^2, y(0) = 1 blows up at t = 1: with h = 1 the stage equations of every implicit method
-# here have no real solution (backward Euler: x - x^2 = 1), so Newton cannot converge.
-BLOWUP = Problem(
-    "test-blowup",
-    variables=[_y],
-    rhs=[_y * _y],
-    y0=[1.0],
-    t_span=(0.0, 1.0),
-    reference="y' = y^2: exact solution 1/(1 - t), finite-time blow-up",
-)
 
 
 # -- registration and declared properties ---------------------------------------------------------

@@ -47,6 +47,14 @@ WITH_EXACT = [p for p in ALL if p.exact is not None]
 EXACT_AT_T0_ULPS = 8
 
 
+def test_a_missing_catalogue_module_is_an_error_not_a_smaller_catalogue(monkeypatch):
+    import problems as catalogue
+
+    monkeypatch.setattr(catalogue, "PROBLEM_MODULES", (*catalogue.PROBLEM_MODULES, "renamed_family"))
+    with pytest.raises(ModuleNotFoundError, match="problems.renamed_family"):
+        catalogue.builtin_problems()
+
+
 def test_catalogue_names_are_registered():
     assert CATALOGUE <= set(problems.names())
 

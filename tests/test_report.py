@@ -15,13 +15,12 @@ import json
 import math
 import re
 import urllib.parse
-from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
 import pytest
+from helpers import loaded_plugin
 
-from harness import registry
 from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.roundoff import RoundoffExperiment, step_sizes
@@ -48,19 +47,10 @@ STEPPERS = [ExplicitRungeKutta(
 '''
 
 
-@contextlib.contextmanager
-def hostile_plugin(directory: Path) -> Iterator[Path]:
+def hostile_plugin(directory: Path) -> contextlib.AbstractContextManager[Path]:
     """The hostile plugin file, loaded; unregistered again afterwards so later tests see the
     registry unchanged."""
-    path = directory / "hostile_plugin.py"
-    path.write_text(HOSTILE_PLUGIN)
-    names = registry.load_plugin(path)
-    try:
-        yield path
-    finally:
-        for n in names:
-            registry.steppers.unregister(n)
-        registry._plugins.pop(str(path.resolve()), None)
+    return loaded_plugin(directory / "hostile_plugin.py", HOSTILE_PLUGIN)
 
 
 def build_quick_report(shared: Path, own: Path, plugin: Path) -> Path:

@@ -12,10 +12,10 @@ from __future__ import annotations
 import contextlib
 import html
 import re
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from helpers import loaded_plugin
 
 from harness import registry
 from harness.report import build_report
@@ -36,17 +36,10 @@ STEPPERS = [ExplicitRungeKutta(
 PERTURBATION = 0.02
 
 
-@contextlib.contextmanager
-def plugin(directory: Path, a32: float, note: str) -> Iterator[Path]:
+def plugin(directory: Path, a32: float, note: str) -> contextlib.AbstractContextManager[Path]:
+    """The RK4 plugin with coefficient a32, loaded for one block (unregistered afterwards)."""
     path = directory / f"rk4_plugin_{'good' if a32 == 0.5 else 'bad'}.py"
-    path.write_text(PLUGIN.format(name=NAME, a32=a32, note=note))
-    names = registry.load_plugin(path)
-    try:
-        yield path
-    finally:
-        for n in names:
-            registry.steppers.unregister(n)
-        registry._plugins.pop(str(path.resolve()), None)
+    return loaded_plugin(path, PLUGIN.format(name=NAME, a32=a32, note=note))
 
 
 @pytest.fixture(scope="module")

@@ -7,41 +7,29 @@ a non-symmetric one misses by ~h^p T (Hairer, Lubich & Wanner, GNI II.3 and V.1)
 
 from __future__ import annotations
 
+from functools import partial
+
+import helpers
 import numpy as np
 import pandas as pd
 import pytest
-from mislabelled import relabelled
+from helpers import cells_or_reasons, relabelled
 
 from harness import tolerances as tol
 from harness.cli import main
-from harness.errors import InputError
 from harness.experiments import get_experiment
 from harness.experiments.common import long_run_steps
 from harness.experiments.reversibility import SUMMARY_COLUMNS, flow_amplification, rounding_bound_ulps
-from harness.registry import get_problem, problems, steppers
-from harness.runner import run_experiment
+from harness.registry import get_problem, steppers
 from harness.stepper import AdaptiveStepper
 
 EXP = get_experiment("reversibility")
 STEPPERS = steppers.names()
 PROBLEMS = ["harmonic", "kepler-elliptic"]
 
+run_direct = partial(helpers.run_direct, EXP)
 
-def run_direct(stepper_names, problem_names, **overrides):
-    """The experiment's own cells, run_cell and summarize in this process (no runner), for the
-    large registry tables: the runner's per-cell bookkeeping would dominate their time."""
-    config = EXP.config(overrides, quick=True)
-    cells, _ = EXP.cells(stepper_names, problem_names, config)
-    rows = pd.concat([EXP.run_cell(c, config) for c in cells], ignore_index=True)
-    return EXP.summarize(rows, config)
-
-
-def run(stepper_names, problem_names, **overrides):
-    """Through the runner (in this process, no cache), as `harness run` does."""
-    result = run_experiment(EXP, stepper_names, problem_names, quick=True, config=overrides,
-                            jobs=1, cache=False, progress=False)
-    assert not len(result.failures), result.failures
-    return result.summary
+run = partial(helpers.run_through_runner, EXP)
 
 
 @pytest.fixture(scope="module")
@@ -54,10 +42,7 @@ def registry_table():
 @pytest.mark.parametrize("name", STEPPERS)
 def test_every_stepper_gets_cells_or_a_reason_on_every_problem(name):
     cfg = EXP.config()
-    cells, skips = EXP.cells([name], problems.names(), cfg)
-    covered = {c.problem for c in cells} | {s.problem for s in skips}
-    assert covered == set(problems.names())
-    assert all(s.reason for s in skips)
+    cells, _ = cells_or_reasons(EXP, name, cfg)
     stepper = steppers.get(name)
     expected = (cfg["adaptive_steps"] if isinstance(stepper, AdaptiveStepper)
                 else cfg["steps"] if stepper.info.explicit else cfg["implicit_steps"])
@@ -130,16 +115,6 @@ def test_velocity_verlet_labelled_not_symmetric_fails(registered):
 
 
 # -- settings and the command line ----------------------------------------------------------------
-@pytest.mark.parametrize("bad, match", [
-    ({"steps": []}, r"config `steps` must be a non-empty list of whole numbers >= 1"),
-    ({"steps": [100, -1]}, r"config `steps` must be a non-empty list"),
-    ({"adaptive_tol": 0.0}, r"config `adaptive_tol` must be a positive finite number"),
-    ({"ensemble": 0}, r"config `ensemble` must be a whole number >= 1, got 0"),
-])
-def test_bad_settings_are_refused_with_the_setting_named(bad, match):
-    with pytest.raises(InputError, match=match):
-        EXP.cells(["leapfrog"], ["harmonic"], EXP.config(bad, quick=True))
-
 
 def test_cli_json_records(capsys):
     code = main(["run", "reversibility", "--quick", "--stepper", "leapfrog", "--stepper", "rk4",

@@ -19,7 +19,7 @@ from harness.problem import NewtonianForm, Problem
 from harness.registry import get_problem, get_stepper, steppers
 from harness.stepper import StepFailure
 from harness.tolerances import EPS, ROUNDOFF_MARGIN
-from implementations import runge_kutta, splitting, taylor, verlet
+from implementations import ProblemCache, runge_kutta, splitting, taylor, verlet
 
 MODULES = (runge_kutta, splitting, verlet, taylor)
 FAMILY_MODULES = {m.__name__ for m in MODULES}
@@ -30,6 +30,21 @@ NEWTONIAN = [s for s in OWN if s.info.form == "newtonian"]
 
 def ids(items):
     return [s.info.name for s in items]
+
+
+@pytest.mark.parametrize("listing, modules", [
+    ("builtin_steppers", "FAMILY_MODULES"),
+    ("unavailable_steppers", "FAMILY_MODULES"),
+    ("unavailable_steppers", "OPTIONAL_MODULES"),
+])
+def test_a_missing_family_module_is_an_error_not_a_smaller_registry(monkeypatch, listing, modules):
+    """Only an optional adapter's library may be absent (then it is listed as unavailable, with
+    its install command); a deleted or renamed module is an error wherever it is listed."""
+    import implementations
+
+    monkeypatch.setattr(implementations, modules, (*getattr(implementations, modules), "renamed_family"))
+    with pytest.raises(ModuleNotFoundError, match="implementations.renamed_family"):
+        getattr(implementations, listing)()
 
 
 def counted(stepper, evals):
@@ -62,14 +77,42 @@ def test_every_family_stepper_is_registered():
 
 @pytest.mark.parametrize("stepper", OWN, ids=ids(OWN))
 def test_declared_properties_are_complete(stepper):
+    """What StepperInfo cannot check alone: a family, a description, a positive cost, and an
+    order claimed exactly when the steps are fixed (its form, reference and the order's range
+    are refused by the constructor)."""
     info = stepper.info
-    assert info.family and info.reference and info.description
-    assert info.form in ("first-order", "newtonian")
+    assert info.family and info.description
     assert info.evals_per_step > 0
-    if info.adaptive:
-        assert info.claimed_order is None
-    else:
-        assert isinstance(info.claimed_order, int) and info.claimed_order >= 1
+    assert (info.claimed_order is None) == info.adaptive
+
+
+@pytest.mark.parametrize("bad, pattern", [
+    ({"form": "hamiltonian"}, r"`form` must be one of"),
+    ({"claimed_order": 0}, r"`claimed_order` must be a positive integer or None, got 0"),
+    ({"claimed_order": 2.0}, r"`claimed_order` must be a positive integer or None, got 2.0"),
+    ({"reference": ""}, r"`reference` \(literature source\) is required"),
+])
+def test_declared_properties_the_constructor_refuses(bad, pattern):
+    """The checks test_declared_properties_are_complete leaves to StepperInfo."""
+    import dataclasses
+
+    with pytest.raises(InputError, match=pattern):
+        dataclasses.replace(get_stepper("rk4").info, **bad)
+
+
+@pytest.mark.parametrize("name, problem", [("taylor", "harmonic"), ("verlet-damped", "damped-cubic")])
+def test_a_pickled_stepper_leaves_its_per_problem_cache_behind_and_rebuilds_it(name, problem):
+    """What a stepper builds per problem (heyoka integrators, velocity structures) is not sent to
+    a worker process: the copy arrives with an empty cache and computes the same steps."""
+    import pickle
+
+    stepper, P = get_stepper(name), get_problem(problem)
+    here = stepper.integrate(P, h=0.1, n_steps=5)
+    copy = pickle.loads(pickle.dumps(stepper))
+    cache = next(v for v in vars(copy).values() if isinstance(v, ProblemCache))
+    assert len(cache) == 0
+    np.testing.assert_array_equal(copy.integrate(P, h=0.1, n_steps=5).final, here.final)
+    assert len(cache) == 1
 
 
 # -- evaluation counts ----------------------------------------------------------------------------

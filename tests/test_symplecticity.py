@@ -10,15 +10,16 @@ Wanner, GNI VI.3-VI.4.
 from __future__ import annotations
 
 import json
+from functools import partial
 
+import helpers
 import numpy as np
 import pandas as pd
 import pytest
-from mislabelled import PlainEulerLabelledSymplectic, relabelled
+from helpers import PlainEulerLabelledSymplectic, cells_or_reasons, relabelled
 
 from harness import tolerances as tol
 from harness.cli import main
-from harness.errors import InputError
 from harness.experiments import get_experiment
 from harness.experiments.symplecticity import (
     SUMMARY_COLUMNS,
@@ -26,28 +27,15 @@ from harness.experiments.symplecticity import (
     one_step_jacobians,
     symplectic_deviation,
 )
-from harness.registry import get_problem, problems, steppers
-from harness.runner import run_experiment
+from harness.registry import get_problem, steppers
 
 EXP = get_experiment("symplecticity")
 STEPPERS = steppers.names()
 PROBLEMS = ["harmonic", "kepler-elliptic"]
 
+run_direct = partial(helpers.run_direct, EXP)
 
-def run_direct(stepper_names, problem_names, **overrides):
-    """The experiment's own cells, run_cell and summarize in this process (no runner)."""
-    config = EXP.config(overrides, quick=True)
-    cells, _ = EXP.cells(stepper_names, problem_names, config)
-    rows = pd.concat([EXP.run_cell(c, config) for c in cells], ignore_index=True)
-    return EXP.summarize(rows, config)
-
-
-def run(stepper_names, problem_names, **overrides):
-    """Through the runner (in this process, no cache), as `harness run` does."""
-    result = run_experiment(EXP, stepper_names, problem_names, quick=True, config=overrides,
-                            jobs=1, cache=False, progress=False)
-    assert not len(result.failures), result.failures
-    return result.summary
+run = partial(helpers.run_through_runner, EXP)
 
 
 # -- the machinery on maps with a known Jacobian ---------------------------------------------------
@@ -78,11 +66,7 @@ def test_finite_difference_jacobian_of_a_linear_map_is_exact_to_rounding(registe
 # -- the registry ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", STEPPERS)
 def test_every_stepper_gets_a_cell_or_a_reason_on_every_problem(name):
-    cfg = EXP.config()
-    cells, skips = EXP.cells([name], problems.names(), cfg)
-    covered = {c.problem for c in cells} | {s.problem for s in skips}
-    assert covered == set(problems.names())
-    assert all(s.reason for s in skips)
+    cells, skips = cells_or_reasons(EXP, name)
     stepper = steppers.get(name)
     if stepper.history_length > 1 and stepper.info.family != "stormer":
         assert not cells
@@ -147,15 +131,6 @@ def test_velocity_verlet_labelled_not_symplectic_fails(registered):
 
 
 # -- settings and the command line ----------------------------------------------------------------
-@pytest.mark.parametrize("bad, match", [
-    ({"states": 0}, r"config `states` must be a whole number >= 1, got 0"),
-    ({"adaptive_tol": -1e-6}, r"config `adaptive_tol` must be a positive finite number"),
-    ({"h": 0.0}, r"config `h` must be a positive finite number \(or unset\)"),
-])
-def test_bad_settings_are_refused_with_the_setting_named(bad, match):
-    with pytest.raises(InputError, match=match):
-        EXP.cells(["leapfrog"], ["harmonic"], EXP.config(bad, quick=True))
-
 
 def test_cli_json_records(capsys):
     code = main(["run", "symplecticity", "--quick", "--stepper", "leapfrog", "--stepper", "rk4",

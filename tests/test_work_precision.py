@@ -8,17 +8,17 @@ in its asymptotic range (Hairer, Norsett & Wanner, Solving ODEs I, II.10).
 from __future__ import annotations
 
 import json
+from functools import partial
 
+import helpers
 import numpy as np
 import pandas as pd
 import pytest
 
 from harness.cli import main
-from harness.errors import InputError
 from harness.experiments import convergence, get_experiment
 from harness.experiments.work_precision import COLUMNS, pareto_front
 from harness.registry import problems, steppers
-from harness.runner import run_experiment
 from harness.stepper import AdaptiveStepper
 
 EXP = get_experiment("work-precision")
@@ -26,12 +26,7 @@ STEPPERS = steppers.names()
 ADAPTIVE = [s for s in STEPPERS if isinstance(steppers.get(s), AdaptiveStepper)]
 FIXED = [s for s in ("euler", "rk4", "velocity-verlet", "implicit-midpoint") if s in steppers]
 
-
-def run(stepper_names, problem_names, **overrides):
-    result = run_experiment(EXP, stepper_names, problem_names, quick=True, config=overrides,
-                            jobs=1, cache=False, progress=False)
-    assert not len(result.failures), result.failures
-    return result.summary
+run = partial(helpers.run_through_runner, EXP)
 
 
 @pytest.fixture(scope="module")
@@ -136,25 +131,12 @@ def test_points_are_those_of_the_convergence_sweep():
 # -- the registry, settings and the command line ----------------------------------------------------
 @pytest.mark.parametrize("name", STEPPERS)
 def test_every_stepper_gets_a_cell_or_a_reason_on_every_problem(name):
-    cfg = EXP.config()
-    cells, skips = EXP.cells([name], problems.names(), cfg)
-    covered = {c.problem for c in cells} | {s.problem for s in skips}
-    assert covered == set(problems.names())
-    assert all(s.reason for s in skips)
+    _, skips = helpers.cells_or_reasons(EXP, name)
     stepper = steppers.get(name)
     # Every problem applies: a pair is skipped only when the stepper cannot run the problem.
     for s in skips:
         assert not stepper.compatible(problems.get(s.problem)), s
 
-
-@pytest.mark.parametrize("bad, match", [
-    ({"tolerances": []}, r"config `tolerances` must be a non-empty list of numbers in \(0, 1\)"),
-    ({"tolerances": [1e-3, 2.0]}, r"config `tolerances` must be"),
-    ({"work_budget": 0}, r"config `work_budget` must be a whole number >= 1, got 0"),
-])
-def test_bad_settings_are_refused_with_the_setting_named(bad, match):
-    with pytest.raises(InputError, match=match):
-        EXP.cells(["rk4"], ["harmonic"], EXP.config(bad, quick=True))
 
 
 def test_cli_json_records(capsys):

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from helpers import loaded_plugin
 
-from harness import registry
 from harness.experiments.base import EXPERIMENTS, Cell, Experiment, Skip
 
 TOY_PLUGIN = '''"""Toy steppers and problems for the harness's own tests: explicit Euler under several names
@@ -118,15 +118,9 @@ class ToyExperiment(Experiment):
 def toy_registry(directory: Path):
     """The toy plugin loaded from `directory` and the toy experiment registered; both removed
     again afterwards so later tests see the registry unchanged."""
-    path = Path(directory) / "toy_plugin.py"
-    path.write_text(TOY_PLUGIN)
-    names = registry.load_plugin(path)
-    EXPERIMENTS["toy"] = ToyExperiment()
-    try:
-        yield path
-    finally:
-        for n in names:
-            registry.steppers.unregister(n)
-            registry.problems.unregister(n)
-        registry._plugins.pop(str(path.resolve()), None)
-        EXPERIMENTS.pop("toy", None)
+    with loaded_plugin(Path(directory) / "toy_plugin.py", TOY_PLUGIN) as path:
+        EXPERIMENTS["toy"] = ToyExperiment()
+        try:
+            yield path
+        finally:
+            EXPERIMENTS.pop("toy", None)
