@@ -11,7 +11,7 @@ Layout (one job per module; everything public is re-exported here):
     harness/runner/executors.py   many cells: serial, loky workers, Dask
     harness/runner/result.py      RunResult and its tables' columns
     harness/keys.py               cache keys from the import graph
-    harness/store.py              the only reader and writer of cell and result files
+    harness/store/                the only reader and writer of cell and result files
 
 `run_experiment(name, steppers, problems, ...)` lists an experiment's cells, reuses every cell
 already in the cache, runs the others, and returns a `RunResult` (rows, summary, failures, skips,
