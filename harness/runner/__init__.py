@@ -7,7 +7,7 @@ Layout (one job per module; everything public is re-exported here):
     harness/runner/limits.py      a cell's time limit (SIGALRM, or an abandoned helper thread)
     harness/runner/validation.py  checking a cell's rows (validate_rows)
     harness/runner/memory.py      the memory guard (estimate_bytes, check_memory)
-    harness/runner/workers.py     one cell wherever it runs (_execute), claim files, orphan watch
+    harness/runner/workers.py     one cell wherever it runs (execute), claim files, orphan watch
     harness/runner/executors.py   many cells: serial, loky workers, Dask
     harness/runner/result.py      RunResult and its tables' columns
     harness/keys.py               cache keys from the import graph
@@ -33,7 +33,7 @@ Where cells run.
   reused across runs). Results come back in any order; rows are put in the order of the
   experiment's cell list, so the result equals a serial run.
 - `scheduler='tcp://HOST:PORT'` (or a `distributed.Client`): the same cells as Dask tasks
-  (`client.submit` of `_execute`, gathered with `as_completed`). Workers need the same
+  (`client.submit` of `execute`, gathered with `as_completed`). Workers need the same
   environment as this process (`pip install -r requirements.txt` and this project, e.g.
   `pip install -e .`); plugin files are shipped with each task and written to the worker's temp
   directory when the worker cannot see the path. The cache stays with this process.
@@ -108,41 +108,41 @@ from harness.keys import MEASURING_MODULES, cell_key, code_version, experiment_f
 from harness.progress import Progress
 from harness.runner.checks import (  # noqa: F401  (re-exported)
     MAX_JOBS_PER_CORE,
-    _check_jobs,
-    _check_names,
-    _check_plugins,
-    _check_scheduler,
-    _progress,
-    _resolve_config,
-    _resolve_experiment,
+    check_jobs,
+    check_names,
+    check_plugins,
+    check_scheduler,
     default_jobs,
+    progress_display,
+    resolve_config,
+    resolve_experiment,
 )
 from harness.runner.executors import (  # noqa: F401  (re-exported)
     DASK_CONNECT_TIMEOUT_S,
     LOKY_IDLE_TIMEOUT_S,
     MAX_CRASH_ROUNDS,
-    _crash_outcome,
-    _dask_client,
-    _loky_batch,
-    _run_dask,
-    _run_loky,
-    _run_serial,
-    _Task,
+    Task,
+    crash_outcome,
+    dask_client,
+    loky_batch,
+    run_dask,
+    run_loky,
+    run_serial,
 )
 from harness.runner.limits import (  # noqa: F401  (re-exported)
     HARD_TIMEOUT_GRACE_S,
     MAX_CELL_TIMEOUT_S,
     CellTimeout,
-    _call_limited,
-    _check_timeout,
+    call_limited,
+    check_timeout,
     time_limit,
 )
 from harness.runner.memory import (  # noqa: F401  (re-exported)
     WORK_ARRAYS,
-    _guard_memory,
     available_memory,
     check_memory,
     estimate_bytes,
+    guard_memory,
 )
 from harness.runner.result import (  # noqa: F401  (re-exported)
     CELL_COLUMNS,
@@ -151,20 +151,24 @@ from harness.runner.result import (  # noqa: F401  (re-exported)
     SKIP_COLUMNS,
     RunResult,
 )
-from harness.runner.validation import _SCALARS, CellOutputError, validate_rows  # noqa: F401
+from harness.runner.validation import SCALARS, CellOutputError, validate_rows  # noqa: F401
 from harness.runner.workers import (  # noqa: F401  (re-exported)
     ORPHAN_CHECK_S,
     STALE_CLAIMS_S,
-    _clean_stale_claims,
-    _execute,
-    _one_line,
-    _plugin_spec,
-    _short_traceback,
+    clean_stale_claims,
+    execute,
+    one_line,
+    plugin_spec,
+    short_traceback,
 )
 from harness.store import (
     CellCache,
     encode_cell,
 )
+
+# the names harness/report/build.py imports (its owner moves it to the public names)
+_check_names = check_names
+_check_plugins = check_plugins
 
 __all__ = [
     "RunResult",
@@ -234,7 +238,7 @@ def _with_ids(rows: pd.DataFrame, cell: Cell) -> pd.DataFrame:
     front = {"experiment": cell.experiment, "cell": cell.label, "stepper": cell.stepper,
              "problem": cell.problem}
     for k, v in cell.params:
-        if isinstance(k, str) and k and isinstance(v, _SCALARS):
+        if isinstance(k, str) and k and isinstance(v, SCALARS):
             front.setdefault(k, v.item() if isinstance(v, np.generic) else v)
     add = {k: v for k, v in front.items() if k not in rows.columns}
     if not add:
@@ -314,11 +318,11 @@ def run_experiment(
         quick, jobs, scheduler, fresh = options.quick, options.jobs, options.scheduler, options.fresh
         cache, cache_dir, plugins = options.cache, options.cache_dir, options.plugins
         cell_timeout = options.cell_timeout
-    exp = _resolve_experiment(experiment)
-    jobs_n = _check_jobs(jobs)
-    timeout = _check_timeout(cell_timeout)
-    sched = _check_scheduler(scheduler)
-    plugin_paths = _check_plugins(plugins)
+    exp = resolve_experiment(experiment)
+    jobs_n = check_jobs(jobs)
+    timeout = check_timeout(cell_timeout)
+    sched = check_scheduler(scheduler)
+    plugin_paths = check_plugins(plugins)
     for name, flag in (("quick", quick), ("fresh", fresh), ("cache", cache)):
         if not isinstance(flag, bool | np.bool_):
             raise InputError(f"`{name}` must be True or False, got {flag!r}")
@@ -327,10 +331,10 @@ def run_experiment(
 
     for p in plugin_paths:
         load_plugin(p)
-    plugin_specs = [_plugin_spec(p) for p in plugin_paths]
-    stepper_names = _check_names("steppers", steppers)
-    problem_names = _check_names("problems", problems)
-    cfg = _resolve_config(exp, config, quick)
+    plugin_specs = [plugin_spec(p) for p in plugin_paths]
+    stepper_names = check_names("steppers", steppers)
+    problem_names = check_names("problems", problems)
+    cfg = resolve_config(exp, config, quick)
 
     try:
         listed = exp.cells(stepper_names, problem_names, cfg)
@@ -341,7 +345,7 @@ def run_experiment(
     except Exception as exc:
         raise ExperimentError(
             f"experiment {exp.name!r} could not list its cells: "
-            f"{type(exc).__name__}: {_one_line(str(exc), 300)}"
+            f"{type(exc).__name__}: {one_line(str(exc), 300)}"
         ) from None
     bad = [c for c in cells if not isinstance(c, Cell)] + [s for s in skips if not isinstance(s, Skip)]
     if bad:
@@ -350,22 +354,22 @@ def run_experiment(
     if not cells and not allow_empty:
         raise no_cells_error([exp.name], skips, stepper_names, problem_names)
     if sched is None and _client is None:
-        _guard_memory(exp, cells, cfg, jobs_n)
+        guard_memory(exp, cells, cfg, jobs_n)
     own_client = None
     if sched is not None and _client is None:
         # connect before looking at the cache: a bad address is an error even when every cell
         # is cached
-        _client, own_client = _dask_client(sched)
+        _client, own_client = dask_client(sched)
 
     exp_version = experiment_fingerprint(exp)
     versions: dict[tuple[str, str], Any] = {}
     failures: dict[int, dict] = {}
     records: dict[int, dict] = {}
     frames: dict[int, pd.DataFrame] = {}
-    tasks: list[_Task] = []
+    tasks: list[Task] = []
     seen: dict[str, int] = {}
     cached = 0
-    bar, own_bar = _progress(progress, exp.name)
+    bar, own_bar = progress_display(progress, exp.name)
     if not _counted:
         bar.add_total(len(cells))
         if not own_bar:
@@ -393,7 +397,7 @@ def run_experiment(
                     versions[pair] = exc
             v = versions[pair]
             if isinstance(v, Exception):
-                fail(i, cell, "", "lookup", _one_line(f"{type(v).__name__}: {v}"))
+                fail(i, cell, "", "lookup", one_line(f"{type(v).__name__}: {v}"))
                 bar.update(1, failed=1)
                 continue
             key = cell_key(cell, cfg, exp_version, v)
@@ -412,11 +416,11 @@ def run_experiment(
                 continue
             payload = {"key": key, "cell": cell, "config": cfg, "experiment": exp,
                        "plugins": plugin_specs, "timeout": timeout, "sp_version": v}
-            tasks.append(_Task(i, cell, key, payload))
+            tasks.append(Task(i, cell, key, payload))
         if cached:
             bar.update(cached, cached=cached)
 
-        def accept(t: _Task, out: dict) -> None:
+        def accept(t: Task, out: dict) -> None:
             if out["ok"]:
                 try:
                     rows = _with_ids(out["rows"], t.cell)
@@ -440,11 +444,11 @@ def run_experiment(
 
         if tasks:
             if _client is not None:
-                _run_dask(tasks, _client, accept)
+                run_dask(tasks, _client, accept)
             elif jobs_n == 1:
-                _run_serial(tasks, accept)
+                run_serial(tasks, accept)
             else:
-                _run_loky(tasks, jobs_n, accept)
+                run_loky(tasks, jobs_n, accept)
     finally:
         if own_client:
             _client.close()
@@ -468,8 +472,8 @@ def run_experiment(
             summary = summary.reset_index(drop=True)
         except Exception as exc:
             summary = pd.DataFrame()
-            rec = failed_record(Cell(exp.name, "", ""), _one_line(f"{type(exc).__name__}: {exc}"),
-                                kind="summarize", traceback=_short_traceback(exc))
+            rec = failed_record(Cell(exp.name, "", ""), one_line(f"{type(exc).__name__}: {exc}"),
+                                kind="summarize", traceback=short_traceback(exc))
             rec["cell"] = f"{exp.name}:summarize"
             failures[len(cells)] = rec
     fail_df = pd.DataFrame([failures[i] for i in sorted(failures)], columns=FAILURE_COLUMNS)
@@ -520,27 +524,27 @@ def run_experiments(
         experiments = list(EXPERIMENTS)
     if isinstance(experiments, str | Experiment):
         experiments = [experiments]
-    exps = [_resolve_experiment(e) for e in experiments]
+    exps = [resolve_experiment(e) for e in experiments]
     if configs is not None and not isinstance(configs, Mapping):
         raise InputError(f"`configs` must map experiment names to settings, got {type(configs).__name__}")
     unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
     if unknown:
         raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
-    sched = _check_scheduler(scheduler)
+    sched = check_scheduler(scheduler)
     from harness.registry import load_plugin
 
-    plugin_paths = _check_plugins(plugins)
+    plugin_paths = check_plugins(plugins)
     for p in plugin_paths:
         load_plugin(p)
     options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
                          cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
-    stepper_names = _check_names("steppers", steppers)
-    problem_names = _check_names("problems", problems)
-    bar, own_bar = _progress(progress, "cells")
+    stepper_names = check_names("steppers", steppers)
+    problem_names = check_names("problems", problems)
+    bar, own_bar = progress_display(progress, "cells")
     sizes = []
     for exp in exps:  # the whole run's size first, so the display's total does not grow
         try:
-            cfg = _resolve_config(exp, (configs or {}).get(exp.name), quick)
+            cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
             sizes.append(len(list(exp.cells(stepper_names, problem_names, cfg)[0])))
         except Exception:  # run_experiment reports it properly below
             sizes = None
@@ -553,7 +557,7 @@ def run_experiments(
     out: dict[str, RunResult] = {}
     try:
         if sched is not None:
-            client, own_client = _dask_client(sched)
+            client, own_client = dask_client(sched)
         for i, exp in enumerate(exps, 1):
             bar.set_description(f"[{i}/{len(exps)}] {exp.name}")
             out[exp.name] = run_experiment(

@@ -81,7 +81,7 @@ def _cell_estimate(experiment: Experiment, cell: Cell, config: Mapping[str, Any]
     return estimate_bytes(dim=dim, ensemble=int(size)), "ensemble"
 
 
-def _guard_memory(experiment: Experiment, cells: Sequence[Cell], config: Mapping[str, Any],
+def guard_memory(experiment: Experiment, cells: Sequence[Cell], config: Mapping[str, Any],
                   jobs: int) -> None:
     estimates = []
     for cell in cells:
