@@ -148,3 +148,13 @@ def test_a_judging_threshold_changes_verdicts_without_recomputing(key_toy, tmp_p
     assert run().computed_cells == 3
     path.write_text(path.read_text().replace('"good" if', '"fine" if'))
     assert run().computed_cells == 0
+
+
+@pytest.mark.parametrize("module", ["harness.stepper.records", "harness.problem.dynamics"])
+def test_a_measuring_package_counts_with_its_submodules(module, monkeypatch):
+    """`harness.stepper` and `harness.problem` are packages: every cell steps through their
+    submodules, so editing one recomputes every experiment's cells."""
+    before = _fingerprints()
+    _edited(monkeypatch, module, lambda text: text + "\n\ndef _helper_added_in_a_test():\n    return 1\n")
+    after = _fingerprints()
+    assert all(before[n] != after[n] for n in EXPERIMENTS)
