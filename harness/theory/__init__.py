@@ -26,13 +26,10 @@ Order
 
 Linear stability
 ----------------
-- Runge-Kutta: R(z) = 1 + z b^T (I - zA)^{-1} e (`rk_stability_function`).
-- Linear multistep: the largest root modulus of rho(zeta) - z sigma(zeta) (the root condition,
-  `lmm_amplification`). Hairer & Wanner, *Solving ODEs II*, V.1.
-- Newtonian methods on x'' = -omega^2 x: the one-step propagator as a function of h*omega
-  (`splitting_propagator`, `second_order_lmm_amplification`).
-- Intervals (`real_stability_interval`, `imag_stability_interval`, `stability_boundary`): the
-  first crossing of |R| = 1 on a scan, refined by root finding (never read off a grid).
+The amplification of each family on the linear test equation (`amplification`: R(z) for
+Runge-Kutta, the root condition for multistep methods, the one-step propagator on
+x'' = -omega^2 x for Newtonian methods; Hairer & Wanner, *Solving ODEs II*, V.1), and where its
+stable intervals end (`amplification` by a refined scan, `intervals` on polynomials).
 """
 
 from __future__ import annotations
