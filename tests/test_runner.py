@@ -110,7 +110,7 @@ def test_changed_configuration_or_experiment_code_recomputes(run, monkeypatch):
     run()
     scaled = run(config={"scale": 2.0})
     assert scaled.computed_cells == 9
-    monkeypatch.setattr(runner, "experiment_fingerprint", lambda exp: "other experiment code")
+    monkeypatch.setattr(runner.orchestration, "experiment_fingerprint", lambda exp: "other experiment code")
     assert run().computed_cells == 9
 
 

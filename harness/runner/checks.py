@@ -30,6 +30,7 @@ def default_jobs() -> int:
 
 
 def check_jobs(jobs: Any) -> int:
+    """`jobs` as a worker count (None: `default_jobs()`), or `InputError` naming `jobs`."""
     if jobs is None:
         return default_jobs()
     if isinstance(jobs, bool) or not isinstance(jobs, int | np.integer):
@@ -44,6 +45,7 @@ _SCHEDULER = re.compile(r"^(tcp|tls|ucx|ws|wss|inproc)://[^\s/]+$")
 
 
 def check_scheduler(value: Any) -> Any:
+    """`value` as a Dask scheduler address or client (None: run locally), or `InputError`."""
     if value is None:
         return None
     try:
@@ -60,6 +62,9 @@ def check_scheduler(value: Any) -> Any:
 
 
 def check_names(kind: str, names: Any) -> list[str]:
+    """The requested names of `kind` ('steppers' or 'problems'; None: every registered one),
+    each checked against the registry (`UnknownNameError` with the closest names), duplicates
+    dropped."""
     from harness import registry
 
     reg = registry.steppers if kind == "steppers" else registry.problems
@@ -79,6 +84,7 @@ def check_names(kind: str, names: Any) -> list[str]:
 
 
 def check_plugins(plugins: Any) -> list[str]:
+    """`plugins` (None, a path or a sequence of paths) as a list of path strings."""
     if plugins is None:
         return []
     if isinstance(plugins, str | os.PathLike):
@@ -94,6 +100,7 @@ def check_plugins(plugins: Any) -> list[str]:
 
 
 def resolve_experiment(experiment: Any) -> Experiment:
+    """The experiment object for `experiment` (an `Experiment` or a registered name)."""
     from harness.experiments.base import get_experiment
 
     if isinstance(experiment, Experiment):
@@ -104,6 +111,9 @@ def resolve_experiment(experiment: Any) -> Experiment:
 
 
 def resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
+    """The experiment's configuration: its defaults (quick ones when `quick`), updated with the
+    known settings of `config` (`InputError` for an unknown one).
+    """
     if config is not None and not isinstance(config, Mapping):
         raise InputError(f"`config` must be a mapping of settings, got {type(config).__name__}")
     if config and exp.default_config:

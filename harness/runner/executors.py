@@ -34,6 +34,9 @@ MAX_CRASH_ROUNDS = 3
 
 @dataclass
 class Task:
+    """One cell to execute: its index in the cell list, the cell, its key and the payload a worker
+    receives.
+    """
     index: int
     cell: Cell
     key: str
@@ -42,11 +45,13 @@ class Task:
 
 
 def crash_outcome(task: Task, message: str, kind: str = "crash") -> dict:
+    """The outcome of a task whose worker died (or, with `kind`, another failure outside the cell)."""
     return {"key": task.key, "ok": False, "kind": kind, "message": one_line(message),
             "traceback": "", "rows": None, "wall_s": 0.0, "worker": ""}
 
 
 def run_serial(tasks: Sequence[Task], accept: Callable[[Task, dict], None]) -> None:
+    """Execute `tasks` one after another in this process, handing each outcome to `accept`."""
     for t in tasks:
         accept(t, execute(t.payload))
 
@@ -92,6 +97,9 @@ def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | N
 
 
 def run_loky(tasks: Sequence[Task], jobs: int, accept) -> None:
+    """Execute `tasks` on `jobs` local loky workers, handing each outcome to `accept` as it
+    arrives; a crashed worker's cells are identified by their claim files (package docstring).
+    """
     clean_stale_claims()
     claim_dir = tempfile.mkdtemp(prefix="harness-claims-")
     try:
@@ -135,6 +143,7 @@ def run_loky(tasks: Sequence[Task], jobs: int, accept) -> None:
 
 
 def dask_client(scheduler: Any) -> tuple[Any, bool]:
+    """(client, owned) for `scheduler` (an address or a client); `owned` says this call made it."""
     from distributed import Client
 
     if isinstance(scheduler, Client):
@@ -161,6 +170,7 @@ def dask_client(scheduler: Any) -> tuple[Any, bool]:
 
 
 def run_dask(tasks: Sequence[Task], client: Any, accept) -> None:
+    """Execute `tasks` as Dask tasks on `client`, handing each outcome to `accept` as it completes."""
     import uuid
 
     from distributed import as_completed

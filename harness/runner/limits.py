@@ -87,6 +87,7 @@ def call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
 
 
 def check_timeout(value: Any) -> float | None:
+    """`value` as a cell time limit in seconds (None: no limit), or `InputError` naming it."""
     if value is None:
         return None
     if isinstance(value, bool):

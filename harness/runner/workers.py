@@ -40,17 +40,20 @@ STALE_CLAIMS_S = 24 * 3600.0
 
 
 def short_traceback(exc: BaseException, frames: int = 6) -> str:
+    """The last `frames` frames of `exc`'s traceback as text, at most 4000 characters."""
     te = traceback.TracebackException.from_exception(exc, limit=-frames)
     text = "".join(te.format()).strip()
     return text if len(text) <= 4000 else "..." + text[-3997:]
 
 
 def one_line(text: str, limit: int = 500) -> str:
+    """`text` on one line, whitespace collapsed, cut to `limit` characters."""
     line = " ".join(str(text).split())
     return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
 def plugin_spec(path: str | os.PathLike) -> dict:
+    """A plugin file as data a worker can rebuild it from: path, name, sha256 and source bytes."""
     p = Path(path).resolve()
     data = p.read_bytes()
     return {"path": str(p), "name": p.name, "sha256": hashlib.sha256(data).hexdigest(), "source": data}
