@@ -19,10 +19,6 @@ ALLOWED_OVERSIZE = {
     "harness/report/figures.py": "owned by the report helper, being split on its branch",
     "harness/experiments/convergence.py": "owned by the precision helper, being split on its branch",
     "harness/report/sections.py": "owned by the report helper, being split on its branch",
-    # not yet split by house-core (issue 11): seams named for whoever continues
-    "harness/experiments/stability.py": "to split: measurement / theory comparison / verdicts",
-    "harness/runner/__init__.py": "to split: run_experiment's orchestration out of the package's re-exports",
-    "harness/cli.py": "to split: parser and main / output helpers / one module of commands",
 }
 
 
