@@ -165,17 +165,7 @@ def reference(
         loaded = load_reference(path, times, shape)
         if loaded is not None:
             y_ref, error, floor, certified_by, compute_s = loaded
-            ref = Reference(
-                problem.name,
-                times,
-                y_ref,
-                error,
-                name,
-                certified_by,
-                time.perf_counter() - start,
-                cached=True,
-                compute_s=compute_s,
-            )
+            cached, cost = True, {}
         else:
             values, cost_level = run(level, reference_tol(level))
             higher, cost_cert = run(cert, certifier_tol(cert, level))
@@ -193,18 +183,9 @@ def reference(
                 )
             except OSError as exc:  # the cache is an optimisation: a read-only disk is no error
                 warnings.warn(f"reference cache not written ({path}): {exc}", stacklevel=2)
-            ref = Reference(
-                problem.name,
-                times,
-                y_ref,
-                error,
-                name,
-                cert.name,
-                time.perf_counter() - start,
-                cached=False,
-                compute_s=compute_s,
-                cost={name: cost_level, cert.name: cost_cert},
-            )
+            certified_by, cached, cost = cert.name, False, {name: cost_level, cert.name: cost_cert}
+        ref = Reference(problem.name, times, y_ref, error, name, certified_by,
+                        time.perf_counter() - start, cached=cached, compute_s=compute_s, cost=cost)
         if required is None or ref.max_error <= required:
             ref.wall_s = time.perf_counter() - start
             return ref

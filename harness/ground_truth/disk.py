@@ -20,6 +20,7 @@ from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
 
 # -- disk cache ------------------------------------------------------------------------------------
 def references_dir() -> Path:
+    """The directory of cached references (`cache_dir()/references`), created if missing."""
     d = cache.cache_dir() / "references"
     d.mkdir(parents=True, exist_ok=True)
     return d
@@ -41,6 +42,19 @@ _CODE_HASH: str | None = None
 
 
 def reference_key(problem: Problem, level: str, times, t0, y0, pars) -> str:
+    """The hash that names a cached reference: problem fingerprint, level, times, t0, initial
+    states, parameters, tolerance factors, heyoka version and this package's source.
+
+    Parameters
+    ----------
+    problem, level : what is integrated and at which precision level; times, t0, y0, pars : the
+    request, as arrays.
+
+    Returns
+    -------
+    str
+        A hex digest.
+    """
     h = hashlib.sha256()
     for part in (
         f"schema={REFERENCE_SCHEMA}",
@@ -61,11 +75,15 @@ def reference_key(problem: Problem, level: str, times, t0, y0, pars) -> str:
 
 
 def cache_path(problem: Problem, level: str, key: str) -> Path:
+    """The file of the cached reference `key` of `problem` at `level`."""
     safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in problem.name)
     return references_dir() / f"{safe}-{level}-{key}.npz"
 
 
 def load_reference(path: Path, times: np.ndarray, shape: tuple[int, int, int]):
+    """The arrays cached at `path`, or None when the file is missing, unreadable, or does not hold
+    `times` and states of `shape` (a corrupt file is ignored and recomputed).
+    """
     if not path.exists():
         return None
     try:
@@ -88,6 +106,7 @@ def load_reference(path: Path, times: np.ndarray, shape: tuple[int, int, int]):
 
 
 def store_reference(path: Path, **arrays: Any) -> None:
+    """Write `arrays` to `path` as one .npz file, atomically (temporary file, then rename)."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem[:40] + ".", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:

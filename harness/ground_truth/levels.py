@@ -26,6 +26,9 @@ SOFTWARE_LEVELS = ("real128", "real192")
 
 @dataclass(frozen=True)
 class Level:
+    """One precision level: its name, heyoka floating-point type, significand bits and, for
+    `real`, the precision in bits.
+    """
     name: str
     fp_type: Any
     bits: int  # significand bits
@@ -42,6 +45,7 @@ class Level:
         return 2.0 ** (1 - self.bits)
 
     def scalar(self, x: float) -> Any:
+        """`x` as a scalar of this level's type."""
         x = float(x)
         if self.name == "float64":
             return x
@@ -102,6 +106,7 @@ def available_levels() -> list[str]:
 
 
 def certifier_of(level: str) -> str:
+    """The level that certifies a reference computed at `level` (the next one in the chain)."""
     chain = level_chain()
     names = [lv.name for lv in chain]
     if level not in names[:-1]:
@@ -142,6 +147,7 @@ class Reference:
 
     @property
     def max_error(self) -> float:
+        """The largest certified error bound over every time and member (0.0 when empty)."""
         return float(np.max(self.error)) if self.error.size else 0.0
 
 

@@ -116,10 +116,12 @@ def _integrator(problem: Problem, level: Level, tol: float) -> tuple[threading.L
 
 
 def reference_tol(level: Level) -> float:
+    """heyoka's tolerance for a reference at `level`: its epsilon times REFERENCE_TOL_FACTOR."""
     return level.eps * REFERENCE_TOL_FACTOR
 
 
 def certifier_tol(cert: Level, level: Level) -> float:
+    """heyoka's tolerance for the certifying rerun at `cert` of a reference at `level`."""
     return max(cert.eps, reference_tol(level) * CERTIFIER_TOL_FACTOR)
 
 

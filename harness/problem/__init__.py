@@ -25,10 +25,10 @@ compiled right-hand side), `checks` (input checks).
 
 from __future__ import annotations
 
-from harness.problem.checks import check_ensemble_size, check_state, check_time
+from harness.problem.checks import check_count, check_ensemble_size, check_state, check_time
 from harness.problem.definition import ExactSolution, Problem
 from harness.problem.dynamics import Dynamics
 from harness.problem.nbody import NBody, NewtonianForm
 
 __all__ = ["Problem", "NewtonianForm", "NBody", "Dynamics", "ExactSolution", "check_state", "check_time",
-           "check_ensemble_size"]
+           "check_ensemble_size", "check_count"]

@@ -12,6 +12,16 @@ from harness.errors import InputError
 
 
 def check_time(value: Any, name: str) -> float:
+    """`value` as a finite float, or `InputError` naming `name`.
+
+    Parameters
+    ----------
+    value : the time given by the caller; name : the argument's name in the error message.
+
+    Returns
+    -------
+    float
+    """
     try:
         x = float(value)
     except (TypeError, ValueError, OverflowError):
@@ -22,15 +32,31 @@ def check_time(value: Any, name: str) -> float:
 
 
 def check_ensemble_size(size: Any) -> int:
+    """`size` as an int in [1, MAX_ENSEMBLE_SIZE], or `InputError` naming `size`."""
     from harness.tolerances import MAX_ENSEMBLE_SIZE
 
-    if isinstance(size, bool) or not isinstance(size, int | np.integer):
-        raise InputError(f"`ensemble` size must be a positive integer, got {size!r}")
-    if size < 1:
-        raise InputError(f"`ensemble` size must be at least 1, got {size}")
-    if size > MAX_ENSEMBLE_SIZE:
-        raise InputError(f"`ensemble` size must be at most {MAX_ENSEMBLE_SIZE}, got {size}")
-    return int(size)
+    return check_count(size, "`ensemble` size", MAX_ENSEMBLE_SIZE)
+
+
+def check_count(value: Any, label: str, maximum: int) -> int:
+    """`value` as a whole number in [1, `maximum`], or `InputError` starting with `label`.
+
+    Parameters
+    ----------
+    value : the count given by the caller; label : how the message names it (e.g. "`n_steps`");
+    maximum : the largest count allowed.
+
+    Returns
+    -------
+    int
+    """
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise InputError(f"{label} must be a whole number, got {value!r}")
+    if value < 1:
+        raise InputError(f"{label} must be at least 1, got {value}")
+    if value > maximum:
+        raise InputError(f"{label} must be at most {maximum}, got {value}")
+    return int(value)
 
 
 def check_state(y: Any, dim: int, name: str = "y0") -> np.ndarray:

@@ -127,6 +127,7 @@ class Problem:
     # -- declared facts -------------------------------------------------------------------------
     @property
     def dim(self) -> int:
+        """The number of state variables."""
         return len(self.variables)
 
     @property
@@ -136,10 +137,12 @@ class Problem:
 
     @property
     def velocity_dependent(self) -> bool:
+        """True for a Newtonian problem whose acceleration reads the velocities."""
         return self.newtonian is not None and self.newtonian.velocity_dependent
 
     @cached_property
     def time_dependent(self) -> bool:
+        """True when the right-hand side reads `hy.time` (non-autonomous)."""
         return bool(self.compiled("rhs", None).is_time_dependent)
 
     @property
@@ -154,6 +157,7 @@ class Problem:
 
     @property
     def parameter_values(self) -> np.ndarray:
+        """The default parameter values, in the order of `parameters`."""
         return np.array(list(self.parameters.values()), dtype=np.float64)
 
     def describe(self) -> dict[str, Any]:

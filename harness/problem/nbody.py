@@ -15,6 +15,16 @@ from harness.errors import InputError
 
 
 def expression_names(exprs: Sequence[hy.expression]) -> set[str]:
+    """The names of the variables that occur in any of `exprs`.
+
+    Parameters
+    ----------
+    exprs : heyoka expressions.
+
+    Returns
+    -------
+    set of str
+    """
     out: set[str] = set()
     for e in exprs:
         out.update(hy.get_variables(e))
@@ -31,6 +41,7 @@ class NewtonianForm:
 
     @property
     def velocity_dependent(self) -> bool:
+        """True when the acceleration reads any velocity variable."""
         used = expression_names(self.acceleration)
         return any(str(v) in used for v in self.velocities)
 
@@ -178,6 +189,7 @@ class NBody:
         return list(positions + velocities), nf, invariants
 
     def describe(self) -> dict[str, Any]:
+        """The system's description as plain data (masses, G, frame, dimension, body names)."""
         return {"kind": "n-body", "masses": list(self.masses), "G": float(self.G),
                 "central": self.central, "frame": self.frame, "dimension": self.dimension,
                 "names": list(self.names)}

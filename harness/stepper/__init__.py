@@ -98,6 +98,7 @@ class Stepper(ABC):
         return None
 
     def compatible(self, problem: Problem) -> bool:
+        """True when this stepper can integrate `problem` (see `check_compatible`)."""
         try:
             check_compatible(self, problem)
         except IncompatibleError:
@@ -409,6 +410,7 @@ class AdaptiveStepper(Stepper):
     tol: float = 1e-10
 
     def with_tolerance(self, tol: float) -> AdaptiveStepper:
+        """A copy of this stepper with tolerance `tol` (a positive finite number)."""
         import copy
 
         try:

@@ -12,6 +12,7 @@ import numpy as np
 
 from harness.errors import HarnessError, IncompatibleError, InputError
 from harness.problem import Problem
+from harness.problem.checks import check_count
 
 if TYPE_CHECKING:
     from harness.stepper import Stepper
@@ -60,6 +61,7 @@ class StepperInfo:
             raise InputError(f"stepper {self.name!r}: `reference` (literature source) is required")
 
     def as_dict(self) -> dict[str, Any]:
+        """The claims as one flat dict (the `extra` entries merged in)."""
         d = asdict(self)
         d.update(d.pop("extra"))
         return d
@@ -79,6 +81,7 @@ class Carry:
 
     @property
     def t(self) -> float:
+        """The carry's current time, t0 + n h."""
         return self.t0 + self.n * self.h
 
 
@@ -99,10 +102,12 @@ class Trajectory:
 
     @property
     def final(self) -> np.ndarray:
+        """The state at the last output time, shaped (dim, N)."""
         return self.y[-1]
 
 
 def check_step_size(h: Any) -> float:
+    """`h` as a positive finite float, or `InputError` naming `h`."""
     try:
         x = float(h)
     except (TypeError, ValueError, OverflowError):
@@ -115,13 +120,8 @@ def check_step_size(h: Any) -> float:
 
 
 def check_steps(n: Any, name: str = "n_steps") -> int:
-    if isinstance(n, bool) or not isinstance(n, int | np.integer):
-        raise InputError(f"`{name}` must be a whole number, got {n!r}")
-    if n < 1:
-        raise InputError(f"`{name}` must be at least 1, got {n}")
-    if n > MAX_STEPS:
-        raise InputError(f"`{name}` must be at most {MAX_STEPS}, got {n}")
-    return int(n)
+    """`n` as a step count in [1, MAX_STEPS], or `InputError` naming `name`."""
+    return check_count(n, f"`{name}`", MAX_STEPS)
 
 
 def check_compatible(stepper: Stepper, problem: Problem) -> None:

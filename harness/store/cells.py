@@ -100,6 +100,7 @@ class CellCache:
         self.root = Path(root) / "cells"
 
     def path(self, key: str) -> Path:
+        """The file that holds the cell with key `key` (32 lowercase hex digits), existing or not."""
         if not isinstance(key, str) or not _CELL_KEY.match(key):
             raise InputError(f"`key` must be 32 lowercase hex digits, got {key!r}")
         return self.root / key[:2] / f"{key}.parquet"

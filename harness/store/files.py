@@ -23,6 +23,9 @@ _META_MARK = b"harness"
 
 # -- atomic writes --------------------------------------------------------------------------------
 def fsync_dir(path: Path) -> None:
+    """Flush the directory entry of `path` to disk (after a rename into it); a no-op where the
+    system cannot open directories.
+    """
     try:
         fd = os.open(path, os.O_RDONLY)
     except OSError:
@@ -169,6 +172,9 @@ def read_parquet(
 
 
 def read_json(path: Path) -> Any:
+    """The parsed JSON file `path`; `CorruptResultsError` naming it when it is missing, not UTF-8,
+    not JSON, or nested too deeply to be a harness file.
+    """
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

@@ -35,14 +35,17 @@ class StoredRun:
 
     @property
     def experiments(self) -> list[str]:
+        """The names of the experiments saved in this run, in run order."""
         return list(self.meta["experiments"])
 
     @property
     def provenance(self) -> dict:
+        """Where the run came from: code version, libraries, machine, date (`harness.provenance`)."""
         return self.meta["provenance"]
 
     @property
     def config(self) -> dict:
+        """The configuration the run was made with."""
         return self.meta["config"]
 
     @property
@@ -52,6 +55,7 @@ class StoredRun:
 
     @property
     def n_failed(self) -> int:
+        """How many cells of the run failed."""
         return int(self.meta["totals"]["failed"])
 
     def table(self, name: str, experiment: str | None = None) -> pd.DataFrame:
@@ -89,14 +93,17 @@ class StoredRun:
 
     @property
     def failures(self) -> pd.DataFrame:
+        """One record per failed cell, over every experiment."""
         return self.table("failures")
 
     @property
     def skips(self) -> pd.DataFrame:
+        """One record per (stepper, problem) pair that does not apply, with the reason."""
         return self.table("skips")
 
     @property
     def cells(self) -> pd.DataFrame:
+        """One record per cell: its key, status and whether it came from the cache."""
         return self.table("cells")
 
 

@@ -156,6 +156,7 @@ def _check_config(config: Mapping[str, Any]) -> dict:
 
 
 class StabilityExperiment(Experiment):
+    """The lambda h test for every fixed-step stepper (see the module docstring)."""
     name = "stability"
     description = (
         "Linear stability: |R(z)| over the complex lambda h plane, real/imaginary intervals and "
@@ -201,6 +202,7 @@ class StabilityExperiment(Experiment):
         return cells, skips
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """Probe one stepper (first-order or Newtonian, by its form) and compare with its formula."""
         from harness.registry import get_problem, get_stepper
 
         config = _check_config({**self.default_config, **dict(config)})
@@ -218,6 +220,7 @@ class StabilityExperiment(Experiment):
         return pd.concat([grid, pd.DataFrame([summary])], ignore_index=True)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """One summary record per cell, with its verdict."""
         if rows.empty or "kind" not in rows:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         out = rows[rows["kind"] == "summary"].reset_index(drop=True)
@@ -241,6 +244,16 @@ def _verdict(agrees: bool | None, claim_ok: bool | None) -> str:
 
 def _unbounded(figures: Mapping[str, float]) -> str:
     return ",".join(k for k, v in figures.items() if v is not None and math.isinf(v))
+
+
+def _agreement(diff: float, failed: int, differs: str, points: str, messages: list[str]) -> bool:
+    """Whether probe and formula agree (within STABILITY_AGREEMENT_TOL, no failed step); what
+    does not agree is appended to `messages` (`differs` and `points` word it)."""
+    if diff > tol.STABILITY_AGREEMENT_TOL:
+        messages.append(f"{differs} by {diff:.3g} (allowed {tol.STABILITY_AGREEMENT_TOL:g})")
+    if failed:
+        messages.append(f"the step failed at {failed} {points}")
+    return diff <= tol.STABILITY_AGREEMENT_TOL and failed == 0
 
 
 def _run_first_order(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, dict]:
@@ -277,12 +290,8 @@ def _run_first_order(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, d
         # to rounding they are the same function, and its intervals are the formula's, decided
         # exactly (a flat crossing makes two root-findings of the same function differ by far
         # more than the functions do).
-        agrees = diff <= tol.STABILITY_AGREEMENT_TOL and failed == 0
-        if diff > tol.STABILITY_AGREEMENT_TOL:
-            messages.append(f"probe differs from the coefficients' formula by {diff:.3g} "
-                            f"(allowed {tol.STABILITY_AGREEMENT_TOL:g})")
-        if failed:
-            messages.append(f"the step failed at {failed} grid point(s) where the formula is finite")
+        agrees = _agreement(diff, failed, "probe differs from the coefficients' formula",
+                            "grid point(s) where the formula is finite", messages)
         if poles:
             messages.append(f"{poles} grid point(s) at a pole of the formula left out")
         if agrees:
@@ -346,12 +355,8 @@ def _run_newtonian(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, dic
                     for m, e in ok), default=0.0)
         a = theory.analytic_stability(coeffs, limit=limit)
         a_limit = a["hw_limit"]
-        agrees = diff <= tol.STABILITY_AGREEMENT_TOL and failed == 0
-        if diff > tol.STABILITY_AGREEMENT_TOL:
-            messages.append(f"probe propagator differs from the coefficients' by {diff:.3g} "
-                            f"(allowed {tol.STABILITY_AGREEMENT_TOL:g})")
-        if failed:
-            messages.append(f"the step failed at {failed} h omega value(s)")
+        agrees = _agreement(diff, failed, "probe propagator differs from the coefficients'",
+                            "h omega value(s)", messages)
         if agrees:
             hw_limit = a_limit
         elif not _intervals_agree(hw_limit, a_limit):

@@ -41,6 +41,9 @@ def analytic_blocks(coeffs: Any, z: np.ndarray, k: int) -> np.ndarray | None:
 
 
 def first_order_analytic_amp(coeffs: Any, z: np.ndarray) -> np.ndarray | None:
+    """|R(z)| (Runge-Kutta) or the largest root modulus (linear multistep) from `coeffs` for
+    each complex z, or None for coefficients of another kind.
+    """
     if isinstance(coeffs, ButcherTableau):
         return np.abs(theory.rk_stability_function(coeffs, z))
     if isinstance(coeffs, LinearMultistep):
@@ -85,6 +88,9 @@ def newtonian_pair(coeffs: Any, probe: NewtonianProbe, hw: float, matrix: np.nda
 
 
 def newtonian_analytic_amp(coeffs: Any, hw: np.ndarray) -> np.ndarray | None:
+    """The spectral radius of the propagator on x'' = -x from `coeffs` for each h omega in `hw`,
+    or None for coefficients of another kind.
+    """
     if isinstance(coeffs, SplittingScheme):
         return theory.splitting_amplification(coeffs, hw)
     if isinstance(coeffs, SecondOrderMultistep):

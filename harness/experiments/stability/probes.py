@@ -170,6 +170,7 @@ class NewtonianProbe:
         return np.array([[0.0, 1.0], [c[0], c[1]]])
 
     def amplification(self, hw: Any) -> np.ndarray:
+        """The probe's spectral radius at each h omega in `hw` (inf where a step fails)."""
         hw = np.asarray(hw, dtype=float)
         out = np.empty(hw.size)
         for i, x in enumerate(hw.reshape(-1)):
