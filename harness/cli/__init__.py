@@ -199,19 +199,12 @@ def _main(args: argparse.Namespace) -> int:
     return code if written == EXIT_OK else written
 
 
+# the parser's subcommands and the functions that run them
+COMMANDS = {"list": cmd_list, "reference": cmd_reference, "run": cmd_run, "gate": cmd_gate,
+            "report": cmd_report, "population": cmd_population}
+
+
 def _dispatch(args: argparse.Namespace) -> int:
     load_plugins(args.plugin)
-    if args.command == "list":
-        return cmd_list(args)
-    if args.command == "reference":
-        return cmd_reference(args)
-    if args.command == "run":
-        return cmd_run(args)
-    if args.command == "gate":
-        return cmd_gate(args)
-    if args.command == "report":
-        return cmd_report(args)
-    if args.command == "population":
-        return cmd_population(args)
-    raise AssertionError(args.command)
+    return COMMANDS[args.command](args)
 
