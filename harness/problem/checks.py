@@ -72,3 +72,23 @@ def check_state(y: Any, dim: int, name: str = "y0") -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise InputError(f"`{name}` must be finite (no NaN or inf)")
     return arr
+
+
+def check_positive(value: Any, label: str) -> float:
+    """`value` as a positive finite float, or `InputError` starting with `label`.
+
+    Parameters
+    ----------
+    value : the number given by the caller; label : how the message names it (e.g. "`h`").
+
+    Returns
+    -------
+    float
+    """
+    try:
+        x = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"{label} must be a positive finite number, got {value!r}") from None
+    if not (math.isfinite(x) and x > 0.0):
+        raise InputError(f"{label} must be a positive finite number, got {value!r}")
+    return x

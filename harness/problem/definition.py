@@ -15,7 +15,7 @@ import numpy as np
 
 from harness import cache
 from harness.errors import InputError
-from harness.problem.checks import check_ensemble_size
+from harness.problem.checks import check_ensemble_size, check_positive
 from harness.problem.dynamics import Dynamics
 from harness.problem.nbody import NBody, NewtonianForm, expression_names
 
@@ -336,13 +336,7 @@ class Problem:
 def _check_optional_positive(problem: str, name: str, value: Any) -> float | None:
     if value is None:
         return None
-    try:
-        x = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"problem {problem!r}: `{name}` must be a positive number, got {value!r}") from None
-    if not (math.isfinite(x) and x > 0.0):
-        raise InputError(f"problem {problem!r}: `{name}` must be a positive finite number, got {value!r}")
-    return x
+    return check_positive(value, f"problem {problem!r}: `{name}`")
 
 
 def _check_structure(name: str, structure: Any, var_names: list[str]) -> None:
