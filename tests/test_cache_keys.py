@@ -48,7 +48,7 @@ def test_editing_an_imported_helper_changes_only_the_experiments_that_import_it(
 def test_the_stale_cache_cases_of_the_issue_are_covered():
     """The shared sweep and time-scale helpers (once in energy.py, now in experiments/common.py
     and harness/scales.py) are in the keys of every experiment that uses them, and the
-    stability measurement's theory.py is in its key."""
+    stability measurement's theory package is in its key."""
     for name in ("symplecticity", "reversibility", "energy"):
         counted = keys.measuring_modules(EXPERIMENTS[name])[0]
         assert "harness.experiments.common" in counted, name

@@ -44,7 +44,7 @@ def test_every_allowed_oversize_entry_is_still_needed():
 
 
 # -- no module reads another module's private names ----------------------------------------------------
-# The stepper contract's own hooks (harness/stepper.py, item 3), which a subclass overrides and may
+# The stepper contract's own hooks (harness/stepper/__init__.py, item 3), which a subclass overrides and may
 # reach through super().
 CONTRACT_HOOKS = {"_start", "_step", "_observe", "_reverse", "_advance", "_start_from_history"}
 # Names that start with an underscore but are documented public API of their library.
