@@ -141,3 +141,12 @@ def test_every_module_is_listed_in_the_layout_note():
     note = (ROOT / "docs" / "LAYOUT.md").read_text()
     missing = [_rel(p) for p in _modules(*PACKAGES) if _rel(p) not in note]
     assert not missing, "modules missing from docs/LAYOUT.md: " + ", ".join(missing)
+
+
+def test_every_package_is_listed_in_pyproject():
+    """A package directory missing from pyproject.toml's explicit list is left out of the wheel."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {_rel(p.parent).replace("/", ".") for p in _modules(*PACKAGES) if p.name == "__init__.py"}
+    assert found <= listed, sorted(found - listed)
