@@ -234,13 +234,16 @@ class SplittingScheme:
 
     @property
     def kick_coefficients(self) -> np.ndarray:
+        """The kick coefficients b_i, in sequence order."""
         return np.array([v for k, v in self.sequence if k == "K"])
 
     @property
     def drift_coefficients(self) -> np.ndarray:
+        """The drift coefficients a_i, in sequence order."""
         return np.array([v for k, v in self.sequence if k == "D"])
 
     def fingerprint(self) -> str:
+        """The coefficients, exactly, as text (what a cell key records of the method)."""
         return "split:" + ";".join(f"{k}{v!r}" for k, v in self.sequence)
 
     # -- what the coefficients say about the method --------------------------------------------
@@ -331,11 +334,13 @@ class LinearMultistep:
         _set_multistep(self, name, a, b)
 
     def fingerprint(self) -> str:
+        """alpha and beta, exactly, as text (what a cell key records of the method)."""
         return f"lmm:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
 
     symplectic = False  # no linear multistep method is symplectic (HLW XV.4, Tang 1993)
 
     def order(self) -> int:
+        """Order from the error constants (`harness.theory.lmm_order`)."""
         from harness.theory import lmm_order
 
         return lmm_order(self)
@@ -382,6 +387,7 @@ class SecondOrderMultistep:
         _set_multistep(self, name, a, b)
 
     def fingerprint(self) -> str:
+        """alpha and beta, exactly, as text (what a cell key records of the method)."""
         return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
 
     # A multistep recurrence is not a map of phase space: symplecticity is a property of the
@@ -389,6 +395,7 @@ class SecondOrderMultistep:
     symplectic = None
 
     def order(self) -> int:
+        """Order from the error constants (`harness.theory.second_order_lmm_order`)."""
         from harness.theory import second_order_lmm_order
 
         return second_order_lmm_order(self)
