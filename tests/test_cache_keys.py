@@ -158,3 +158,12 @@ def test_a_measuring_package_counts_with_its_submodules(module, monkeypatch):
     _edited(monkeypatch, module, lambda text: text + "\n\ndef _helper_added_in_a_test():\n    return 1\n")
     after = _fingerprints()
     assert all(before[n] != after[n] for n in EXPERIMENTS)
+
+
+def test_an_experiment_that_imports_no_stepper_still_counts_the_measuring_packages(key_toy):
+    """The toy imports neither `harness.stepper` nor `harness.problem`; every cell still steps
+    through their submodules (a stepper's carry, a problem's dynamics), so they are in its key."""
+    exp, _ = key_toy
+    counted = keys.measuring_modules(exp)[0]
+    wanted = {"harness.stepper.records", "harness.problem.dynamics", "harness.problem.definition"}
+    assert wanted <= set(counted)
