@@ -234,13 +234,16 @@ class SplittingScheme:
 
     @property
     def kick_coefficients(self) -> np.ndarray:
+        """The kick coefficients b_i, in sequence order."""
         return np.array([v for k, v in self.sequence if k == "K"])
 
     @property
     def drift_coefficients(self) -> np.ndarray:
+        """The drift coefficients a_i, in sequence order."""
         return np.array([v for k, v in self.sequence if k == "D"])
 
     def fingerprint(self) -> str:
+        """The coefficients, exactly, as text (what a cell key records of the method)."""
         return "split:" + ";".join(f"{k}{v!r}" for k, v in self.sequence)
 
     # -- what the coefficients say about the method --------------------------------------------
@@ -278,6 +281,30 @@ def _palindromic(alpha: np.ndarray, beta: np.ndarray, *, alpha_sign: float) -> b
                 and np.max(np.abs(beta - beta[::-1])) <= tol_)
 
 
+def _multistep_arrays(name: str, alpha: Sequence[Number], beta: Sequence[Number],
+                      min_length: int) -> tuple[np.ndarray, np.ndarray]:
+    """alpha and beta as float arrays of one length k+1 >= `min_length`, with alpha_k = 1."""
+    a = as_float_array(alpha, f"{name}.alpha", 1)
+    b = as_float_array(beta, f"{name}.beta", 1)
+    if a.shape != b.shape or a.size < min_length:
+        raise CoefficientError(
+            f"`{name}`: alpha and beta must have the same length k+1 >= {min_length}, "
+            f"got {a.size} and {b.size}"
+        )
+    if not _close(a[-1], 1.0):
+        raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {float(a[-1])!r}")
+    return a, b
+
+
+def _set_multistep(method: object, name: str, a: np.ndarray, b: np.ndarray) -> None:
+    """Fill a frozen multistep record: its name, coefficients, step count and explicitness."""
+    object.__setattr__(method, "name", name)
+    object.__setattr__(method, "alpha", a)
+    object.__setattr__(method, "beta", b)
+    object.__setattr__(method, "steps", a.size - 1)
+    object.__setattr__(method, "explicit", b[-1] == 0.0)
+
+
 @dataclass(frozen=True, eq=False)
 class LinearMultistep:
     """A k-step method sum_{j=0}^{k} alpha_j y_{n+j} = h sum_{j=0}^{k} beta_j f_{n+j}.
@@ -294,14 +321,7 @@ class LinearMultistep:
     explicit: bool = field(init=False)
 
     def __init__(self, name: str, alpha: Sequence[Number], beta: Sequence[Number]):
-        a = as_float_array(alpha, f"{name}.alpha", 1)
-        b = as_float_array(beta, f"{name}.beta", 1)
-        if a.shape != b.shape or a.size < 2:
-            raise CoefficientError(
-                f"`{name}`: alpha and beta must have the same length k+1 >= 2, got {a.size} and {b.size}"
-            )
-        if not _close(a[-1], 1.0):
-            raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {float(a[-1])!r}")
+        a, b = _multistep_arrays(name, alpha, beta, 2)
         j = np.arange(a.size)
         size = float(np.abs(a).sum() * a.size + np.abs(b).sum())
         if not _close(a.sum(), 0.0, size, a.size):
@@ -311,18 +331,16 @@ class LinearMultistep:
                 f"`{name}`: sum j*alpha_j must equal sum beta_j (consistency), got "
                 f"{float(j @ a)!r} and {float(b.sum())!r}"
             )
-        object.__setattr__(self, "name", name)
-        object.__setattr__(self, "alpha", a)
-        object.__setattr__(self, "beta", b)
-        object.__setattr__(self, "steps", a.size - 1)
-        object.__setattr__(self, "explicit", b[-1] == 0.0)
+        _set_multistep(self, name, a, b)
 
     def fingerprint(self) -> str:
+        """alpha and beta, exactly, as text (what a cell key records of the method)."""
         return f"lmm:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
 
     symplectic = False  # no linear multistep method is symplectic (HLW XV.4, Tang 1993)
 
     def order(self) -> int:
+        """Order from the error constants (`harness.theory.lmm_order`)."""
         from harness.theory import lmm_order
 
         return lmm_order(self)
@@ -353,14 +371,7 @@ class SecondOrderMultistep:
     explicit: bool = field(init=False)
 
     def __init__(self, name: str, alpha: Sequence[Number], beta: Sequence[Number]):
-        a = as_float_array(alpha, f"{name}.alpha", 1)
-        b = as_float_array(beta, f"{name}.beta", 1)
-        if a.shape != b.shape or a.size < 3:
-            raise CoefficientError(
-                f"`{name}`: alpha and beta must have the same length k+1 >= 3, got {a.size} and {b.size}"
-            )
-        if not _close(a[-1], 1.0):
-            raise CoefficientError(f"`{name}.alpha` must end with alpha_k = 1, got {float(a[-1])!r}")
+        a, b = _multistep_arrays(name, alpha, beta, 3)
         j = np.arange(a.size, dtype=float)
         checks = [
             ("sum alpha_j = 0", a.sum(), 0.0),
@@ -373,13 +384,10 @@ class SecondOrderMultistep:
                 raise CoefficientError(
                     f"`{name}`: consistency needs {rule}, got {float(lhs)!r} vs {float(rhs)!r}"
                 )
-        object.__setattr__(self, "name", name)
-        object.__setattr__(self, "alpha", a)
-        object.__setattr__(self, "beta", b)
-        object.__setattr__(self, "steps", a.size - 1)
-        object.__setattr__(self, "explicit", b[-1] == 0.0)
+        _set_multistep(self, name, a, b)
 
     def fingerprint(self) -> str:
+        """alpha and beta, exactly, as text (what a cell key records of the method)."""
         return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
 
     # A multistep recurrence is not a map of phase space: symplecticity is a property of the
@@ -387,6 +395,7 @@ class SecondOrderMultistep:
     symplectic = None
 
     def order(self) -> int:
+        """Order from the error constants (`harness.theory.second_order_lmm_order`)."""
         from harness.theory import second_order_lmm_order
 
         return second_order_lmm_order(self)

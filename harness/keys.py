@@ -16,7 +16,8 @@ file schema and two code versions:
   3. for `harness.tolerances`, which holds measuring and judging thresholds side by side, the
      values of only the names that the measuring code reads (`tol.NAME`, `from
      harness.tolerances import NAME`), so changing a verdict threshold recomputes nothing;
-  4. `MEASURING_MODULES`, reached through objects rather than imports, and the harness version.
+  4. `MEASURING_MODULES`, reached through objects rather than imports (with the submodules a
+     package among them imports from itself), and the harness version.
 Forgetting a module in `JUDGING_MODULES` costs recomputation, never a stale cell.
 """
 
@@ -239,12 +240,19 @@ def measuring_modules(experiment: Experiment) -> tuple[dict[str, str], set[str]]
                 continue
             if _is_project(m) and not _excluded(m) and m not in seen:
                 todo.append((m, False))
-    for m in MEASURING_MODULES:
-        if m not in counted:
-            text = _source(m)
-            counted[m] = text if text is not None else f"<no source: {m}>"
-            modules, names = _imports(m, [_parse(text)] if text and _parse(text) else [])
-            tol_names |= names
+    # a measuring module that is a package counts with the submodules it imports (its code split
+    # into modules), followed within the package only
+    todo = [m for m in MEASURING_MODULES if m not in counted]
+    while todo:
+        m = todo.pop()
+        if m in counted:
+            continue
+        text = _source(m)
+        counted[m] = text if text is not None else f"<no source: {m}>"
+        modules, names = _imports(m, [_parse(text)] if text and _parse(text) else [])
+        tol_names |= names
+        root = next(r for r in MEASURING_MODULES if m == r or m.startswith(r + "."))
+        todo += [s for s in sorted(modules) if s.startswith(root + ".") and s not in counted]
     return counted, tol_names
 
 

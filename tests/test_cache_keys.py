@@ -48,7 +48,7 @@ def test_editing_an_imported_helper_changes_only_the_experiments_that_import_it(
 def test_the_stale_cache_cases_of_the_issue_are_covered():
     """The shared sweep and time-scale helpers (once in energy.py, now in experiments/common.py
     and harness/scales.py) are in the keys of every experiment that uses them, and the
-    stability measurement's theory.py is in its key."""
+    stability measurement's theory package is in its key."""
     for name in ("symplecticity", "reversibility", "energy"):
         counted = keys.measuring_modules(EXPERIMENTS[name])[0]
         assert "harness.experiments.common" in counted, name
@@ -148,3 +148,22 @@ def test_a_judging_threshold_changes_verdicts_without_recomputing(key_toy, tmp_p
     assert run().computed_cells == 3
     path.write_text(path.read_text().replace('"good" if', '"fine" if'))
     assert run().computed_cells == 0
+
+
+@pytest.mark.parametrize("module", ["harness.stepper.records", "harness.problem.dynamics"])
+def test_a_measuring_package_counts_with_its_submodules(module, monkeypatch):
+    """`harness.stepper` and `harness.problem` are packages: every cell steps through their
+    submodules, so editing one recomputes every experiment's cells."""
+    before = _fingerprints()
+    _edited(monkeypatch, module, lambda text: text + "\n\ndef _helper_added_in_a_test():\n    return 1\n")
+    after = _fingerprints()
+    assert all(before[n] != after[n] for n in EXPERIMENTS)
+
+
+def test_an_experiment_that_imports_no_stepper_still_counts_the_measuring_packages(key_toy):
+    """The toy imports neither `harness.stepper` nor `harness.problem`; every cell still steps
+    through their submodules (a stepper's carry, a problem's dynamics), so they are in its key."""
+    exp, _ = key_toy
+    counted = keys.measuring_modules(exp)[0]
+    wanted = {"harness.stepper.records", "harness.problem.dynamics", "harness.problem.definition"}
+    assert wanted <= set(counted)

@@ -11,7 +11,6 @@ load times are recorded in test-artifacts/, never asserted.
 
 from __future__ import annotations
 
-import ast
 import json
 import os
 import subprocess
@@ -350,54 +349,6 @@ def test_powers_match_the_library_power_to_rounding(exponent):
         assert abs(out[0] - x**exponent) <= 4 * EPS * abs(x**exponent)
     small = (2 * exponent).is_integer() and abs(2 * exponent) <= MAX_SMALL_POWER
     assert ("**" not in source) == small
-
-
-# -- no module reads another module's private names ----------------------------------------------------
-# The stepper contract's own hooks (harness/stepper.py, item 3), which a subclass overrides and may
-# reach through super().
-CONTRACT_HOOKS = {"_start", "_step", "_observe", "_reverse", "_advance", "_start_from_history"}
-
-
-def private_reads(source: str) -> list[str]:
-    """Every `obj._name` in `source` where obj is not the object itself (`self`, `cls`) or, for
-    a stepper-contract hook, `super()`: a read of another module's or object's private name."""
-    found = []
-    for node in ast.walk(ast.parse(source)):
-        if not isinstance(node, ast.Attribute):
-            continue
-        name = node.attr
-        if not name.startswith("_") or (name.startswith("__") and name.endswith("__")):
-            continue
-        owner = node.value
-        if isinstance(owner, ast.Name) and owner.id in ("self", "cls"):
-            continue
-        if (
-            isinstance(owner, ast.Call) and isinstance(owner.func, ast.Name)
-            and owner.func.id == "super" and name in CONTRACT_HOOKS
-        ):
-            continue
-        found.append(f"line {node.lineno}: {ast.unparse(node)}")
-    return found
-
-
-def test_the_private_name_scan_finds_private_reads():
-    snippet = textwrap.dedent(
-        """
-        import numpy as np
-        from implementations import splitting
-        def f(stepper, c):
-            self_ok = stepper.info.name
-            return np._NoValue, splitting._HLW, stepper._ops, c.hcoef, super()._reverse, super()._ops
-        """
-    )
-    found = private_reads(snippet)
-    assert [f.split(": ", 1)[1] for f in found] == ["np._NoValue", "splitting._HLW", "stepper._ops",
-                                                  "super()._ops"]
-
-
-@pytest.mark.parametrize("module", ["implementations/compiled.py", "implementations/compiled_kernels.py"])
-def test_no_private_names_of_other_modules_are_read(module):
-    assert private_reads((ROOT / module).read_text()) == []
 
 
 # -- compile and load times, recorded -----------------------------------------------------------------

@@ -39,7 +39,7 @@ ENSEMBLE = 16
 def private_reference_cache(tmp_path_factory, monkeypatch):
     directory = tmp_path_factory.getbasetemp() / "references"
     directory.mkdir(exist_ok=True)
-    monkeypatch.setattr(gt, "references_dir", lambda: directory)
+    monkeypatch.setattr(gt.disk, "references_dir", lambda: directory)
     return directory
 
 
@@ -112,7 +112,7 @@ def test_unreachable_required_error_raises():
 
 
 def test_cache_round_trip_and_corrupt_file_recovery(tmp_path, monkeypatch):
-    monkeypatch.setattr(gt, "references_dir", lambda: tmp_path)
+    monkeypatch.setattr(gt.disk, "references_dir", lambda: tmp_path)
     problem = get_problem("harmonic")
     y0 = problem.ensemble(3, seed=11)
     first = gt.reference(problem, [1.0, 2.0], y0)
@@ -139,9 +139,9 @@ def test_cache_round_trip_and_corrupt_file_recovery(tmp_path, monkeypatch):
 def test_integrator_is_built_once_per_problem_and_level():
     problem = get_problem("gaussian")
     gt.reference(problem, 1.0)
-    built = len(gt._integrators)
+    built = len(gt.integrators)
     gt.reference(problem, [0.5, 2.0, 3.0], problem.ensemble(5, seed=3))
-    assert len(gt._integrators) == built
+    assert len(gt.integrators) == built
 
 
 def test_times_equal_to_t0_return_the_initial_state_exactly():

@@ -111,7 +111,7 @@ def test_changed_configuration_or_experiment_code_recomputes(run, monkeypatch):
     run()
     scaled = run(config={"scale": 2.0})
     assert scaled.computed_cells == 9
-    monkeypatch.setattr(runner, "experiment_fingerprint", lambda exp: "other experiment code")
+    monkeypatch.setattr(runner.orchestration, "experiment_fingerprint", lambda exp: "other experiment code")
     assert run().computed_cells == 9
 
 
@@ -159,7 +159,7 @@ def test_claim_directories_of_long_killed_runs_are_removed(tmp_path, monkeypatch
         (d / ("0" * 32)).write_text("1234\n")
     stamp = time.time() - runner.STALE_CLAIMS_S - 60
     os.utime(old, (stamp, stamp))
-    runner._clean_stale_claims()
+    runner.clean_stale_claims()
     assert not old.exists() and fresh.exists()
 
 
@@ -210,7 +210,7 @@ def test_a_crashing_or_stuck_worker_fails_only_its_cell(run, monkeypatch):
 
 
 class _FakePool:
-    """Stands in for `_loky_batch`: runs a batch 'on' `n` workers, where a cell named in
+    """Stands in for `loky_batch`: runs a batch 'on' `n` workers, where a cell named in
     `silent` kills its worker without a word (like `os._exit`) and takes the whole pool down."""
 
     def __init__(self, silent):
@@ -234,12 +234,12 @@ class _FakePool:
 
 def test_a_silent_worker_death_is_pinned_on_its_cell_by_rerunning_alone(monkeypatch):
     pool = _FakePool(silent={"bad"})
-    monkeypatch.setattr(runner.executors, "_loky_batch", pool)
+    monkeypatch.setattr(runner.executors, "loky_batch", pool)
     names = ["a", "bad", "b", "c", "d"]
-    tasks = [runner._Task(i, Cell("toy", n, "p"), f"{i:032x}", {"timeout": None})
+    tasks = [runner.Task(i, Cell("toy", n, "p"), f"{i:032x}", {"timeout": None})
              for i, n in enumerate(names)]
     outcomes = {}
-    runner._run_loky(tasks, 2, lambda t, out: outcomes.__setitem__(t.cell.stepper, out))
+    runner.run_loky(tasks, 2, lambda t, out: outcomes.__setitem__(t.cell.stepper, out))
     assert set(outcomes) == set(names)
     assert outcomes["bad"]["kind"] == "crash" and "EXIT(3)" in outcomes["bad"]["message"]
     assert all(outcomes[n]["ok"] for n in names if n != "bad")

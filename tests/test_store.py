@@ -189,7 +189,7 @@ def test_a_foreign_cell_file_is_refused(tmp_path):
 def test_save_and_load_round_trip_rows_summary_and_meta(tmp_path):
     saved = [_result("convergence"), _result("energy", n=3, failed=False)]
     path = save_run(saved, root=tmp_path, config={"command": "report", "jobs": 2, "quick": True})
-    assert path.parent == tmp_path and store._RUN_ID.match(path.name)
+    assert path.parent == tmp_path and store.RUN_ID.match(path.name)
     run = load_run(root=tmp_path)
     assert run.run_id == path.name and run.experiments == ["convergence", "energy"]
     for res in saved:

@@ -25,6 +25,7 @@ import numpy as np
 
 from harness.errors import InputError
 from harness.experiments.base import Cell, Skip
+from harness.problem.checks import check_positive
 
 __all__ = [
     "check_config",
@@ -96,13 +97,7 @@ def check_config(
 
 
 def _number(flag: str, value: Any) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"`{flag}` must be a positive finite number, got {value!r}") from None
-    if not (math.isfinite(x) and x > 0.0):
-        raise InputError(f"`{flag}` must be a positive finite number, got {value!r}")
-    return x
+    return check_positive(value, f"`{flag}`")
 
 
 def _counts(flag: str, value: Any) -> list[int]:

@@ -29,7 +29,8 @@ def default_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _check_jobs(jobs: Any) -> int:
+def check_jobs(jobs: Any) -> int:
+    """`jobs` as a worker count (None: `default_jobs()`), or `InputError` naming `jobs`."""
     if jobs is None:
         return default_jobs()
     if isinstance(jobs, bool) or not isinstance(jobs, int | np.integer):
@@ -43,7 +44,8 @@ def _check_jobs(jobs: Any) -> int:
 _SCHEDULER = re.compile(r"^(tcp|tls|ucx|ws|wss|inproc)://[^\s/]+$")
 
 
-def _check_scheduler(value: Any) -> Any:
+def check_scheduler(value: Any) -> Any:
+    """`value` as a Dask scheduler address or client (None: run locally), or `InputError`."""
     if value is None:
         return None
     try:
@@ -59,7 +61,10 @@ def _check_scheduler(value: Any) -> Any:
     return value
 
 
-def _check_names(kind: str, names: Any) -> list[str]:
+def check_names(kind: str, names: Any) -> list[str]:
+    """The requested names of `kind` ('steppers' or 'problems'; None: every registered one),
+    each checked against the registry (`UnknownNameError` with the closest names), duplicates
+    dropped."""
     from harness import registry
 
     reg = registry.steppers if kind == "steppers" else registry.problems
@@ -78,7 +83,8 @@ def _check_names(kind: str, names: Any) -> list[str]:
     return list(dict.fromkeys(out))
 
 
-def _check_plugins(plugins: Any) -> list[str]:
+def check_plugins(plugins: Any) -> list[str]:
+    """`plugins` (None, a path or a sequence of paths) as a list of path strings."""
     if plugins is None:
         return []
     if isinstance(plugins, str | os.PathLike):
@@ -93,7 +99,8 @@ def _check_plugins(plugins: Any) -> list[str]:
     return out
 
 
-def _resolve_experiment(experiment: Any) -> Experiment:
+def resolve_experiment(experiment: Any) -> Experiment:
+    """The experiment object for `experiment` (an `Experiment` or a registered name)."""
     from harness.experiments.base import get_experiment
 
     if isinstance(experiment, Experiment):
@@ -103,7 +110,10 @@ def _resolve_experiment(experiment: Any) -> Experiment:
     return get_experiment(experiment)
 
 
-def _resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
+def resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
+    """The experiment's configuration: its defaults (quick ones when `quick`), updated with the
+    known settings of `config` (`InputError` for an unknown one).
+    """
     if config is not None and not isinstance(config, Mapping):
         raise InputError(f"`config` must be a mapping of settings, got {type(config).__name__}")
     if config and exp.default_config:
@@ -116,7 +126,7 @@ def _resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
     return exp.config(dict(config or {}), quick=bool(quick))
 
 
-def _progress(progress: Any, desc: str) -> tuple[Progress, bool]:
+def progress_display(progress: Any, desc: str) -> tuple[Progress, bool]:
     """(progress display, whether this call owns and closes it)."""
     if isinstance(progress, Progress):
         return progress, False

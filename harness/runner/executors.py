@@ -20,7 +20,7 @@ from harness.errors import (
 )
 from harness.experiments.base import Cell
 from harness.runner import limits
-from harness.runner.workers import _claim_verdict, _clean_stale_claims, _execute, _one_line
+from harness.runner.workers import claim_verdict, clean_stale_claims, execute, one_line
 
 # Seconds to wait for a Dask scheduler to answer.
 DASK_CONNECT_TIMEOUT_S = 10
@@ -33,7 +33,10 @@ MAX_CRASH_ROUNDS = 3
 
 
 @dataclass
-class _Task:
+class Task:
+    """One cell to execute: its index in the cell list, the cell, its key and the payload a worker
+    receives.
+    """
     index: int
     cell: Cell
     key: str
@@ -41,17 +44,19 @@ class _Task:
     crash_rounds: int = 0
 
 
-def _crash_outcome(task: _Task, message: str, kind: str = "crash") -> dict:
-    return {"key": task.key, "ok": False, "kind": kind, "message": _one_line(message),
+def crash_outcome(task: Task, message: str, kind: str = "crash") -> dict:
+    """The outcome of a task whose worker died (or, with `kind`, another failure outside the cell)."""
+    return {"key": task.key, "ok": False, "kind": kind, "message": one_line(message),
             "traceback": "", "rows": None, "wall_s": 0.0, "worker": ""}
 
 
-def _run_serial(tasks: Sequence[_Task], accept: Callable[[_Task, dict], None]) -> None:
+def run_serial(tasks: Sequence[Task], accept: Callable[[Task, dict], None]) -> None:
+    """Execute `tasks` one after another in this process, handing each outcome to `accept`."""
     for t in tasks:
-        accept(t, _execute(t.payload))
+        accept(t, execute(t.payload))
 
 
-def _loky_batch(batch: Sequence[_Task], n: int, accept) -> tuple[BaseException | None, list[_Task]]:
+def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | None, list[Task]]:
     """Run `batch` on `n` loky workers. Returns (the pool's breakdown or None, unfinished tasks)."""
     from joblib.externals.loky import get_reusable_executor
 
@@ -59,7 +64,7 @@ def _loky_batch(batch: Sequence[_Task], n: int, accept) -> tuple[BaseException |
     futures = {}
     try:
         for t in batch:
-            futures[executor.submit(_execute, t.payload)] = t
+            futures[executor.submit(execute, t.payload)] = t
         pending = set(futures)
         broken: BaseException | None = None
         while pending and broken is None:
@@ -71,7 +76,7 @@ def _loky_batch(batch: Sequence[_Task], n: int, accept) -> tuple[BaseException |
                     broken = exc
                     pending.add(fut)
                 elif exc is not None:  # the task could not be sent or its result returned
-                    accept(t, _crash_outcome(t, f"could not run in a worker process: "
+                    accept(t, crash_outcome(t, f"could not run in a worker process: "
                                                 f"{type(exc).__name__}: {exc}", kind="error"))
                 else:
                     accept(t, fut.result())
@@ -91,8 +96,11 @@ def _loky_batch(batch: Sequence[_Task], n: int, accept) -> tuple[BaseException |
     return broken, unfinished
 
 
-def _run_loky(tasks: Sequence[_Task], jobs: int, accept) -> None:
-    _clean_stale_claims()
+def run_loky(tasks: Sequence[Task], jobs: int, accept) -> None:
+    """Execute `tasks` on `jobs` local loky workers, handing each outcome to `accept` as it
+    arrives; a crashed worker's cells are identified by their claim files (package docstring).
+    """
+    clean_stale_claims()
     claim_dir = tempfile.mkdtemp(prefix="harness-claims-")
     try:
         for t in tasks:
@@ -100,12 +108,12 @@ def _run_loky(tasks: Sequence[_Task], jobs: int, accept) -> None:
             t.payload["parent_pid"] = os.getpid()
             t.payload["hard_kill"] = True
             t.payload["hard_grace"] = max(limits.HARD_TIMEOUT_GRACE_S, 0.2 * (t.payload["timeout"] or 0))
-        normal: list[_Task] = list(tasks)
-        suspects: list[_Task] = []
+        normal: list[Task] = list(tasks)
+        suspects: list[Task] = []
         while normal or suspects:
             alone = not normal
             batch, normal = ([suspects.pop(0)], normal) if alone else (normal, [])
-            broken, unfinished = _loky_batch(batch, 1 if alone else min(jobs, len(batch)), accept)
+            broken, unfinished = loky_batch(batch, 1 if alone else min(jobs, len(batch)), accept)
             if broken is None:
                 continue
             claims: dict[str, str] = {}
@@ -114,16 +122,16 @@ def _run_loky(tasks: Sequence[_Task], jobs: int, accept) -> None:
                     claims[name] = Path(claim_dir, name).read_text(errors="replace")
                     os.unlink(os.path.join(claim_dir, name))
             codes = re.search(r"exit codes of the workers are (\{[^}]*\})", str(broken))
-            reason = f"exit codes {codes.group(1)}" if codes else _one_line(str(broken), 200)
-            verdicts = {t.key: _claim_verdict(claims[t.key]) for t in unfinished if t.key in claims}
+            reason = f"exit codes {codes.group(1)}" if codes else one_line(str(broken), 200)
+            verdicts = {t.key: claim_verdict(claims[t.key]) for t in unfinished if t.key in claims}
             known_culprit = any(v is not None for v in verdicts.values())
             for t in unfinished:
                 t.crash_rounds += 1
                 verdict = verdicts.get(t.key)
                 if verdict is not None:
-                    accept(t, _crash_outcome(t, verdict[1], verdict[0]))
+                    accept(t, crash_outcome(t, verdict[1], verdict[0]))
                 elif alone or t.crash_rounds >= MAX_CRASH_ROUNDS:
-                    accept(t, _crash_outcome(t, f"worker process died running this cell ({reason})"))
+                    accept(t, crash_outcome(t, f"worker process died running this cell ({reason})"))
                 elif t.key in claims and not known_culprit:
                     suspects.append(t)  # in flight when an unknown cell killed the pool
                 elif verdicts:
@@ -134,7 +142,8 @@ def _run_loky(tasks: Sequence[_Task], jobs: int, accept) -> None:
         shutil.rmtree(claim_dir, ignore_errors=True)
 
 
-def _dask_client(scheduler: Any) -> tuple[Any, bool]:
+def dask_client(scheduler: Any) -> tuple[Any, bool]:
+    """(client, owned) for `scheduler` (an address or a client); `owned` says this call made it."""
     from distributed import Client
 
     if isinstance(scheduler, Client):
@@ -146,7 +155,7 @@ def _dask_client(scheduler: Any) -> tuple[Any, bool]:
         try:
             client = Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s", set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
-            failure = f"{type(exc).__name__}: {_one_line(str(exc), 200)}"
+            failure = f"{type(exc).__name__}: {one_line(str(exc), 200)}"
         if failure is not None:
             import gc
 
@@ -160,7 +169,8 @@ def _dask_client(scheduler: Any) -> tuple[Any, bool]:
     return client, True
 
 
-def _run_dask(tasks: Sequence[_Task], client: Any, accept) -> None:
+def run_dask(tasks: Sequence[Task], client: Any, accept) -> None:
+    """Execute `tasks` as Dask tasks on `client`, handing each outcome to `accept` as it completes."""
     import uuid
 
     from distributed import as_completed
@@ -169,14 +179,14 @@ def _run_dask(tasks: Sequence[_Task], client: Any, accept) -> None:
     futures = {}
     try:
         for t in tasks:
-            fut = client.submit(_execute, t.payload, key=f"harness-cell-{t.key}-{tag}", pure=False)
+            fut = client.submit(execute, t.payload, key=f"harness-cell-{t.key}-{tag}", pure=False)
             futures[fut] = t
         for fut in as_completed(list(futures), loop=client.loop):
             t = futures[fut]
             try:
                 out = fut.result()
             except Exception as exc:  # KilledWorker, a lost connection, an unpicklable result
-                out = _crash_outcome(t, f"Dask task failed: {type(exc).__name__}: {exc}")
+                out = crash_outcome(t, f"Dask task failed: {type(exc).__name__}: {exc}")
             accept(t, out)
     except KeyboardInterrupt:
         client.cancel(list(futures))

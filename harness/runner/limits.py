@@ -60,7 +60,7 @@ def time_limit(seconds: float | None):
             signal.setitimer(signal.ITIMER_REAL, remaining, outer_interval)
 
 
-def _call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
+def call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
     """fn() under a time limit: SIGALRM in a main thread, else an abandoned helper thread."""
     if seconds is None:
         return fn()
@@ -86,7 +86,8 @@ def _call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
 
 
 
-def _check_timeout(value: Any) -> float | None:
+def check_timeout(value: Any) -> float | None:
+    """`value` as a cell time limit in seconds (None: no limit), or `InputError` naming it."""
     if value is None:
         return None
     if isinstance(value, bool):

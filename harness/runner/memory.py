@@ -81,8 +81,11 @@ def _cell_estimate(experiment: Experiment, cell: Cell, config: Mapping[str, Any]
     return estimate_bytes(dim=dim, ensemble=int(size)), "ensemble"
 
 
-def _guard_memory(experiment: Experiment, cells: Sequence[Cell], config: Mapping[str, Any],
+def guard_memory(experiment: Experiment, cells: Sequence[Cell], config: Mapping[str, Any],
                   jobs: int) -> None:
+    """Refuse (`InputError`) a run whose `jobs` largest cells together would not fit in the
+    available memory (see `estimate_bytes`).
+    """
     estimates = []
     for cell in cells:
         b, arg = _cell_estimate(experiment, cell, config)

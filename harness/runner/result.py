@@ -41,14 +41,17 @@ class RunResult:
 
     @property
     def n_cells(self) -> int:
+        """How many cells the run had."""
         return len(self.cells)
 
     @property
     def n_failed(self) -> int:
+        """How many cells failed."""
         return len(self.failures)
 
     @property
     def ok(self) -> bool:
+        """True when no cell failed."""
         return self.n_failed == 0
 
 

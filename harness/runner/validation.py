@@ -25,7 +25,7 @@ _KINDS = {
     "bool": pd.api.types.is_bool_dtype,
     "str": lambda s: pd.api.types.is_string_dtype(s) or pd.api.types.is_object_dtype(s),
 }
-_SCALARS = (str, bool, int, float, np.bool_, np.integer, np.floating)
+SCALARS = (str, bool, int, float, np.bool_, np.integer, np.floating)
 
 
 def validate_rows(experiment: Experiment, rows: Any) -> pd.DataFrame:
@@ -50,7 +50,7 @@ def validate_rows(experiment: Experiment, rows: Any) -> pd.DataFrame:
         if pd.api.types.is_complex_dtype(s):
             raise CellOutputError(f"column {c!r} is complex; store real and imaginary parts apart")
         if pd.api.types.is_object_dtype(s):
-            odd = [type(v).__name__ for v in s if v is not None and not isinstance(v, _SCALARS)
+            odd = [type(v).__name__ for v in s if v is not None and not isinstance(v, SCALARS)
                    and not (isinstance(v, float) and math.isnan(v))]
             if odd:
                 raise CellOutputError(

@@ -1,6 +1,6 @@
 """One cell, wherever it runs: plugins, code-version check, claim file, time limit, rows.
 
-`_execute(task)` is the entry point of every worker (this process, loky, Dask); it never raises.
+`execute(task)` is the entry point of every worker (this process, loky, Dask); it never raises.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from harness.errors import (
 )
 from harness.experiments.base import Cell
 from harness.keys import code_version
-from harness.runner.limits import HARD_TIMEOUT_GRACE_S, CellTimeout, _call_limited
+from harness.runner.limits import HARD_TIMEOUT_GRACE_S, CellTimeout, call_limited
 from harness.runner.validation import CellOutputError, validate_rows
 from harness.store import (
     atomic_write_bytes,
@@ -39,18 +39,21 @@ ORPHAN_CHECK_S = 1.0
 STALE_CLAIMS_S = 24 * 3600.0
 
 
-def _short_traceback(exc: BaseException, frames: int = 6) -> str:
+def short_traceback(exc: BaseException, frames: int = 6) -> str:
+    """The last `frames` frames of `exc`'s traceback as text, at most 4000 characters."""
     te = traceback.TracebackException.from_exception(exc, limit=-frames)
     text = "".join(te.format()).strip()
     return text if len(text) <= 4000 else "..." + text[-3997:]
 
 
-def _one_line(text: str, limit: int = 500) -> str:
+def one_line(text: str, limit: int = 500) -> str:
+    """`text` on one line, whitespace collapsed, cut to `limit` characters."""
     line = " ".join(str(text).split())
     return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
-def _plugin_spec(path: str | os.PathLike) -> dict:
+def plugin_spec(path: str | os.PathLike) -> dict:
+    """A plugin file as data a worker can rebuild it from: path, name, sha256 and source bytes."""
     p = Path(path).resolve()
     data = p.read_bytes()
     return {"path": str(p), "name": p.name, "sha256": hashlib.sha256(data).hexdigest(), "source": data}
@@ -89,7 +92,7 @@ _HARD_TIMEOUT_MARK = "harness: hard timeout after"
 _FATAL_MARK = "Fatal Python error:"
 
 
-def _claim_verdict(text: str) -> tuple[str, str] | None:
+def claim_verdict(text: str) -> tuple[str, str] | None:
     """(failure kind, message) when a claim file says why its worker died, else None."""
     for line in text.splitlines():
         if line.startswith(_HARD_TIMEOUT_MARK):
@@ -140,7 +143,7 @@ def _watch_for_orphaning(parent: int) -> None:
     threading.Thread(target=watch, name="harness-orphan-watch", daemon=True).start()
 
 
-def _execute(task: Mapping[str, Any]) -> dict:
+def execute(task: Mapping[str, Any]) -> dict:
     """Run one cell and return its outcome; never raises (a worker's entry point). The time
     limit and `wall_s` cover `run_cell` and the check of its rows, not the worker's set-up."""
     cell: Cell = task["cell"]
@@ -171,7 +174,7 @@ def _execute(task: Mapping[str, Any]) -> dict:
         with contextlib.redirect_stdout(sys.stderr):  # a plugin's print() stays off stdout
             problem = _prepare_worker(task)
         if problem is not None:
-            out.update(kind=problem[0], message=_one_line(problem[1]))
+            out.update(kind=problem[0], message=one_line(problem[1]))
             return out
         if timeout is not None and task.get("hard_kill"):
             grace = float(task.get("hard_grace", HARD_TIMEOUT_GRACE_S))
@@ -181,19 +184,19 @@ def _execute(task: Mapping[str, Any]) -> dict:
         experiment = task["experiment"]
         started = time.perf_counter()
         with contextlib.redirect_stdout(sys.stderr):
-            rows = _call_limited(
+            rows = call_limited(
                 lambda: validate_rows(experiment, experiment.run_cell(cell, task["config"])), timeout
             )
         out.update(ok=True, kind="", rows=rows)
     except CellTimeout:
         out.update(kind="timeout", message=f"timeout after {timeout:g} s")
     except (CellOutputError, StepperOutputError) as exc:
-        out.update(kind="invalid", message=_one_line(str(exc)))
+        out.update(kind="invalid", message=one_line(str(exc)))
     except (KeyboardInterrupt, Terminated):
         raise
     except BaseException as exc:  # the cell's own failure, whatever it is
-        out.update(kind="error", message=_one_line(f"{type(exc).__name__}: {exc}"),
-                   traceback=_short_traceback(exc))
+        out.update(kind="error", message=one_line(f"{type(exc).__name__}: {exc}"),
+                   traceback=short_traceback(exc))
     finally:
         if watchdog is not None:
             watchdog.cancel()
@@ -210,7 +213,7 @@ def _execute(task: Mapping[str, Any]) -> dict:
 
 
 
-def _clean_stale_claims() -> None:
+def clean_stale_claims() -> None:
     """Remove claim directories left by runs killed long ago (their process ended before its
     `finally`); a live run touches its directory with every cell."""
     base = Path(tempfile.gettempdir())

@@ -38,6 +38,9 @@ to compare with). Adaptive steppers are skipped (their step is not a fixed linea
 References: Hairer & Wanner, *Solving ODEs II*, IV.2 (stability function, A-stability) and V.1
 (root condition); Hairer, Lubich & Wanner, *Geometric Numerical Integration*, I.5 (linear
 stability of Verlet); the course's ODE notes (course-material file 004, the lambda h test).
+
+This module runs the experiment and judges it; `probes` (the black-box probes) and `analytic`
+(the formula side) serve it.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -53,15 +56,23 @@ import pandas as pd
 
 from harness import theory
 from harness import tolerances as tol
-from harness.coefficients import (
-    ButcherTableau,
-    LinearMultistep,
-    SecondOrderMultistep,
-    SplittingScheme,
-)
+from harness.coefficients import LinearMultistep
 from harness.errors import InputError
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
-from harness.stepper import AdaptiveStepper, StepFailure, Stepper
+from harness.experiments.stability.analytic import (
+    analytic_blocks,
+    first_order_analytic_amp,
+    newtonian_analytic_amp,
+    newtonian_pair,
+    relative_diff,
+)
+from harness.experiments.stability.probes import (
+    STEP_FAILURES,
+    FirstOrderProbe,
+    NewtonianProbe,
+    block_companion,
+)
+from harness.stepper import AdaptiveStepper, Stepper
 
 __all__ = [
     "StabilityExperiment",
@@ -85,218 +96,6 @@ SUMMARY_COLUMNS = [
 ]
 
 _CLAIM_KEYS = {"first-order": ("real_interval", "imag_interval"), "newtonian": ("hw_limit",)}
-_FAILURES = (StepFailure, np.linalg.LinAlgError)
-
-
-# =============================================================================================
-# Probes
-# =============================================================================================
-def _block_companion(C: np.ndarray) -> np.ndarray:
-    """Companion matrix of y_k = sum_j C_j y_j: C shaped (M, k, d, d) -> (M, k d, k d) acting
-    on the stacked history (y_0, ..., y_{k-1})."""
-    M, k, d, _ = C.shape
-    out = np.zeros((M, k * d, k * d))
-    for i in range(k - 1):
-        out[:, i * d : (i + 1) * d, (i + 1) * d : (i + 2) * d] = np.eye(d)
-    for j in range(k):
-        out[:, (k - 1) * d :, j * d : (j + 1) * d] = C[:, j]
-    return out
-
-
-def _split_on_failure(run: Callable[[np.ndarray], np.ndarray], idx: np.ndarray, out: np.ndarray):
-    """Run `run` on points `idx`; when a step fails for the ensemble, bisect so only the
-    failing points are marked NaN (an implicit solve exactly at a pole of R, say)."""
-    try:
-        out[idx] = run(idx)
-    except _FAILURES:
-        if idx.size == 1:
-            out[idx] = np.nan
-            return
-        half = idx.size // 2
-        _split_on_failure(run, idx[:half], out)
-        _split_on_failure(run, idx[half:], out)
-
-
-class FirstOrderProbe:
-    """Black-box recurrence of a first-order stepper on y' = lambda y with h = 1."""
-
-    chunk_points = 4096
-
-    def __init__(self, stepper: Stepper, problem):
-        self.stepper = stepper
-        self.problem = problem
-        self.k = int(getattr(stepper, "history_length", 1))
-        names = list(problem.parameters)
-        if problem.dim != 2 or "lambda_re" not in names or "lambda_im" not in names:
-            raise InputError(
-                f"problem {problem.name!r} must be the complex test equation with state "
-                f"(Re y, Im y) and parameters lambda_re, lambda_im"
-            )
-        self._i_re, self._i_im = names.index("lambda_re"), names.index("lambda_im")
-        self._defaults = problem.parameter_values
-
-    def _pars(self, z: np.ndarray) -> np.ndarray:
-        P = np.repeat(self._defaults[:, None], z.size, axis=1)
-        P[self._i_re] = z.real
-        P[self._i_im] = z.imag
-        return P
-
-    def _blocks_once(self, z: np.ndarray) -> np.ndarray:
-        k, d = self.k, 2
-        m = z.size
-        per = k * d
-        N = m * per
-        history = [np.zeros((d, N)) for _ in range(k)]
-        for j in range(k):
-            for a in range(d):
-                history[j][a, np.arange(m) * per + j * d + a] = 1.0
-        pars = np.repeat(self._pars(z), per, axis=1)
-        if N < 2 or np.all(pars == pars[:, :1]):
-            # one distinct lambda would be compiled in as a constant (a new compile per value):
-            # a padding member with another lambda keeps the runtime-parameter function
-            pad = pars[:, :1] + 1.0
-            pars = np.concatenate([pars, pad], axis=1)
-            history = [np.concatenate([hj, np.zeros((d, 1))], axis=1) for hj in history]
-        y = self.stepper.step_from_history(
-            self.problem, h=1.0, history=history, t0=self.problem.t0, pars=pars
-        )[:, :N]
-        # member m*per + j*d + a holds column a of C_j at point m
-        return y.reshape(d, m, k, d).transpose(1, 2, 0, 3)
-
-    def blocks(self, z: Any) -> np.ndarray:
-        """C_j at each z: shape (M, k, 2, 2); NaN where the step failed."""
-        z = np.asarray(z, dtype=complex).reshape(-1)
-        out = np.empty((z.size, self.k, 2, 2))
-        for start in range(0, z.size, self.chunk_points):
-            idx = np.arange(start, min(start + self.chunk_points, z.size))
-            _split_on_failure(lambda i: self._blocks_once(z[i]), idx, out)
-        return out
-
-    def amplification(self, z: Any) -> np.ndarray:
-        """Spectral radius of the block companion matrix (|R(z)| for one-step methods)."""
-        z = np.asarray(z, dtype=complex)
-        C = self.blocks(z)
-        if self.k == 1:
-            r = np.hypot(C[:, 0, 0, 0], C[:, 0, 1, 0])  # |R|: C_0 = [[Re R, -Im R], [Im R, Re R]]
-        else:
-            r = theory.spectral_radius(_block_companion(C))
-        return r.reshape(z.shape)
-
-
-class NewtonianProbe:
-    """Black-box propagator of a Newtonian stepper on x'' = -x (omega = 1), step h = h omega.
-
-    Modes: 'one-step' (unit states (x, v) through one step), 'history' (unit history vectors
-    through `step_from_history`), 'position-recurrence' (two-step position recurrence
-    x_2 = c_0 x_0 + c_1 x_1 identified from the two unit starts, confirmed on x_3).
-    """
-
-    def __init__(self, stepper: Stepper, problem):
-        self.stepper = stepper
-        self.problem = problem
-        if problem.newtonian is None or len(problem.newtonian.positions) != 1:
-            raise InputError(f"problem {problem.name!r} must be the 1-D oscillator x'' = -x")
-        self.k = int(getattr(stepper, "history_length", 1))
-        coeffs = stepper.coefficients
-        if self.k > 1:
-            self.mode = "history"
-        elif isinstance(coeffs, SecondOrderMultistep) and coeffs.steps == 2:
-            self.mode = "position-recurrence"
-        elif isinstance(coeffs, SecondOrderMultistep | LinearMultistep) and coeffs.steps > 1:
-            raise InputError(
-                f"stepper {stepper.info.name!r} is a {coeffs.steps}-step method without a history "
-                "hook (`history_length`); its propagator cannot be probed"
-            )
-        else:
-            self.mode = "one-step"
-        self.recurrence_mismatch = 0.0
-        self.last_blocks: np.ndarray | None = None  # C_j of the last 'history' probe, (k, 2, 2)
-
-    def matrix(self, hw: float) -> np.ndarray:
-        """The propagator at step h omega = `hw`: (x, v) -> (x, v) for 'one-step'; the block
-        companion for 'history'; [[0, 1], [c_0, c_1]] on (x_(n-1), x_n) for
-        'position-recurrence'."""
-        s, p = self.stepper, self.problem
-        if self.mode == "one-step":
-            return s.step_from_history(p, h=hw, history=[np.eye(2)], t0=p.t0)
-        if self.mode == "history":
-            k, d = self.k, 2
-            N = k * d
-            history = [np.zeros((d, N)) for _ in range(k)]
-            for j in range(k):
-                for a in range(d):
-                    history[j][a, j * d + a] = 1.0
-            y = s.step_from_history(p, h=hw, history=history, t0=p.t0)
-            C = y.reshape(d, 1, k, d).transpose(1, 2, 0, 3)
-            self.last_blocks = C[0]
-            return _block_companion(C)[0]
-        tr = s.integrate(p, h=hw, n_steps=3, y0=np.eye(2), t0=p.t0, save_steps=[0, 1, 2, 3])
-        X = tr.y[:, 0, :]  # positions, (4 steps, 2 starts)
-        c = np.linalg.solve(np.stack([X[0], X[1]], axis=1), X[2])
-        pred = c[0] * X[1] + c[1] * X[2]
-        mismatch = float(np.max(np.abs(pred - X[3])) / max(1.0, float(np.max(np.abs(X[3])))))
-        self.recurrence_mismatch = max(self.recurrence_mismatch, mismatch)
-        return np.array([[0.0, 1.0], [c[0], c[1]]])
-
-    def amplification(self, hw: Any) -> np.ndarray:
-        hw = np.asarray(hw, dtype=float)
-        out = np.empty(hw.size)
-        for i, x in enumerate(hw.reshape(-1)):
-            try:
-                out[i] = theory.spectral_radius(self.matrix(float(x)))
-            except _FAILURES:
-                out[i] = np.nan
-        return out.reshape(hw.shape)
-
-
-# =============================================================================================
-# Comparison with the coefficients
-# =============================================================================================
-def _complex_block(c: np.ndarray) -> np.ndarray:
-    """Complex numbers (...) -> their real 2x2 multiplication blocks (..., 2, 2)."""
-    out = np.empty((*c.shape, 2, 2))
-    out[..., 0, 0] = c.real
-    out[..., 0, 1] = -c.imag
-    out[..., 1, 0] = c.imag
-    out[..., 1, 1] = c.real
-    return out
-
-
-def _analytic_blocks(coeffs: Any, z: np.ndarray, k: int) -> np.ndarray | None:
-    """The recurrence blocks the coefficients predict at each z, shaped like the probe's, or
-    None when the coefficients do not describe a first-order recurrence of length k."""
-    if isinstance(coeffs, ButcherTableau) and k == 1:
-        return _complex_block(theory.rk_stability_function(coeffs, z))[:, None]
-    if isinstance(coeffs, LinearMultistep) and coeffs.steps == k:
-        with np.errstate(all="ignore"):
-            lead = coeffs.alpha[-1] - z * coeffs.beta[-1]
-            c = -(coeffs.alpha[None, :-1] - z[:, None] * coeffs.beta[None, :-1]) / lead[:, None]
-        return _complex_block(c)
-    return None
-
-
-def _first_order_analytic_amp(coeffs: Any, z: np.ndarray) -> np.ndarray | None:
-    if isinstance(coeffs, ButcherTableau):
-        return np.abs(theory.rk_stability_function(coeffs, z))
-    if isinstance(coeffs, LinearMultistep):
-        return theory.lmm_amplification(coeffs, z)
-    return None
-
-
-def _relative_diff(probe: np.ndarray, analytic: np.ndarray) -> tuple[float, int, int]:
-    """max |probe - analytic| / max(1, |analytic|) per point over points where the analytic
-    value is finite; also the number of such points where the probe failed, and the number of
-    points excluded (poles of the formula)."""
-    axes = tuple(range(1, analytic.ndim))
-    finite_a = np.all(np.isfinite(analytic), axis=axes)
-    finite_p = np.all(np.isfinite(probe), axis=axes)
-    both = finite_a & finite_p
-    if both.any():
-        scale = np.maximum(1.0, np.max(np.abs(analytic[both]), axis=axes))
-        diff = float(np.max(np.max(np.abs(probe[both] - analytic[both]), axis=axes) / scale))
-    else:
-        diff = 0.0
-    return diff, int(np.sum(finite_a & ~finite_p)), int(np.sum(~finite_a))
 
 
 def _intervals_agree(a: float, b: float) -> bool:
@@ -357,6 +156,7 @@ def _check_config(config: Mapping[str, Any]) -> dict:
 
 
 class StabilityExperiment(Experiment):
+    """The lambda h test for every fixed-step stepper (see the module docstring)."""
     name = "stability"
     description = (
         "Linear stability: |R(z)| over the complex lambda h plane, real/imaginary intervals and "
@@ -402,6 +202,7 @@ class StabilityExperiment(Experiment):
         return cells, skips
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """Probe one stepper (first-order or Newtonian, by its form) and compare with its formula."""
         from harness.registry import get_problem, get_stepper
 
         config = _check_config({**self.default_config, **dict(config)})
@@ -419,6 +220,7 @@ class StabilityExperiment(Experiment):
         return pd.concat([grid, pd.DataFrame([summary])], ignore_index=True)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """One summary record per cell, with its verdict."""
         if rows.empty or "kind" not in rows:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         out = rows[rows["kind"] == "summary"].reset_index(drop=True)
@@ -444,6 +246,16 @@ def _unbounded(figures: Mapping[str, float]) -> str:
     return ",".join(k for k, v in figures.items() if v is not None and math.isinf(v))
 
 
+def _agreement(diff: float, failed: int, differs: str, points: str, messages: list[str]) -> bool:
+    """Whether probe and formula agree (within STABILITY_AGREEMENT_TOL, no failed step); what
+    does not agree is appended to `messages` (`differs` and `points` word it)."""
+    if diff > tol.STABILITY_AGREEMENT_TOL:
+        messages.append(f"{differs} by {diff:.3g} (allowed {tol.STABILITY_AGREEMENT_TOL:g})")
+    if failed:
+        messages.append(f"the step failed at {failed} {points}")
+    return diff <= tol.STABILITY_AGREEMENT_TOL and failed == 0
+
+
 def _run_first_order(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, dict]:
     probe = FirstOrderProbe(stepper, problem)
     coeffs = stepper.coefficients
@@ -455,8 +267,8 @@ def _run_first_order(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, d
     if probe.k == 1:
         abs_probe = np.hypot(C[:, 0, 0, 0], C[:, 0, 1, 0])
     else:
-        abs_probe = theory.spectral_radius(_block_companion(C))
-    abs_analytic = _first_order_analytic_amp(coeffs, Z)
+        abs_probe = theory.spectral_radius(block_companion(C))
+    abs_analytic = first_order_analytic_amp(coeffs, Z)
     grid = pd.DataFrame({
         "kind": "grid", "z_re": Z.real, "z_im": Z.imag, "abs_r_probe": abs_probe,
         "abs_r_analytic": abs_analytic if abs_analytic is not None else np.nan,
@@ -469,21 +281,17 @@ def _run_first_order(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, d
     agrees: bool | None = None
     diff = math.nan
     a_real = a_imag = math.nan
-    expected = _analytic_blocks(coeffs, Z, probe.k)
+    expected = analytic_blocks(coeffs, Z, probe.k)
     if expected is not None:
-        diff, failed, poles = _relative_diff(C, expected)
+        diff, failed, poles = relative_diff(C, expected)
         a = theory.analytic_stability(coeffs, limit=limit)
         a_real, a_imag = a["real_interval"], a["imag_interval"]
         # Probe and formula are judged on the amplification values themselves: where they agree
         # to rounding they are the same function, and its intervals are the formula's, decided
         # exactly (a flat crossing makes two root-findings of the same function differ by far
         # more than the functions do).
-        agrees = diff <= tol.STABILITY_AGREEMENT_TOL and failed == 0
-        if diff > tol.STABILITY_AGREEMENT_TOL:
-            messages.append(f"probe differs from the coefficients' formula by {diff:.3g} "
-                            f"(allowed {tol.STABILITY_AGREEMENT_TOL:g})")
-        if failed:
-            messages.append(f"the step failed at {failed} grid point(s) where the formula is finite")
+        agrees = _agreement(diff, failed, "probe differs from the coefficients' formula",
+                            "grid point(s) where the formula is finite", messages)
         if poles:
             messages.append(f"{poles} grid point(s) at a pole of the formula left out")
         if agrees:
@@ -514,33 +322,6 @@ def _run_first_order(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, d
     return grid, summary
 
 
-def _newtonian_pair(coeffs: Any, probe: NewtonianProbe, hw: float, matrix: np.ndarray):
-    """(measured, predicted) arrays to compare at step `hw`, in the probe's coordinates, or None
-    when the coefficients say nothing about what this probe sees."""
-    if isinstance(coeffs, SplittingScheme) and probe.mode == "one-step":
-        return matrix, theory.splitting_propagator(coeffs, hw)
-    if not isinstance(coeffs, SecondOrderMultistep):
-        return None
-    w2 = hw * hw
-    k = coeffs.steps
-    c = -(coeffs.alpha[:k] + w2 * coeffs.beta[:k]) / (coeffs.alpha[k] + w2 * coeffs.beta[k])
-    if probe.mode == "position-recurrence" and k == 2:
-        return matrix, np.array([[0.0, 1.0], [c[0], c[1]]])
-    if probe.mode == "history" and probe.k == k and probe.last_blocks is not None:
-        # the position row of each block: x_k = sum_j c_j x_j, no dependence on the velocities
-        measured = probe.last_blocks[:, 0, :]
-        return measured, np.stack([c, np.zeros(k)], axis=1)
-    return None
-
-
-def _newtonian_analytic_amp(coeffs: Any, hw: np.ndarray) -> np.ndarray | None:
-    if isinstance(coeffs, SplittingScheme):
-        return theory.splitting_amplification(coeffs, hw)
-    if isinstance(coeffs, SecondOrderMultistep):
-        return theory.second_order_lmm_amplification(coeffs, hw)
-    return None
-
-
 def _run_newtonian(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, dict]:
     probe = NewtonianProbe(stepper, problem)
     coeffs = stepper.coefficients
@@ -550,12 +331,12 @@ def _run_newtonian(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, dic
     for x in hws:
         try:
             m = probe.matrix(float(x))
-        except _FAILURES:
+        except STEP_FAILURES:
             m = None
         mats.append(m)
-        pairs.append(_newtonian_pair(coeffs, probe, float(x), m) if m is not None else None)
+        pairs.append(newtonian_pair(coeffs, probe, float(x), m) if m is not None else None)
     abs_probe = np.array([float(theory.spectral_radius(m)) if m is not None else np.nan for m in mats])
-    abs_analytic = _newtonian_analytic_amp(coeffs, hws)
+    abs_analytic = newtonian_analytic_amp(coeffs, hws)
     grid = pd.DataFrame({
         "kind": "grid-hw", "hw": hws, "abs_r_probe": abs_probe,
         "abs_r_analytic": abs_analytic if abs_analytic is not None else np.nan,
@@ -574,12 +355,8 @@ def _run_newtonian(stepper: Stepper, problem, config) -> tuple[pd.DataFrame, dic
                     for m, e in ok), default=0.0)
         a = theory.analytic_stability(coeffs, limit=limit)
         a_limit = a["hw_limit"]
-        agrees = diff <= tol.STABILITY_AGREEMENT_TOL and failed == 0
-        if diff > tol.STABILITY_AGREEMENT_TOL:
-            messages.append(f"probe propagator differs from the coefficients' by {diff:.3g} "
-                            f"(allowed {tol.STABILITY_AGREEMENT_TOL:g})")
-        if failed:
-            messages.append(f"the step failed at {failed} h omega value(s)")
+        agrees = _agreement(diff, failed, "probe propagator differs from the coefficients'",
+                            "h omega value(s)", messages)
         if agrees:
             hw_limit = a_limit
         elif not _intervals_agree(hw_limit, a_limit):

@@ -23,6 +23,8 @@ Contract for a stepper (a subclass of `Stepper`):
 6. It is registered in `implementations/__init__.py` (or through the `harness.steppers` entry
    point); `coefficients` holds its data object when it has one.
 Public methods (`integrate`, `round_trip`) check their input and keep the books.
+
+This module holds the `Stepper` base class; `records` holds the records and checks it uses.
 """
 
 from __future__ import annotations
@@ -31,13 +33,23 @@ import math
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from harness.errors import HarnessError, IncompatibleError, InputError, StepperOutputError
+from harness.errors import IncompatibleError, InputError, StepperOutputError
 from harness.problem import Dynamics, Problem, check_state, check_time
+from harness.stepper.records import (
+    FORMS,
+    MAX_STEPS,
+    Carry,
+    StepFailure,
+    StepperInfo,
+    Trajectory,
+    check_compatible,
+    check_step_size,
+    check_steps,
+)
 
 __all__ = [
     "StepperInfo",
@@ -49,12 +61,11 @@ __all__ = [
     "check_step_size",
     "check_steps",
     "FORMS",
+    "MAX_STEPS",
     "AdaptiveStepper",
     "StepperOutputError",
 ]
 
-FORMS = ("first-order", "newtonian")
-MAX_STEPS = 100_000_000
 # A step that turns a finite state no larger than this into NaN (with no inf anywhere) is the
 # stepper's fault, not a blow-up: overflow gives inf first, and NaN needs inf - inf, 0 * inf or
 # 0 / 0 -- unless the step overflowed on the way (checked by replaying it with overflow trapped).
@@ -75,125 +86,6 @@ def _made_nan(before: np.ndarray, after: np.ndarray) -> bool:
     return bool(after.size) and bool(np.all(np.any(np.isnan(after), axis=0)))
 
 
-class StepFailure(HarnessError):
-    """A step could not be completed (an implicit stage solve did not converge)."""
-
-
-@dataclass(frozen=True)
-class StepperInfo:
-    """What a stepper claims about itself. Every field is reported beside its measurement."""
-
-    name: str
-    family: str
-    claimed_order: int | None
-    explicit: bool
-    symplectic: bool
-    symmetric: bool
-    evals_per_step: float
-    form: str
-    velocity_dependent: bool
-    reference: str
-    description: str = ""
-    adaptive: bool = False
-    implementation: str = "numpy"
-    extra: dict = field(default_factory=dict)
-
-    def __post_init__(self):
-        if self.form not in FORMS:
-            raise InputError(f"stepper {self.name!r}: `form` must be one of {FORMS}, got {self.form!r}")
-        if self.claimed_order is not None and (
-            not isinstance(self.claimed_order, int) or self.claimed_order < 1
-        ):
-            raise InputError(
-                f"stepper {self.name!r}: `claimed_order` must be a positive integer or None, "
-                f"got {self.claimed_order!r}"
-            )
-        if not self.reference:
-            raise InputError(f"stepper {self.name!r}: `reference` (literature source) is required")
-
-    def as_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d.update(d.pop("extra"))
-        return d
-
-
-class Carry:
-    """What a stepper remembers between steps. `t` is derived from the step count, not summed."""
-
-    __slots__ = ("t0", "h", "n", "y", "__dict__")
-
-    def __init__(self, t0: float, h: float, y: np.ndarray, **extra: Any):
-        self.t0 = t0
-        self.h = h
-        self.n = 0
-        self.y = y
-        self.__dict__.update(extra)
-
-    @property
-    def t(self) -> float:
-        return self.t0 + self.n * self.h
-
-
-@dataclass
-class Trajectory:
-    """States saved at chosen step indices: `y[k]` is the state (dim, N) after `steps[k]` steps."""
-
-    stepper: str
-    problem: str
-    h: float
-    steps: np.ndarray
-    t: np.ndarray
-    y: np.ndarray
-    evals: dict
-    wall_s: float
-    finite: bool
-    member_t: np.ndarray | None = None  # (saves, N) physical times when members' clocks differ
-
-    @property
-    def final(self) -> np.ndarray:
-        return self.y[-1]
-
-
-def check_step_size(h: Any) -> float:
-    try:
-        x = float(h)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"`h` must be a real number, got {h!r}") from None
-    if math.isnan(x) or math.isinf(x):
-        raise InputError(f"`h` must be finite, got {x!r}")
-    if x <= 0.0:
-        raise InputError(f"`h` must be positive, got {x!r}")
-    return x
-
-
-def check_steps(n: Any, name: str = "n_steps") -> int:
-    if isinstance(n, bool) or not isinstance(n, int | np.integer):
-        raise InputError(f"`{name}` must be a whole number, got {n!r}")
-    if n < 1:
-        raise InputError(f"`{name}` must be at least 1, got {n}")
-    if n > MAX_STEPS:
-        raise InputError(f"`{name}` must be at most {MAX_STEPS}, got {n}")
-    return int(n)
-
-
-def check_compatible(stepper: Stepper, problem: Problem) -> None:
-    """Raise IncompatibleError when `stepper` cannot integrate `problem` (with the reason)."""
-    info = stepper.info
-    if info.form == "newtonian" and problem.newtonian is None:
-        raise IncompatibleError(
-            f"stepper {info.name!r} needs a Newtonian problem (q'' = a(q, t)); "
-            f"problem {problem.name!r} is a first-order system"
-        )
-    if info.form == "newtonian" and problem.velocity_dependent and not info.velocity_dependent:
-        raise IncompatibleError(
-            f"stepper {info.name!r} needs an acceleration independent of velocity; "
-            f"problem {problem.name!r} has a(q, v, t)"
-        )
-    reason = stepper.incompatibility(problem)
-    if reason:
-        raise IncompatibleError(f"stepper {info.name!r} cannot run problem {problem.name!r}: {reason}")
-
-
 class Stepper(ABC):
     """Base class: see the module docstring for the numbered contract."""
 
@@ -206,6 +98,7 @@ class Stepper(ABC):
         return None
 
     def compatible(self, problem: Problem) -> bool:
+        """True when this stepper can integrate `problem` (see `check_compatible`)."""
         try:
             check_compatible(self, problem)
         except IncompatibleError:
@@ -517,6 +410,7 @@ class AdaptiveStepper(Stepper):
     tol: float = 1e-10
 
     def with_tolerance(self, tol: float) -> AdaptiveStepper:
+        """A copy of this stepper with tolerance `tol` (a positive finite number)."""
         import copy
 
         try:

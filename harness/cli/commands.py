@@ -1,0 +1,260 @@
+"""The commands of the `harness` command line, one function each (`harness list`, `run`,
+`reference`, `gate`, `report`, `population`), writing through `harness.cli.output`."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Sequence
+
+from harness.cli.output import (
+    EXIT_FAILED,
+    EXIT_OK,
+    SHOWN_SKIPS,
+    one_line,
+    output_buffer,
+    print_json,
+    print_table,
+)
+
+
+def load_plugins(paths: Sequence[str]) -> None:
+    """Load every plugin file in `paths` into the registry."""
+    from harness.registry import load_plugin
+
+    for path in paths:
+        load_plugin(path)
+
+
+def _names(kind: str, requested: Sequence[str]) -> list[str]:
+    from harness.registry import problems, steppers
+
+    reg = steppers if kind == "stepper" else problems
+    if not requested:
+        return reg.names()
+    for name in requested:
+        reg.get(name)  # raises UnknownNameError with the closest names
+    return list(dict.fromkeys(requested))
+
+
+
+def cmd_population(args) -> int:
+    """Generate a population (harness.populations), judge it, save the per-method table and the
+    rates under results/<run-id>/ as `gate-population`, and exit 1 on any false alarm or miss."""
+    import time
+
+    import pandas as pd
+
+    from harness.errors import InputError
+    from harness.populations import error_rates, generate
+    from harness.runner import RunResult
+    from harness.store import save_run
+
+    if not 1 <= args.size <= 1000:
+        raise InputError(f"`--size` must lie in [1, 1000], got {args.size}")
+    started = time.perf_counter()
+    table, rates = error_rates(generate(args.size, seed=args.seed))
+    empty = pd.DataFrame()
+    result = RunResult(experiment="gate-population",
+                       description="the gate's error rates on generated methods",
+                       config={"size": args.size, "seed": args.seed}, rows=table, summary=rates,
+                       failures=empty, skips=empty, cells=empty, wall_s=time.perf_counter() - started,
+                       cached_cells=0, computed_cells=len(table))
+    path = save_run({"gate-population": result}, config={"command": "population", "size": args.size,
+                                                          "seed": args.seed})
+    print(f"harness: results saved in {os.fspath(path)}", file=sys.stderr)
+    overall = rates[rates.family == "all"].iloc[0]
+    bad = int(overall.gate_false_alarms + overall.gate_misses)
+    if args.json:
+        print_json(rates.to_dict("records"))
+    else:
+        print_table(rates, list(rates.columns))
+        print(f"population: {int(overall.correct_methods)} correct methods, {int(overall.mutants)} mutants; "
+              f"gate false alarms {int(overall.gate_false_alarms)}, misses {int(overall.gate_misses)}; "
+              f"measurement alone: false alarms {int(overall.measurement_false_alarms)}, "
+              f"misses {int(overall.measurement_misses)}", file=output_buffer())
+    return EXIT_FAILED if bad else EXIT_OK
+
+
+
+def cmd_list(args) -> int:
+    """`harness list steppers|problems`: the registry as a table or JSON."""
+    from harness.registry import plugin_errors, problems, steppers
+
+    if args.kind == "steppers":
+        records = [dict(s.info.as_dict(), origin=steppers.origin(s.info.name)) for s in steppers.all()]
+        cols = ["name", "family", "claimed_order", "explicit", "symplectic", "symmetric",
+                "evals_per_step", "form", "velocity_dependent", "adaptive"]
+    elif args.kind == "problems":
+        records = [dict(p.describe(), origin=problems.origin(p.name)) for p in problems.all()]
+        cols = ["name", "form", "dim", "t_span", "velocity_dependent", "conservative",
+                "exact_solution", "invariants"]
+    else:
+        from harness.experiments import EXPERIMENTS, get_experiment  # noqa: F401
+
+        records = [{"name": e.name, "description": e.description} for e in EXPERIMENTS.values()]
+        cols = ["name", "description"]
+    if args.json:
+        print_json(records)
+    else:
+        import pandas as pd
+
+        print_table(pd.DataFrame(records), cols)
+    for err in plugin_errors():
+        print(f"harness: warning: {one_line(err)}", file=sys.stderr)
+    return EXIT_OK
+
+
+def cmd_reference(args) -> int:
+    """`harness reference PROBLEM --t T`: the certified reference state at the given times."""
+    import numpy as np
+
+    from harness.ground_truth import reference
+    from harness.problem import check_time
+    from harness.registry import get_problem
+
+    problem = get_problem(args.problem)
+    t = check_time(args.t, "--t")
+    if t < problem.t0:
+        from harness.errors import InputError
+
+        raise InputError(f"`--t` must be >= the start time {problem.t0:g} of {problem.name!r}, got {t:g}")
+    ref = reference(problem, np.array([t]))
+    record = {
+        "problem": problem.name,
+        "t": t,
+        "variables": [str(v) for v in problem.variables],
+        "state": ref.y[-1][:, 0].tolist(),
+        "reference_error": float(np.max(ref.error[-1])),
+        "precision": ref.precision,
+        "certified_by": ref.certified_by,
+    }
+    if problem.exact is not None:
+        exact = problem.exact(t, problem.y0[:, None], problem.t0, problem.pars_for(1))[:, 0]
+        record["exact_state"] = exact.tolist()
+        record["exact_difference"] = float(np.max(np.abs(exact - ref.y[-1][:, 0])))
+    if args.json:
+        print_json([record])
+    else:
+        for k, v in record.items():
+            print(f"{k:>18}: {v}", file=output_buffer())
+    return EXIT_OK
+
+
+def _shared_run_settings(args) -> dict[str, object]:
+    """The run settings every running command takes from its options (quick, jobs, scheduler,
+    fresh, plugins)."""
+    return {"quick": args.quick, "jobs": args.jobs, "scheduler": args.scheduler, "fresh": args.fresh,
+            "plugins": tuple(args.plugin)}
+
+
+def _run(args, experiment: str):
+    """Run one experiment's grid and save it under results/<run-id>/ (path on stderr)."""
+    from harness.experiments import get_experiment
+    from harness.experiments.common import OVERRIDE_KEYS, check_overrides
+    from harness.runner import run_experiment
+    from harness.store import save_run
+
+    overrides = check_overrides(get_experiment(experiment),
+                                {k: getattr(args, k, None) for k in OVERRIDE_KEYS})
+    result = run_experiment(
+        experiment,
+        _names("stepper", args.stepper),
+        _names("problem", args.problem),
+        **_shared_run_settings(args),
+        cell_timeout=args.cell_timeout,
+        config=overrides or None,
+    )
+    path = save_run({experiment: result}, config={"command": args.command, "experiment": experiment,
+                                                   "quick": args.quick, "plugins": list(args.plugin),
+                                                   "overrides": overrides})
+    print(f"harness: results saved in {os.fspath(path)}", file=sys.stderr)
+    return result
+
+
+def _failures_table(result) -> list[dict]:
+    import pandas as pd
+
+    f = result.failures
+    if isinstance(f, pd.DataFrame):
+        return f.to_dict("records")
+    return list(f or [])
+
+
+def cmd_run(args) -> int:
+    """`harness run EXPERIMENT`: run one experiment, print its summary; exit 1 on a failed cell
+    or claim.
+    """
+    from harness.experiments import get_experiment
+
+    get_experiment(args.experiment)  # unknown name -> exit 2 with the closest names
+    result = _run(args, args.experiment)
+    records = result.summary.to_dict("records")
+    failures = _failures_table(result)
+    if args.json:
+        print_json(records + [dict(f, verdict="failed", passed=False) for f in failures])
+    else:
+        print_table(result.summary, list(result.summary.columns))
+        _print_footer(result, failures)
+    # A claim an experiment checks (stability figures, bounded energy, reversibility, ...) that
+    # does not hold fails the run like a failed cell does.
+    failed_claims = 0
+    if "passed" in result.summary.columns:
+        failed_claims = int((result.summary["passed"] == False).sum())  # noqa: E712 (object column)
+        if failed_claims and not args.json:
+            print(f"{args.experiment}: {failed_claims} cell(s) whose claim does not hold",
+                  file=output_buffer())
+    return EXIT_FAILED if failures or failed_claims else EXIT_OK
+
+
+def _print_footer(result, failures) -> None:
+    out = output_buffer()
+    print(f"\n{len(result.summary)} cells, {len(failures)} failed, "
+          f"{getattr(result, 'cached_cells', 0)} from cache, {result.wall_s:.1f} s", file=out)
+    for f in failures:
+        print(f"FAILED {f.get('stepper')} x {f.get('problem')}: {one_line(str(f.get('message', '')))}",
+              file=out)
+    skips = result.skips.to_dict("records") if hasattr(result.skips, "to_dict") else []
+    for r in skips[:SHOWN_SKIPS]:
+        print(f"not applicable: {r.get('stepper')} x {r.get('problem')}: {one_line(str(r.get('reason')))}",
+              file=out)
+    if len(skips) > SHOWN_SKIPS:
+        print(f"not applicable: {len(skips) - SHOWN_SKIPS} more pairs (every reason: "
+              "`harness.results.load(table='skips')`)", file=out)
+
+
+def cmd_gate(args) -> int:
+    """`harness gate`: run convergence and judge every stepper's claims; exit 1 when one fails."""
+    from harness.gate import GATE_COLUMNS, gate_table
+
+    result = _run(args, "convergence")
+    table = gate_table(result.summary)
+    failures = _failures_table(result)
+    passed = bool(table["passed"].all()) and not failures
+    if args.json:
+        print_json(table.to_dict("records") + [
+            dict(f, verdict="failed", passed=False) for f in failures
+        ])
+    else:
+        print_table(table, GATE_COLUMNS)
+        _print_footer(result, failures)
+        n_bad = int((~table["passed"]).sum()) + len(failures)
+        n_unmeasured = int((table["outcome"] == "not-measurable").sum())
+        print(f"gate: {'PASSED' if passed else 'FAILED'} ({len(table)} cells, {n_bad} failing, "
+              f"{n_unmeasured} not measurable: see their reasons)", file=output_buffer())
+    return EXIT_OK if passed else EXIT_FAILED
+
+
+def cmd_report(args) -> int:
+    """`harness report`: build the HTML report and print its path."""
+    from harness.report import build_report
+
+    path = build_report(
+        steppers=_names("stepper", args.stepper),
+        problems=_names("problem", args.problem),
+        **_shared_run_settings(args),
+        output=args.output,
+        compare=args.compare,
+    )
+    print(os.fspath(path), file=output_buffer())
+    return EXIT_OK

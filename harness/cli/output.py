@@ -1,0 +1,126 @@
+"""The command line's one output layer: the collected stdout of a command, its writing at the end,
+one-line errors with sysexits-style statuses, and JSON and table printing."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import os
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_CANTCREAT, EXIT_IOERR, EXIT_NOPERM, EXIT_PIPE = 73, 74, 77, 141
+# A run's footer lists at most this many pairs that do not apply (all are in the saved run).
+SHOWN_SKIPS = 10
+
+# The command's stdout while it runs (see the module docstring); `print(..., file=output_buffer())`.
+OUTPUT: list[io.StringIO] = []
+
+
+def output_buffer() -> io.StringIO:
+    """The buffer collecting the running command's output (written to stdout at the end)."""
+    if not OUTPUT:
+        OUTPUT.append(io.StringIO())
+    return OUTPUT[-1]
+
+
+def report_error(message: str, code: int) -> int:
+    """Print `message` as one error line on stderr and return `code`."""
+    print(f"harness: error: {one_line(message)}", file=sys.stderr)
+    return code
+
+
+def os_error_status(exc: OSError) -> tuple[str, int]:
+    """(one-line message, exit status) for an OS error (`harness.errors.describe_os_error`)."""
+    from harness.errors import describe_os_error
+
+    return describe_os_error(exc)
+
+
+def _stdout_name() -> str:
+    try:
+        target = os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        return "stdout"
+    return f"stdout ({target})" if target.startswith("/") else "stdout"
+
+
+def write_stdout(text: str) -> int:
+    """Write the command's output and flush it; an OS error becomes one line on stderr."""
+    try:
+        if text:
+            sys.stdout.write(text)
+        sys.stdout.flush()
+    except OSError as exc:
+        exc.filename = _stdout_name()
+        _silence_stdout()
+        return report_error(*os_error_status(exc))
+    return EXIT_OK
+
+
+def _silence_stdout() -> None:
+    """After a failed write, point the real stdout at /dev/null so the interpreter's own flush
+    at exit does not print a second error (only for the process's real stdout)."""
+    if sys.stdout is not sys.__stdout__:
+        return
+    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
+def explain_skips(skips: Sequence[dict], as_json: bool) -> None:
+    """Why each requested pair does not apply: JSON records or a table, on stdout."""
+    if as_json:
+        print_json([dict(r, verdict="not-applicable", passed=False) for r in skips])
+        return
+    import pandas as pd
+
+    print("not applicable:", file=output_buffer())
+    print_table(pd.DataFrame(list(skips), columns=["experiment", "stepper", "problem", "reason"]),
+                 ["experiment", "stepper", "problem", "reason"])
+
+
+def one_line(text: str) -> str:
+    """`text` on one line, whitespace collapsed, cut to 500 characters."""
+    line = " ".join(text.split())
+    return line if len(line) <= 500 else line[:497] + "..."
+
+
+
+def _jsonable(value: Any) -> Any:
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def print_json(records: Any) -> None:
+    """Print `records` as indented JSON to the command's output."""
+    print(json.dumps(_jsonable(records), indent=2), file=output_buffer())
+
+
+def print_table(frame, columns: Sequence[str]) -> None:
+    """Print the `columns` of `frame` as a plain-text table to the command's output."""
+    import pandas as pd
+
+    if frame.empty:
+        print("(none)", file=output_buffer())
+        return
+    cols = [c for c in columns if c in frame.columns]
+    with pd.option_context("display.max_rows", None, "display.max_columns", None,
+                           "display.width", 200, "display.max_colwidth", 70):
+        print(frame[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"), file=output_buffer())

@@ -1,0 +1,166 @@
+"""Propagating a reference with heyoka's Taylor integrator at one precision level: integrators
+built once per process, and bounded work (every reference has a work and time budget)."""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from typing import Any
+
+import heyoka as hy
+import numpy as np
+
+from harness import cache
+from harness.errors import InputError, ReferenceError_, WorkLimitError
+from harness.ground_truth.levels import COMPACT_MODE_SIZE, SOFTWARE_LEVELS, Level
+from harness.problem import Problem
+from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
+
+# -- work bounds ----------------------------------------------------------------------------------
+# Every reference integration is bounded and interruptible. heyoka runs in compiled code, so it is
+# driven in chunks (`propagate_grid(max_steps=...)`, resumed where it stopped: the same steps as
+# one uninterrupted call); between chunks Python runs, so Ctrl-C and a cell's time limit
+# (SIGALRM, also with --jobs 1) take effect, and the work so far is checked. Work is counted in
+# float64-step units: a Taylor step costs `REFERENCE_STEP_COST[level]` of them (measured on this
+# machine type for Kepler: long double ~10x, real128 ~300x a float64 step). After the first
+# chunk the work the whole span needs is projected from the rate so far; a run projected or found
+# to exceed `REFERENCE_MAX_WORK` units per member and precision, or running longer than
+# `REFERENCE_MAX_SECONDS`, stops with `WorkLimitError` naming the limit and the environment
+# variable that raises it. 1e8 units (~1e7 long double or ~3e5 real128 steps) is ~100x the
+# largest catalogue reference; 900 s is ~100x all catalogue references together.
+REFERENCE_STEP_COST = {"float64": 1.0, "longdouble": 10.0, "real128": 300.0, "real192": 1000.0}
+REFERENCE_MAX_WORK = 1e8
+REFERENCE_MAX_SECONDS = 900.0
+# A chunk is this much work (~10 ms to ~1 s of compiled code between checks).
+REFERENCE_CHUNK_WORK = 20_000
+
+
+def _limit(env: str, default: float) -> float:
+    raw = os.environ.get(env)
+    if raw is None or raw == "":
+        return default
+    try:
+        value = float(raw)
+    except ValueError:
+        raise InputError(f"`{env}` must be a positive number, got {raw!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"`{env}` must be a positive number, got {raw!r}")
+    return value
+
+
+def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray, member: int,
+                       started: float) -> tuple[Any, np.ndarray]:
+    """`ta.propagate_grid(grid)` in chunks, within the work bounds (see above); returns
+    (outcome, states at the grid points)."""
+    max_work = _limit("HARNESS_REFERENCE_MAX_WORK", REFERENCE_MAX_WORK)
+    max_seconds = _limit("HARNESS_REFERENCE_MAX_SECONDS", REFERENCE_MAX_SECONDS)
+    cost = REFERENCE_STEP_COST.get(level.name, max(REFERENCE_STEP_COST.values()))
+    chunk = max(20, int(REFERENCE_CHUNK_WORK / cost))
+    t_start, t_end = float(grid[0]), float(grid[-1])
+    rows: list[np.ndarray] = []
+    remaining = grid
+    steps = 0
+    while True:
+        result = ta.propagate_grid(remaining, max_steps=chunk)
+        outcome, states = result[0], result[-1]
+        rows.extend(states if not rows else states[1:])  # a resumed grid starts at the stop time
+        steps += int(result[3])
+        if outcome != hy.taylor_outcome.step_limit:
+            return outcome, np.array(rows)
+        done = float(ta.time) - t_start
+        projected = cost * steps * (t_end - t_start) / done if done > 0 else math.inf
+        where = (f"ground truth for problem {problem.name!r} failed in {level.name} at "
+                 f"t = {float(ta.time):.17g} (member {member}): reaching t = {t_end:.6g}")
+        if projected > max_work:
+            raise WorkLimitError(
+                f"{where} needs about {projected / cost:.3g} Taylor steps ({projected:.3g} work "
+                f"units), more than the limit of {max_work:.3g} units "
+                "(`HARNESS_REFERENCE_MAX_WORK`; set it higher to allow this)")
+        elapsed = time.perf_counter() - started
+        if elapsed > max_seconds:
+            raise WorkLimitError(
+                f"{where} took over {elapsed:.0f} s, more than the limit of {max_seconds:g} s "
+                "(`HARNESS_REFERENCE_MAX_SECONDS`; set it higher to allow this)")
+        remaining = np.concatenate([np.array([ta.time], dtype=grid.dtype), grid[len(rows):]])
+
+
+# -- integrators ---------------------------------------------------------------------------------
+integrators: dict[tuple[str, str], tuple[threading.Lock, Any]] = {}
+_integrators_lock = threading.Lock()
+
+
+def _integrator(problem: Problem, level: Level, tol: float) -> tuple[threading.Lock, Any]:
+    key = (problem.fingerprint(), level.name, tol)
+    with _integrators_lock:
+        found = integrators.get(key)
+    if found is not None:
+        return found
+    cache.configure_heyoka_cache()
+    sys = list(zip(problem.variables, problem.rhs, strict=True))
+    kwargs: dict[str, Any] = {
+        "tol": level.scalar(tol),
+        "high_accuracy": True,
+        "compact_mode": level.name in SOFTWARE_LEVELS
+        or sum(len(str(e)) for e in problem.rhs) > COMPACT_MODE_SIZE,
+    }
+    if level.name != "float64":
+        kwargs["fp_type"] = level.fp_type
+    if problem.parameters:
+        kwargs["pars"] = level.array(problem.parameter_values)
+    ta = hy.taylor_adaptive(sys, level.array(problem.y0), **kwargs)
+    entry = (threading.Lock(), ta)
+    with _integrators_lock:
+        return integrators.setdefault(key, entry)
+
+
+def reference_tol(level: Level) -> float:
+    """heyoka's tolerance for a reference at `level`: its epsilon times REFERENCE_TOL_FACTOR."""
+    return level.eps * REFERENCE_TOL_FACTOR
+
+
+def certifier_tol(cert: Level, level: Level) -> float:
+    """heyoka's tolerance for the certifying rerun at `cert` of a reference at `level`."""
+    return max(cert.eps, reference_tol(level) * CERTIFIER_TOL_FACTOR)
+
+
+def propagate(
+    problem: Problem,
+    level: Level,
+    tol: float,
+    times: np.ndarray,
+    y0: np.ndarray,
+    t0: float,
+    pars: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """States at `times` for every member, shaped (nt, dim, N), in the level's number type."""
+    lock, ta = _integrator(problem, level, tol)
+    prepend = times[0] > t0
+    grid = level.array(np.concatenate([[t0], times]) if prepend else times)
+    n_members = y0.shape[1]
+    out = []
+    start = time.perf_counter()
+    with lock:
+        for n in range(n_members):
+            ta.state[:] = level.array(y0[:, n])
+            ta.time = level.scalar(t0)
+            if pars.shape[0]:
+                ta.pars[:] = level.array(pars[:, n])
+            outcome, states = _propagate_bounded(problem, level, ta, grid, n, start)
+            if outcome != hy.taylor_outcome.time_limit:
+                raise ReferenceError_(
+                    f"ground truth for problem {problem.name!r} failed in {level.name} at "
+                    f"t = {float(ta.time):.17g} (member {n}): heyoka stopped with {outcome} "
+                    "(the solution blows up or becomes non-finite)"
+                )
+            states = states[1:] if prepend else states
+            check = states.astype(np.float64)
+            if not np.all(np.isfinite(check)):
+                bad = int(np.argmax(~np.all(np.isfinite(check), axis=1)))
+                raise ReferenceError_(
+                    f"ground truth for problem {problem.name!r} is not finite in {level.name} at "
+                    f"t = {times[bad]:.17g} (member {n})"
+                )
+            out.append(states)
+    return np.stack(out, axis=-1), time.perf_counter() - start

@@ -1,0 +1,445 @@
+"""Orchestration of a run: list an experiment's cells, reuse the cached ones, run the others on
+the chosen executor, and assemble the `RunResult` (see the package docstring for the guarantees)."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness.errors import (
+    HarnessError,
+    InputError,
+    NoApplicableCellsError,
+    UnknownNameError,
+)
+from harness.experiments.base import Cell, Experiment, Skip, failed_record
+from harness.keys import cell_key, code_version, experiment_fingerprint
+from harness.progress import Progress
+from harness.runner.checks import (
+    check_jobs,
+    check_names,
+    check_plugins,
+    check_scheduler,
+    progress_display,
+    resolve_config,
+    resolve_experiment,
+)
+from harness.runner.executors import (
+    Task,
+    dask_client,
+    run_dask,
+    run_loky,
+    run_serial,
+)
+from harness.runner.limits import (
+    check_timeout,
+)
+from harness.runner.memory import (
+    guard_memory,
+)
+from harness.runner.result import (
+    CELL_COLUMNS,
+    FAILURE_COLUMNS,
+    ID_COLUMNS,
+    SKIP_COLUMNS,
+    RunResult,
+)
+from harness.runner.validation import SCALARS, CellOutputError
+from harness.runner.workers import (
+    one_line,
+    plugin_spec,
+    short_traceback,
+)
+from harness.store import (
+    CellCache,
+    encode_cell,
+)
+
+FAILURE_KINDS = ("error", "invalid", "timeout", "crash", "lookup", "version", "summarize")
+
+
+class ExperimentError(HarnessError):
+    """An experiment could not list its cells (the message names the experiment)."""
+
+
+
+# -- the runner -------------------------------------------------------------------------------------
+def _skip_records(skips: Iterable[Skip]) -> list[dict]:
+    return [{"experiment": s.experiment, "stepper": s.stepper, "problem": s.problem,
+             "reason": s.reason} for s in skips]
+
+
+def no_cells_error(experiments: Sequence[str], skips: Sequence[Skip] | pd.DataFrame,
+                   steppers: Sequence[str], problems: Sequence[str]) -> NoApplicableCellsError:
+    """The error for a run over zero applicable cells: one line saying why each requested pair
+    does not apply (the experiments' skip reasons); every record is kept in `.skips`."""
+    records = (skips.to_dict("records") if isinstance(skips, pd.DataFrame)
+               else _skip_records(skips))
+    what = ", ".join(map(repr, experiments))
+    head = (f"no cell of {what} applies to the requested stepper(s) "
+            f"{_few(steppers)} x problem(s) {_few(problems)}")
+    if not records:
+        return NoApplicableCellsError(head + " (the experiment lists no pairs for them)", records)
+    reasons = [f"{r['stepper'] or '-'} x {r['problem'] or '-'}: {r['reason']}" for r in records[:4]]
+    more = f"; and {len(records) - 4} more pairs" if len(records) > 4 else ""
+    return NoApplicableCellsError(f"{head}: " + "; ".join(reasons) + more, records)
+
+
+def _few(names: Sequence[str], n: int = 4) -> str:
+    shown = ", ".join(names[:n]) if names else "(none)"
+    return shown + (f" (+{len(names) - n} more)" if len(names) > n else "")
+
+
+def _params_json(cell: Cell) -> str:
+    return json.dumps({str(k): v for k, v in cell.params}, sort_keys=True, default=repr)
+
+
+def _with_ids(rows: pd.DataFrame, cell: Cell) -> pd.DataFrame:
+    rows = rows.reset_index(drop=True)
+    front = {"experiment": cell.experiment, "cell": cell.label, "stepper": cell.stepper,
+             "problem": cell.problem}
+    for k, v in cell.params:
+        if isinstance(k, str) and k and isinstance(v, SCALARS):
+            front.setdefault(k, v.item() if isinstance(v, np.generic) else v)
+    add = {k: v for k, v in front.items() if k not in rows.columns}
+    if not add:
+        return rows
+    ids = pd.DataFrame({k: [v] * len(rows) for k, v in add.items()})
+    return pd.concat([ids, rows], axis=1)
+
+
+def _roundtrip(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
+    """Rows as they come back from the cell file (so fresh and cached cells are identical), and
+    the file's bytes for the cache (`harness.store.encode_cell`)."""
+    try:
+        return encode_cell(key, rows, info)
+    except InputError as exc:
+        raise CellOutputError(f"rows {exc}") from None
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to run cells, as one object: what `run_experiments` hands to each `run_experiment`
+    (and what a caller may pass as `options=` instead of the keywords of the same names)."""
+
+    quick: bool = False
+    jobs: int | None = None
+    scheduler: str | Any | None = None
+    fresh: bool = False
+    cache: bool = True
+    cache_dir: str | os.PathLike | None = None
+    plugins: tuple[str | os.PathLike, ...] = ()
+    cell_timeout: float | None = None
+
+
+def run_experiment(
+    experiment: str | Experiment,
+    steppers: Sequence[str] | None = None,
+    problems: Sequence[str] | None = None,
+    *,
+    config: Mapping[str, Any] | None = None,
+    options: RunOptions | None = None,
+    quick: bool = False,
+    jobs: int | None = None,
+    scheduler: str | Any | None = None,
+    fresh: bool = False,
+    cache: bool = True,
+    cache_dir: str | os.PathLike | None = None,
+    plugins: Sequence[str | os.PathLike] = (),
+    cell_timeout: float | None = None,
+    progress: Progress | bool | str | None = None,
+    allow_empty: bool = False,
+    _client: Any = None,
+    _counted: bool = False,
+) -> RunResult:
+    """Run one experiment over `steppers` x `problems` (None: the whole registry).
+
+    Arguments: `config` overrides the experiment's settings (`quick` starts from its quick
+    settings); `jobs` worker processes (None: all cores; 1: in this process); `scheduler` a Dask
+    scheduler address (`tcp://HOST:PORT`) or `distributed.Client`, instead of local processes;
+    `fresh` recomputes cached cells; `cache=False` neither reads nor writes the cache;
+    `cache_dir` the cache root (default `harness.cache.cache_dir()`); `plugins` .py files loaded
+    here and on every worker before names are looked up; `cell_timeout` seconds per cell;
+    `progress` None/True (bar on a terminal, plain lines otherwise), False (silent), a mode
+    ('bar', 'lines', 'off') or a shared `Progress`; `allow_empty=True` returns an empty result
+    instead of raising when no cell applies. `options` (a `RunOptions`), when given, supplies
+    `quick`, `jobs`, `scheduler`, `fresh`, `cache`, `cache_dir`, `plugins` and `cell_timeout`
+    in place of those keywords.
+
+    Raises `InputError` / `UnknownNameError` / `PluginError` (all `HarnessError`) for bad
+    arguments before any cell runs, `NoApplicableCellsError` (with every skip reason) when no
+    requested pair applies, `ExperimentError` when the experiment cannot list its
+    cells, `CorruptResultsError` for a damaged cache file. Failures of single cells never raise:
+    they are in `RunResult.failures`.
+    """
+    started = time.perf_counter()
+    if options is not None:
+        if not isinstance(options, RunOptions):
+            raise InputError(f"`options` must be a RunOptions, got {type(options).__name__}")
+        quick, jobs, scheduler, fresh = options.quick, options.jobs, options.scheduler, options.fresh
+        cache, cache_dir, plugins = options.cache, options.cache_dir, options.plugins
+        cell_timeout = options.cell_timeout
+    exp = resolve_experiment(experiment)
+    jobs_n = check_jobs(jobs)
+    timeout = check_timeout(cell_timeout)
+    sched = check_scheduler(scheduler)
+    plugin_paths = check_plugins(plugins)
+    for name, flag in (("quick", quick), ("fresh", fresh), ("cache", cache)):
+        if not isinstance(flag, bool | np.bool_):
+            raise InputError(f"`{name}` must be True or False, got {flag!r}")
+    store = CellCache(cache_dir) if cache else None
+    from harness.registry import load_plugin
+
+    for p in plugin_paths:
+        load_plugin(p)
+    plugin_specs = [plugin_spec(p) for p in plugin_paths]
+    stepper_names = check_names("steppers", steppers)
+    problem_names = check_names("problems", problems)
+    cfg = resolve_config(exp, config, quick)
+
+    try:
+        listed = exp.cells(stepper_names, problem_names, cfg)
+        cells, skips = listed
+        cells, skips = list(cells), list(skips)
+    except HarnessError:
+        raise
+    except Exception as exc:
+        raise ExperimentError(
+            f"experiment {exp.name!r} could not list its cells: "
+            f"{type(exc).__name__}: {one_line(str(exc), 300)}"
+        ) from None
+    bad = [c for c in cells if not isinstance(c, Cell)] + [s for s in skips if not isinstance(s, Skip)]
+    if bad:
+        raise ExperimentError(f"experiment {exp.name!r} listed {type(bad[0]).__name__} objects "
+                              "where Cell and Skip objects belong")
+    if not cells and not allow_empty:
+        raise no_cells_error([exp.name], skips, stepper_names, problem_names)
+    if sched is None and _client is None:
+        guard_memory(exp, cells, cfg, jobs_n)
+    own_client = None
+    if sched is not None and _client is None:
+        # connect before looking at the cache: a bad address is an error even when every cell
+        # is cached
+        _client, own_client = dask_client(sched)
+
+    exp_version = experiment_fingerprint(exp)
+    versions: dict[tuple[str, str], Any] = {}
+    failures: dict[int, dict] = {}
+    records: dict[int, dict] = {}
+    frames: dict[int, pd.DataFrame] = {}
+    tasks: list[Task] = []
+    seen: dict[str, int] = {}
+    cached = 0
+    bar, own_bar = progress_display(progress, exp.name)
+    if not _counted:
+        bar.add_total(len(cells))
+        if not own_bar:
+            bar.set_description(exp.name)
+
+    def record(i: int, cell: Cell, key: str, status: str, was_cached: bool, wall: float,
+               n_rows: int, worker: str) -> None:
+        records[i] = {"experiment": exp.name, "cell": cell.label, "stepper": cell.stepper,
+                      "problem": cell.problem, "params": _params_json(cell), "key": key,
+                      "status": status, "cached": was_cached, "wall_s": float(wall),
+                      "n_rows": int(n_rows), "worker": worker}
+
+    def fail(i: int, cell: Cell, key: str, kind: str, message: str, tb: str = "",
+             wall: float = 0.0, worker: str = "") -> None:
+        failures[i] = failed_record(cell, message, kind=kind, traceback=tb, key=key)
+        record(i, cell, key, "failed", False, wall, 0, worker)
+
+    try:
+        for i, cell in enumerate(cells):
+            pair = (cell.stepper, cell.problem)
+            if pair not in versions:
+                try:
+                    versions[pair] = code_version(*pair)
+                except Exception as exc:  # unknown name, or a fingerprint() that raises
+                    versions[pair] = exc
+            v = versions[pair]
+            if isinstance(v, Exception):
+                fail(i, cell, "", "lookup", one_line(f"{type(v).__name__}: {v}"))
+                bar.update(1, failed=1)
+                continue
+            key = cell_key(cell, cfg, exp_version, v)
+            if key in seen:
+                raise ExperimentError(
+                    f"experiment {exp.name!r} lists cell {cell.label} twice"
+                )
+            seen[key] = i
+            hit = store.get(key) if (store is not None and not fresh) else None
+            if hit is not None:
+                rows, info = hit
+                frames[i] = rows
+                record(i, cell, key, "ok", True, float(info.get("wall_s", 0.0)), len(rows),
+                       str(info.get("worker", "")))
+                cached += 1
+                continue
+            payload = {"key": key, "cell": cell, "config": cfg, "experiment": exp,
+                       "plugins": plugin_specs, "timeout": timeout, "sp_version": v}
+            tasks.append(Task(i, cell, key, payload))
+        if cached:
+            bar.update(cached, cached=cached)
+
+        def accept(t: Task, out: dict) -> None:
+            if out["ok"]:
+                try:
+                    rows = _with_ids(out["rows"], t.cell)
+                    info = {"key": t.key, "experiment": exp.name, "cell": t.cell.label,
+                            "wall_s": out["wall_s"], "worker": out["worker"]}
+                    rows, data = _roundtrip(t.key, rows, info)
+                except CellOutputError as exc:
+                    fail(t.index, t.cell, t.key, "invalid", str(exc), wall=out["wall_s"],
+                         worker=out["worker"])
+                    bar.update(1, failed=1)
+                    return
+                if store is not None:
+                    store.put_encoded(t.key, data)  # atomic; OutputError names the file
+                frames[t.index] = rows
+                record(t.index, t.cell, t.key, "ok", False, out["wall_s"], len(rows), out["worker"])
+                bar.update(1)
+            else:
+                fail(t.index, t.cell, t.key, out["kind"], out["message"], out["traceback"],
+                     out["wall_s"], out["worker"])
+                bar.update(1, failed=1)
+
+        if tasks:
+            if _client is not None:
+                run_dask(tasks, _client, accept)
+            elif jobs_n == 1:
+                run_serial(tasks, accept)
+            else:
+                run_loky(tasks, jobs_n, accept)
+    finally:
+        if own_client:
+            _client.close()
+        if own_bar:
+            bar.close()
+
+    order = sorted(frames)
+    if order:
+        with_rows = [frames[i] for i in order if len(frames[i].columns)]
+        rows_df = pd.concat(with_rows, ignore_index=True) if with_rows else pd.DataFrame(columns=ID_COLUMNS)
+    else:
+        rows_df = pd.DataFrame(columns=ID_COLUMNS)
+    summary = pd.DataFrame()
+    if order:
+        try:
+            summary = exp.summarize(rows_df.copy(), cfg)
+            if not isinstance(summary, pd.DataFrame):
+                raise CellOutputError(
+                    f"summarize returned {type(summary).__name__}, expected a pandas DataFrame"
+                )
+            summary = summary.reset_index(drop=True)
+        except Exception as exc:
+            summary = pd.DataFrame()
+            rec = failed_record(Cell(exp.name, "", ""), one_line(f"{type(exc).__name__}: {exc}"),
+                                kind="summarize", traceback=short_traceback(exc))
+            rec["cell"] = f"{exp.name}:summarize"
+            failures[len(cells)] = rec
+    fail_df = pd.DataFrame([failures[i] for i in sorted(failures)], columns=FAILURE_COLUMNS)
+    skip_df = pd.DataFrame(_skip_records(skips), columns=SKIP_COLUMNS)
+    cell_df = pd.DataFrame([records[i] for i in sorted(records)], columns=CELL_COLUMNS)
+    return RunResult(
+        experiment=exp.name,
+        description=str(getattr(exp, "description", "")),
+        config=cfg,
+        rows=rows_df,
+        summary=summary,
+        failures=fail_df,
+        skips=skip_df,
+        cells=cell_df,
+        wall_s=time.perf_counter() - started,
+        cached_cells=cached,
+        computed_cells=len(tasks),
+        options={"jobs": jobs_n if sched is None and _client is None else None,
+                 "scheduler": scheduler if isinstance(scheduler, str) else None,
+                 "fresh": bool(fresh), "cache": bool(cache), "quick": bool(quick),
+                 "cell_timeout": timeout, "plugins": plugin_paths,
+                 "steppers": stepper_names, "problems": problem_names},
+    )
+
+
+def run_experiments(
+    experiments: Sequence[str | Experiment] | None = None,
+    steppers: Sequence[str] | None = None,
+    problems: Sequence[str] | None = None,
+    *,
+    configs: Mapping[str, Mapping[str, Any]] | None = None,
+    quick: bool = False,
+    jobs: int | None = None,
+    scheduler: str | Any | None = None,
+    fresh: bool = False,
+    cache: bool = True,
+    cache_dir: str | os.PathLike | None = None,
+    plugins: Sequence[str | os.PathLike] = (),
+    cell_timeout: float | None = None,
+    progress: Progress | bool | str | None = None,
+) -> dict[str, RunResult]:
+    """`run_experiment` for several experiments (None: every registered one), in order, with one
+    progress display and one Dask connection; `configs` maps experiment name -> overrides.
+    Returns {experiment name: RunResult}; pass it to `harness.store.save_run`."""
+    from harness.experiments import EXPERIMENTS
+
+    if experiments is None:
+        experiments = list(EXPERIMENTS)
+    if isinstance(experiments, str | Experiment):
+        experiments = [experiments]
+    exps = [resolve_experiment(e) for e in experiments]
+    if configs is not None and not isinstance(configs, Mapping):
+        raise InputError(f"`configs` must map experiment names to settings, got {type(configs).__name__}")
+    unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
+    if unknown:
+        raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
+    sched = check_scheduler(scheduler)
+    from harness.registry import load_plugin
+
+    plugin_paths = check_plugins(plugins)
+    for p in plugin_paths:
+        load_plugin(p)
+    options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
+                         cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
+    stepper_names = check_names("steppers", steppers)
+    problem_names = check_names("problems", problems)
+    bar, own_bar = progress_display(progress, "cells")
+    sizes = []
+    for exp in exps:  # the whole run's size first, so the display's total does not grow
+        try:
+            cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
+            sizes.append(len(list(exp.cells(stepper_names, problem_names, cfg)[0])))
+        except Exception:  # run_experiment reports it properly below
+            sizes = None
+            break
+    counted = sizes is not None
+    if counted:
+        bar.add_total(sum(sizes))
+    client = None
+    own_client = False
+    out: dict[str, RunResult] = {}
+    try:
+        if sched is not None:
+            client, own_client = dask_client(sched)
+        for i, exp in enumerate(exps, 1):
+            bar.set_description(f"[{i}/{len(exps)}] {exp.name}")
+            out[exp.name] = run_experiment(
+                exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
+                options=options, progress=bar, _client=client, _counted=counted, allow_empty=True,
+            )
+            if sched is not None:
+                out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None
+    finally:
+        if own_client and client is not None:
+            client.close()
+        if own_bar:
+            bar.close()
+    if out and not any(r.n_cells for r in out.values()):
+        raise no_cells_error(list(out), pd.concat([r.skips for r in out.values()], ignore_index=True),
+                             stepper_names, problem_names)
+    return out

@@ -1,0 +1,142 @@
+"""The records a stepper works with: its claims (`StepperInfo`), its carry between steps (`Carry`),
+what `integrate` returns (`Trajectory`), a failed step (`StepFailure`), and the checks of step
+size, step count and stepper/problem compatibility."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from harness.errors import HarnessError, IncompatibleError, InputError
+from harness.problem import Problem
+from harness.problem.checks import check_count
+
+if TYPE_CHECKING:
+    from harness.stepper import Stepper
+
+__all__ = ["FORMS", "MAX_STEPS", "StepFailure", "StepperInfo", "Carry", "Trajectory", "check_step_size",
+           "check_steps", "check_compatible"]
+
+
+FORMS = ("first-order", "newtonian")
+MAX_STEPS = 100_000_000
+
+class StepFailure(HarnessError):
+    """A step could not be completed (an implicit stage solve did not converge)."""
+
+
+@dataclass(frozen=True)
+class StepperInfo:
+    """What a stepper claims about itself. Every field is reported beside its measurement."""
+
+    name: str
+    family: str
+    claimed_order: int | None
+    explicit: bool
+    symplectic: bool
+    symmetric: bool
+    evals_per_step: float
+    form: str
+    velocity_dependent: bool
+    reference: str
+    description: str = ""
+    adaptive: bool = False
+    implementation: str = "numpy"
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.form not in FORMS:
+            raise InputError(f"stepper {self.name!r}: `form` must be one of {FORMS}, got {self.form!r}")
+        if self.claimed_order is not None and (
+            not isinstance(self.claimed_order, int) or self.claimed_order < 1
+        ):
+            raise InputError(
+                f"stepper {self.name!r}: `claimed_order` must be a positive integer or None, "
+                f"got {self.claimed_order!r}"
+            )
+        if not self.reference:
+            raise InputError(f"stepper {self.name!r}: `reference` (literature source) is required")
+
+    def as_dict(self) -> dict[str, Any]:
+        """The claims as one flat dict (the `extra` entries merged in)."""
+        d = asdict(self)
+        d.update(d.pop("extra"))
+        return d
+
+
+class Carry:
+    """What a stepper remembers between steps. `t` is derived from the step count, not summed."""
+
+    __slots__ = ("t0", "h", "n", "y", "__dict__")
+
+    def __init__(self, t0: float, h: float, y: np.ndarray, **extra: Any):
+        self.t0 = t0
+        self.h = h
+        self.n = 0
+        self.y = y
+        self.__dict__.update(extra)
+
+    @property
+    def t(self) -> float:
+        """The carry's current time, t0 + n h."""
+        return self.t0 + self.n * self.h
+
+
+@dataclass
+class Trajectory:
+    """States saved at chosen step indices: `y[k]` is the state (dim, N) after `steps[k]` steps."""
+
+    stepper: str
+    problem: str
+    h: float
+    steps: np.ndarray
+    t: np.ndarray
+    y: np.ndarray
+    evals: dict
+    wall_s: float
+    finite: bool
+    member_t: np.ndarray | None = None  # (saves, N) physical times when members' clocks differ
+
+    @property
+    def final(self) -> np.ndarray:
+        """The state at the last output time, shaped (dim, N)."""
+        return self.y[-1]
+
+
+def check_step_size(h: Any) -> float:
+    """`h` as a positive finite float, or `InputError` naming `h`."""
+    try:
+        x = float(h)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"`h` must be a real number, got {h!r}") from None
+    if math.isnan(x) or math.isinf(x):
+        raise InputError(f"`h` must be finite, got {x!r}")
+    if x <= 0.0:
+        raise InputError(f"`h` must be positive, got {x!r}")
+    return x
+
+
+def check_steps(n: Any, name: str = "n_steps") -> int:
+    """`n` as a step count in [1, MAX_STEPS], or `InputError` naming `name`."""
+    return check_count(n, f"`{name}`", MAX_STEPS)
+
+
+def check_compatible(stepper: Stepper, problem: Problem) -> None:
+    """Raise IncompatibleError when `stepper` cannot integrate `problem` (with the reason)."""
+    info = stepper.info
+    if info.form == "newtonian" and problem.newtonian is None:
+        raise IncompatibleError(
+            f"stepper {info.name!r} needs a Newtonian problem (q'' = a(q, t)); "
+            f"problem {problem.name!r} is a first-order system"
+        )
+    if info.form == "newtonian" and problem.velocity_dependent and not info.velocity_dependent:
+        raise IncompatibleError(
+            f"stepper {info.name!r} needs an acceleration independent of velocity; "
+            f"problem {problem.name!r} has a(q, v, t)"
+        )
+    reason = stepper.incompatibility(problem)
+    if reason:
+        raise IncompatibleError(f"stepper {info.name!r} cannot run problem {problem.name!r}: {reason}")

@@ -1,0 +1,142 @@
+"""The per-cell cache: one checked Parquet file per finished cell, named by the cell's key;
+`encode_cell`/`decode_cell` are the only code that writes or reads a cell file's format."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from harness.errors import InputError, describe_os_error
+from harness.provenance import to_jsonable
+from harness.store.files import atomic_write_bytes, decode_parquet, encode_parquet
+from harness.store.schema import CELL_SCHEMA, CorruptResultsError
+
+_CELL_KEY = re.compile(r"^[0-9a-f]{32}$")
+
+# -- the cell cache -------------------------------------------------------------------------------
+def _content_sha256(df: pd.DataFrame) -> str:
+    """sha256 over a table's column names, dtypes and values (independent of Parquet's bytes,
+    so it can live inside the file it checks)."""
+    import numpy as np
+
+    h = hashlib.sha256()
+    h.update(json.dumps([[str(c), str(df[c].dtype)] for c in df.columns]).encode())
+    h.update(str(len(df)).encode())
+    for c in df.columns:
+        col = df[c]
+        if pd.api.types.is_numeric_dtype(col) and not pd.api.types.is_object_dtype(col):
+            h.update(np.ascontiguousarray(col.to_numpy()).tobytes())
+        else:
+            h.update(json.dumps([None if v is None else repr(v) for v in col.tolist()]).encode())
+    return h.hexdigest()
+
+
+def _cell_schema(df: pd.DataFrame) -> dict[str, str]:
+    return {str(c): str(df[c].dtype) for c in df.columns}
+
+
+def encode_cell(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
+    """A finished cell as (its rows as they read back from the file, the file's bytes). The
+    metadata holds `info`, the key, the schema, the column dtypes, the row count and the content
+    checksum. Raises `InputError` when the rows cannot be stored as Parquet."""
+    plain = {**to_jsonable(dict(info)), "schema": CELL_SCHEMA, "key": key}
+    back, _ = decode_parquet(encode_parquet(rows, plain))
+    meta = {**plain, "columns": _cell_schema(back), "n_rows": int(len(back)),
+            "content_sha256": _content_sha256(back)}
+    return back, encode_parquet(rows, meta)
+
+
+def decode_cell(data: bytes, path: str | os.PathLike, key: str | None = None) -> tuple[pd.DataFrame, dict]:
+    """(rows, info) of a cell file's bytes, after checking its schema, key, columns, dtypes,
+    row count and content checksum; `CorruptResultsError` naming `path` otherwise."""
+    df, info = decode_parquet(data, path)
+    if info.get("schema") != CELL_SCHEMA:
+        raise CorruptResultsError(path, f"not a harness cell file of schema {CELL_SCHEMA!r} "
+                                        f"(schema {str(info.get('schema'))[:60]!r})")
+    if key is not None and info.get("key") != key:
+        raise CorruptResultsError(path, f"holds cell {str(info.get('key'))[:40]!r}, not {key!r}")
+    columns, n_rows, digest = info.get("columns"), info.get("n_rows"), info.get("content_sha256")
+    if not isinstance(columns, dict) or not isinstance(n_rows, int) or not isinstance(digest, str):
+        raise CorruptResultsError(path, "cell metadata lacks its columns, row count or checksum")
+    found = _cell_schema(df)
+    if found != columns:
+        lost = [c for c in columns if c not in found]
+        changed = [f"{c} ({columns[c]} -> {found[c]})" for c in columns
+                   if c in found and found[c] != columns[c]]
+        extra = [c for c in found if c not in columns]
+        raise CorruptResultsError(path, "columns differ from the recorded schema: "
+                                        f"missing {lost}, retyped {changed}, unexpected {extra}")
+    if len(df) != n_rows:
+        raise CorruptResultsError(path, f"has {len(df)} rows, its metadata records {n_rows}")
+    if _content_sha256(df) != digest:
+        raise CorruptResultsError(path, "content differs from its checksum (the file was changed "
+                                        "or damaged after it was written)")
+    return df, info
+
+
+class CellCache:
+    """Finished cells, one Parquet file each, keyed by `harness.runner.cell_key`.
+
+    `get` returns a cell's rows or None; a file that exists but is damaged, of another schema
+    or of another key raises `CorruptResultsError` naming it (delete it, or run with
+    `fresh=True`, which overwrites). `put` writes atomically."""
+
+    HINT = "; delete it, or recompute with fresh=True (--fresh), which overwrites it"
+
+    def __init__(self, root: str | os.PathLike | None = None):
+        if root is None:
+            from harness.cache import cache_dir
+
+            root = cache_dir()
+        if not isinstance(root, str | os.PathLike) or not str(root):
+            raise InputError(f"`cache_dir` must be a directory path, got {root!r}")
+        self.root = Path(root) / "cells"
+
+    def path(self, key: str) -> Path:
+        """The file that holds the cell with key `key` (32 lowercase hex digits), existing or not."""
+        if not isinstance(key, str) or not _CELL_KEY.match(key):
+            raise InputError(f"`key` must be 32 lowercase hex digits, got {key!r}")
+        return self.root / key[:2] / f"{key}.parquet"
+
+    def get(self, key: str) -> tuple[pd.DataFrame, dict] | None:
+        """(rows, info) of a finished cell, or None when it is not cached."""
+        p = self.path(key)
+        try:
+            if not p.is_file():
+                if p.exists() or p.is_symlink():
+                    raise CorruptResultsError(p, "is not a regular file" + self.HINT)
+                return None
+            data = p.read_bytes()
+        except OSError as exc:
+            message, _ = describe_os_error(exc, p)
+            raise CorruptResultsError(p, f"cannot be read: {message}{self.HINT}") from None
+        try:
+            return decode_cell(data, p, key)
+        except CorruptResultsError as exc:
+            raise CorruptResultsError(p, exc.problem + self.HINT) from None
+
+    def put(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> Path:
+        """Write a finished cell (encoded by `encode_cell`) atomically; return its path."""
+        _, data = encode_cell(key, rows, info)
+        return self.put_encoded(key, data)
+
+    def put_encoded(self, key: str, data: bytes) -> Path:
+        """Write the bytes `encode_cell` made for `key` atomically; return the path."""
+        p = self.path(key)
+        atomic_write_bytes(p, data)
+        return p
+
+    def __contains__(self, key: object) -> bool:
+        return isinstance(key, str) and bool(_CELL_KEY.match(key)) and self.path(key).exists()
+
+    def __len__(self) -> int:
+        if not self.root.is_dir():
+            return 0
+        return sum(1 for _ in self.root.glob("??/*.parquet"))

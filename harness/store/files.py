@@ -1,0 +1,189 @@
+"""Atomic writes and checked files: every file is written to a temporary file, fsynced and
+renamed into place; Parquet files carry harness metadata that every read checks."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import os
+import tempfile
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import IO, Any
+
+import pandas as pd
+
+from harness.errors import InputError, OutputError, describe_os_error
+from harness.provenance import to_jsonable
+from harness.store.schema import CorruptResultsError
+
+_META_MARK = b"harness"
+
+# -- atomic writes --------------------------------------------------------------------------------
+def fsync_dir(path: Path) -> None:
+    """Flush the directory entry of `path` to disk (after a rename into it); a no-op where the
+    system cannot open directories.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_writer(path: str | os.PathLike) -> Iterator[IO[bytes]]:
+    """Open a temporary file beside `path` for writing; on success flush, fsync and rename it
+    over `path`. On any error (or a crash) `path` keeps its previous content; the temporary file
+    is removed when Python still runs, and is hidden (`.name.*.tmp`) otherwise."""
+    target = Path(path)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise _output_error(exc, target) from None
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise _output_error(exc, target) from None
+        raise
+    fsync_dir(target.parent)
+
+
+def _output_error(exc: OSError, target: Path) -> OutputError:
+    """`OutputError` naming the file being written and the OS problem (see
+    `harness.errors.describe_os_error`)."""
+    exc.filename = str(target)  # a temporary file's or a parent's name would only confuse
+    message, status = describe_os_error(exc)
+    return OutputError(message, status)
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write `data` to `path` atomically (see `atomic_writer`)."""
+    with atomic_writer(path) as fh:
+        fh.write(data)
+
+
+def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write `obj` as JSON (NumPy values converted, no NaN literals) atomically."""
+    text = json.dumps(to_jsonable(obj), indent=1, allow_nan=False) + "\n"
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def encode_parquet(df: pd.DataFrame, extra: Mapping[str, Any] | None = None) -> bytes:
+    """`df` (index dropped) as Parquet bytes, `extra` in the file's metadata. Raises
+    `InputError` when `df` cannot be stored (say, a column of mixed Python objects), with the
+    reason pyarrow gives."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    if not isinstance(df, pd.DataFrame):
+        raise InputError(f"a results table must be a pandas DataFrame, got {type(df).__name__}")
+    try:
+        table = pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False)
+        if extra is not None:
+            meta = dict(table.schema.metadata or {})
+            meta[_META_MARK] = json.dumps(to_jsonable(extra), allow_nan=False).encode()
+            table = table.replace_schema_metadata(meta)
+        buf = io.BytesIO()
+        pq.write_table(table, buf)
+    except Exception as exc:  # pyarrow's ArrowInvalid / ArrowTypeError / TypeError
+        msg = " ".join(str(exc).split())[:200]
+        raise InputError(f"table cannot be stored as Parquet: {type(exc).__name__}: {msg}") from None
+    return buf.getvalue()
+
+
+def decode_parquet(data: bytes, path: str | os.PathLike = "<bytes>") -> tuple[pd.DataFrame, dict]:
+    """(DataFrame, `extra` metadata or {}) from Parquet bytes; `CorruptResultsError` naming
+    `path` when they are not Parquet or the harness metadata is damaged."""
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(io.BytesIO(data))
+        df = table.to_pandas()
+    except Exception as exc:  # ArrowInvalid and friends: not (valid) Parquet
+        msg = " ".join(str(exc).split())[:200]
+        problem = f"not a readable Parquet file ({type(exc).__name__}: {msg})"
+        raise CorruptResultsError(path, problem) from None
+    extra: dict = {}
+    raw = (table.schema.metadata or {}).get(_META_MARK)
+    if raw is not None:
+        try:
+            extra = json.loads(raw)
+        except ValueError:
+            raise CorruptResultsError(path, "harness metadata is not valid JSON") from None
+        if not isinstance(extra, dict):
+            raise CorruptResultsError(path, "harness metadata is not a JSON object")
+    return df, extra
+
+
+def write_parquet(path: str | os.PathLike, df: pd.DataFrame,
+                  extra: Mapping[str, Any] | None = None) -> str:
+    """Write `df` as Parquet atomically (see `encode_parquet`); return the file's sha256."""
+    data = encode_parquet(df, extra)
+    atomic_write_bytes(path, data)
+    return hashlib.sha256(data).hexdigest()
+
+
+def read_parquet(
+    path: str | os.PathLike,
+    *,
+    columns: list[str] | None = None,
+    n_rows: int | None = None,
+    sha256: str | None = None,
+) -> tuple[pd.DataFrame, dict]:
+    """Read a Parquet file the harness wrote: (DataFrame, the `extra` metadata or {}).
+
+    Checks, when given, the exact column list, the row count and the checksum; any mismatch,
+    or a file that is not Parquet, raises `CorruptResultsError` naming the file."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except FileNotFoundError:
+        raise CorruptResultsError(p, "missing") from None
+    except OSError as exc:
+        raise CorruptResultsError(p, f"cannot be read: {exc.strerror or exc}") from None
+    if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
+        raise CorruptResultsError(
+            p, "content differs from the checksum in meta.json (changed after the run was saved)"
+        )
+    df, extra = decode_parquet(data, p)
+    if columns is not None and list(df.columns) != list(columns):
+        raise CorruptResultsError(
+            p, f"columns {list(map(str, df.columns))} differ from the recorded {list(columns)}"
+        )
+    if n_rows is not None and len(df) != n_rows:
+        raise CorruptResultsError(p, f"has {len(df)} rows, meta.json records {n_rows}")
+    return df, extra
+
+
+def read_json(path: Path) -> Any:
+    """The parsed JSON file `path`; `CorruptResultsError` naming it when it is missing, not UTF-8,
+    not JSON, or nested too deeply to be a harness file.
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CorruptResultsError(path, "missing") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CorruptResultsError(path, f"cannot be read: {exc}") from None
+    try:
+        return json.loads(text)
+    except ValueError as exc:
+        raise CorruptResultsError(path, f"not valid JSON ({exc})") from None
+    except RecursionError:
+        raise CorruptResultsError(path, "JSON nested too deeply to be a harness file") from None
