@@ -241,6 +241,12 @@ _JIT_INLINE = '@njit(cache=True, error_model="numpy", inline="always")'
 
 _HELPERS = f'''
 {_JIT_INLINE}
+def is_finite(x):
+    # np.isfinite on a scalar: the same test, without the per-element library call it compiles to
+    return abs(x) <= 1.7976931348623157e308
+
+
+{_JIT_INLINE}
 def rhs_all(f_rhs, t, Y, P, Out):
     dim = Y.shape[0]
     y = np.empty(dim)
@@ -317,12 +323,17 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
         for n in range(nsteps):
             t = t0 + (n0 + n) * h
             for i in range(s):
+                q0 = start[i]
+                q1 = start[i + 1]
+                if q0 == q1:  # a stage at y itself (the first): no copy
+                    call_state_into(f_rhs, t + hc[i], y, 0, p, K, i * dim)
+                    continue
                 for d in range(dim):
                     acc = y[d]
-                    for q in range(start[i], start[i + 1]):
+                    for q in range(q0, q1):
                         acc += coef[q] * K[term[q] * dim + d]
                     stage[d] = acc
-                call_state_into(f_rhs, t + hc[i], stage, p, K, i * dim)
+                call_state_into(f_rhs, t + hc[i], stage, 0, p, K, i * dim)
             for d in range(dim):
                 acc = y[d]
                 for q in range(nw):
@@ -575,7 +586,7 @@ def lmm_finite(H, slot):
     k, dim, N = H.shape
     for d in range(dim):
         for m in range(N):
-            if not np.isfinite(H[slot, d, m]):
+            if not is_finite(H[slot, d, m]):
                 return False
     return True
 
@@ -610,8 +621,84 @@ def lmm_unroll(H, F, fvalid, head):
 # history is a ring of k slots: a step writes one slot instead of shifting k.
 LMM_EXPLICIT = f'''
 {_JIT_EXACT}
+def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
+    # one member: the history ring flat in W (states in slots 0..k-1, derivatives in k..2k-1),
+    # the formula's terms as (signed coefficient, offset into W) fixed per step
+    k, dim, N = H.shape
+    W = np.empty(2 * k * dim)
+    for sl in range(k):
+        for d in range(dim):
+            W[sl * dim + d] = H[sl, d, 0]
+            W[(k + sl) * dim + d] = F[sl, d, 0]
+    valid = fvalid.copy()
+    p = np.empty(P.shape[0])
+    for q in range(P.shape[0]):
+        p[q] = P[q, 0]
+    tkind = np.empty(2 * k, dtype=np.int64)
+    tindex = np.empty(2 * k, dtype=np.int64)
+    tcoef = np.empty(2 * k)
+    nt = 0
+    for jj in range(k):
+        if alpha[jj] != 0.0:
+            tkind[nt] = 0
+            tindex[nt] = jj
+            tcoef[nt] = -alpha[jj]
+            nt += 1
+        if beta[jj] != 0.0:
+            tkind[nt] = k
+            tindex[nt] = jj
+            tcoef[nt] = h * beta[jj]
+            nt += 1
+    off = np.empty(nt, dtype=np.int64)
+    evals = 0
+    head = 0
+    for n in range(nsteps):
+        t = t0 + (n0 + n) * h
+        oldest = head
+        newest = oldest + k - 1 if oldest > 0 else k - 1
+        head = head + 1 if head + 1 < k else 0
+        finite = True
+        for d in range(dim):
+            if not is_finite(W[newest * dim + d]):
+                finite = False
+        if not finite:
+            for d in range(dim):
+                W[oldest * dim + d] = np.nan
+            valid[oldest] = False
+            continue
+        for jj in range(k):
+            sl = oldest + jj
+            if sl >= k:
+                sl -= k
+            if beta[jj] != 0.0 and not valid[sl]:
+                call_state_into(f_rhs, t - (k - 1 - jj) * h, W, sl * dim, p, W, (k + sl) * dim)
+                valid[sl] = True
+                evals += 1
+        for q in range(nt):
+            sl = oldest + tindex[q]
+            if sl >= k:
+                sl -= k
+            off[q] = (tkind[q] + sl) * dim
+        for d in range(dim):
+            acc = 0.0
+            for q in range(nt):
+                acc += tcoef[q] * W[off[q] + d]
+            W[oldest * dim + d] = acc
+        valid[oldest] = False
+    for jj in range(k):
+        sl = (head + jj) % k
+        for d in range(dim):
+            H[jj, d, 0] = W[sl * dim + d]
+            F[jj, d, 0] = W[(k + sl) * dim + d]
+        fvalid[jj] = valid[sl]
+    return evals
+
+
+{_JIT_EXACT}
 def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
     k, dim, N = H.shape
+    if N == 1:
+        return lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
     npar = P.shape[0]
     y = np.empty(dim)
     out = np.empty(dim)
@@ -645,7 +732,7 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
         finite = True
         for d in range(dim):
             for m in range(N):
-                if not np.isfinite(H[newest, d, m]):
+                if not is_finite(H[newest, d, m]):
                     finite = False
         head = head + 1 if head + 1 < k else 0
         slot = slots[0]  # the oldest slot takes the new state
@@ -764,7 +851,7 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
         finite = True
         for d in range(dim):
             for j in range(N):
-                if not np.isfinite(Y[d, j]):
+                if not is_finite(Y[d, j]):
                     finite = False
         if not finite:
             Y[:, :] = np.nan
@@ -874,22 +961,23 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
                 break
             norm = 0.0
             nan_seen = False
-            for r in range(m):
-                d = r % dim
-                for j in range(N):
-                    X[r, j] += DX[r, j]
-                    e = abs(DX[r, j] * inv_scale[d, j])
-                    if e != e:
-                        nan_seen = True
-                    elif e > norm:
-                        norm = e
-            if nan_seen or not np.isfinite(norm):
+            for i in range(impl):
+                for d in range(dim):
+                    r = i * dim + d
+                    for j in range(N):
+                        X[r, j] += DX[r, j]
+                        e = abs(DX[r, j] * inv_scale[d, j])
+                        if e != e:
+                            nan_seen = True
+                        elif e > norm:
+                            norm = e
+            if nan_seen or not is_finite(norm):
                 norm = np.nan
                 break
             if norm <= tol:
                 converged = True
                 break
-            if np.isfinite(previous):
+            if is_finite(previous):
                 theta = norm / previous
                 if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
                     converged = True
@@ -1045,13 +1133,13 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                         nan_seen = True
                     elif e > norm:
                         norm = e
-            if nan_seen or not np.isfinite(norm):
+            if nan_seen or not is_finite(norm):
                 norm = np.nan
                 break
             if norm <= tol:
                 converged = True
                 break
-            if np.isfinite(previous):
+            if is_finite(previous):
                 theta = norm / previous
                 if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
                     converged = True
@@ -1130,18 +1218,19 @@ def call_state(typingctx, address, t, x, p, out):
 
 
 @intrinsic
-def call_state_into(typingctx, address, t, x, p, out, offset):
-    """As `call_state`, writing to `out`'s data from element `offset` on (a row of a matrix
-    without making a view of it)."""
-    sig = types.void(address, t, x, p, out, offset)
+def call_state_into(typingctx, address, t, x, x_offset, p, out, out_offset):
+    """As `call_state`, reading `x`'s data from element `x_offset` on and writing `out`'s from
+    element `out_offset` on (rows of a flat array, without making views)."""
+    sig = types.void(address, t, x, x_offset, p, out, out_offset)
 
     def codegen(context, builder, signature, args):
         dptr = ir.DoubleType().as_pointer()
         pointers = [
-            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
-            for ty, value in zip(signature.args[2:5], args[2:5], strict=True)
+            builder.bitcast(_data_pointer(context, builder, signature.args[i], args[i]), dptr)
+            for i in (2, 4, 5)
         ]
-        pointers[2] = builder.gep(pointers[2], [args[5]])
+        pointers[0] = builder.gep(pointers[0], [args[3]])
+        pointers[2] = builder.gep(pointers[2], [args[6]])
         fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType(), dptr, dptr, dptr])
         builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], *pointers])
         return context.get_dummy_value()
