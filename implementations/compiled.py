@@ -50,6 +50,7 @@ from implementations.compiled_kernels import (
 )
 from implementations.implicit_rk import NewtonSettings
 from implementations.splitting import StaggeredLeapfrog
+from implementations.step_control import ControlledSplittingStepper
 
 __all__ = [
     "CompiledRungeKutta",
@@ -58,6 +59,7 @@ __all__ = [
     "CompiledStormer",
     "CompiledMultistep",
     "CompiledImplicitRungeKutta",
+    "CompiledControlledSplitting",
     "compiled_variant",
     "fastest",
     "problem_module",
@@ -641,15 +643,58 @@ class CompiledImplicitRungeKutta(_Compiled):
         c.flags[1] = 0  # the predictor extrapolates forward only
 
 
+# -- step-controlled splitting ---------------------------------------------------------------------------
+class CompiledControlledSplitting(_Compiled, ControlledSplittingStepper):
+    """A splitting scheme under a step controller (`ControlledSplittingStepper`, naive or
+    reversible; Huang & Leimkuhler, SIAM J. Sci. Comput. 18 (1997) 239-256; Hairer, Lubich &
+    Wanner, GNI, VIII.3.2) run by the compiled controlled kernel. A subclass of the NumPy loop: the
+    carry, the reversal and the members' clocks are its own (`_start`, `_reverse`, `_time`); only
+    the steps are compiled."""
+
+    kind = "step-controlled splitting"
+
+    def __init__(self, base: Stepper):
+        if not isinstance(base, ControlledSplittingStepper):
+            raise InputError(f"`stepper` {base.info.name!r} needs a ControlledSplittingStepper")
+        ControlledSplittingStepper.__init__(
+            self, base.record, reference=base.info.reference, description=base.info.description
+        )
+        _Compiled.__init__(self, base)
+        seq = self.record.scheme.sequence
+        self.kicks = np.array([kind == "K" for kind, _ in seq], dtype=np.bool_)
+        self.op_coefficients = np.array([coeff for _, coeff in seq], dtype=np.float64)
+
+    def incompatibility(self, problem: Problem) -> str | None:
+        reason = self.base.incompatibility(problem)
+        if reason is None and problem.velocity_dependent:
+            reason = "the compiled controlled loop needs an acceleration independent of the velocity"
+        return reason or super().incompatibility(problem)
+
+    def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
+        density = self.record.density
+        z = c.z if self._reversible else np.zeros(c.y.shape[1])
+        evals = call_kernel(
+            "controlled_advance", address(dyn.problem, "accel"), self.kicks, self.op_coefficients,
+            bool(self._fsal), bool(c.force_valid), bool(self._reversible),
+            float(density.position_power), float(density.momentum_power), float(c.t0), float(c.h),
+            int(n), c.y, c.a, c.time, z, _pars(dyn),
+        )
+        dyn.counts["accel"] += int(evals)
+        c.force_valid = self._fsal
+
+
 # -- choosing the family -------------------------------------------------------------------------------
 def compiled_variant(stepper: Stepper) -> Stepper:
     """The compiled implementation (named `<name>@compiled`) of a stepper whose method is a
     coefficient object: explicit or implicit `ButcherTableau`, `SplittingScheme` (a
-    `StaggeredLeapfrog` keeps its staggered form), `LinearMultistep`, `SecondOrderMultistep`."""
+    `StaggeredLeapfrog` keeps its staggered form), `LinearMultistep`, `SecondOrderMultistep`, or
+    a splitting scheme under a step controller (`ControlledSplittingStepper`)."""
     if not isinstance(stepper, Stepper):
         raise InputError(f"`stepper` must be a Stepper, got {type(stepper).__name__}")
     if stepper.info.implementation == "compiled":
         raise InputError(f"`stepper` {stepper.info.name!r} is already compiled")
+    if isinstance(stepper, ControlledSplittingStepper):
+        return CompiledControlledSplitting(stepper)
     coeffs = stepper.coefficients
     if isinstance(coeffs, ButcherTableau):
         return CompiledRungeKutta(stepper) if coeffs.explicit else CompiledImplicitRungeKutta(stepper)
@@ -681,7 +726,7 @@ def _family_loops() -> tuple[type, ...]:
     from implementations.verlet import TwoStepVerlet
 
     return (ExplicitRungeKutta, ImplicitRungeKutta, SplittingStepper, StaggeredLeapfrog,
-            LinearMultistepStepper, TwoStepVerlet)
+            LinearMultistepStepper, TwoStepVerlet, ControlledSplittingStepper)
 
 
 def fastest(stepper: Stepper, problem: Problem) -> Stepper:
@@ -725,7 +770,7 @@ def _registered() -> list[Stepper]:
             continue
         module = import_module(f"implementations.{name}")
         for stepper in module.STEPPERS:
-            if stepper.coefficients is None:
+            if stepper.coefficients is None and not isinstance(stepper, ControlledSplittingStepper):
                 continue
             try:
                 out.append(compiled_variant(stepper))

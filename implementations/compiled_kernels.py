@@ -25,7 +25,9 @@ incompatible (with the reason).
 
 Caching: every module text is written once to `harness.cache.cache_dir() / "numba"`, named by a
 hash of its text, and imported under a name derived from that hash; every function has
-`cache=True`. `COMPILE_LOG` records, per process, what was compiled or loaded and how long it took.
+`cache=True`. A compile holds a file lock (`_compile_lock`), so processes started together compile
+each kernel once and the others load it. `COMPILE_LOG` records, per process, what was compiled or
+loaded and how long it took (wall and CPU seconds).
 
 Floating-point rules: operations in the NumPy loops' order; in the functions and the explicit
 one-step and Stormer kernels a*b + c may become one fused multiply-add (as in heyoka's compiled
@@ -38,6 +40,7 @@ vectorisation).
 from __future__ import annotations
 
 import ast
+import contextlib
 import dataclasses
 import hashlib
 import importlib.util
@@ -386,6 +389,95 @@ def split_advance(f_accel, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y
         evals = e
     return evals
 '''
+
+# A drift/kick splitting under a step controller (`implementations.step_control`): per member a
+# physical step hs = h sigma(q, v) (naive) or hs = h / z with z_{n+1/2} = z_{n-1/2} + h G(y_n),
+# G = -position_power (q.v) / |q|^2 (reversible; Huang & Leimkuhler 1997; Hairer, Lubich & Wanner,
+# GNI, VIII.3.2); sigma = |q|^position_power |L|^momentum_power with |L| frozen at the start for
+# the reversible controller. Powers as NumPy evaluates `array ** scalar` (exact fast paths for the
+# exponents -1, 0, 1/2, 1, 2). Each member keeps its own clock Time.
+CONTROLLED = f'''
+{_JIT_INLINE}
+def numpy_power(x, e):
+    if e == 1.0:
+        return x
+    if e == -1.0:
+        return 1.0 / x
+    if e == 2.0:
+        return x * x
+    if e == 0.5:
+        return np.sqrt(x)
+    if e == 0.0:
+        return 1.0
+    return x ** e
+
+
+{_JIT_EXACT}
+def controlled_advance(f_accel, kick, coef, fsal, valid0, reversible, pos_power, mom_power, t0, h,
+                       nsteps, Y, Acc, Time, Z, P):
+    nops = kick.shape[0]
+    nq = Acc.shape[0]
+    npar = P.shape[0]
+    q = np.empty(nq)
+    v = np.empty(nq)
+    a = np.empty(nq)
+    p = np.empty(npar)
+    half = 0.5 * pos_power
+    evals = 0
+    for j in range(Y.shape[1]):
+        for d in range(nq):
+            q[d] = Y[d, j]
+            v[d] = Y[nq + d, j]
+            a[d] = Acc[d, j]
+        for k in range(npar):
+            p[k] = P[k, j]
+        time = Time[j]
+        z = Z[j]
+        valid = valid0
+        e = 0
+        for n in range(nsteps):
+            if reversible:
+                hs = h / z if z > 0.0 else np.inf
+            else:
+                r2 = 0.0
+                qv = 0.0
+                v2 = 0.0
+                for d in range(nq):
+                    r2 += q[d] * q[d]
+                    qv += q[d] * v[d]
+                    v2 += v[d] * v[d]
+                L = np.sqrt(max(r2 * v2 - qv * qv, 0.0))
+                hs = h * (numpy_power(r2, half) * numpy_power(L, mom_power))
+            for i in range(nops):
+                ch = coef[i] * hs
+                if kick[i]:
+                    if not (i == 0 and valid):
+                        call_state(f_accel, t0, q, p, a)
+                        e += 1
+                    for d in range(nq):
+                        v[d] += ch * a[d]
+                else:
+                    for d in range(nq):
+                        q[d] += ch * v[d]
+            valid = fsal
+            time += hs
+            if reversible:
+                r2 = 0.0
+                qv = 0.0
+                for d in range(nq):
+                    r2 += q[d] * q[d]
+                    qv += q[d] * v[d]
+                z += h * ((-pos_power) * qv / r2)
+        for d in range(nq):
+            Y[d, j] = q[d]
+            Y[nq + d, j] = v[d]
+            Acc[d, j] = a[d]
+        Time[j] = time
+        Z[j] = z
+        evals = e
+    return evals
+'''
+
 
 # Staggered leapfrog: x += d h v_{n+1/2}, v_{n+3/2} = v_{n+1/2} + k h a(x_{n+1}, t_{n+1}).
 LEAPFROG = f'''
@@ -1176,12 +1268,12 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
 KERNELS = (
     "rk_advance", "rk_advance_cols", "split_advance", "split_advance_cols", "leapfrog_advance",
     "leapfrog_advance_cols", "stormer_advance", "lmm_explicit_advance", "irk_advance",
-    "lmm_implicit_advance", "rhs_all", "accel_all",
+    "lmm_implicit_advance", "controlled_advance", "rhs_all", "accel_all",
 )
 #: Every template, for fingerprints (a change to any kernel changes every compiled stepper's).
 TEMPLATES = (
     _HELPERS, _ACCEL_HELPER, _LMM_PSI, _NEWTON, RK, SPLITTING, LEAPFROG, STORMER, LMM_EXPLICIT,
-    IMPLICIT_RK, LMM_IMPLICIT, RK_COLUMNS, SPLITTING_COLUMNS, LEAPFROG_COLUMNS,
+    IMPLICIT_RK, LMM_IMPLICIT, RK_COLUMNS, SPLITTING_COLUMNS, LEAPFROG_COLUMNS, CONTROLLED,
 )
 #: Per problem: 'functions' (rhs, rhs_cols, and accel, accel_cols for accelerations of the
 #: positions only) and 'jacobian' (jac, for the Newton-solved families).
@@ -1310,7 +1402,8 @@ def _intrinsics_digest() -> str:
 def family_source() -> str:
     """The text of the generated family-kernel module (the same for every problem)."""
     parts = [_HELPERS, _ACCEL_HELPER, RK, RK_COLUMNS, SPLITTING, SPLITTING_COLUMNS, LEAPFROG,
-             LEAPFROG_COLUMNS, STORMER, _LMM_PSI, LMM_EXPLICIT, _NEWTON, IMPLICIT_RK, LMM_IMPLICIT]
+             LEAPFROG_COLUMNS, STORMER, _LMM_PSI, LMM_EXPLICIT, _NEWTON, IMPLICIT_RK, LMM_IMPLICIT,
+             CONTROLLED]
     header = _FAMILY_HEADER.format(**_versions(), intrinsics=_intrinsics_digest())
     return header + "\n\n".join(p.strip("\n") + "\n" for p in parts)
 
@@ -1389,6 +1482,27 @@ def _write_once(path: Path, text: str) -> None:
             os.unlink(tmp)
 
 
+@contextlib.contextmanager
+def _compile_lock(stem: str):
+    """Hold an exclusive lock on `stem`.lock in the numba cache directory while compiling (or
+    loading) what `stem` names: workers started together (the gate's, the report's) compile each
+    kernel and problem module once between them; the others wait and load it from numba's disk
+    cache. Without `fcntl` (not POSIX) every process compiles for itself."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    path = cache.cache_dir() / "numba" / f"{stem}.lock"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
 def _slug(name: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in name)[:40]
 
@@ -1405,9 +1519,10 @@ def _import_text(text: str, stem: str, what: str) -> ModuleType:
         spec = importlib.util.spec_from_file_location(mod_name, path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[mod_name] = module
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         try:
-            spec.loader.exec_module(module)
+            with _compile_lock(f"{stem}_{digest}"):
+                spec.loader.exec_module(module)
         except BaseException:
             sys.modules.pop(mod_name, None)
             raise
@@ -1416,6 +1531,7 @@ def _import_text(text: str, stem: str, what: str) -> ModuleType:
             COMPILE_LOG.append({
                 "what": what,
                 "seconds": time.perf_counter() - start,
+                "cpu_seconds": time.process_time() - cpu,
                 "source": "cached" if all(f.cache_hits for f in cfuncs) else "compiled",
             })
     return module
@@ -1463,16 +1579,19 @@ def call_kernel(name: str, *args: Any) -> Any:
     compile (or cache load) time in COMPILE_LOG."""
     if name not in KERNELS:
         raise InputError(f"`name` must be one of {list(KERNELS)}, got {name!r}")
-    kernel = getattr(family_module(), name)
+    module = family_module()
+    kernel = getattr(module, name)
     if kernel.signatures:
         return kernel(*args)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
+    with _compile_lock(f"{module.__name__}_{name}"):  # compiled (or loaded) only, not run
+        kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
     result = kernel(*args)
-    elapsed = time.perf_counter() - start
     stats = kernel.stats
     COMPILE_LOG.append({
         "what": name,
-        "seconds": elapsed,
+        "seconds": time.perf_counter() - start,
+        "cpu_seconds": time.process_time() - cpu,
         "source": "cached" if stats.cache_hits and not stats.cache_misses else "compiled",
     })
     return result

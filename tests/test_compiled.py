@@ -116,6 +116,29 @@ def test_every_builtin_with_coefficients_has_a_registered_compiled_variant():
     assert {"explicit-rk", "splitting", "stormer", "multistep", "implicit-rk"} <= families
 
 
+def test_every_registered_method_with_coefficients_has_a_compiled_variant():
+    """Over the whole registry, variants included (`<name>@embedded`, the step-controlled
+    splittings, anything added since): a NumPy stepper whose method is a record of data (a
+    coefficient object or a controlled scheme) has `<name>@compiled`, which the agreement sweep
+    below compares with it; only the black boxes (no record) have none."""
+    from implementations.step_control import ControlledSplittingStepper
+
+    names = set(steppers.names(variants=True))
+    missing, black_boxes = [], []
+    for s in steppers.all(variants=True):
+        if s.info.implementation == "compiled":
+            continue
+        if s.coefficients is None and not isinstance(s, ControlledSplittingStepper):
+            black_boxes.append(s.info.name)
+        elif s.info.name + SUFFIX not in names:
+            missing.append(s.info.name)
+    assert missing == []
+    assert {"bogacki-shampine@embedded", "velocity-verlet+dtheta-reversible"} <= {
+        s.info.extra["numpy_implementation"] for s in COMPILED
+    }
+    assert all(get_stepper(n).info.family in ("taylor", "external") for n in black_boxes)
+
+
 @pytest.mark.parametrize("stepper", COMPILED, ids=lambda s: s.info.name)
 def test_same_claims_and_the_same_coefficient_object(stepper):
     base = stepper.base
@@ -452,6 +475,21 @@ def test_cold_compile_and_cached_load_are_recorded(tmp_path):
         f"{runs['cold']['first_call_s']:.2f} s, cached {runs['cached']['first_call_s']:.2f} s; "
         f"10^6 steps {runs['cached']['steps_1e6_s']:.3f} s (load average {runs['load_average'][0]:.1f})"
     )
+
+
+def test_a_compile_holds_a_lock_other_processes_wait_on(tmp_path, monkeypatch):
+    """While one process compiles a kernel or module, another's attempt to take the same lock
+    blocks (here: a non-blocking attempt fails), so workers started together compile once."""
+    fcntl = pytest.importorskip("fcntl", reason="file locks are POSIX only; elsewhere each process compiles")
+    from implementations.compiled_kernels import _compile_lock
+
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
+    with _compile_lock("family_x"):
+        path = tmp_path / "numba" / "family_x.lock"
+        with open(path, "a") as other, pytest.raises(BlockingIOError):
+            fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    with open(path, "a") as other:  # released
+        fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
 
 
 def test_fastest_never_replaces_a_changed_loop():
