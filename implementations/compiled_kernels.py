@@ -5,10 +5,11 @@ Two kinds of generated module (Lam, Pitrou & Seibert, *Numba: a LLVM-based Pytho
 LLVM-HPC 2015, for the compiler):
 - the family module, the same for every problem and method: the kernels of explicit Runge-Kutta,
   splitting, the staggered leapfrog, Stormer's two-step rule, explicit and implicit linear
-  multistep, implicit Runge-Kutta (Newton), and column forms of the explicit one-step families
-  for ensembles. A kernel reads its method from arrays (A, b, c; the drift/kick sequence; alpha,
-  beta) and calls the problem's functions through their addresses (`call_state`,
-  `call_columns`: an indirect call, as a C loop through a function pointer). So a cold run
+  multistep, implicit Runge-Kutta (Newton), splittings under a step controller, and column forms
+  of the explicit one-step families for ensembles. A kernel reads its method from arrays (A, b,
+  c; the drift/kick sequence; alpha, beta) and calls the problem's functions through their
+  addresses (`call_state`, `call_state_into`, `call_columns`: an indirect call, as a C loop
+  through a function pointer). So a cold run
   compiles each family kernel once, whatever the problems and methods, and later processes load
   them from numba's disk cache.
 - per problem, its functions as C-callable numba `cfunc`s: `rhs(t, y, p, out)`, its column form
@@ -903,6 +904,70 @@ def lu_solve(M, b, x):
             acc -= M[i, q] * x[q]
         x[i] = acc / M[i, i]
     return True
+
+
+{_JIT_INLINE}
+def newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
+    # DX[:, j] = -Mats[j]^-1 G[:, j] for every member; False on a singular matrix
+    m = Mw.shape[0]
+    for j in range(G.shape[1]):
+        for r in range(m):
+            for q in range(m):
+                Mw[r, q] = Mats[j, r, q]
+        for r in range(m):
+            rhs_w[r] = -G[r, j]
+        if not lu_solve(Mw, rhs_w, sol):
+            return False
+        for r in range(m):
+            DX[r, j] = sol[r]
+    return True
+
+
+{_JIT_INLINE}
+def newton_update(X, DX, inv_scale):
+    # X += DX; the increment's max-norm scaled by inv_scale (rows i * dim + d use row d), NaN
+    # when any scaled entry is not finite
+    dim = inv_scale.shape[0]
+    norm = 0.0
+    nan_seen = False
+    for i in range(X.shape[0] // dim):
+        for d in range(dim):
+            r = i * dim + d
+            for j in range(X.shape[1]):
+                X[r, j] += DX[r, j]
+                e = abs(DX[r, j] * inv_scale[d, j])
+                if e != e:
+                    nan_seen = True
+                elif e > norm:
+                    norm = e
+    if nan_seen or not is_finite(norm):
+        return np.nan
+    return norm
+
+
+{_JIT_INLINE}
+def newton_converged(norm, previous, tol, theta):
+    # (converged, contraction): the increment at most tol, or theta / (1 - theta) |dx| at most tol
+    if norm <= tol:
+        return True, theta
+    if is_finite(previous):
+        theta = norm / previous
+        if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
+            return True, theta
+    return False, theta
+
+
+{_JIT_INLINE}
+def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, theta, status):
+    stats[0] = n
+    stats[1] = n_rhs
+    stats[2] = n_jac
+    stats[3] = n_iter
+    stats[4] = iteration
+    stats[5] = norm
+    stats[6] = res_norm
+    stats[7] = theta
+    stats[8] = status
 '''
 
 # Implicit Runge-Kutta (Hairer & Wanner II, IV.8): unknowns Z_i = h sum_j a_ij f(t + c_j h,
@@ -1038,53 +1103,18 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
                                     Mats[j, i * dim + a, q * dim + bb] = v
                 n_jac += impl if full else 1
             n_iter += 1
-            for j in range(N):
-                for r in range(Mw.shape[0]):
-                    for q in range(Mw.shape[1]):
-                        Mw[r, q] = Mats[j, r, q]
-                for r in range(m):
-                    rhs_w[r] = -G[r, j]
-                if not lu_solve(Mw, rhs_w, sol):
-                    status = 2
-                    break
-                for r in range(m):
-                    DX[r, j] = sol[r]
-            if status == 2:
+            if not newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
+                status = 2
                 break
-            norm = 0.0
-            nan_seen = False
-            for i in range(impl):
-                for d in range(dim):
-                    r = i * dim + d
-                    for j in range(N):
-                        X[r, j] += DX[r, j]
-                        e = abs(DX[r, j] * inv_scale[d, j])
-                        if e != e:
-                            nan_seen = True
-                        elif e > norm:
-                            norm = e
-            if nan_seen or not is_finite(norm):
-                norm = np.nan
+            norm = newton_update(X, DX, inv_scale)
+            if norm != norm:
                 break
-            if norm <= tol:
-                converged = True
+            converged, theta = newton_converged(norm, previous, tol, theta)
+            if converged:
                 break
-            if is_finite(previous):
-                theta = norm / previous
-                if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
-                    converged = True
-                    break
             previous = norm
         if not converged:
-            stats[0] = n
-            stats[1] = n_rhs
-            stats[2] = n_jac
-            stats[3] = n_iter
-            stats[4] = k
-            stats[5] = norm
-            stats[6] = res_norm
-            stats[7] = theta
-            stats[8] = status
+            newton_stats(stats, n, n_rhs, n_jac, n_iter, k, norm, res_norm, theta, status)
             return
         for d in range(dim):
             for j in range(N):
@@ -1202,51 +1232,18 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                             Mats[j, a, bb] = v
                 n_jac += 1
             n_iter += 1
-            for j in range(N):
-                for r in range(Mw.shape[0]):
-                    for q in range(Mw.shape[1]):
-                        Mw[r, q] = Mats[j, r, q]
-                for r in range(dim):
-                    rhs_w[r] = -G[r, j]
-                if not lu_solve(Mw, rhs_w, sol):
-                    status = 2
-                    break
-                for r in range(dim):
-                    DX[r, j] = sol[r]
-            if status == 2:
+            if not newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
+                status = 2
                 break
-            norm = 0.0
-            nan_seen = False
-            for d in range(dim):
-                for j in range(N):
-                    X[d, j] += DX[d, j]
-                    e = abs(DX[d, j] * inv_scale[d, j])
-                    if e != e:
-                        nan_seen = True
-                    elif e > norm:
-                        norm = e
-            if nan_seen or not is_finite(norm):
-                norm = np.nan
+            norm = newton_update(X, DX, inv_scale)
+            if norm != norm:
                 break
-            if norm <= tol:
-                converged = True
+            converged, theta = newton_converged(norm, previous, tol, theta)
+            if converged:
                 break
-            if is_finite(previous):
-                theta = norm / previous
-                if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
-                    converged = True
-                    break
             previous = norm
         if not converged:
-            stats[0] = n
-            stats[1] = n_rhs
-            stats[2] = n_jac
-            stats[3] = n_iter
-            stats[4] = it
-            stats[5] = norm
-            stats[6] = res_norm
-            stats[7] = theta
-            stats[8] = status
+            newton_stats(stats, n, n_rhs, n_jac, n_iter, it, norm, res_norm, theta, status)
             lmm_unroll(H, F, fvalid, head)
             return
         head = (head + 1) % k
