@@ -477,6 +477,27 @@ def test_cold_compile_and_cached_load_are_recorded(tmp_path):
     )
 
 
+@pytest.mark.parametrize("controller", ["naive", "reversible"])
+def test_fastest_runs_a_step_controller_compiled_with_the_numpy_bookkeeping(controller):
+    """The step-control experiment's long runs take `fastest`: the compiled controller, a subclass
+    of the NumPy loop (same carry, reversal and clocks), whose run and round trip are the NumPy
+    loop's to rounding, clocks included."""
+    from implementations.compiled import CompiledControlledSplitting, fastest
+    from implementations.step_control import ControlledSplittingStepper
+
+    stepper = get_stepper(f"velocity-verlet+dtheta-{controller}")
+    problem = get_problem("kepler-elliptic")
+    runner = fastest(stepper, problem)
+    assert isinstance(runner, CompiledControlledSplitting)
+    assert isinstance(runner, ControlledSplittingStepper) and runner.info.implementation == "compiled"
+    y0 = problem.ensemble(2, seed=5)
+    a = stepper.integrate(problem, h=0.02, n_steps=3000, y0=y0, save_steps=[0, 1500, 3000])
+    b = runner.integrate(problem, h=0.02, n_steps=3000, y0=y0, save_steps=[0, 1500, 3000])
+    _assert_agree(a.y, b.y, runner.info.name)
+    _assert_agree(a.t, b.t, runner.info.name + " clocks")
+    assert a.evals == b.evals
+
+
 def test_a_compile_holds_a_lock_other_processes_wait_on(tmp_path, monkeypatch):
     """While one process compiles a kernel or module, another's attempt to take the same lock
     blocks (here: a non-blocking attempt fails), so workers started together compile once."""
