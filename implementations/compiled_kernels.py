@@ -269,18 +269,8 @@ def rhs_all(f_rhs, t, Y, P, Out):
 _ACCEL_HELPER = f'''
 {_JIT}
 def accel_all(f_accel, t, Q, P, Out):
-    nq = Q.shape[0]
-    q = np.empty(nq)
-    out = np.empty(nq)
-    p = np.empty(P.shape[0])
-    for j in range(Q.shape[1]):
-        for d in range(nq):
-            q[d] = Q[d, j]
-        for k in range(P.shape[0]):
-            p[k] = P[k, j]
-        call_state(f_accel, t, q, p, out)
-        for d in range(nq):
-            Out[d, j] = out[d]
+    # the acceleration of every member: the same member loop as the right-hand side's
+    rhs_all(f_accel, t, Q, P, Out)
 '''
 
 # Explicit Runge-Kutta (Hairer, Norsett & Wanner I, II.1, eq. (1.8)):
