@@ -45,59 +45,55 @@ def _value(results: dict, stepper: str, column: str, **where) -> float:
     return float(value)
 
 
-class MeasuredOrder:
+class _PerStepper:
+    """One tracked summary column per stepper; a subclass names the column and keeps its own
+    `setup_cache` (asv keys the cached results by the function's place in the source)."""
+
     params = (stepper_names(),)
     param_names = ["stepper"]
-    unit = "order"
     timeout = 1800
+    column = ""
+
+    def setup(self, results, stepper):
+        self.value = _value(results, stepper, self.column)
+
+
+class MeasuredOrder(_PerStepper):
+    unit = "order"
+    column = "measured_order"
 
     def setup_cache(self):
         return _run("convergence", "harmonic")
-
-    def setup(self, results, stepper):
-        self.value = _value(results, stepper, "measured_order")
 
     def track_measured_order(self, results, stepper):
         return self.value
 
 
-class EnergyDriftSlope:
-    params = (stepper_names(),)
-    param_names = ["stepper"]
+class EnergyDriftSlope(_PerStepper):
     unit = "relative energy error / time"
-    timeout = 1800
+    column = "drift_slope"
 
     def setup_cache(self):
         return _run("energy", "kepler-elliptic")
-
-    def setup(self, results, stepper):
-        self.value = _value(results, stepper, "drift_slope")
 
     def track_energy_drift_slope(self, results, stepper):
         return self.value
 
 
-class MaxEnergyError:
-    params = (stepper_names(),)
-    param_names = ["stepper"]
+class MaxEnergyError(_PerStepper):
     unit = "relative energy error"
-    timeout = 1800
+    column = "max_rel_energy_error"
 
     def setup_cache(self):
         return _run("energy", "kepler-elliptic")
-
-    def setup(self, results, stepper):
-        self.value = _value(results, stepper, "max_rel_energy_error")
 
     def track_max_energy_error(self, results, stepper):
         return self.value
 
 
-class Reversibility:
-    params = (stepper_names(),)
-    param_names = ["stepper"]
+class Reversibility(_PerStepper):
     unit = "ulps"
-    timeout = 1800
+    column = "return_error_ulps"
 
     def setup_cache(self):
         results = _run("reversibility", "kepler-elliptic")
@@ -105,9 +101,6 @@ class Reversibility:
             longest = max((r["steps"] for r in results["summary"]), default=None)
             results["summary"] = [r for r in results["summary"] if r["steps"] == longest]
         return results
-
-    def setup(self, results, stepper):
-        self.value = _value(results, stepper, "return_error_ulps")
 
     def track_return_error(self, results, stepper):
         return self.value

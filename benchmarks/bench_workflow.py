@@ -77,14 +77,20 @@ class GroundTruthCold:
         assert not ref.cached
 
 
-class Gate:
+class _Once:
+    """A run of seconds to minutes: timed once, no warm-up."""
+
+    timeout = 3600
+    number = 1
+    repeat = 1
+    warmup_time = 0.0
+
+
+class Gate(_Once):
     """The CI gate (convergence of every stepper, judged) on the harmonic oscillator, computed
     from scratch in this process with the quick settings."""
 
     timeout = 1800
-    number = 1
-    repeat = 1
-    warmup_time = 0.0
 
     def setup(self):
         try:
@@ -113,12 +119,7 @@ def _harness(args: list[str], env: dict[str, str]) -> None:
         raise RuntimeError(f"harness {' '.join(args)} failed: {done.stderr.strip()[-800:]}")
 
 
-class _Workflow:
-    timeout = 3600
-    number = 1
-    repeat = 1
-    warmup_time = 0.0
-
+class _Workflow(_Once):
     def setup(self):
         try:
             import harness.cli  # noqa: F401

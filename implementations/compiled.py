@@ -12,7 +12,11 @@ implementation from `compiled_variant`, and every built-in one is registered as
 
 Families: explicit Runge-Kutta, splitting (drift/kick), staggered leapfrog, Stormer two-step
 (accelerations independent of the velocity), linear multistep (explicit, and implicit by
-Newton's method with the problem's Jacobian), implicit Runge-Kutta (Newton). Each follows the
+Newton's method with the problem's Jacobian), implicit Runge-Kutta (Newton), and splittings under
+a step controller (`implementations.step_control`). Where a NumPy loop's carry bookkeeping
+(starts, observations, reversal) is not a plain state, the compiled class shares it: it subclasses
+the NumPy loop (step-controlled splitting) or calls its public helpers (Stormer's
+`TwoStepVerlet.observed_state`, the multistep `starting_values`). Each follows the
 NumPy loop of its family step for step: the same operations in the same order, the same starts,
 observations, time reversal and first-same-as-last reuse, the same evaluation counts, the same
 Newton tolerance, iteration cap and convergence test (ensemble-wide), and `StepFailure` where
@@ -35,9 +39,9 @@ import numpy as np
 from scipy.linalg.blas import daxpy
 
 from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
-from harness.errors import InputError, UnknownNameError
+from harness.errors import InputError
 from harness.problem import Dynamics, Problem
-from harness.stepper import Carry, StepFailure, Stepper, check_compatible
+from harness.stepper import Carry, StepFailure, Stepper
 from implementations.compiled_kernels import (
     COMPILE_LOG,
     TEMPLATES,
@@ -48,8 +52,11 @@ from implementations.compiled_kernels import (
     problem_module,
     translate_decomposition,
 )
-from implementations.implicit_rk import NewtonSettings
+from implementations.implicit_rk import NewtonSettings, extrapolation_matrix
+from implementations.multistep import LinearMultistepStepper
 from implementations.splitting import StaggeredLeapfrog
+from implementations.step_control import ControlledSplittingStepper
+from implementations.verlet import TwoStepVerlet
 
 __all__ = [
     "CompiledRungeKutta",
@@ -58,6 +65,7 @@ __all__ = [
     "CompiledStormer",
     "CompiledMultistep",
     "CompiledImplicitRungeKutta",
+    "CompiledControlledSplitting",
     "compiled_variant",
     "fastest",
     "problem_module",
@@ -366,25 +374,11 @@ class CompiledStormer(_Compiled):
         c.at_start = False
 
     def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
-        nq = dyn.nq
-        out = np.empty_like(c.y)
-        out[:nq] = c.cur
-        if c.at_start:
-            out[nq:] = c.v0
-        else:
-            np.subtract(c.nxt, c.prev, out=out[nq:])
-            out[nq:] /= 2.0 * c.h
-        return out
+        return TwoStepVerlet.observed_state(c, dyn.nq)
 
     def _reverse(self, dyn: Dynamics, c: Carry) -> None:
         super()._reverse(dyn, c)
-        if c.at_start:
-            h = c.h
-            c.prev = c.nxt
-            c.nxt = c.cur + h * c.v0 + (0.5 * h * h) * c.a_start
-            c.at_start = False
-        else:
-            c.prev, c.nxt = c.nxt, c.prev
+        TwoStepVerlet.reverse_neighbours(c)
 
 
 # -- Newton failures ---------------------------------------------------------------------------------
@@ -425,8 +419,8 @@ class CompiledMultistep(_Compiled):
 
     def __init__(self, base: Stepper):
         table = base.coefficients
-        if not isinstance(table, LinearMultistep):
-            raise InputError(f"`stepper` {base.info.name!r} needs a LinearMultistep")
+        if not isinstance(table, LinearMultistep) or not isinstance(base, LinearMultistepStepper):
+            raise InputError(f"`stepper` {base.info.name!r} needs a LinearMultistepStepper")
         super().__init__(base)
         self.history_length = table.steps
         self.implicit = not bool(table.explicit)
@@ -439,41 +433,8 @@ class CompiledMultistep(_Compiled):
             [float((-1) ** (k - 1 - j) * math.comb(k, j)) for j in range(k)], dtype=np.float64
         )
 
-    def _starter_stepper(self) -> Stepper:
-        if isinstance(self.starter, Stepper):
-            return self.starter
-        from harness.registry import get_stepper  # lazy: the registry imports this module
-
-        return get_stepper(self.starter)
-
-    def _starting_values(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> list:
-        count = self.coefficients.steps - 1
-        if count == 0:
-            return []
-        if self.starter == "reference":
-            from harness.ground_truth import reference
-
-            times = t0 + h * np.arange(1, count + 1)
-            ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)
-            values = [np.array(ref.y[i], dtype=np.float64) for i in range(count)]
-        else:
-            try:
-                starter = self._starter_stepper()
-            except UnknownNameError as exc:
-                raise InputError(f"starter of {self.info.name!r}: {exc}") from None
-            check_compatible(starter, dyn.problem)
-            tr = starter.integrate(
-                dyn.problem, h=h, n_steps=count, y0=y0, t0=t0, pars=dyn.pars,
-                save_steps=range(1, count + 1),
-            )
-            values = [np.ascontiguousarray(tr.y[i]) for i in range(count)]
-            for key, value in tr.evals.items():
-                dyn.counts[key] = dyn.counts.get(key, 0) + value
-        dyn.counts["starter_steps"] = dyn.counts.get("starter_steps", 0) + count
-        return values
-
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        pending = [(y, None) for y in self._starting_values(dyn, t0, y0, h)]
+        pending = [(y, None) for y in self.base.starting_values(dyn, t0, y0, h)]
         return Carry(t0, h, y0, hist_y=[y0], hist_f=[None], pending=pending)
 
     def _start_from_history(self, dyn: Dynamics, t0: float, h: float, history: list) -> Carry:
@@ -548,26 +509,6 @@ class CompiledMultistep(_Compiled):
 
 
 # -- implicit Runge-Kutta ----------------------------------------------------------------------------
-def _extrapolation_matrix(nodes: np.ndarray) -> np.ndarray | None:
-    """E with Z_new_i ~ sum_j E_ij Z_prev_j: the previous step's collocation polynomial u(tau)
-    through (0, 0) and (c_j, Z_j), evaluated at 1 + c_i, relative to u(1) (Hairer & Wanner II,
-    IV.8). None when the nodes are not distinct and nonzero."""
-    pts = np.concatenate([[0.0], nodes])
-    if np.any(nodes == 0.0) or np.unique(pts).size != pts.size:
-        return None
-
-    def lagrange(j: int, tau: float) -> float:
-        others = np.delete(pts, j)
-        return float(np.prod((tau - others) / (pts[j] - others)))
-
-    s = nodes.size
-    E = np.empty((s, s))
-    for i in range(s):
-        for j in range(s):
-            E[i, j] = lagrange(j + 1, 1.0 + nodes[i]) - lagrange(j + 1, 1.0)
-    return E
-
-
 class CompiledImplicitRungeKutta(_Compiled):
     """An implicit Runge-Kutta method (a `ButcherTableau` with a nonzero upper triangle) run by
     the compiled Newton kernel: unknowns Z_i = h sum_j a_ij f(t + c_j h, y + Z_j) on the stages
@@ -609,7 +550,7 @@ class CompiledImplicitRungeKutta(_Compiled):
             expl.size == 1 and expl[0] == 0 and impl.size == tab.stages - 1
             and np.array_equal(A[-1], b) and c[-1] == 1.0
         )
-        E = _extrapolation_matrix(self.c_impl)
+        E = extrapolation_matrix(self.c_impl)
         self.has_predictor = E is not None
         self.E = np.zeros((impl.size, impl.size)) if E is None else E
         self.last_row_inv = np.ascontiguousarray(A_ii_inv[-1])
@@ -641,15 +582,58 @@ class CompiledImplicitRungeKutta(_Compiled):
         c.flags[1] = 0  # the predictor extrapolates forward only
 
 
+# -- step-controlled splitting ---------------------------------------------------------------------------
+class CompiledControlledSplitting(_Compiled, ControlledSplittingStepper):
+    """A splitting scheme under a step controller (`ControlledSplittingStepper`, naive or
+    reversible; Huang & Leimkuhler, SIAM J. Sci. Comput. 18 (1997) 239-256; Hairer, Lubich &
+    Wanner, GNI, VIII.3.2) run by the compiled controlled kernel. A subclass of the NumPy loop: the
+    carry, the reversal and the members' clocks are its own (`_start`, `_reverse`, `_time`); only
+    the steps are compiled."""
+
+    kind = "step-controlled splitting"
+
+    def __init__(self, base: Stepper):
+        if not isinstance(base, ControlledSplittingStepper):
+            raise InputError(f"`stepper` {base.info.name!r} needs a ControlledSplittingStepper")
+        ControlledSplittingStepper.__init__(
+            self, base.record, reference=base.info.reference, description=base.info.description
+        )
+        _Compiled.__init__(self, base)
+        seq = self.record.scheme.sequence
+        self.kicks = np.array([kind == "K" for kind, _ in seq], dtype=np.bool_)
+        self.op_coefficients = np.array([coeff for _, coeff in seq], dtype=np.float64)
+
+    def incompatibility(self, problem: Problem) -> str | None:
+        reason = self.base.incompatibility(problem)
+        if reason is None and problem.velocity_dependent:
+            reason = "the compiled controlled loop needs an acceleration independent of the velocity"
+        return reason or super().incompatibility(problem)
+
+    def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:
+        density = self.record.density
+        z = c.z if self._reversible else np.zeros(c.y.shape[1])
+        evals = call_kernel(
+            "controlled_advance", address(dyn.problem, "accel"), self.kicks, self.op_coefficients,
+            bool(self._fsal), bool(c.force_valid), bool(self._reversible),
+            float(density.position_power), float(density.momentum_power), float(c.t0), float(c.h),
+            int(n), c.y, c.a, c.time, z, _pars(dyn),
+        )
+        dyn.counts["accel"] += int(evals)
+        c.force_valid = self._fsal
+
+
 # -- choosing the family -------------------------------------------------------------------------------
 def compiled_variant(stepper: Stepper) -> Stepper:
     """The compiled implementation (named `<name>@compiled`) of a stepper whose method is a
     coefficient object: explicit or implicit `ButcherTableau`, `SplittingScheme` (a
-    `StaggeredLeapfrog` keeps its staggered form), `LinearMultistep`, `SecondOrderMultistep`."""
+    `StaggeredLeapfrog` keeps its staggered form), `LinearMultistep`, `SecondOrderMultistep`, or
+    a splitting scheme under a step controller (`ControlledSplittingStepper`)."""
     if not isinstance(stepper, Stepper):
         raise InputError(f"`stepper` must be a Stepper, got {type(stepper).__name__}")
     if stepper.info.implementation == "compiled":
         raise InputError(f"`stepper` {stepper.info.name!r} is already compiled")
+    if isinstance(stepper, ControlledSplittingStepper):
+        return CompiledControlledSplitting(stepper)
     coeffs = stepper.coefficients
     if isinstance(coeffs, ButcherTableau):
         return CompiledRungeKutta(stepper) if coeffs.explicit else CompiledImplicitRungeKutta(stepper)
@@ -675,13 +659,11 @@ _variants_lock = threading.Lock()
 def _family_loops() -> tuple[type, ...]:
     """The NumPy loop classes the compiled families mirror step for step."""
     from implementations.implicit_rk import ImplicitRungeKutta
-    from implementations.multistep import LinearMultistepStepper
     from implementations.runge_kutta import ExplicitRungeKutta
     from implementations.splitting import SplittingStepper
-    from implementations.verlet import TwoStepVerlet
 
     return (ExplicitRungeKutta, ImplicitRungeKutta, SplittingStepper, StaggeredLeapfrog,
-            LinearMultistepStepper, TwoStepVerlet)
+            LinearMultistepStepper, TwoStepVerlet, ControlledSplittingStepper)
 
 
 def fastest(stepper: Stepper, problem: Problem) -> Stepper:
@@ -725,7 +707,7 @@ def _registered() -> list[Stepper]:
             continue
         module = import_module(f"implementations.{name}")
         for stepper in module.STEPPERS:
-            if stepper.coefficients is None:
+            if stepper.coefficients is None and not isinstance(stepper, ControlledSplittingStepper):
                 continue
             try:
                 out.append(compiled_variant(stepper))

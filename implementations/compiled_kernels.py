@@ -5,10 +5,11 @@ Two kinds of generated module (Lam, Pitrou & Seibert, *Numba: a LLVM-based Pytho
 LLVM-HPC 2015, for the compiler):
 - the family module, the same for every problem and method: the kernels of explicit Runge-Kutta,
   splitting, the staggered leapfrog, Stormer's two-step rule, explicit and implicit linear
-  multistep, implicit Runge-Kutta (Newton), and column forms of the explicit one-step families
-  for ensembles. A kernel reads its method from arrays (A, b, c; the drift/kick sequence; alpha,
-  beta) and calls the problem's functions through their addresses (`call_state`,
-  `call_columns`: an indirect call, as a C loop through a function pointer). So a cold run
+  multistep, implicit Runge-Kutta (Newton), splittings under a step controller, and column forms
+  of the explicit one-step families for ensembles. A kernel reads its method from arrays (A, b,
+  c; the drift/kick sequence; alpha, beta) and calls the problem's functions through their
+  addresses (`call_state`, `call_state_into`, `call_columns`: an indirect call, as a C loop
+  through a function pointer). So a cold run
   compiles each family kernel once, whatever the problems and methods, and later processes load
   them from numba's disk cache.
 - per problem, its functions as C-callable numba `cfunc`s: `rhs(t, y, p, out)`, its column form
@@ -25,7 +26,9 @@ incompatible (with the reason).
 
 Caching: every module text is written once to `harness.cache.cache_dir() / "numba"`, named by a
 hash of its text, and imported under a name derived from that hash; every function has
-`cache=True`. `COMPILE_LOG` records, per process, what was compiled or loaded and how long it took.
+`cache=True`. A compile holds a file lock (`_compile_lock`), so processes started together compile
+each kernel once and the others load it. `COMPILE_LOG` records, per process, what was compiled or
+loaded and how long it took (wall and CPU seconds).
 
 Floating-point rules: operations in the NumPy loops' order; in the functions and the explicit
 one-step and Stormer kernels a*b + c may become one fused multiply-add (as in heyoka's compiled
@@ -38,6 +41,7 @@ vectorisation).
 from __future__ import annotations
 
 import ast
+import contextlib
 import dataclasses
 import hashlib
 import importlib.util
@@ -241,6 +245,12 @@ _JIT_INLINE = '@njit(cache=True, error_model="numpy", inline="always")'
 
 _HELPERS = f'''
 {_JIT_INLINE}
+def is_finite(x):
+    # np.isfinite on a scalar: the same test, without the per-element library call it compiles to
+    return abs(x) <= 1.7976931348623157e308
+
+
+{_JIT_INLINE}
 def rhs_all(f_rhs, t, Y, P, Out):
     dim = Y.shape[0]
     y = np.empty(dim)
@@ -259,18 +269,8 @@ def rhs_all(f_rhs, t, Y, P, Out):
 _ACCEL_HELPER = f'''
 {_JIT}
 def accel_all(f_accel, t, Q, P, Out):
-    nq = Q.shape[0]
-    q = np.empty(nq)
-    out = np.empty(nq)
-    p = np.empty(P.shape[0])
-    for j in range(Q.shape[1]):
-        for d in range(nq):
-            q[d] = Q[d, j]
-        for k in range(P.shape[0]):
-            p[k] = P[k, j]
-        call_state(f_accel, t, q, p, out)
-        for d in range(nq):
-            Out[d, j] = out[d]
+    # the acceleration of every member: the same member loop as the right-hand side's
+    rhs_all(f_accel, t, Q, P, Out)
 '''
 
 # Explicit Runge-Kutta (Hairer, Norsett & Wanner I, II.1, eq. (1.8)):
@@ -317,12 +317,17 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
         for n in range(nsteps):
             t = t0 + (n0 + n) * h
             for i in range(s):
+                q0 = start[i]
+                q1 = start[i + 1]
+                if q0 == q1:  # a stage at y itself (the first): no copy
+                    call_state_into(f_rhs, t + hc[i], y, 0, p, K, i * dim)
+                    continue
                 for d in range(dim):
                     acc = y[d]
-                    for q in range(start[i], start[i + 1]):
+                    for q in range(q0, q1):
                         acc += coef[q] * K[term[q] * dim + d]
                     stage[d] = acc
-                call_state_into(f_rhs, t + hc[i], stage, p, K, i * dim)
+                call_state_into(f_rhs, t + hc[i], stage, 0, p, K, i * dim)
             for d in range(dim):
                 acc = y[d]
                 for q in range(nw):
@@ -375,6 +380,95 @@ def split_advance(f_accel, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y
         evals = e
     return evals
 '''
+
+# A drift/kick splitting under a step controller (`implementations.step_control`): per member a
+# physical step hs = h sigma(q, v) (naive) or hs = h / z with z_{n+1/2} = z_{n-1/2} + h G(y_n),
+# G = -position_power (q.v) / |q|^2 (reversible; Huang & Leimkuhler 1997; Hairer, Lubich & Wanner,
+# GNI, VIII.3.2); sigma = |q|^position_power |L|^momentum_power with |L| frozen at the start for
+# the reversible controller. Powers as NumPy evaluates `array ** scalar` (exact fast paths for the
+# exponents -1, 0, 1/2, 1, 2). Each member keeps its own clock Time.
+CONTROLLED = f'''
+{_JIT_INLINE}
+def numpy_power(x, e):
+    if e == 1.0:
+        return x
+    if e == -1.0:
+        return 1.0 / x
+    if e == 2.0:
+        return x * x
+    if e == 0.5:
+        return np.sqrt(x)
+    if e == 0.0:
+        return 1.0
+    return x ** e
+
+
+{_JIT_EXACT}
+def controlled_advance(f_accel, kick, coef, fsal, valid0, reversible, pos_power, mom_power, t0, h,
+                       nsteps, Y, Acc, Time, Z, P):
+    nops = kick.shape[0]
+    nq = Acc.shape[0]
+    npar = P.shape[0]
+    q = np.empty(nq)
+    v = np.empty(nq)
+    a = np.empty(nq)
+    p = np.empty(npar)
+    half = 0.5 * pos_power
+    evals = 0
+    for j in range(Y.shape[1]):
+        for d in range(nq):
+            q[d] = Y[d, j]
+            v[d] = Y[nq + d, j]
+            a[d] = Acc[d, j]
+        for k in range(npar):
+            p[k] = P[k, j]
+        time = Time[j]
+        z = Z[j]
+        valid = valid0
+        e = 0
+        for n in range(nsteps):
+            if reversible:
+                hs = h / z if z > 0.0 else np.inf
+            else:
+                r2 = 0.0
+                qv = 0.0
+                v2 = 0.0
+                for d in range(nq):
+                    r2 += q[d] * q[d]
+                    qv += q[d] * v[d]
+                    v2 += v[d] * v[d]
+                L = np.sqrt(max(r2 * v2 - qv * qv, 0.0))
+                hs = h * (numpy_power(r2, half) * numpy_power(L, mom_power))
+            for i in range(nops):
+                ch = coef[i] * hs
+                if kick[i]:
+                    if not (i == 0 and valid):
+                        call_state(f_accel, t0, q, p, a)
+                        e += 1
+                    for d in range(nq):
+                        v[d] += ch * a[d]
+                else:
+                    for d in range(nq):
+                        q[d] += ch * v[d]
+            valid = fsal
+            time += hs
+            if reversible:
+                r2 = 0.0
+                qv = 0.0
+                for d in range(nq):
+                    r2 += q[d] * q[d]
+                    qv += q[d] * v[d]
+                z += h * ((-pos_power) * qv / r2)
+        for d in range(nq):
+            Y[d, j] = q[d]
+            Y[nq + d, j] = v[d]
+            Acc[d, j] = a[d]
+        Time[j] = time
+        Z[j] = z
+        evals = e
+    return evals
+'''
+
 
 # Staggered leapfrog: x += d h v_{n+1/2}, v_{n+3/2} = v_{n+1/2} + k h a(x_{n+1}, t_{n+1}).
 LEAPFROG = f'''
@@ -575,7 +669,7 @@ def lmm_finite(H, slot):
     k, dim, N = H.shape
     for d in range(dim):
         for m in range(N):
-            if not np.isfinite(H[slot, d, m]):
+            if not is_finite(H[slot, d, m]):
                 return False
     return True
 
@@ -610,8 +704,84 @@ def lmm_unroll(H, F, fvalid, head):
 # history is a ring of k slots: a step writes one slot instead of shifting k.
 LMM_EXPLICIT = f'''
 {_JIT_EXACT}
+def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
+    # one member: the history ring flat in W (states in slots 0..k-1, derivatives in k..2k-1),
+    # the formula's terms as (signed coefficient, offset into W) fixed per step
+    k, dim, N = H.shape
+    W = np.empty(2 * k * dim)
+    for sl in range(k):
+        for d in range(dim):
+            W[sl * dim + d] = H[sl, d, 0]
+            W[(k + sl) * dim + d] = F[sl, d, 0]
+    valid = fvalid.copy()
+    p = np.empty(P.shape[0])
+    for q in range(P.shape[0]):
+        p[q] = P[q, 0]
+    tkind = np.empty(2 * k, dtype=np.int64)
+    tindex = np.empty(2 * k, dtype=np.int64)
+    tcoef = np.empty(2 * k)
+    nt = 0
+    for jj in range(k):
+        if alpha[jj] != 0.0:
+            tkind[nt] = 0
+            tindex[nt] = jj
+            tcoef[nt] = -alpha[jj]
+            nt += 1
+        if beta[jj] != 0.0:
+            tkind[nt] = k
+            tindex[nt] = jj
+            tcoef[nt] = h * beta[jj]
+            nt += 1
+    off = np.empty(nt, dtype=np.int64)
+    evals = 0
+    head = 0
+    for n in range(nsteps):
+        t = t0 + (n0 + n) * h
+        oldest = head
+        newest = oldest + k - 1 if oldest > 0 else k - 1
+        head = head + 1 if head + 1 < k else 0
+        finite = True
+        for d in range(dim):
+            if not is_finite(W[newest * dim + d]):
+                finite = False
+        if not finite:
+            for d in range(dim):
+                W[oldest * dim + d] = np.nan
+            valid[oldest] = False
+            continue
+        for jj in range(k):
+            sl = oldest + jj
+            if sl >= k:
+                sl -= k
+            if beta[jj] != 0.0 and not valid[sl]:
+                call_state_into(f_rhs, t - (k - 1 - jj) * h, W, sl * dim, p, W, (k + sl) * dim)
+                valid[sl] = True
+                evals += 1
+        for q in range(nt):
+            sl = oldest + tindex[q]
+            if sl >= k:
+                sl -= k
+            off[q] = (tkind[q] + sl) * dim
+        for d in range(dim):
+            acc = 0.0
+            for q in range(nt):
+                acc += tcoef[q] * W[off[q] + d]
+            W[oldest * dim + d] = acc
+        valid[oldest] = False
+    for jj in range(k):
+        sl = (head + jj) % k
+        for d in range(dim):
+            H[jj, d, 0] = W[sl * dim + d]
+            F[jj, d, 0] = W[(k + sl) * dim + d]
+        fvalid[jj] = valid[sl]
+    return evals
+
+
+{_JIT_EXACT}
 def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
     k, dim, N = H.shape
+    if N == 1:
+        return lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
     npar = P.shape[0]
     y = np.empty(dim)
     out = np.empty(dim)
@@ -645,7 +815,7 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
         finite = True
         for d in range(dim):
             for m in range(N):
-                if not np.isfinite(H[newest, d, m]):
+                if not is_finite(H[newest, d, m]):
                     finite = False
         head = head + 1 if head + 1 < k else 0
         slot = slots[0]  # the oldest slot takes the new state
@@ -724,6 +894,70 @@ def lu_solve(M, b, x):
             acc -= M[i, q] * x[q]
         x[i] = acc / M[i, i]
     return True
+
+
+{_JIT_INLINE}
+def newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
+    # DX[:, j] = -Mats[j]^-1 G[:, j] for every member; False on a singular matrix
+    m = Mw.shape[0]
+    for j in range(G.shape[1]):
+        for r in range(m):
+            for q in range(m):
+                Mw[r, q] = Mats[j, r, q]
+        for r in range(m):
+            rhs_w[r] = -G[r, j]
+        if not lu_solve(Mw, rhs_w, sol):
+            return False
+        for r in range(m):
+            DX[r, j] = sol[r]
+    return True
+
+
+{_JIT_INLINE}
+def newton_update(X, DX, inv_scale):
+    # X += DX; the increment's max-norm scaled by inv_scale (rows i * dim + d use row d), NaN
+    # when any scaled entry is not finite
+    dim = inv_scale.shape[0]
+    norm = 0.0
+    nan_seen = False
+    for i in range(X.shape[0] // dim):
+        for d in range(dim):
+            r = i * dim + d
+            for j in range(X.shape[1]):
+                X[r, j] += DX[r, j]
+                e = abs(DX[r, j] * inv_scale[d, j])
+                if e != e:
+                    nan_seen = True
+                elif e > norm:
+                    norm = e
+    if nan_seen or not is_finite(norm):
+        return np.nan
+    return norm
+
+
+{_JIT_INLINE}
+def newton_converged(norm, previous, tol, theta):
+    # (converged, contraction): the increment at most tol, or theta / (1 - theta) |dx| at most tol
+    if norm <= tol:
+        return True, theta
+    if is_finite(previous):
+        theta = norm / previous
+        if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
+            return True, theta
+    return False, theta
+
+
+{_JIT_INLINE}
+def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, theta, status):
+    stats[0] = n
+    stats[1] = n_rhs
+    stats[2] = n_jac
+    stats[3] = n_iter
+    stats[4] = iteration
+    stats[5] = norm
+    stats[6] = res_norm
+    stats[7] = theta
+    stats[8] = status
 '''
 
 # Implicit Runge-Kutta (Hairer & Wanner II, IV.8): unknowns Z_i = h sum_j a_ij f(t + c_j h,
@@ -764,7 +998,7 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
         finite = True
         for d in range(dim):
             for j in range(N):
-                if not np.isfinite(Y[d, j]):
+                if not is_finite(Y[d, j]):
                     finite = False
         if not finite:
             Y[:, :] = np.nan
@@ -859,52 +1093,18 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
                                     Mats[j, i * dim + a, q * dim + bb] = v
                 n_jac += impl if full else 1
             n_iter += 1
-            for j in range(N):
-                for r in range(Mw.shape[0]):
-                    for q in range(Mw.shape[1]):
-                        Mw[r, q] = Mats[j, r, q]
-                for r in range(m):
-                    rhs_w[r] = -G[r, j]
-                if not lu_solve(Mw, rhs_w, sol):
-                    status = 2
-                    break
-                for r in range(m):
-                    DX[r, j] = sol[r]
-            if status == 2:
+            if not newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
+                status = 2
                 break
-            norm = 0.0
-            nan_seen = False
-            for r in range(m):
-                d = r % dim
-                for j in range(N):
-                    X[r, j] += DX[r, j]
-                    e = abs(DX[r, j] * inv_scale[d, j])
-                    if e != e:
-                        nan_seen = True
-                    elif e > norm:
-                        norm = e
-            if nan_seen or not np.isfinite(norm):
-                norm = np.nan
+            norm = newton_update(X, DX, inv_scale)
+            if norm != norm:
                 break
-            if norm <= tol:
-                converged = True
+            converged, theta = newton_converged(norm, previous, tol, theta)
+            if converged:
                 break
-            if np.isfinite(previous):
-                theta = norm / previous
-                if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
-                    converged = True
-                    break
             previous = norm
         if not converged:
-            stats[0] = n
-            stats[1] = n_rhs
-            stats[2] = n_jac
-            stats[3] = n_iter
-            stats[4] = k
-            stats[5] = norm
-            stats[6] = res_norm
-            stats[7] = theta
-            stats[8] = status
+            newton_stats(stats, n, n_rhs, n_jac, n_iter, k, norm, res_norm, theta, status)
             return
         for d in range(dim):
             for j in range(N):
@@ -1022,51 +1222,18 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                             Mats[j, a, bb] = v
                 n_jac += 1
             n_iter += 1
-            for j in range(N):
-                for r in range(Mw.shape[0]):
-                    for q in range(Mw.shape[1]):
-                        Mw[r, q] = Mats[j, r, q]
-                for r in range(dim):
-                    rhs_w[r] = -G[r, j]
-                if not lu_solve(Mw, rhs_w, sol):
-                    status = 2
-                    break
-                for r in range(dim):
-                    DX[r, j] = sol[r]
-            if status == 2:
+            if not newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
+                status = 2
                 break
-            norm = 0.0
-            nan_seen = False
-            for d in range(dim):
-                for j in range(N):
-                    X[d, j] += DX[d, j]
-                    e = abs(DX[d, j] * inv_scale[d, j])
-                    if e != e:
-                        nan_seen = True
-                    elif e > norm:
-                        norm = e
-            if nan_seen or not np.isfinite(norm):
-                norm = np.nan
+            norm = newton_update(X, DX, inv_scale)
+            if norm != norm:
                 break
-            if norm <= tol:
-                converged = True
+            converged, theta = newton_converged(norm, previous, tol, theta)
+            if converged:
                 break
-            if np.isfinite(previous):
-                theta = norm / previous
-                if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
-                    converged = True
-                    break
             previous = norm
         if not converged:
-            stats[0] = n
-            stats[1] = n_rhs
-            stats[2] = n_jac
-            stats[3] = n_iter
-            stats[4] = it
-            stats[5] = norm
-            stats[6] = res_norm
-            stats[7] = theta
-            stats[8] = status
+            newton_stats(stats, n, n_rhs, n_jac, n_iter, it, norm, res_norm, theta, status)
             lmm_unroll(H, F, fvalid, head)
             return
         head = (head + 1) % k
@@ -1088,12 +1255,12 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
 KERNELS = (
     "rk_advance", "rk_advance_cols", "split_advance", "split_advance_cols", "leapfrog_advance",
     "leapfrog_advance_cols", "stormer_advance", "lmm_explicit_advance", "irk_advance",
-    "lmm_implicit_advance", "rhs_all", "accel_all",
+    "lmm_implicit_advance", "controlled_advance", "rhs_all", "accel_all",
 )
 #: Every template, for fingerprints (a change to any kernel changes every compiled stepper's).
 TEMPLATES = (
     _HELPERS, _ACCEL_HELPER, _LMM_PSI, _NEWTON, RK, SPLITTING, LEAPFROG, STORMER, LMM_EXPLICIT,
-    IMPLICIT_RK, LMM_IMPLICIT, RK_COLUMNS, SPLITTING_COLUMNS, LEAPFROG_COLUMNS,
+    IMPLICIT_RK, LMM_IMPLICIT, RK_COLUMNS, SPLITTING_COLUMNS, LEAPFROG_COLUMNS, CONTROLLED,
 )
 #: Per problem: 'functions' (rhs, rhs_cols, and accel, accel_cols for accelerations of the
 #: positions only) and 'jacobian' (jac, for the Newton-solved families).
@@ -1130,18 +1297,19 @@ def call_state(typingctx, address, t, x, p, out):
 
 
 @intrinsic
-def call_state_into(typingctx, address, t, x, p, out, offset):
-    """As `call_state`, writing to `out`'s data from element `offset` on (a row of a matrix
-    without making a view of it)."""
-    sig = types.void(address, t, x, p, out, offset)
+def call_state_into(typingctx, address, t, x, x_offset, p, out, out_offset):
+    """As `call_state`, reading `x`'s data from element `x_offset` on and writing `out`'s from
+    element `out_offset` on (rows of a flat array, without making views)."""
+    sig = types.void(address, t, x, x_offset, p, out, out_offset)
 
     def codegen(context, builder, signature, args):
         dptr = ir.DoubleType().as_pointer()
         pointers = [
-            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
-            for ty, value in zip(signature.args[2:5], args[2:5], strict=True)
+            builder.bitcast(_data_pointer(context, builder, signature.args[i], args[i]), dptr)
+            for i in (2, 4, 5)
         ]
-        pointers[2] = builder.gep(pointers[2], [args[5]])
+        pointers[0] = builder.gep(pointers[0], [args[3]])
+        pointers[2] = builder.gep(pointers[2], [args[6]])
         fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType(), dptr, dptr, dptr])
         builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], *pointers])
         return context.get_dummy_value()
@@ -1221,7 +1389,8 @@ def _intrinsics_digest() -> str:
 def family_source() -> str:
     """The text of the generated family-kernel module (the same for every problem)."""
     parts = [_HELPERS, _ACCEL_HELPER, RK, RK_COLUMNS, SPLITTING, SPLITTING_COLUMNS, LEAPFROG,
-             LEAPFROG_COLUMNS, STORMER, _LMM_PSI, LMM_EXPLICIT, _NEWTON, IMPLICIT_RK, LMM_IMPLICIT]
+             LEAPFROG_COLUMNS, STORMER, _LMM_PSI, LMM_EXPLICIT, _NEWTON, IMPLICIT_RK, LMM_IMPLICIT,
+             CONTROLLED]
     header = _FAMILY_HEADER.format(**_versions(), intrinsics=_intrinsics_digest())
     return header + "\n\n".join(p.strip("\n") + "\n" for p in parts)
 
@@ -1300,6 +1469,27 @@ def _write_once(path: Path, text: str) -> None:
             os.unlink(tmp)
 
 
+@contextlib.contextmanager
+def _compile_lock(stem: str):
+    """Hold an exclusive lock on `stem`.lock in the numba cache directory while compiling (or
+    loading) what `stem` names: workers started together (the gate's, the report's) compile each
+    kernel and problem module once between them; the others wait and load it from numba's disk
+    cache. Without `fcntl` (not POSIX) every process compiles for itself."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    path = cache.cache_dir() / "numba" / f"{stem}.lock"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
 def _slug(name: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in name)[:40]
 
@@ -1316,9 +1506,10 @@ def _import_text(text: str, stem: str, what: str) -> ModuleType:
         spec = importlib.util.spec_from_file_location(mod_name, path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[mod_name] = module
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         try:
-            spec.loader.exec_module(module)
+            with _compile_lock(f"{stem}_{digest}"):
+                spec.loader.exec_module(module)
         except BaseException:
             sys.modules.pop(mod_name, None)
             raise
@@ -1327,6 +1518,7 @@ def _import_text(text: str, stem: str, what: str) -> ModuleType:
             COMPILE_LOG.append({
                 "what": what,
                 "seconds": time.perf_counter() - start,
+                "cpu_seconds": time.process_time() - cpu,
                 "source": "cached" if all(f.cache_hits for f in cfuncs) else "compiled",
             })
     return module
@@ -1374,16 +1566,19 @@ def call_kernel(name: str, *args: Any) -> Any:
     compile (or cache load) time in COMPILE_LOG."""
     if name not in KERNELS:
         raise InputError(f"`name` must be one of {list(KERNELS)}, got {name!r}")
-    kernel = getattr(family_module(), name)
+    module = family_module()
+    kernel = getattr(module, name)
     if kernel.signatures:
         return kernel(*args)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
+    with _compile_lock(f"{module.__name__}_{name}"):  # compiled (or loaded) only, not run
+        kernel.compile(tuple(kernel.typeof_pyval(a) for a in args))
     result = kernel(*args)
-    elapsed = time.perf_counter() - start
     stats = kernel.stats
     COMPILE_LOG.append({
         "what": name,
-        "seconds": elapsed,
+        "seconds": time.perf_counter() - start,
+        "cpu_seconds": time.process_time() - cpu,
         "source": "cached" if stats.cache_hits and not stats.cache_misses else "compiled",
     })
     return result

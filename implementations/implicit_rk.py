@@ -41,6 +41,7 @@ __all__ = [
     "NewtonSettings",
     "newton_solve",
     "scaled_norm",
+    "extrapolation_matrix",
     "BACKWARD_EULER",
     "TRAPEZOID",
     "IMPLICIT_MIDPOINT",
@@ -163,7 +164,7 @@ def newton_solve(
     )
 
 
-def _extrapolation_matrix(nodes: np.ndarray) -> np.ndarray | None:
+def extrapolation_matrix(nodes: np.ndarray) -> np.ndarray | None:
     """E with Z_new_i ~ sum_j E_ij Z_prev_j: the polynomial u(tau) through (0, 0) and
     (c_j, Z_j) (the previous step's collocation polynomial, in units of h, relative to y_{n-1}),
     evaluated at 1 + c_i and taken relative to u(1). None when the nodes are not distinct and
@@ -255,7 +256,7 @@ class ImplicitRungeKutta(Stepper):
             and np.array_equal(A[-1], b)
             and c[-1] == 1.0
         )
-        self._predictor = _extrapolation_matrix(self._c_impl)
+        self._predictor = extrapolation_matrix(self._c_impl)
         # the derivative at the last stage, recovered from Z: h F_impl = A_ii^{-1} (Z - h A_ie F_e)
         self._last_row_inv = A_ii_inv[-1]
         n_impl = self._impl.size

@@ -178,7 +178,9 @@ class LinearMultistepStepper(Stepper):
             )
         return starter
 
-    def _starting_values(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> list:
+    def starting_values(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> list:
+        """y_1 .. y_{k-1} from the starter (its evaluations counted in `dyn`); shared with the
+        compiled loop of the same method."""
         count = self.coefficients.steps - 1
         if count == 0:
             return []
@@ -205,7 +207,7 @@ class LinearMultistepStepper(Stepper):
 
     # -- contract ----------------------------------------------------------------------------------
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        pending = [(y, None) for y in self._starting_values(dyn, t0, y0, h)]
+        pending = [(y, None) for y in self.starting_values(dyn, t0, y0, h)]
         return Carry(t0, h, y0, hist_y=[y0], hist_f=[None], pending=pending)
 
     def _start_from_history(self, dyn: Dynamics, t0: float, h: float, history: list) -> Carry:

@@ -233,8 +233,11 @@ class TwoStepVerlet(Stepper):
         c.at_start = False
         self._solve_next(dyn, c, c.t + c.h)
 
-    def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
-        nq = dyn.nq
+    @staticmethod
+    def observed_state(c: Carry, nq: int) -> np.ndarray:
+        """(x_n, v_n) of a carry (prev, cur, nxt) = (x_{n-1}, x_n, x_{n+1}): the start velocity
+        before the first step, else the central difference (x_{n+1} - x_{n-1}) / 2h. Shared with
+        the compiled loop of the same carry."""
         out = np.empty_like(c.y)
         out[:nq] = c.cur
         if c.at_start:
@@ -244,18 +247,26 @@ class TwoStepVerlet(Stepper):
             out[nq:] /= 2.0 * c.h
         return out
 
-    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
-        super()._reverse(dyn, c)
-        if c.kind == "constant":
-            c.P, c.M = self._linear_system(c.B, c.h)
+    @staticmethod
+    def reverse_neighbours(c: Carry) -> None:
+        """The carry's neighbours for the reversed direction (after h changed sign): swapped, or
+        the Taylor start in the new direction when x_{-1} was never formed."""
         if c.at_start:
-            # x_{-1} was never formed: the Taylor start in the new direction.
             h = c.h
             c.prev = c.nxt
             c.nxt = c.cur + h * c.v0 + (0.5 * h * h) * c.a_start
             c.at_start = False
         else:
             c.prev, c.nxt = c.nxt, c.prev
+
+    def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
+        return self.observed_state(c, dyn.nq)
+
+    def _reverse(self, dyn: Dynamics, c: Carry) -> None:
+        super()._reverse(dyn, c)
+        if c.kind == "constant":
+            c.P, c.M = self._linear_system(c.B, c.h)
+        self.reverse_neighbours(c)
 
 
 STORMER = SecondOrderMultistep("stormer", [1, -2, 1], [0, 1, 0])

@@ -115,6 +115,29 @@ def test_every_builtin_with_coefficients_has_a_registered_compiled_variant():
     assert {"explicit-rk", "splitting", "stormer", "multistep", "implicit-rk"} <= families
 
 
+def test_every_registered_method_with_coefficients_has_a_compiled_variant():
+    """Over the whole registry, variants included (`<name>@embedded`, the step-controlled
+    splittings, anything added since): a NumPy stepper whose method is a record of data (a
+    coefficient object or a controlled scheme) has `<name>@compiled`, which the agreement sweep
+    below compares with it; only the black boxes (no record) have none."""
+    from implementations.step_control import ControlledSplittingStepper
+
+    names = set(steppers.names(variants=True))
+    missing, black_boxes = [], []
+    for s in steppers.all(variants=True):
+        if s.info.implementation == "compiled":
+            continue
+        if s.coefficients is None and not isinstance(s, ControlledSplittingStepper):
+            black_boxes.append(s.info.name)
+        elif s.info.name + SUFFIX not in names:
+            missing.append(s.info.name)
+    assert missing == []
+    assert {"bogacki-shampine@embedded", "velocity-verlet+dtheta-reversible"} <= {
+        s.info.extra["numpy_implementation"] for s in COMPILED
+    }
+    assert all(get_stepper(n).info.family in ("taylor", "external") for n in black_boxes)
+
+
 @pytest.mark.parametrize("stepper", COMPILED, ids=lambda s: s.info.name)
 def test_same_claims_and_the_same_coefficient_object(stepper):
     base = stepper.base
@@ -403,6 +426,42 @@ def test_cold_compile_and_cached_load_are_recorded(tmp_path):
         f"{runs['cold']['first_call_s']:.2f} s, cached {runs['cached']['first_call_s']:.2f} s; "
         f"10^6 steps {runs['cached']['steps_1e6_s']:.3f} s (load average {runs['load_average'][0]:.1f})"
     )
+
+
+@pytest.mark.parametrize("controller", ["naive", "reversible"])
+def test_fastest_runs_a_step_controller_compiled_with_the_numpy_bookkeeping(controller):
+    """The step-control experiment's long runs take `fastest`: the compiled controller, a subclass
+    of the NumPy loop (same carry, reversal and clocks), whose run and round trip are the NumPy
+    loop's to rounding, clocks included."""
+    from implementations.compiled import CompiledControlledSplitting, fastest
+    from implementations.step_control import ControlledSplittingStepper
+
+    stepper = get_stepper(f"velocity-verlet+dtheta-{controller}")
+    problem = get_problem("kepler-elliptic")
+    runner = fastest(stepper, problem)
+    assert isinstance(runner, CompiledControlledSplitting)
+    assert isinstance(runner, ControlledSplittingStepper) and runner.info.implementation == "compiled"
+    y0 = problem.ensemble(2, seed=5)
+    a = stepper.integrate(problem, h=0.02, n_steps=3000, y0=y0, save_steps=[0, 1500, 3000])
+    b = runner.integrate(problem, h=0.02, n_steps=3000, y0=y0, save_steps=[0, 1500, 3000])
+    _assert_agree(a.y, b.y, runner.info.name)
+    _assert_agree(a.t, b.t, runner.info.name + " clocks")
+    assert a.evals == b.evals
+
+
+def test_a_compile_holds_a_lock_other_processes_wait_on(tmp_path, monkeypatch):
+    """While one process compiles a kernel or module, another's attempt to take the same lock
+    blocks (here: a non-blocking attempt fails), so workers started together compile once."""
+    fcntl = pytest.importorskip("fcntl", reason="file locks are POSIX only; elsewhere each process compiles")
+    from implementations.compiled_kernels import _compile_lock
+
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
+    with _compile_lock("family_x"):
+        path = tmp_path / "numba" / "family_x.lock"
+        with open(path, "a") as other, pytest.raises(BlockingIOError):
+            fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    with open(path, "a") as other:  # released
+        fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
 
 
 def test_fastest_never_replaces_a_changed_loop():

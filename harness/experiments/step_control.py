@@ -93,6 +93,8 @@ def _with_related(steppers: list[str], problems: list[str], config) -> tuple[lis
     for other in stepper_registry.all(variants=True):
         if other.info.name in names or not is_step_controlled(other):
             continue
+        if other.info.implementation == "compiled":  # the same method: `fastest` runs it
+            continue
         peer = fixed_peer(other)
         if peer is not None and peer.info.name in names:
             steppers.append(other.info.name)
@@ -168,15 +170,18 @@ class StepControlExperiment(Experiment):
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
         from harness.registry import get_problem, get_stepper
+        from implementations.compiled import fastest  # the compiled loops where they apply
 
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         peer = fixed_peer(stepper)
-        frames = _energy_rows(stepper, peer, problem, config)
-        sweep = _order_rows(stepper, problem, config)
+        runner, peer_runner = fastest(stepper, problem), fastest(peer, problem)
+        frames = _energy_rows(runner, peer_runner, problem, config)
+        sweep = _order_rows(runner, problem, config)
         frames.append(sweep)
-        frames.append(_work_rows(stepper, peer, problem, sweep, config))
+        frames.append(_work_rows(runner, peer_runner, problem, sweep, config))
         out = pd.concat(frames, ignore_index=True)
+        out["peer"] = out["peer"].replace(peer_runner.info.name, peer.info.name)
         out["stepper"] = stepper.info.name
         out["problem"] = problem.name
         for c in ROW_COLUMNS:
