@@ -24,7 +24,6 @@ Comput. 4 (1983) 136-148 (LSODA, automatic Adams/BDF switching).
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import warnings
 
@@ -116,12 +115,7 @@ class _MemberDynamics:
     """
 
     def __init__(self, dyn: Dynamics, member: int):
-        view = copy.copy(dyn)  # shallow: shares `counts` and the compiled functions
-        view.pars = np.ascontiguousarray(dyn.pars[:, member : member + 1])
-        view.size = 1
-        view._tbuf = np.zeros(1)
-        view._qv = None
-        self._view = view
+        self._view = dyn.member(member)  # shares `counts` and the compiled functions
         self.reset()
 
     def reset(self) -> None:
@@ -178,10 +172,12 @@ class ScipyStepper(AdaptiveStepper):
             ),
             adaptive=True,
             implementation="scipy",
-            extra=self._extra(),
+            extra=self.extra_info(),
         )
 
-    def _extra(self) -> dict:
+    def extra_info(self) -> dict:
+        """The record's `extra` entries for this tolerance: scipy's rtol/atol, method and
+        Jacobian use, and the unit the evaluation counts are in."""
         return {
             "tol": self.tol,
             "rtol": max(self.tol, SCIPY_MIN_RTOL),
@@ -193,7 +189,7 @@ class ScipyStepper(AdaptiveStepper):
 
     def with_tolerance(self, tol: float) -> ScipyStepper:
         clone = super().with_tolerance(tol)
-        clone.info = dataclasses.replace(clone.info, extra=clone._extra())
+        clone.info = dataclasses.replace(clone.info, extra=clone.extra_info())
         return clone
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:

@@ -196,12 +196,7 @@ class LinearMultistepStepper(Stepper):
                 check_compatible(starter, dyn.problem)
             except IncompatibleError as exc:
                 raise IncompatibleError(f"starter of {self.info.name!r}: {exc}") from None
-            sc = starter._start(dyn, t0, y0.copy(), h)
-            values = []
-            for _ in range(count):
-                starter._step(dyn, sc)
-                sc.n += 1
-                values.append(starter._observe(dyn, sc))
+            values = starter.first_steps(dyn, t0, y0, h, count)
         dyn.counts["starter_steps"] = dyn.counts.get("starter_steps", 0) + count
         return values
 

@@ -60,8 +60,6 @@ KNOWN = {
     "harness/report/figures.py": {"fig._harness_layout"},
     "harness/report/step_control.py": {"F._styled", "F._new", "F._loglog", "F._legend_outside",
                                        "F._thin", "F._clip_log", "F._label"},
-    "implementations/external.py": {"view._tbuf", "view._qv", "clone._extra"},
-    "implementations/multistep.py": {"starter._start", "starter._step", "starter._observe"},
     "implementations/rebound_adapter.py": {"clone._info"},
 }
 

@@ -3,6 +3,7 @@ Jacobian (heyoka compiled functions), with evaluation counters."""
 
 from __future__ import annotations
 
+import copy
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -44,6 +45,30 @@ class Dynamics:
             kind = "accel_q" if self._a_positions_only else "accel"
             self._a = problem.compiled(kind, self.constants)
         self._qv = np.empty((self.dim, self.size)) if problem.newtonian is not None else None
+
+    def member(self, index: int) -> Dynamics:
+        """One ensemble member's view: the same compiled functions and the same `counts` (so
+        every call is booked on the run), that member's parameters and its own buffers.
+
+        Parameters
+        ----------
+        index : the member's column in `pars`.
+
+        Returns
+        -------
+        A shallow copy of this object sized for one member.
+        """
+        view = copy.copy(self)
+        view.pars = np.ascontiguousarray(self.pars[:, index : index + 1])
+        view.size = 1
+        view.reset_buffers()
+        return view
+
+    def reset_buffers(self) -> None:
+        """Give this object its own work buffers, sized for `size` members (a copy must not
+        write into the buffers of the object it was copied from)."""
+        self._tbuf = np.zeros(self.size)
+        self._qv = None
 
     def _kwargs(self, t: float, n: int) -> dict:
         kw = {}

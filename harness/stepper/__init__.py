@@ -359,6 +359,28 @@ class Stepper(ABC):
             self._explain_nonfinite(problem, h, t0, y, pars, n_steps, prefix=forward)
         return start, back
 
+    def first_steps(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float, count: int) -> list[np.ndarray]:
+        """The states after each of the first `count` steps from (t0, y0), observed as
+        `integrate` would (a multistep method's starting values come from here).
+
+        Parameters
+        ----------
+        dyn : the run's dynamics (its counters book the evaluations).
+        t0, y0, h : start time, start state (dim, N), step size.
+        count : how many steps.
+
+        Returns
+        -------
+        A list of `count` states, each (dim, N).
+        """
+        c = self._start(dyn, t0, y0.copy(), h)
+        states = []
+        for _ in range(count):
+            self._step(dyn, c)
+            c.n += 1
+            states.append(self._observe(dyn, c))
+        return states
+
     def step_from_history(
         self,
         problem: Problem,
