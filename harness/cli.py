@@ -4,7 +4,8 @@
     harness run EXPERIMENT [--stepper NAME]... [--problem NAME]... [--plugin FILE]... [--json]
     harness reference PROBLEM --t T [--json]
     harness gate [--json]
-    harness report [--quick] [--fresh]
+    harness report [--quick] [--fresh] [--compare RUN]
+    harness report --from RUN [--compare RUN]   (re-render a saved run, nothing measured)
 
 Errors a user can fix exit 2 with one line on stderr naming the argument and the rule; the
 gate exits 1 when a claim fails; a run or gate over zero applicable cells exits 2 and prints why
@@ -111,6 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", default=None, metavar="DIR", help="reports directory (default: reports/)")
     p.add_argument("--compare", default=None, metavar="RUN",
                    help="earlier run (id or path) for 'what changed' (default: the newest older run)")
+    p.add_argument("--from", dest="from_run", default=None, metavar="RUN",
+                   help="re-render the report of a saved run (id, path or 'latest'); nothing is measured")
     return parser
 
 
@@ -507,8 +510,13 @@ def _cmd_gate(args) -> int:
 
 
 def _cmd_report(args) -> int:
-    from harness.report import build_report
+    from harness.report import build_report, rerender_report
 
+    if args.from_run is not None:
+        path = rerender_report(args.from_run, output=args.output, compare=args.compare,
+                               grid_options=_grid_options_given(args))
+        print(os.fspath(path), file=_out())
+        return EXIT_OK
     path = build_report(
         steppers=_names("stepper", args.stepper),
         problems=_names("problem", args.problem),
@@ -522,6 +530,15 @@ def _cmd_report(args) -> int:
     )
     print(os.fspath(path), file=_out())
     return EXIT_OK
+
+
+def _grid_options_given(args) -> list[str]:
+    """The measuring options given on the command line (`report --from` takes none)."""
+    given = [f"--{k}" for k in ("stepper", "problem", "plugin") if getattr(args, k)]
+    given += [f"--{k}" for k in ("quick", "fresh") if getattr(args, k)]
+    given += [f"--{k.replace('_', '-')}" for k in ("jobs", "scheduler", "cell_timeout")
+              if getattr(args, k) is not None]
+    return given
 
 
 if __name__ == "__main__":  # pragma: no cover

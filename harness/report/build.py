@@ -38,8 +38,8 @@ from harness.experiments import EXPERIMENT_NAMES as REPORT_EXPERIMENTS
 from harness.progress import Progress
 from harness.provenance import PROJECT_ROOT
 
-__all__ = ["build_report", "write_report", "report_experiments", "reports_root", "render_html",
-           "run_view"]
+__all__ = ["build_report", "write_report", "rerender_report", "report_experiments", "reports_root",
+           "render_html", "run_view"]
 
 
 
@@ -236,6 +236,24 @@ def build_report(
         compare=compare, compare_default=True)
     _say(bar, f"report written in {time.perf_counter() - started:.1f} s: {path}")
     return path
+
+
+def rerender_report(run: str | os.PathLike | None, *, output: str | os.PathLike | None = None,
+                    compare: str | os.PathLike | None = None, grid_options: Sequence[str] = ()) -> Path:
+    """`harness report --from RUN`: write the report of a saved run again (id, path, 'latest'),
+    nothing measured; the steppers, problems and mode are the run's own, so `grid_options` (the
+    measuring options given with it) are refused."""
+    if grid_options:
+        raise InputError(f"`--from` re-renders a saved run as it was measured; it takes no "
+                         f"{', '.join(grid_options)}")
+    from harness.store import load_run
+
+    stored = load_run(run)
+    if compare is not None:
+        from harness.store import resolve_run
+
+        resolve_run(compare, root=stored.path.parent)
+    return write_report(stored, output=output, compare=compare, compare_default=True)
 
 
 def run_view(stored: Any, *, load_plugins: bool = True) -> Any:
