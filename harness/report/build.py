@@ -324,8 +324,12 @@ def write_report(
                 f"{totals.get('cells', 0)} cells ({totals.get('computed', 0)} computed, "
                 f"{totals.get('cached', 0)} from cache, {totals.get('failed', 0)} failed) in "
                 f"{len(meta.get('experiments', {}))} experiments.")
+    from harness.report.figure_svg import page_css
+
+    figure_css = page_css(b.figure for sec in sections for b in sec.blocks if b.figure is not None)
     html = render_html({
-        "sections": sections, "run_id": stored.run_id, "generated": meta.get("created_utc", ""),
+        "sections": sections, "figure_css": figure_css, "run_id": stored.run_id,
+        "generated": meta.get("created_utc", ""),
         "commit": git.get("short_sha") or "unknown", "dirty": bool(git.get("dirty")),
         "mode": "quick mode (CI-sized settings)" if view.quick else "full settings",
         "headline": headline, "version": __version__, "results_path": str(stored.path),

@@ -17,14 +17,16 @@ shared by many rows is written once as a numbered note below its table and refer
 
 from __future__ import annotations
 
+import base64
+import gzip
 import hashlib
 import json
 import math
 import re
 import time
-import urllib.parse
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -81,7 +83,7 @@ class Table:
 
 @dataclass
 class Download:
-    """A tidy table embedded as a `data:text/csv` link."""
+    """A tidy table embedded as a gzip-compressed CSV `data:` link."""
 
     filename: str
     uri: str
@@ -218,15 +220,17 @@ CSV_DIGITS = 4
 
 
 def csv_download(df: pd.DataFrame | None, filename: str) -> Download | None:
-    """`df` as an embedded CSV link (numbers with CSV_DIGITS significant digits; percent-encoding
-    only where a URL needs it, so the page grows by about the CSV's own size)."""
+    """`df` as an embedded, gzip-compressed CSV link (`<name>.csv.gz`, numbers with CSV_DIGITS
+    significant digits): a figure's tidy table costs the page a third of its CSV text or less,
+    and every CSV reader opens it (`pandas.read_csv` reads .gz directly). The archive carries
+    no date, so a report's bytes depend on its data only."""
     if df is None or not len(df.columns):
         return None
     text = df.to_csv(index=False, float_format=f"%.{CSV_DIGITS}g", lineterminator="\n")
-    uri = "data:text/csv;charset=utf-8," + urllib.parse.quote(text, safe=",.-_:;=+/()[]*!~'@ ")\
-        .replace(" ", "%20")
-    safe_name = re.sub(r"[^A-Za-z0-9_.-]+", "-", filename)[:120]
-    return Download(safe_name, uri, len(df), len(uri))
+    packed = gzip.compress(text.encode("utf-8"), compresslevel=9, mtime=0)
+    uri = "data:application/gzip;base64," + base64.b64encode(packed).decode("ascii")
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", filename)[:120]
+    return Download(stem if stem.endswith(".gz") else stem + ".gz", uri, len(df), len(uri))
 
 
 def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str, *,
@@ -462,6 +466,7 @@ def skip_note(sec: Section, view: RunView, name: str) -> None:
 # -- the sections in order ---------------------------------------------------------------------------
 FIXED_BEFORE = (("verdicts", "Verdicts"), ("changes", "What changed since the last run"))
 FIXED_AFTER = (("ground-truth", "Ground truth"), ("claims", "Claims from the course material, checked"),
+               ("gate-population", "How much to trust the gate"),
                ("provenance", "Provenance"), ("performance-history", "Performance history"))
 
 
@@ -500,7 +505,8 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
         say(name)
         out.append(timer.run(name, lambda name=name: _guarded(
             lambda v: _experiment_section(v, name, number[name]), view, name, number, names)))
-    for key, fn in (("ground-truth", X.ground_truth), ("claims", X.claims)):
+    trust = lambda v: X.gate_trust(v, Path(results_path).parent)  # noqa: E731
+    for key, fn in (("ground-truth", X.ground_truth), ("claims", X.claims), ("gate-population", trust)):
         say(key)
         out.append(timer.run(key, lambda fn=fn, key=key: _guarded(fn, view, key, number, names)))
     say("performance history")
