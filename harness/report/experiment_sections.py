@@ -363,8 +363,8 @@ def work_precision(view: RunView, sec: Section) -> None:
                                            adaptive),
                    f"Error against evaluations (left) and wall time (right) on {problem}; bold: the "
                    f"best of each family (fewest evaluations to reach {F.WORK_TARGET_ERROR:g}), "
-                   "faint: the others. Wall times depend on this machine and its load (see "
-                   "Provenance).")
+                   "faint (left only): the others. Wall times depend on this machine and its load "
+                   "(see Provenance); every method's are in the CSV.")
     summ = view.summary(name)
     if len(summ) and {"stepper", "problem", "error"} <= set(summ.columns):
         table = _work_table(summ)

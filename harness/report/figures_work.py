@@ -55,7 +55,8 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                           adaptive: Mapping[str, bool]) -> Figure | None:
     """Error against evaluations (left) and wall time (right) on one problem, one line per
     method; the best method of each family (`best_per_family`) drawn bold and named in the
-    legend, the others thin and faint. Adaptive peers dashed with hollow markers."""
+    legend, the others thin and faint on the left only (wall times of a shared machine are too
+    noisy to rank the rest). Adaptive peers dashed with hollow markers."""
     from matplotlib.lines import Line2D
 
     err = rows["error"].astype(float) if "error" in rows else pd.Series(dtype=float)
@@ -81,6 +82,8 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                 continue
             peer = adaptive.get(stepper, False)
             strong = stepper in bold
+            if cost == "wall_s" and not strong:
+                continue  # wall time: the best of each family only (all of them are in the CSV)
             c = palette.colour(stepper)
             ax.plot(s["_x"], s["error"].astype(float), "--" if peer else "-",
                     marker=palette.marker(stepper) if strong else None, ms=3.2, lw=1.6 if strong else 0.6,
