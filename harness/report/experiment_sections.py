@@ -115,8 +115,8 @@ def _evals_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bo
     "convergence", title="Convergence",
     intro=("Global error at the final time against the step size h, one figure per problem with "
            "one panel per family; the slope of the fitted range (dashed) is the measured order, "
-           "judged against the order the coefficients give. Filled markers were used by the "
-           "fit, hollow ones were excluded (roundoff floor, reference floor — dotted — or "
+           "judged against the order the coefficients give. Markers bound the range the fit "
+           "used; points beyond it were excluded (roundoff floor, reference floor — dotted — or "
            "pre-asymptotic); adaptive steppers are judged against their tolerance instead."),
     measures=(Measure("measured_order", "measured order", ci=("order_ci_low", "order_ci_high")),),
     verdicts=_convergence_verdicts,
@@ -134,10 +134,10 @@ def convergence(view: RunView, sec: Section) -> None:
             glob = g[g["kind"] == "global"] if "kind" in g else g
             same = [" = ".join([k, *v]) for k, v in F.same_curves(glob).items() if v] if len(glob) else []
             sec.figure(F.convergence_figure(problem, g, view.palette, ref_err),
-                       f"Error against h on {problem}: markers on the points the order fit used, "
-                       "the thin line alone where points were excluded (pre-asymptotic, roundoff or "
-                       "reference floor; the CSV says which); dashed, the fitted slope over the "
-                       "range it used; dotted, the reference floor."
+                       f"Error against h on {problem}: markers at the two ends of the range the "
+                       "order fit used, the thin line alone beyond them where points were excluded "
+                       "(pre-asymptotic, roundoff or reference floor; the CSV says which point is "
+                       "which); dashed, the fitted slope over that range; dotted, the reference floor."
                        + (f" Identical curves drawn once: {'; '.join(same)}." if same else ""))
     cols = [("stepper", "stepper"), ("problem", "problem"), ("claimed_order", "claimed"),
             ("measured_order", "measured"), ("order_ci_low", "95% CI low"),

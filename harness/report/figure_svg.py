@@ -251,6 +251,14 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
         if st in classes:
             del el.attrib["style"]
             el.set("class", classes[st])
+    for g in root.iter(f"{{{_NS}}}g"):  # a run of markers of one style: the class once, on the group
+        kids = list(g)
+        first = kids[0].attrib.get("class") if kids else None
+        if first and "class" not in g.attrib and all(
+                _local(k.tag) == "use" and k.attrib.get("class") == first for k in kids):
+            g.set("class", first)
+            for k in kids:
+                del k.attrib["class"]
     css = "".join(f".{c}{{{st}}}" for st, c in classes.items())
     for parent in root.iter():  # matplotlib's own <style> (one global rule) joins the page's
         for child in list(parent):

@@ -83,8 +83,9 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             ok = np.isfinite(err) & (err > 0) & (err <= LOG_CEILING)
             used = s["in_fit"].fillna(False).astype(bool).to_numpy() & ok
             ax.plot(h[ok], err[ok], "-", color=c, lw=0.8, alpha=0.7)
-            ax.plot(h[used], err[used], linestyle="none", marker=palette.marker(stepper), color=c,
-                    ms=3.2)
+            ends = np.flatnonzero(used)[[0, -1]] if used.any() else np.array([], dtype=int)
+            ax.plot(h[ends], err[ends], linestyle="none", marker=palette.marker(stepper), color=c,
+                    ms=3.2)  # the ends of the fitted range (every point's role is in the CSV)
             slope = math.nan
             if used.sum() >= tol.MIN_FIT_POINTS:
                 f = fit_order(h[used], err[used])

@@ -248,7 +248,9 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
         k = df[status].map(lambda v: 0 if (not _missing_value(v) and not bool(v)) else 1)
         df = df.assign(_k=k).sort_values("_k", kind="stable").drop(columns="_k")
     headers = ([""] if status else []) + [h for _, h in columns]
-    table_id = id or (anchor("table", experiment, caption) if experiment else "")
+    # short: every note reference repeats it
+    table_id = id or (f"t-{hashlib.sha1(f'{experiment}{caption}'.encode()).hexdigest()[:6]}"
+                      if experiment else "")
     notes: dict[str, int] = {}
     rows = []
     for rec in df.to_dict("records"):
