@@ -220,9 +220,9 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
 @register_section(
     "reversibility", title="Reversibility",
     intro=("N steps forward, time reversed, N steps back: the distance from the start in units "
-           "of rounding (ulps of the state), against N. A method claimed symmetric (solid) must "
-           "stay under the dotted rounding bound; one not claimed symmetric (dashed) must miss "
-           "it by more."),
+           "of the rounding bound (what rounding alone explains), against N. A method claimed "
+           "symmetric (solid) must stay under the dotted line at 1 on every problem; one not "
+           "claimed symmetric (dashed) must stay above it."),
     key=("stepper", "problem", "steps"),
     measures=(Measure("return_error_ulps", "return error (ulps)", factor=tol.REPORT_CHANGE_ROUNDING),),
     score=(ScoreColumn("reversible claimed / measured", _reversible_score),),
@@ -230,9 +230,10 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
 def reversibility(view: RunView, sec: Section) -> None:
     summ = view.summary("reversibility")
     symmetric = view.flag("symmetric")
-    for problem in _problems_in(view, summ):
-        sec.figure(F.reversibility_figure(problem, summ[summ["problem"] == problem], view.palette,
-                                          symmetric), f"Return error against N on {problem}.")
+    sec.figure(F.reversibility_figure(summ, view.palette, symmetric),
+               "Return error over the rounding bound against N, every problem in one figure: for "
+               "each method the worst case against its claim (largest ratio over the problems if "
+               "claimed symmetric, smallest if not). Each problem's values: the CSV and the table.")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("steps", "N"), ("h", "h"),
             ("return_error_ulps", "return error (ulps)"), ("rounding_bound_ulps", "rounding bound (ulps)"),
             ("claimed_symmetric", "claimed symmetric"), ("growth_exponent", "growth exponent"),

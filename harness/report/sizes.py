@@ -81,8 +81,13 @@ def main(argv: list[str] | None = None) -> int:
     print(section_totals(sizes).to_string())
     print("\nlargest items:")
     print(sizes[sizes["kind"] != "other"].nlargest(15, "bytes").to_string(index=False))
+    sys.stdout.flush()
     return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except BrokenPipeError:  # the reader (`| head`) has what it wanted
+        sys.stderr.close()
+        sys.exit(141)
