@@ -45,13 +45,17 @@ def _absolute_points(d: str) -> list[tuple[float, float]]:
     "M5 5L5 5L5 5",
 ])
 def test_relative_paths_draw_the_same_points(d):
-    short = _relative_path(d)
-    assert _absolute_points(short) == _absolute_points(d)
-    assert len(short) <= len(d)
+    for scale in (1, 10):  # whole points, tenths
+        short = _relative_path(d, scale)
+        exact = [(round(x * scale) / scale, round(y * scale) / scale) for x, y in _absolute_points(d)]
+        drawn = _absolute_points(short)
+        # zero-length steps are dropped; every point drawn is the exact one, rounded
+        assert [p for k, p in enumerate(exact) if k == 0 or p != exact[k - 1]] == drawn
+        assert len(short) <= len(d)
 
 
 def test_other_paths_are_left_as_they_are():
-    for d in ("M0 0L1 1C2 2 3 3 4 4", "M0 0L1 1z", "M1 1"):
+    for d in ("M0 0L1 1C2 2 3 3 4 4", "M0 0L1 1z", "M1 1", "M0 0L1 1"):
         assert _relative_path(d) == d
 
 

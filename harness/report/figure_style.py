@@ -25,7 +25,7 @@ EXCLUSION_STYLE = {
 }
 # Lines of long runs are thinned to about this many points per line (log-spaced in steps): on a
 # panel a few hundred pixels wide, more points add bytes, not detail.
-MAX_POINTS_PER_LINE = 24
+MAX_POINTS_PER_LINE = 16
 # Small multiples: at most this many methods share one panel, so every line can be told apart.
 MAX_LINES_PER_PANEL = 8
 # Errors of exactly zero cannot sit on a log axis: they are drawn at this value (said in the

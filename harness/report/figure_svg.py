@@ -158,8 +158,10 @@ def _dedupe_style(style: str) -> str:
     return ";".join(f"{k}:{v}" for k, v in last.items() if k)
 
 
-def _tenths(v: int) -> str:
-    """A coordinate in tenths of a point as its shortest SVG number (15 -> 1.5, -5 -> -.5)."""
+def _short_number(v: int, scale: int) -> str:
+    """`v / scale` (scale 1 or 10) as its shortest SVG number (15/10 -> 1.5, -5/10 -> -.5)."""
+    if scale == 1:
+        return str(v)
     sign, a = ("-" if v < 0 else ""), abs(v)
     whole, frac = divmod(a, 10)
     if not frac:
@@ -168,25 +170,31 @@ def _tenths(v: int) -> str:
 
 
 _MOVE_LINE = re.compile(r"([ML])(-?[\d.]+) (-?[\d.]+)")
+# Data lines (paths of three points or more) are drawn to whole points: a point is 1.3 CSS
+# pixels at the figure's own size and less where the page scales it down, so the line looks the
+# same; its numbers are in the figure's CSV.
+LINE_SCALE = 1
 
 
-def _relative_path(d: str) -> str:
+def _relative_path(d: str, scale: int = LINE_SCALE) -> str:
     """A path of absolute moves and lines only (what matplotlib writes for data lines) in
-    relative steps: same points (rounded to tenths first, so no error accumulates), about a
-    third fewer bytes. Any other path is returned unchanged."""
-    if SVG_DECIMALS != 1 or not d.startswith("M"):
+    relative steps of 1/`scale` point: the points rounded first, so no error accumulates; about
+    half the bytes. Any other path is returned unchanged."""
+    if not d.startswith("M"):
         return d
     pieces = _MOVE_LINE.findall(d)
     if len(pieces) < 3 or sum(len(c) + len(x) + len(y) + 1 for c, x, y in pieces) != len(d):
         return d
     out, px, py, last = [], 0, 0, ""
     for k, (cmd, x, y) in enumerate(pieces):
-        X, Y = round(float(x) * 10), round(float(y) * 10)
+        X, Y = round(float(x) * scale), round(float(y) * scale)
         if k == 0:
-            out.append(f"M{_tenths(X)} {_tenths(Y)}")
+            out.append(f"M{_short_number(X, scale)} {_short_number(Y, scale)}")
         else:
             c = cmd.lower()
-            dx, dy = _tenths(X - px), _tenths(Y - py)
+            if c == "l" and X == px and Y == py:
+                continue  # a step of zero length draws nothing
+            dx, dy = _short_number(X - px, scale), _short_number(Y - py, scale)
             # after a move or a line, further pairs are lines: the letter can go
             implicit = c == "l" and last in ("l", "m")
             head = ("" if dx.startswith("-") else " ") if implicit else c
