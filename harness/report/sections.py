@@ -200,7 +200,7 @@ def anchor(*parts: Any) -> str:
     """A stable, safe HTML id for a table row: readable slug plus a short hash of the exact
     key (names from plugins may hold any character)."""
     key = "\x1f".join(str(p) for p in parts)
-    slug = re.sub(r"[^a-z0-9]+", "-", key.lower()).strip("-")[:28]
+    slug = re.sub(r"[^a-z0-9]+", "-", key.lower()).strip("-")[:16]  # every link repeats it
     return f"r-{slug}-{hashlib.sha1(key.encode()).hexdigest()[:6]}"
 
 
