@@ -127,3 +127,41 @@ def test_cli_compare_with_an_unknown_run_fails_in_one_line_before_running(tmp_pa
     assert code == 2 and len(err) == 1
     assert "`run` 'no-such-run'" in err[0]
     assert not (tmp_path / "reports").exists()
+
+
+def test_cli_from_rerenders_a_saved_run_without_measuring(two_runs, tmp_path, capsys, monkeypatch):
+    from harness.cli import main
+
+    results = two_runs["second"].parent.parent.parent / "results"
+    run_id = two_runs["second"].parent.name
+    monkeypatch.setenv("HARNESS_RESULTS_DIR", str(results))
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path / "empty-cache"))  # nothing to reuse
+    runs_before = sorted(p.name for p in results.iterdir())
+    try:
+        # the same reports directory: the earlier report's recorded verdicts are found there
+        code = main(["report", "--from", run_id, "--output", str(two_runs["second"].parent.parent)])
+    finally:  # the re-render loaded the run's plugin again
+        for path in list(registry._plugins):
+            if "rk4_plugin" in path:
+                for n in [NAME] if NAME in registry.steppers else []:
+                    registry.steppers.unregister(n)
+                registry._plugins.pop(path, None)
+    out = capsys.readouterr().out.strip()
+    assert code == 0 and out.endswith("index.html")
+    text = Path(out).read_text(encoding="utf-8")
+    assert f"Run <code>{run_id}</code>" in text and Path(out).parent.name == f"{run_id}-2"
+    assert not (tmp_path / "empty-cache" / "cells").exists()  # no cell was run
+    assert sorted(p.name for p in results.iterdir()) == runs_before  # no new run saved
+    changes = text.split('<section id="changes"')[1].split("</section>")[0]
+    assert 'id="changed-verdicts"' in changes  # compared with the newest older run, as `report` does
+
+
+def test_cli_from_refuses_measuring_options(tmp_path, capsys):
+    from harness.cli import main
+
+    code = main(["report", "--from", "latest", "--stepper", "euler", "--quick",
+                 "--output", str(tmp_path / "reports")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert "`--from`" in err[0] and "--stepper" in err[0] and "--quick" in err[0]
+    assert not (tmp_path / "reports").exists()

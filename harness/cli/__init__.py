@@ -4,7 +4,8 @@
     harness run EXPERIMENT [--stepper NAME]... [--problem NAME]... [--plugin FILE]... [--json]
     harness reference PROBLEM --t T [--json]
     harness gate [--json]
-    harness report [--quick] [--fresh]
+    harness report [--quick] [--fresh] [--compare RUN]
+    harness report --from RUN [--compare RUN]   (re-render a saved run, nothing measured)
 
 Errors a user can fix exit 2 with one line on stderr naming the argument and the rule; the
 gate exits 1 when a claim fails; a run or gate over zero applicable cells exits 2 and prints why
@@ -116,6 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", default=None, metavar="DIR", help="reports directory (default: reports/)")
     p.add_argument("--compare", default=None, metavar="RUN",
                    help="earlier run (id or path) for 'what changed' (default: the newest older run)")
+    p.add_argument("--from", dest="from_run", default=None, metavar="RUN",
+                   help="re-render the report of a saved run (id, path or 'latest'); nothing is measured")
     return parser
 
 

@@ -247,8 +247,13 @@ def cmd_gate(args) -> int:
 
 def cmd_report(args) -> int:
     """`harness report`: build the HTML report and print its path."""
-    from harness.report import build_report
+    from harness.report import build_report, rerender_report
 
+    if args.from_run is not None:
+        path = rerender_report(args.from_run, output=args.output, compare=args.compare,
+                               grid_options=_grid_options_given(args))
+        print(os.fspath(path), file=output_buffer())
+        return EXIT_OK
     path = build_report(
         steppers=_names("stepper", args.stepper),
         problems=_names("problem", args.problem),
@@ -258,3 +263,12 @@ def cmd_report(args) -> int:
     )
     print(os.fspath(path), file=output_buffer())
     return EXIT_OK
+
+
+def _grid_options_given(args) -> list[str]:
+    """The measuring options given on the command line (`report --from` takes none)."""
+    given = [f"--{k}" for k in ("stepper", "problem", "plugin") if getattr(args, k)]
+    given += [f"--{k}" for k in ("quick", "fresh") if getattr(args, k)]
+    given += [f"--{k.replace('_', '-')}" for k in ("jobs", "scheduler", "cell_timeout")
+              if getattr(args, k) is not None]
+    return given

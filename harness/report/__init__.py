@@ -15,9 +15,10 @@ from harness.report.build import (
     render_html,
     report_experiments,
     reports_root,
+    rerender_report,
     run_view,
     write_report,
 )
 
-__all__ = ["build_report", "write_report", "render_html", "reports_root", "report_experiments",
-           "run_view"]
+__all__ = ["build_report", "write_report", "rerender_report", "render_html", "reports_root",
+           "report_experiments", "run_view"]

@@ -38,8 +38,8 @@ from harness.experiments import EXPERIMENT_NAMES as REPORT_EXPERIMENTS
 from harness.progress import Progress
 from harness.provenance import PROJECT_ROOT
 
-__all__ = ["build_report", "write_report", "report_experiments", "reports_root", "render_html",
-           "run_view"]
+__all__ = ["build_report", "write_report", "rerender_report", "report_experiments", "reports_root",
+           "render_html", "run_view"]
 
 
 
@@ -238,6 +238,24 @@ def build_report(
     return path
 
 
+def rerender_report(run: str | os.PathLike | None, *, output: str | os.PathLike | None = None,
+                    compare: str | os.PathLike | None = None, grid_options: Sequence[str] = ()) -> Path:
+    """`harness report --from RUN`: write the report of a saved run again (id, path, 'latest'),
+    nothing measured; the steppers, problems and mode are the run's own, so `grid_options` (the
+    measuring options given with it) are refused."""
+    if grid_options:
+        raise InputError(f"`--from` re-renders a saved run as it was measured; it takes no "
+                         f"{', '.join(grid_options)}")
+    from harness.store import load_run
+
+    stored = load_run(run)
+    if compare is not None:
+        from harness.store import resolve_run
+
+        resolve_run(compare, root=stored.path.parent)
+    return write_report(stored, output=output, compare=compare, compare_default=True)
+
+
 def run_view(stored: Any, *, load_plugins: bool = True) -> Any:
     """The RunView of a saved run: its tables, and the steppers, problems and mode of its own
     configuration (plugins the run used are loaded again so their steppers can be shown)."""
@@ -306,8 +324,12 @@ def write_report(
                 f"{totals.get('cells', 0)} cells ({totals.get('computed', 0)} computed, "
                 f"{totals.get('cached', 0)} from cache, {totals.get('failed', 0)} failed) in "
                 f"{len(meta.get('experiments', {}))} experiments.")
+    from harness.report.figure_svg import page_css
+
+    figure_css = page_css(b.figure for sec in sections for b in sec.blocks if b.figure is not None)
     html = render_html({
-        "sections": sections, "run_id": stored.run_id, "generated": meta.get("created_utc", ""),
+        "sections": sections, "figure_css": figure_css, "run_id": stored.run_id,
+        "generated": meta.get("created_utc", ""),
         "commit": git.get("short_sha") or "unknown", "dirty": bool(git.get("dirty")),
         "mode": "quick mode (CI-sized settings)" if view.quick else "full settings",
         "headline": headline, "version": __version__, "results_path": str(stored.path),

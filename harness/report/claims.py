@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
+from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
 from harness.provenance import PROJECT_ROOT
 
 __all__ = ["ClaimSpec", "ClaimResult", "CLAIMS", "check_claims", "course_material_dir"]
@@ -85,18 +86,45 @@ def _fmt(x: float, digits: int = 3) -> str:
     return "n/a" if not math.isfinite(x) else f"{x:.{digits}g}"
 
 
+# The methods the course texts speak of, by their coefficients: a registered stepper is one of
+# them when its coefficients are the same (same fingerprint), whatever its name.
+EULER = ButcherTableau("forward Euler", A=[[0.0]], b=[1.0], c=[0.0])
+RK4 = ButcherTableau("classical Runge-Kutta (Kutta 1901)",
+                     A=[[0, 0, 0, 0], [0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 1, 0]],
+                     b=[1 / 6, 1 / 3, 1 / 3, 1 / 6], c=[0, 0.5, 0.5, 1])
+VELOCITY_VERLET = SplittingScheme("velocity Verlet / leapfrog (kick-drift-kick)",
+                                  [("K", 0.5), ("D", 1.0), ("K", 0.5)])
+POSITION_VERLET = SplittingScheme("position Verlet (drift-kick-drift)", [("D", 0.5), ("K", 1.0), ("D", 0.5)])
+STORMER = SecondOrderMultistep("two-step Verlet form (Stormer)", alpha=[1, -2, 1], beta=[0, 1, 0])
+
+
+def steppers_with(*records: object) -> list[str]:
+    """The registered steppers whose coefficients are one of `records` (same kind, same
+    fingerprint)."""
+    from harness import registry
+
+    wanted = {(type(r), r.fingerprint()) for r in records}  # type: ignore[attr-defined]
+    out = []
+    for name in registry.steppers.names():
+        coeffs = getattr(registry.get_stepper(name), "coefficients", None)
+        if coeffs is not None and hasattr(coeffs, "fingerprint") \
+                and (type(coeffs), coeffs.fingerprint()) in wanted:
+            out.append(name)
+    return out
+
+
 # -- the judges -------------------------------------------------------------------------------------
 def _verlet_local_h4(tables: Tables) -> tuple[str, str, list[dict]]:
     conv = _summary(tables, "convergence")
     if conv.empty or "local_exponent_q" not in conv:
         return NOT_MEASURED, "no convergence results", []
-    s = conv[conv["stepper"] == "stormer-verlet"]
+    s = conv[conv["stepper"].isin(steppers_with(STORMER))]
     q = s["local_exponent_q"].astype(float)
-    values = [{"stepper": "stormer-verlet", "problem": p, "local exponent (positions)": _fmt(v, 4)}
-              for p, v in zip(s["problem"], q, strict=True)]
+    values = [{"stepper": n, "problem": p, "local exponent (positions)": _fmt(v, 4)}
+              for n, p, v in zip(s["stepper"], s["problem"], q, strict=True)]
     q = q[np.isfinite(q)]
     if q.empty:
-        return NOT_MEASURED, "stormer-verlet's local error was not measured on any problem", values
+        return NOT_MEASURED, "the two-step Verlet form's local error was not measured on any problem", values
     med = float(q.median())
     ok = abs(med - 4.0) <= tol.GATE_ORDER_TOL
     text = (f"one step of the two-step recurrence from exact history: position error ~ h^q with "
@@ -111,26 +139,29 @@ def _velocity_verlet_two_orders(tables: Tables) -> tuple[str, str, list[dict]]:
         return NOT_MEASURED, "no convergence results", []
     orders: dict[str, float] = {}
     values = []
-    for name in ("stormer-verlet", "velocity-verlet"):
-        s = conv[(conv["stepper"] == name) & (conv["verdict"] == "converged")]
+    for name, record in (("two-step", STORMER), ("velocity", VELOCITY_VERLET)):
+        members = steppers_with(record)
+        s = conv[conv["stepper"].isin(members) & (conv["verdict"] == "converged")]
         m = s["measured_order"].astype(float)
         m = m[np.isfinite(m)]
         if m.empty:
             continue
         orders[name] = float(m.median())
-        loc = conv.loc[conv["stepper"] == name, "local_exponent_q"].astype(float) \
+        loc = conv.loc[conv["stepper"].isin(members), "local_exponent_q"].astype(float) \
             if "local_exponent_q" in conv else pd.Series(dtype=float)
         loc = loc[np.isfinite(loc)]
-        values.append({"stepper": name, "global order (median)": f"{orders[name]:.3f}",
+        values.append({"stepper": ", ".join(sorted(set(s["stepper"]))),
+                       "global order (median)": f"{orders[name]:.3f}",
                        "problems": str(len(m)),
                        "local exponent, positions (median)": _fmt(float(loc.median()), 4)
                        if not loc.empty else "n/a"})
     if len(orders) < 2:
-        return NOT_MEASURED, "needs converged cells of both stormer-verlet and velocity-verlet", values
-    gap = orders["stormer-verlet"] - orders["velocity-verlet"]
+        return NOT_MEASURED, ("needs converged cells of both the two-step Verlet form and velocity "
+                              "Verlet"), values
+    gap = orders["two-step"] - orders["velocity"]
     ok = abs(gap - 2.0) <= 2 * tol.GATE_ORDER_TOL
-    text = (f"global orders: stormer-verlet {orders['stormer-verlet']:.3f}, velocity-verlet "
-            f"{orders['velocity-verlet']:.3f}; difference {gap:+.3f} (the claim needs about +2). "
+    text = (f"global orders: two-step Verlet form {orders['two-step']:.3f}, velocity Verlet "
+            f"{orders['velocity']:.3f}; difference {gap:+.3f} (the claim needs about +2). "
             "The h^4 quoted for Verlet is its one-step position error, not its global error, "
             "which is h^2 like velocity Verlet's")
     return (AGREE if ok else DISAGREE), text, values
@@ -140,29 +171,28 @@ def _rk4_drifts(tables: Tables) -> tuple[str, str, list[dict]]:
     en = _summary(tables, "energy")
     if en.empty:
         return NOT_MEASURED, "no energy-drift results", []
-    s = en[en["stepper"] == "rk4"]
+    s = en[en["stepper"].isin(steppers_with(RK4))]
     if s.empty:
-        return NOT_MEASURED, "rk4 was not run in the energy experiment", []
-    values = [{"stepper": "rk4", "problem": r["problem"], "drift class": r["drift_class"],
+        return NOT_MEASURED, "no stepper with the classical RK4 tableau was run in the energy experiment", []
+    values = [{"stepper": r["stepper"], "problem": r["problem"], "drift class": r["drift_class"],
                "drift exponent": _fmt(_num(r["drift_exponent"])),
                "max relative energy error": _fmt(_num(r["max_rel_energy_error"]))}
               for r in s.to_dict("records")]
     classes = list(s["drift_class"])
     ok = all(c in ("linear", "unstable") for c in classes) and "linear" in classes
-    by_problem = ", ".join(f"{p}: {c}" for p, c in zip(s["problem"], classes, strict=True))
-    text = (f"energy error envelope of rk4: {by_problem}; "
+    by_problem = ", ".join(f"{n} on {p}: {c}" for n, p, c in zip(s["stepper"], s["problem"], classes,
+                                                                 strict=True))
+    text = (f"energy error envelope of the classical RK4 tableau: {by_problem}; "
             "agreement means a secular drift (linear in t) on every problem measured")
     return (AGREE if ok else DISAGREE), text, values
-
-
-_VERLET_FAMILY = ("leapfrog", "velocity-verlet", "position-verlet", "stormer-verlet")
 
 
 def _angular_momentum_exact(tables: Tables) -> tuple[str, str, list[dict]]:
     en = _summary(tables, "energy")
     if en.empty or "angular_momentum_conserved" not in en:
         return NOT_MEASURED, "no energy-drift results", []
-    s = en[en["stepper"].isin(_VERLET_FAMILY) & en["max_rel_angular_momentum_error"].notna()]
+    verlet = steppers_with(VELOCITY_VERLET, POSITION_VERLET, STORMER)
+    s = en[en["stepper"].isin(verlet) & en["max_rel_angular_momentum_error"].notna()]
     s = s[np.isfinite(s["max_rel_angular_momentum_error"].astype(float))]
     if s.empty:
         return NOT_MEASURED, ("no leapfrog/Verlet run on a problem with angular momentum (the "
@@ -188,13 +218,13 @@ def _euler_interval(tables: Tables) -> tuple[str, str, list[dict]]:
     st = _summary(tables, "stability")
     if st.empty:
         return NOT_MEASURED, "no stability results", []
-    s = st[st["stepper"] == "euler"]
+    s = st[st["stepper"].isin(steppers_with(EULER))]
     if s.empty:
-        return NOT_MEASURED, "euler was not in this report's stability run", []
+        return NOT_MEASURED, "no stepper with forward Euler's tableau was in this report's stability run", []
     r = s.iloc[0]
     real = _num(r["real_interval"])
     imag = _num(r["imag_interval"])
-    values = [{"stepper": "euler", "real interval (probe)": f"[-{real:.10g}, 0]",
+    values = [{"stepper": r["stepper"], "real interval (probe)": f"[-{real:.10g}, 0]",
                "real interval (formula)": f"[-{_num(r['analytic_real_interval']):.10g}, 0]",
                "imaginary interval": f"±{imag:.3g}"}]
     ok = math.isfinite(real) and abs(real - 2.0) <= tol.STABILITY_INTERVAL_AGREEMENT
@@ -210,19 +240,19 @@ def _verlet_rounding(tables: Tables) -> tuple[str, str, list[dict]]:
     values = []
     ratios = []
     for problem, g in ro.groupby("problem", sort=False):
-        two = g[g["stepper"] == "stormer-verlet"]["floor_error"].astype(float)
-        one = g[g["stepper"].isin(["leapfrog", "velocity-verlet"])]["floor_error"].astype(float)
+        two = g[g["stepper"].isin(steppers_with(STORMER))]["floor_error"].astype(float)
+        one = g[g["stepper"].isin(steppers_with(VELOCITY_VERLET))]["floor_error"].astype(float)
         if two.empty or one.empty or not np.isfinite(two).all() or not np.isfinite(one).any():
             continue
         ratio = float(two.iloc[0]) / max(float(one[np.isfinite(one)].max()), tol.EPS * tol.EPS)
         ratios.append(ratio)
         values.append({"problem": problem, "steps": str(int(g["n_steps"].iloc[0])),
-                       "floor, stormer-verlet": _fmt(float(two.iloc[0])),
-                       "floor, leapfrog / velocity-verlet (worst)": _fmt(float(one.max())),
+                       "floor, two-step Verlet form": _fmt(float(two.iloc[0])),
+                       "floor, velocity Verlet / leapfrog (worst)": _fmt(float(one.max())),
                        "ratio": _fmt(ratio)})
     if not ratios:
-        return NOT_MEASURED, ("needs stormer-verlet and leapfrog or velocity-verlet in the "
-                              "roundoff experiment"), values
+        return NOT_MEASURED, ("needs the two-step Verlet form and velocity Verlet (or leapfrog) in "
+                              "the roundoff experiment"), values
     ok = min(ratios) >= tol.ROUNDOFF_CLAIM_RATIO
     text = (f"lowest relative position error reached at a fixed step count as h shrinks: the "
             f"two-step form's floor is {min(ratios):.3g} to {max(ratios):.3g} times the one-step "

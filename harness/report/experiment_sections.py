@@ -115,8 +115,8 @@ def _evals_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bo
     "convergence", title="Convergence",
     intro=("Global error at the final time against the step size h, one figure per problem with "
            "one panel per family; the slope of the fitted range (dashed) is the measured order, "
-           "judged against the order the coefficients give. Filled markers were used by the "
-           "fit, hollow ones were excluded (roundoff floor, reference floor — dotted — or "
+           "judged against the order the coefficients give. Markers bound the range the fit "
+           "used; points beyond it were excluded (roundoff floor, reference floor — dotted — or "
            "pre-asymptotic); adaptive steppers are judged against their tolerance instead."),
     measures=(Measure("measured_order", "measured order", ci=("order_ci_low", "order_ci_high")),),
     verdicts=_convergence_verdicts,
@@ -134,10 +134,10 @@ def convergence(view: RunView, sec: Section) -> None:
             glob = g[g["kind"] == "global"] if "kind" in g else g
             same = [" = ".join([k, *v]) for k, v in F.same_curves(glob).items() if v] if len(glob) else []
             sec.figure(F.convergence_figure(problem, g, view.palette, ref_err),
-                       f"Error against h on {problem}: markers on the points the order fit used, "
-                       "the thin line alone where points were excluded (pre-asymptotic, roundoff or "
-                       "reference floor; the CSV says which); dashed, the fitted slope over the "
-                       "range it used; dotted, the reference floor."
+                       f"Error against h on {problem}: markers at the two ends of the range the "
+                       "order fit used, the thin line alone beyond them where points were excluded "
+                       "(pre-asymptotic, roundoff or reference floor; the CSV says which point is "
+                       "which); dashed, the fitted slope over that range; dotted, the reference floor."
                        + (f" Identical curves drawn once: {'; '.join(same)}." if same else ""))
     cols = [("stepper", "stepper"), ("problem", "problem"), ("claimed_order", "claimed"),
             ("measured_order", "measured"), ("order_ci_low", "95% CI low"),
@@ -220,9 +220,9 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
 @register_section(
     "reversibility", title="Reversibility",
     intro=("N steps forward, time reversed, N steps back: the distance from the start in units "
-           "of rounding (ulps of the state), against N. A method claimed symmetric (solid) must "
-           "stay under the dotted rounding bound; one not claimed symmetric (dashed) must miss "
-           "it by more."),
+           "of the rounding bound (what rounding alone explains), against N. A method claimed "
+           "symmetric (solid) must stay under the dotted line at 1 on every problem; one not "
+           "claimed symmetric (dashed) must stay above it."),
     key=("stepper", "problem", "steps"),
     measures=(Measure("return_error_ulps", "return error (ulps)", factor=tol.REPORT_CHANGE_ROUNDING),),
     score=(ScoreColumn("reversible claimed / measured", _reversible_score),),
@@ -230,9 +230,10 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
 def reversibility(view: RunView, sec: Section) -> None:
     summ = view.summary("reversibility")
     symmetric = view.flag("symmetric")
-    for problem in _problems_in(view, summ):
-        sec.figure(F.reversibility_figure(problem, summ[summ["problem"] == problem], view.palette,
-                                          symmetric), f"Return error against N on {problem}.")
+    sec.figure(F.reversibility_figure(summ, view.palette, symmetric),
+               "Return error over the rounding bound against N, every problem in one figure: for "
+               "each method the worst case against its claim (largest ratio over the problems if "
+               "claimed symmetric, smallest if not). Each problem's values: the CSV and the table.")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("steps", "N"), ("h", "h"),
             ("return_error_ulps", "return error (ulps)"), ("rounding_bound_ulps", "rounding bound (ulps)"),
             ("claimed_symmetric", "claimed symmetric"), ("growth_exponent", "growth exponent"),
@@ -363,8 +364,8 @@ def work_precision(view: RunView, sec: Section) -> None:
                                            adaptive),
                    f"Error against evaluations (left) and wall time (right) on {problem}; bold: the "
                    f"best of each family (fewest evaluations to reach {F.WORK_TARGET_ERROR:g}), "
-                   "faint: the others. Wall times depend on this machine and its load (see "
-                   "Provenance).")
+                   "faint (left only): the others. Wall times depend on this machine and its load "
+                   "(see Provenance); every method's are in the CSV.")
     summ = view.summary(name)
     if len(summ) and {"stepper", "problem", "error"} <= set(summ.columns):
         table = _work_table(summ)

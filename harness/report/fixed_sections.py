@@ -33,7 +33,7 @@ from harness.report.sections import (
     section_spec,
 )
 
-__all__ = ["verdicts_section", "changes_section", "ground_truth", "claims", "provenance",
+__all__ = ["verdicts_section", "changes_section", "ground_truth", "claims", "gate_trust", "provenance",
            "performance_history"]
 
 # The first screen lists at most this many failing claims; the rest are one click away, folded.
@@ -243,6 +243,46 @@ def claims(view: RunView) -> Section:
             sec.table(Table(f"{r.key}: measured values ({len(r.values)} rows)", cols,
                             [Row([TextCell(str(v.get(c, ""))) for c in cols]) for v in r.values],
                             folded=True))
+    return sec
+
+
+# -- how much to trust the gate ------------------------------------------------------------------
+def gate_trust(view: RunView, results_dir: Any) -> Section:
+    """The gate's own error rates from the newest `harness population` run saved beside this
+    run: per family of generated methods, false alarms on correct ones and misses on mutants."""
+    import json
+    from pathlib import Path
+
+    from harness.store import list_runs, load_run
+
+    sec = Section("gate-population", 0, "How much to trust the gate")
+    sec.intro = ("The gate judged on generated methods whose truth is known: random correct "
+                 "members of parametric families (every one must pass) and mutants with one "
+                 "coefficient broken (every one must fail). A false alarm is a correct method "
+                 "failed, a miss a mutant passed; both rates should be zero.")
+    found = None
+    for run_id in reversed(list_runs(results_dir)):
+        try:
+            meta = json.loads((Path(results_dir) / run_id / "meta.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if "gate-population" in meta.get("experiments", {}):
+            found = run_id
+            break
+    if found is None:
+        sec.note("No population run in the results directory: `harness population` measures "
+                 "the gate's false alarms and misses and saves them there.")
+        return sec
+    stored = load_run(found, root=results_dir)
+    summ = stored.summaries["gate-population"]
+    cfg = stored.meta.get("config", {}).get("run", {})
+    sec.note(f"From run {found} ({cfg.get('size', '?')} correct methods per family, seed "
+             f"{cfg.get('seed', '?')}).")
+    cols = [(c, c.replace("_", " ")) for c in ("family", "correct_methods", "mutants", "gate_false_alarms",
+                                               "gate_misses", "measurement_false_alarms",
+                                               "measurement_misses") if c in summ]
+    sec.table(df_table(summ, cols, "False alarms and misses per family of generated methods",
+                       status=None, sort_failing=False, folded=False))
     return sec
 
 

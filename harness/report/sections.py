@@ -17,14 +17,16 @@ shared by many rows is written once as a numbered note below its table and refer
 
 from __future__ import annotations
 
+import base64
+import gzip
 import hashlib
 import json
 import math
 import re
 import time
-import urllib.parse
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -81,7 +83,7 @@ class Table:
 
 @dataclass
 class Download:
-    """A tidy table embedded as a `data:text/csv` link."""
+    """A tidy table embedded as a gzip-compressed CSV `data:` link."""
 
     filename: str
     uri: str
@@ -198,7 +200,7 @@ def anchor(*parts: Any) -> str:
     """A stable, safe HTML id for a table row: readable slug plus a short hash of the exact
     key (names from plugins may hold any character)."""
     key = "\x1f".join(str(p) for p in parts)
-    slug = re.sub(r"[^a-z0-9]+", "-", key.lower()).strip("-")[:28]
+    slug = re.sub(r"[^a-z0-9]+", "-", key.lower()).strip("-")[:16]  # every link repeats it
     return f"r-{slug}-{hashlib.sha1(key.encode()).hexdigest()[:6]}"
 
 
@@ -218,15 +220,17 @@ CSV_DIGITS = 4
 
 
 def csv_download(df: pd.DataFrame | None, filename: str) -> Download | None:
-    """`df` as an embedded CSV link (numbers with CSV_DIGITS significant digits; percent-encoding
-    only where a URL needs it, so the page grows by about the CSV's own size)."""
+    """`df` as an embedded, gzip-compressed CSV link (`<name>.csv.gz`, numbers with CSV_DIGITS
+    significant digits): a figure's tidy table costs the page a third of its CSV text or less,
+    and every CSV reader opens it (`pandas.read_csv` reads .gz directly). The archive carries
+    no date, so a report's bytes depend on its data only."""
     if df is None or not len(df.columns):
         return None
     text = df.to_csv(index=False, float_format=f"%.{CSV_DIGITS}g", lineterminator="\n")
-    uri = "data:text/csv;charset=utf-8," + urllib.parse.quote(text, safe=",.-_:;=+/()[]*!~'@ ")\
-        .replace(" ", "%20")
-    safe_name = re.sub(r"[^A-Za-z0-9_.-]+", "-", filename)[:120]
-    return Download(safe_name, uri, len(df), len(uri))
+    packed = gzip.compress(text.encode("utf-8"), compresslevel=9, mtime=0)
+    uri = "data:application/gzip;base64," + base64.b64encode(packed).decode("ascii")
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "-", filename)[:120]
+    return Download(stem if stem.endswith(".gz") else stem + ".gz", uri, len(df), len(uri))
 
 
 def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str, *,
@@ -244,7 +248,9 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
         k = df[status].map(lambda v: 0 if (not _missing_value(v) and not bool(v)) else 1)
         df = df.assign(_k=k).sort_values("_k", kind="stable").drop(columns="_k")
     headers = ([""] if status else []) + [h for _, h in columns]
-    table_id = id or (anchor("table", experiment, caption) if experiment else "")
+    # short: every note reference repeats it
+    table_id = id or (f"t-{hashlib.sha1(f'{experiment}{caption}'.encode()).hexdigest()[:6]}"
+                      if experiment else "")
     notes: dict[str, int] = {}
     rows = []
     for rec in df.to_dict("records"):
@@ -462,6 +468,7 @@ def skip_note(sec: Section, view: RunView, name: str) -> None:
 # -- the sections in order ---------------------------------------------------------------------------
 FIXED_BEFORE = (("verdicts", "Verdicts"), ("changes", "What changed since the last run"))
 FIXED_AFTER = (("ground-truth", "Ground truth"), ("claims", "Claims from the course material, checked"),
+               ("gate-population", "How much to trust the gate"),
                ("provenance", "Provenance"), ("performance-history", "Performance history"))
 
 
@@ -500,7 +507,8 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
         say(name)
         out.append(timer.run(name, lambda name=name: _guarded(
             lambda v: _experiment_section(v, name, number[name]), view, name, number, names)))
-    for key, fn in (("ground-truth", X.ground_truth), ("claims", X.claims)):
+    trust = lambda v: X.gate_trust(v, Path(results_path).parent)  # noqa: E731
+    for key, fn in (("ground-truth", X.ground_truth), ("claims", X.claims), ("gate-population", trust)):
         say(key)
         out.append(timer.run(key, lambda fn=fn, key=key: _guarded(fn, view, key, number, names)))
     say("performance history")

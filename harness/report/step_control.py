@@ -12,7 +12,6 @@ the other section builders), `build_section(run_tables)` an HTML fragment from a
 
 from __future__ import annotations
 
-import dataclasses
 import html
 from collections.abc import Mapping
 from typing import Any
@@ -20,7 +19,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.report import figures as F
+from harness.report.figure_style import _clip_log, _label, _legend_outside, _loglog, _new, _styled, _thin
+from harness.report.figure_svg import Figure, check_svg, to_svg
 from harness.report.sections import Section, df_table, register_section
 
 __all__ = ["EXPERIMENT", "TITLE", "section", "build_section", "energy_control_figure"]
@@ -30,16 +30,18 @@ TITLE = "Step control: bounded orbits?"
 _STYLE = {"fixed": "-", "naive": "--", "reversible": "-."}
 
 
-@F._styled
-def energy_control_figure(problem: str, rows: pd.DataFrame) -> F.Figure | None:
+@_styled
+def energy_control_figure(problem: str, rows: pd.DataFrame) -> Figure | None:
     """Relative energy error against t (log-log) of the fixed-step peer and each controlled
-    stepper on one problem; the fixed peer is drawn once."""
+    stepper on one problem; the fixed peer is drawn once. The figure's data is what it draws
+    (each line thinned to the envelope of log-spaced bins)."""
     g = rows[(rows["problem"] == problem) & (rows["kind"] == "energy")]
     if g.empty:
         return None
-    fig, axes = F._new(size=(7.4, 4.4))
+    fig, axes = _new(size=(7.4, 4.4))
     ax = axes[0][0]
     drawn_fixed = False
+    data = []
     for stepper, s in g.groupby("stepper", sort=False):
         for role, r in s.groupby("role", sort=False):
             if role == "fixed" and drawn_fixed:
@@ -47,19 +49,18 @@ def energy_control_figure(problem: str, rows: pd.DataFrame) -> F.Figure | None:
             label = (f"fixed steps ({r['peer'].iloc[0]})" if role == "fixed" else stepper)
             kind = "fixed" if role == "fixed" else str(r["controller"].iloc[0] if "controller" in r else "")
             t = r["t"].astype(float).to_numpy()
-            x, y = F._thin(t - float(np.nanmin(t)), r["error"].astype(float).to_numpy())
-            ax.plot(x, F._clip_log(y), _STYLE.get(kind, "-"), lw=1.0, label=F._label(label))
+            x, y = _thin(t - float(np.nanmin(t)), r["error"].astype(float).to_numpy())
+            data.append(pd.DataFrame({"stepper": stepper, "role": role, "controller": kind, "t": x,
+                                      "error": y}))
+            ax.plot(x, _clip_log(y), _STYLE.get(kind, "-"), lw=1.0, label=_label(label))
             drawn_fixed = drawn_fixed or role == "fixed"
-    F._loglog(ax)
+    _loglog(ax)
     ax.set_xlabel("t")
     ax.set_ylabel("relative energy error")
-    ax.set_title(f"Energy error on {F._label(problem)}: fixed, naive and reversible control")
-    F._legend_outside(ax)
-    out = F.to_svg(fig, f"step-control-{problem}", f"relative energy error against time on {problem}")
-    if out is not None and out.data is None:
-        keep = [c for c in ("stepper", "role", "controller", "problem", "t", "error") if c in g]
-        out = dataclasses.replace(out, data=g[keep].reset_index(drop=True))
-    return out
+    ax.set_title(f"Energy error on {_label(problem)}: fixed, naive and reversible control")
+    _legend_outside(ax)
+    return to_svg(fig, f"step-control-{problem}", f"relative energy error against time on {problem}",
+                  pd.concat(data, ignore_index=True) if data else None)
 
 
 def _with_controller(rows: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
@@ -83,12 +84,13 @@ def _verdict_text(summary: pd.DataFrame) -> str:
     return head + " " + "; ".join(parts) + "."
 
 
-INTRO = ("The course's Kepler practice session (course file 004, Practice Session #3) asks for a "
-         "step control with Δθ ≈ const that keeps orbits bounded. Each controlled stepper is run "
-         "against the fixed-step stepper with the same splitting coefficients at equal work (same "
-         "number of steps over the same time); the energy error's growth is classified by the "
-         "energy experiment's classifier, and the work ratio is the fixed stepper's force "
-         "evaluations over the controlled one's to reach the same final-time accuracy.")
+INTRO = ("Each step-controlled stepper (Δθ ≈ const, the course's Kepler practice session, course "
+         "file 004, Practice Session #3) runs against the fixed-step stepper with the same splitting "
+         "coefficients at equal work: the energy error's growth is classified by the energy "
+         "experiment's classifier, and the work ratio is the fixed stepper's force evaluations over "
+         "the controlled one's to reach the same final-time accuracy. A flat energy error in the "
+         "figure means bounded orbits, which a reversible controller should keep and a naive one "
+         "lose; a work ratio above 1 means the control saves work.")
 
 
 @register_section("step-control", title=TITLE, intro=INTRO)
@@ -152,7 +154,7 @@ def build_section(run_tables: Mapping[str, pd.DataFrame] | Any) -> str:
     out = [f'<section id="{e(sec.id)}"><h2>{e(sec.title)}</h2><p class="intro">{e(sec.intro)}</p>']
     for b in sec.blocks:
         if b.kind == "figure" and b.figure is not None:
-            out.append(f"<figure>{F.check_svg(b.figure.svg)}<figcaption>{e(b.text)}</figcaption></figure>")
+            out.append(f"<figure>{check_svg(b.figure.standalone())}<figcaption>{e(b.text)}</figcaption></figure>")
         elif b.kind == "table" and b.table is not None:
             t = b.table
             head = "".join(f"<th>{e(c)}</th>" for c in t.columns)

@@ -1,0 +1,159 @@
+"""A headless Chromium driven over the DevTools protocol on a pipe, for looking at a report as a
+reader does: the report's browser test and `scripts/screenshots` use it.
+
+`--remote-debugging-pipe`: fd 3 carries commands in, fd 4 replies and events out, each message
+JSON ending in a NUL byte. `DevTools.open(url)` loads a page in a window of the given size (the
+page's Content-Security-Policy bypassed, so a reference to anything outside the file shows up as
+a request instead of being blocked silently; `--host-resolver-rules` maps every host name to
+nothing as a second guard); `evaluate` reads the DOM, `screenshot` writes a PNG, `requests`
+lists the page's network requests. Debian's `chromium` package provides the browser.
+"""
+
+from __future__ import annotations
+
+import base64
+import fcntl
+import json
+import os
+import select
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+__all__ = ["DevTools", "chromium_binary", "TIMEOUT_S"]
+
+# Seconds to wait for any answer of the browser.
+TIMEOUT_S = 60.0
+
+
+def chromium_binary() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+class DevTools:
+    """A headless chromium driven over --remote-debugging-pipe."""
+
+    def __init__(self, binary: str, profile: Path):
+        to_child_r, self._w = os.pipe()
+        self._r, from_child_w = os.pipe()
+        # move the child's ends above 4, so that putting them on 3 and 4 cannot overwrite one
+        # with the other
+        to_child_r, from_child_w = _above_four(to_child_r), _above_four(from_child_w)
+        args = [
+            "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+            "--disable-background-networking", "--disable-component-update", "--disable-sync",
+            "--disable-dev-shm-usage", "--disable-extensions", "--mute-audio",
+            "--host-resolver-rules=MAP * ~NOTFOUND", f"--user-data-dir={profile}",
+            "--remote-debugging-pipe", "about:blank",
+        ]
+        # a tiny Python trampoline puts the pipe ends on fds 3 and 4, where chromium expects them
+        self.proc = subprocess.Popen(
+            [sys.executable, "-S", "-c", _TRAMPOLINE, str(to_child_r), str(from_child_w), binary,
+             *args],
+            pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self._buf = b""
+        self._id = 0
+        self.events: list[dict] = []
+        self.session: str | None = None
+
+    def _read_message(self, deadline: float) -> dict:
+        while b"\0" not in self._buf:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError("chromium did not answer in time")
+            ready, _, _ = select.select([self._r], [], [], left)
+            if ready:
+                chunk = os.read(self._r, 1 << 20)
+                if not chunk:
+                    raise RuntimeError(f"chromium closed the pipe (exit {self.proc.poll()})")
+                self._buf += chunk
+        raw, self._buf = self._buf.split(b"\0", 1)
+        return json.loads(raw)
+
+    def send(self, method: str, params: dict | None = None, *, session: bool = True) -> dict:
+        self._id += 1
+        msg: dict[str, Any] = {"id": self._id, "method": method, "params": params or {}}
+        if session and self.session:
+            msg["sessionId"] = self.session
+        os.write(self._w, json.dumps(msg).encode() + b"\0")
+        deadline = time.monotonic() + TIMEOUT_S
+        while True:
+            reply = self._read_message(deadline)
+            if reply.get("id") == self._id:
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                return reply.get("result", {})
+            self.events.append(reply)
+
+    def wait_for(self, method: str) -> dict:
+        for i, ev in enumerate(self.events):
+            if ev.get("method") == method:
+                return self.events.pop(i)
+        deadline = time.monotonic() + TIMEOUT_S
+        while True:
+            ev = self._read_message(deadline)
+            if ev.get("method") == method:
+                return ev
+            self.events.append(ev)
+
+    def open(self, url: str, width: int = 1280, height: int = 1800) -> None:
+        target = self.send("Target.createTarget", {"url": "about:blank"}, session=False)
+        attached = self.send("Target.attachToTarget",
+                             {"targetId": target["targetId"], "flatten": True}, session=False)
+        self.session = attached["sessionId"]
+        self.send("Page.enable")
+        self.send("Network.enable")
+        self.send("Page.setBypassCSP", {"enabled": True})
+        self.send("Emulation.setDeviceMetricsOverride",
+                  {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False})
+        self.events.clear()
+        self.send("Page.navigate", {"url": url})
+        self.wait_for("Page.loadEventFired")
+
+    def evaluate(self, expression: str) -> Any:
+        result = self.send("Runtime.evaluate", {"expression": expression, "returnByValue": True})
+        if "exceptionDetails" in result:
+            raise RuntimeError(f"evaluation failed: {result['exceptionDetails']}")
+        return result["result"].get("value")
+
+    def screenshot(self, path: Path, clip: dict | None = None) -> None:
+        params: dict[str, Any] = {"format": "png"}
+        if clip:
+            params.update(clip=dict(clip, scale=1), captureBeyondViewport=True)
+        data = self.send("Page.captureScreenshot", params)["data"]
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(base64.b64decode(data))
+
+    def requests(self) -> list[str]:
+        return [ev["params"]["request"]["url"] for ev in self.events
+                if ev.get("method") == "Network.requestWillBeSent"]
+
+    def close(self) -> None:
+        try:
+            self.send("Browser.close", session=False)
+        except Exception:
+            pass
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        os.close(self._w)
+        os.close(self._r)
+
+
+_TRAMPOLINE = ("import os, sys; os.dup2(int(sys.argv[1]), 3); os.dup2(int(sys.argv[2]), 4); "
+               "os.execv(sys.argv[3], sys.argv[3:])")
+
+
+def _above_four(fd: int) -> int:
+    high = fcntl.fcntl(fd, fcntl.F_DUPFD, 10)
+    os.close(fd)
+    return high

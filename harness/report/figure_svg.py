@@ -1,0 +1,358 @@
+"""Figures as inline SVG text: a matplotlib figure rendered to deterministic, checked, compact SVG.
+
+The SVG is deterministic (ids salted by the figure's slug, no date), uses no external resource,
+and is checked by `check_svg` before it is embedded: names from plugins end up in legends as SVG
+text, which matplotlib escapes; `check_svg` rejects any script, event attribute, foreign object
+or reference outside the figure, so embedding the SVG as markup is safe.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import pandas as pd
+
+from harness.report.figure_style import _RC
+
+__all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS"]
+
+# Coordinates in the SVG are rounded to this many decimals of a point (1/10 pt is far below
+# what a screen shows; the full-precision numbers are in each figure's CSV).
+SVG_DECIMALS = 1
+
+_SVG_NS = "{http://www.w3.org/2000/svg}"
+_XLINK = "{http://www.w3.org/1999/xlink}href"
+_ALLOWED_TAGS = {"svg", "g", "path", "defs", "clipPath", "use", "text", "tspan", "rect", "style",
+                 "metadata", "title", "desc", "circle", "ellipse", "line", "polyline", "polygon",
+                 "image", "pattern", "linearGradient", "radialGradient", "stop", "mask"}
+_RDF_TAGS = {"RDF", "Work", "type", "date", "format", "creator", "Agent", "title"}
+
+
+class UnsafeFigureError(ValueError):
+    """A figure's SVG holds something that must not be embedded in the report."""
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One figure: its slug (unique in the report), inline SVG text, a short alt text, the
+    tidy table of what it draws (offered for download beside it), and the style rules its
+    classes need (`css`; the page holds every figure's rules once, see `page_css`)."""
+
+    slug: str
+    svg: str
+    alt: str
+    data: pd.DataFrame | None = field(default=None, compare=False, repr=False)
+    css: str = field(default="", compare=False, repr=False)
+
+    def standalone(self) -> str:
+        """The SVG with its style rules inside (for use outside the report page)."""
+        if not self.css:
+            return self.svg
+        head_end = self.svg.find(">") + 1
+        return f"{self.svg[:head_end]}<style>{self.css}</style>{self.svg[head_end:]}"
+
+
+def page_css(figures: Iterable[Figure]) -> str:
+    """The style rules of `figures`, each once: classes are named by a hash of their rule, so
+    the same line style in two figures is one rule of the page."""
+    rules: dict[str, None] = {}
+    for fig in figures:
+        for rule in re.findall(r"[^{}]+\{[^{}]*\}", fig.css):
+            rules.setdefault(rule, None)
+    css = "".join(rules)
+    if "<" in css:  # matplotlib's style text never holds markup; refuse if it ever does
+        raise UnsafeFigureError("figure style rules hold a '<'")
+    return css
+
+
+
+# -- SVG output -----------------------------------------------------------------------------------
+def _local(tag: str) -> str:
+    return tag.rsplit("}", 1)[-1]
+
+
+def check_svg(svg: str) -> str:
+    """Return `svg` when it is a plain drawing: well-formed, only drawing elements, no script,
+    no event attribute, no link outside the figure. Raise `UnsafeFigureError` otherwise."""
+    try:
+        root = ET.fromstring(svg)
+    except ET.ParseError as exc:
+        raise UnsafeFigureError(f"figure SVG is not well-formed XML: {exc}") from None
+    if _local(root.tag) != "svg":
+        raise UnsafeFigureError(f"figure SVG root is <{_local(root.tag)}>, expected <svg>")
+    for el in root.iter():
+        tag = _local(el.tag)
+        if tag not in _ALLOWED_TAGS and tag not in _RDF_TAGS:
+            raise UnsafeFigureError(f"figure SVG holds a <{tag}> element")
+        for name, value in el.attrib.items():
+            attr = _local(name).lower()
+            if attr.startswith("on"):
+                raise UnsafeFigureError(f"figure SVG holds an event attribute {attr!r}")
+            if attr == "href" and not value.startswith("#"):
+                if not (tag == "image" and value.startswith("data:image/png;base64,")):
+                    raise UnsafeFigureError(f"figure SVG links outside itself: {value[:60]!r}")
+            if "url(" in value and not re.fullmatch(r"[^()]*(url\(#[\w.-]+\)[^()]*)*", value):
+                raise UnsafeFigureError(f"figure SVG refers to an outside resource: {value[:60]!r}")
+    if re.search(r"<\s*script|javascript:|<\s*foreignObject|@import", svg, re.IGNORECASE):
+        raise UnsafeFigureError("figure SVG holds script or imported content")
+    return svg
+
+
+def to_svg(fig: Any, slug: str, alt: str, data: pd.DataFrame | None = None) -> Figure:
+    """Render a matplotlib figure (made without pyplot, so no global state) to checked,
+    deterministic inline SVG."""
+    buf = io.StringIO()
+    tight = not getattr(fig, "_harness_layout", False)
+    with _rc(slug):
+        fig.savefig(buf, format="svg", bbox_inches="tight" if tight else None,
+                    metadata={"Date": None})
+    text = buf.getvalue()
+    start = text.find("<svg")
+    if start < 0:
+        raise UnsafeFigureError("matplotlib wrote no <svg> element")
+    text, css = _shrink(text[start:], "f" + hashlib.sha1(slug.encode()).hexdigest()[:5])
+    check_svg(text)
+    # sizes in CSS pixels (the stylesheet scales figures down to the page width; the viewBox
+    # keeps the aspect ratio)
+    head_end = text.find(">")
+    head = re.sub(r'width="([\d.]+)pt" height="([\d.]+)pt"',
+                  lambda m: f'width="{float(m.group(1)) * 4 / 3:.0f}" '
+                            f'height="{float(m.group(2)) * 4 / 3:.0f}"',
+                  text[:head_end], count=1)
+    text = head + text[head_end:]
+    text = text.replace("<svg", f'<svg role="img" class="figure" data-slug="{_attr(slug)}"', 1)
+    return Figure(slug=slug, svg=text, alt=alt, data=data, css=css)
+
+
+_NUMBER = re.compile(r"-?\d+\.\d+")
+_NS = "http://www.w3.org/2000/svg"
+_XLINK_NS = "http://www.w3.org/1999/xlink"
+
+
+def _round_numbers(text: str) -> str:
+    def one(m: re.Match) -> str:
+        s = f"{float(m.group(0)):.{SVG_DECIMALS}f}".rstrip("0").rstrip(".")
+        return "0" if s in ("-0", "") else s
+
+    return _NUMBER.sub(one, text)
+
+
+def _compact_path(d: str) -> str:
+    d = _round_numbers(" ".join(d.split()))
+    return _relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d))
+
+
+def _dedupe_style(style: str) -> str:
+    """Each property once, with the value that wins (the last)."""
+    last: dict[str, str] = {}
+    for decl in style.split(";"):
+        name, _, value = decl.partition(":")
+        last.pop(name, None)
+        last[name] = value
+    return ";".join(f"{k}:{v}" for k, v in last.items() if k)
+
+
+def _short_number(v: int, scale: int) -> str:
+    """`v / scale` (scale 1 or 10) as its shortest SVG number (15/10 -> 1.5, -5/10 -> -.5)."""
+    if scale == 1:
+        return str(v)
+    sign, a = ("-" if v < 0 else ""), abs(v)
+    whole, frac = divmod(a, 10)
+    if not frac:
+        return f"{sign}{whole}"
+    return f"{sign}{whole if whole else ''}.{frac}"
+
+
+_MOVE_LINE = re.compile(r"([ML])(-?[\d.]+) (-?[\d.]+)")
+# Data lines (paths of three points or more) are drawn to whole points: a point is 1.3 CSS
+# pixels at the figure's own size and less where the page scales it down, so the line looks the
+# same; its numbers are in the figure's CSV.
+LINE_SCALE = 1
+
+
+def _relative_path(d: str, scale: int = LINE_SCALE) -> str:
+    """A path of absolute moves and lines only (what matplotlib writes for data lines) in
+    relative steps of 1/`scale` point: the points rounded first, so no error accumulates; about
+    half the bytes. Any other path is returned unchanged."""
+    if not d.startswith("M"):
+        return d
+    pieces = _MOVE_LINE.findall(d)
+    if len(pieces) < 3 or sum(len(c) + len(x) + len(y) + 1 for c, x, y in pieces) != len(d):
+        return d
+    out, px, py, last = [], 0, 0, ""
+    for k, (cmd, x, y) in enumerate(pieces):
+        X, Y = round(float(x) * scale), round(float(y) * scale)
+        if k == 0:
+            out.append(f"M{_short_number(X, scale)} {_short_number(Y, scale)}")
+        else:
+            c = cmd.lower()
+            if c == "l" and X == px and Y == py:
+                continue  # a step of zero length draws nothing
+            dx, dy = _short_number(X - px, scale), _short_number(Y - py, scale)
+            # after a move or a line, further pairs are lines: the letter can go
+            implicit = c == "l" and last in ("l", "m")
+            head = ("" if dx.startswith("-") else " ") if implicit else c
+            out.append(f"{head}{dx}{'' if dy.startswith('-') else ' '}{dy}")
+            last = c
+        px, py = X, Y
+    return "".join(out)
+
+
+def _shrink(svg: str, salt: str) -> tuple[str, str]:
+    """Fewer bytes, same drawing: no metadata, coordinates rounded to SVG_DECIMALS, compact
+    paths, attribute-less groups unwrapped, identity rotations dropped, each repeated style
+    turned into a class (names salted by the figure, since a page's inline SVGs share one
+    style scope), and only the ids something refers to kept (matplotlib's group ids would
+    repeat across the figures of one page)."""
+    ET.register_namespace("", _NS)
+    ET.register_namespace("xlink", _XLINK_NS)
+    root = ET.fromstring(svg)
+    used = set(re.findall(r'(?:href="#|url\(#)([\w.-]+)', svg))
+
+    for el in root.iter():
+        if "id" in el.attrib and el.attrib["id"] not in used:
+            del el.attrib["id"]
+        if el.text is not None and not el.text.strip():
+            el.text = None
+        if el.tail is not None and not el.tail.strip():
+            el.tail = None
+
+    def unwrap(parent: ET.Element) -> None:
+        out = []
+        for child in list(parent):
+            unwrap(child)
+            if _local(child.tag) == "metadata":
+                continue
+            if _local(child.tag) == "g" and not child.attrib:
+                out.extend(list(child))
+            else:
+                out.append(child)
+        parent[:] = out
+
+    unwrap(root)
+    _merge_marker_defs(root)
+    _merge_siblings(root)
+    styles: dict[str, int] = {}
+    for el in root.iter():
+        for name in ("d", "x", "y", "points"):
+            if name in el.attrib:
+                value = el.attrib[name]
+                el.set(name, _compact_path(value) if name == "d" else _round_numbers(value))
+        tr = el.attrib.get("transform", "")
+        if re.fullmatch(r"rotate\(-?0(?:\s[^)]*)?\)", tr):
+            del el.attrib["transform"]
+        st = el.attrib.get("style")
+        if st is not None:
+            st = _dedupe_style(re.sub(r"\s*([:;])\s*", r"\1", st).strip().rstrip(";"))
+            el.set("style", st)
+            styles[st] = styles.get(st, 0) + 1
+    # every style becomes a class named by its rule's hash: the page holds each rule once
+    classes = {st: "k" + hashlib.sha1(st.encode()).hexdigest()[:7] for st in styles}
+    for el in root.iter():
+        st = el.attrib.get("style")
+        if st in classes:
+            del el.attrib["style"]
+            el.set("class", classes[st])
+    for g in root.iter(f"{{{_NS}}}g"):  # a run of markers of one style: the class once, on the group
+        kids = list(g)
+        first = kids[0].attrib.get("class") if kids else None
+        if first and "class" not in g.attrib and all(
+                _local(k.tag) == "use" and k.attrib.get("class") == first for k in kids):
+            g.set("class", first)
+            for k in kids:
+                del k.attrib["class"]
+    css = "".join(f".{c}{{{st}}}" for st, c in classes.items())
+    for parent in root.iter():  # matplotlib's own <style> (one global rule) joins the page's
+        for child in list(parent):
+            if _local(child.tag) == "style":
+                css = re.sub(r"\s*([:;{}])\s*", r"\1", child.text or "") + css
+                parent.remove(child)
+    for parent in root.iter():
+        for child in list(parent):
+            if _local(child.tag) == "defs" and not len(child):
+                parent.remove(child)
+    text = ET.tostring(root, encoding="unicode").replace(" />", "/>")
+    # SVG 2's plain `href` (every current browser): each marker's <use> is a few bytes shorter
+    text = text.replace(' xlink:href="#', ' href="#')
+    if "xlink:" not in text.split(">", 1)[1]:
+        text = text.replace(f' xmlns:xlink="{_XLINK_NS}"', "", 1)
+    # shorter ids (every marker use repeats one): salted, since ids are page-wide
+    ids = sorted(set(re.findall(r'\sid="([\w.-]+)"', text)), key=len, reverse=True)
+    for i, old in enumerate(ids):
+        text = text.replace(f'id="{old}"', f'id="{salt}i{i}"').replace(f'"#{old}"', f'"#{salt}i{i}"') \
+            .replace(f"url(#{old})", f"url(#{salt}i{i})")
+    return text, css
+
+
+def _merge_siblings(root: ET.Element) -> None:
+    """Paths with the same attributes but their data, separated only by text (grid lines
+    between tick labels, the segments of one style), become one path."""
+    for parent in root.iter():
+        kids = list(parent)
+        out: list[ET.Element] = []
+        last: dict[tuple, ET.Element] = {}
+        for child in kids:
+            tag = _local(child.tag)
+            if tag == "path" and "id" not in child.attrib and "d" in child.attrib:
+                key = tuple(sorted((k, v) for k, v in child.attrib.items() if k != "d"))
+                prev = last.get(key)
+                if prev is not None:
+                    prev.set("d", prev.attrib["d"] + child.attrib["d"])
+                    continue
+                last = {key: child}
+            elif tag != "text":
+                last = {}
+            out.append(child)
+        if len(out) != len(kids):
+            parent[:] = out
+
+
+def _merge_marker_defs(root: ET.Element) -> None:
+    """matplotlib defines one marker path per (shape, stroke style); keep one definition per
+    shape and move its style onto each use (a used element inherits from its <use>)."""
+    href = f"{{{_XLINK_NS}}}href"
+    defs = {}
+    for el in root.iter(f"{{{_NS}}}path"):
+        if "id" in el.attrib and "d" in el.attrib:
+            defs[el.attrib["id"]] = el
+    canonical: dict[str, ET.Element] = {}
+    style_of: dict[str, str] = {}
+    target: dict[str, str] = {}
+    for i, el in defs.items():
+        key = el.attrib["d"]
+        style_of[i] = el.attrib.get("style", "")
+        first = canonical.setdefault(key, el)
+        target[i] = first.attrib["id"]
+    for use in root.iter(f"{{{_NS}}}use"):
+        ref = use.attrib.get(href, "")[1:]
+        if ref in target:
+            # the definition's own style won over the use's: it goes last
+            merged = ";".join(s for s in (use.attrib.get("style", ""), style_of[ref]) if s)
+            if merged:
+                use.set("style", merged)
+            use.set(href, "#" + target[ref])
+    keep = {id(e) for e in canonical.values()}
+    for parent in root.iter():
+        for child in list(parent):
+            if child.attrib.get("id") in defs and id(child) not in keep:
+                parent.remove(child)
+    for el in canonical.values():
+        el.attrib.pop("style", None)
+
+
+def _attr(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]", "-", text)
+
+
+def _rc(slug: str):
+    import matplotlib as mpl
+
+    return mpl.rc_context({**_RC, "svg.hashsalt": f"harness-report-{slug}"})
+
+

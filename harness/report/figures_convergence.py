@@ -1,0 +1,152 @@
+"""Convergence figures: error against step size per problem (small multiples per family), and
+the roundoff floor at a fixed step count."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.report.figure_style import (
+    LOG_CEILING,
+    Palette,
+    _clip_log,
+    _label,
+    _legend_outside,
+    _loglog,
+    _multiples,
+    _new,
+    _panel_legend,
+    _small_ticks,
+    _styled,
+    panels,
+)
+from harness.report.figure_svg import Figure, to_svg
+
+__all__ = ['SAME_CURVE_DIGITS', 'same_curves', 'convergence_figure', 'roundoff_figure']
+
+# -- convergence ----------------------------------------------------------------------------------
+# Digits at which two methods' error curves count as the same curve (drawn once): far more than
+# a log-log figure resolves.
+SAME_CURVE_DIGITS = 6
+
+
+def same_curves(rows: pd.DataFrame) -> dict[str, list[str]]:
+    """Methods whose (h, error, used-by-the-fit) points agree to SAME_CURVE_DIGITS digits — the
+    same coefficients run by another implementation — are drawn as one curve: first method ->
+    the others, in the order given (a method drawn by another maps to nothing, is not a key)."""
+    keys: dict[tuple, str] = {}
+    out: dict[str, list[str]] = {}
+    for stepper, s in rows.groupby("stepper", sort=False):
+        s = s.sort_values("h")
+        key = tuple(zip(np.round(np.log10(s["h"].astype(float).abs() + 1e-300), SAME_CURVE_DIGITS),
+                        [float(f"{e:.{SAME_CURVE_DIGITS}g}") for e in s["error"].astype(float)],
+                        s["in_fit"].fillna(False).astype(bool), strict=True))
+        if key in keys:
+            out[keys[key]].append(stepper)
+        else:
+            keys[key] = stepper
+            out[stepper] = []
+    return out
+
+
+@_styled
+def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
+                       reference_error: float | None) -> Figure | None:
+    """Global error against h (log-log) on one problem, one panel per family (at most
+    MAX_LINES_PER_PANEL methods each): points used by the order fit marked, excluded points on
+    the thin line only (the CSV says why each was excluded), the fitted slope drawn over exactly
+    the range it used, the reference's certified error as the floor every panel shares."""
+    from matplotlib.lines import Line2D
+
+    from harness.experiments.convergence import fit_order
+
+    g = rows[(rows["kind"] == "global") & np.isfinite(rows["h"].astype(float))]
+    if g.empty:
+        return None
+    twins = same_curves(g)
+    shown = [s for s in dict.fromkeys(g["stepper"]) if s in twins]
+    groups = panels(shown, palette.families)
+    fig, axes = _multiples(len(groups), sharey=True)
+    floor = reference_error if reference_error is not None and np.isfinite(reference_error) \
+        and reference_error > 0 else None
+    data = []
+    for ax, (title, members) in zip(axes, groups, strict=True):
+        handles = []
+        for stepper in members:
+            s = g[g["stepper"] == stepper].sort_values("h")
+            c = palette.colour(stepper)
+            err = s["error"].astype(float).to_numpy()
+            h = s["h"].astype(float).to_numpy()
+            ok = np.isfinite(err) & (err > 0) & (err <= LOG_CEILING)
+            used = s["in_fit"].fillna(False).astype(bool).to_numpy() & ok
+            ax.plot(h[ok], err[ok], "-", color=c, lw=0.8, alpha=0.7)
+            ends = np.flatnonzero(used)[[0, -1]] if used.any() else np.array([], dtype=int)
+            ax.plot(h[ends], err[ends], linestyle="none", marker=palette.marker(stepper), color=c,
+                    ms=3.2)  # the ends of the fitted range (every point's role is in the CSV)
+            slope = math.nan
+            if used.sum() >= tol.MIN_FIT_POINTS:
+                f = fit_order(h[used], err[used])
+                slope = float(f["order"])
+                hh = np.array([h[used].min(), h[used].max()])
+                ax.plot(hh, np.exp(f["intercept"]) * hh ** f["order"], "--", color=c, lw=1.8)
+            fit_text = f"slope {slope:.2f}" if np.isfinite(slope) else "no fit"
+            same = f" and {len(twins[stepper])} identical" if twins[stepper] else ""
+            label = f"{_label(stepper)}{same} ({fit_text})"
+            handles.append(Line2D([], [], color=c, marker=palette.marker(stepper), ms=3, lw=0.8,
+                                  label=label))
+            excluded = s["excluded"].fillna("").astype(str).to_numpy() if "excluded" in s else \
+                np.array([""] * len(s))
+            for name in (stepper, *twins[stepper]):
+                data.append(pd.DataFrame({"stepper": name, "h": h, "error": err,
+                                          "in_fit": used.astype(int), "excluded": excluded}))
+        if floor is not None:
+            ax.axhline(floor, color="k", lw=0.9, ls=":")
+        _loglog(ax)
+        ax.set_title(title)
+        _small_ticks(ax)
+        _panel_legend(ax, handles, loc="lower right")
+    if floor is not None:
+        lo, hi = axes[0].get_ylim()
+        axes[0].set_ylim(min(lo, floor / 3.0), hi)  # the floor line stays in view
+    fig.supxlabel("step size h", fontsize=8)
+    fig.supylabel("global error at the final time", fontsize=8)
+    fig.suptitle(f"Convergence on {_label(problem)}", fontsize=8.5)
+    frame = pd.concat(data, ignore_index=True) if data else None
+    return to_svg(fig, f"convergence-{problem}", f"error against step size on {problem}", frame)
+
+
+
+# -- roundoff -------------------------------------------------------------------------------------
+@_styled
+def roundoff_figure(rows: pd.DataFrame, palette: Palette) -> Figure | None:
+    """Position error against h at a fixed step count, one panel per problem, with the
+    truncation error extrapolated from the largest step."""
+    if rows.empty:
+        return None
+    problems = list(dict.fromkeys(rows["problem"]))
+    fig, axes = _new(1, len(problems), size=(3.9 * len(problems) + 1.6, 3.8))
+    for ax, problem in zip(axes[0], problems, strict=True):
+        g = rows[rows["problem"] == problem]
+        for stepper, s in g.groupby("stepper", sort=False):
+            s = s.sort_values("h")
+            ax.plot(s["h"], _clip_log(s["error"]), "-",
+                    marker=palette.marker(stepper), ms=4, color=palette.colour(stepper),
+                    label=_label(stepper))
+        first = g.sort_values("h").groupby("stepper").tail(1)
+        if len(first):
+            s = g[g["stepper"] == first["stepper"].iloc[0]].sort_values("h")
+            ax.plot(s["h"], _clip_log(s["truncation_estimate"]), ":",
+                    color="k", lw=0.9, label="truncation alone (∝ h³ at fixed N)")
+        _loglog(ax)
+        ax.set_xlabel("step size h")
+        ax.set_title(f"{_label(problem)}, N = {int(g['n_steps'].iloc[0])} steps")
+    axes[0][0].set_ylabel("relative position error")
+    _legend_outside(axes[0][-1], layout=False)
+    cols = [c for c in ("stepper", "problem", "n_steps", "h", "error", "truncation_estimate") if c in rows]
+    return to_svg(fig, "roundoff", "position error against step size at a fixed step count",
+                  rows[cols].reset_index(drop=True))
+
+

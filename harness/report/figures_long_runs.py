@@ -1,0 +1,136 @@
+"""Long-run figures: reversibility (return error against N with the rounding bound) and the
+error of an invariant (energy, angular momentum) against time, one panel per drift class."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.report.figure_style import (
+    LOG_CEILING,
+    LOG_FLOOR,
+    Palette,
+    _clip_log,
+    _label,
+    _loglog,
+    _multiples,
+    _panel_legend,
+    _small_ticks,
+    _styled,
+    _thin,
+    panels,
+)
+from harness.report.figure_svg import Figure, to_svg
+
+__all__ = ['reversibility_figure', 'energy_figure', 'angular_momentum_figure']
+
+# -- reversibility ----------------------------------------------------------------------------------
+@_styled
+def reversibility_figure(table: pd.DataFrame, palette: Palette,
+                         symmetric: Mapping[str, bool]) -> Figure | None:
+    """Return error over the rounding bound against the number of steps N, all problems in one
+    figure, one panel per family: for each method the worst case against its claim over the
+    problems (the largest ratio for a method claimed symmetric, solid, which must stay at or
+    below 1; the smallest for one not claimed, dashed, which must stay above). The per-problem
+    values are in the figure's CSV and the section's table."""
+    need = {"stepper", "steps", "return_error_ulps", "rounding_bound_ulps"}
+    if table.empty or not need <= set(table.columns):
+        return None
+    t = table.assign(ratio=table["return_error_ulps"].astype(float)
+                     / table["rounding_bound_ulps"].astype(float))
+    groups = panels(list(dict.fromkeys(t["stepper"])), palette.families)
+    fig, axes = _multiples(len(groups), sharex=True, sharey=True)
+    for ax, (title, members) in zip(axes, groups, strict=True):
+        for stepper in members:
+            sym = symmetric.get(stepper, False)
+            g = t[t["stepper"] == stepper].groupby("steps")["ratio"]
+            worst = (g.max() if sym else g.min()).sort_index()
+            y = worst.to_numpy(float)
+            y = np.where(np.isfinite(y), np.clip(y, 1e-3, LOG_CEILING), np.nan)
+            ax.plot(worst.index.to_numpy(float), y, "-" if sym else "--", marker=palette.marker(stepper),
+                    color=palette.colour(stepper), ms=3, lw=0.9,
+                    label=f"{_label(stepper)}{' (symmetric)' if sym else ''}")
+        ax.axhline(1.0, color="k", ls=":", lw=1.0, label="rounding bound")
+        _loglog(ax)
+        ax.set_title(title)
+        _small_ticks(ax)
+        _panel_legend(ax, loc="upper left")
+    fig.supxlabel("steps N forward, then N back", fontsize=8)
+    fig.supylabel("return error / rounding bound (0 at 10⁻³)", fontsize=8)
+    fig.suptitle("Time reversibility, every problem", fontsize=8)
+    cols = [c for c in ("stepper", "problem", "steps", "h", "return_error", "return_error_ulps",
+                        "rounding_bound_ulps", "verdict") if c in table]
+    return to_svg(fig, "reversibility", "return error over the rounding bound against N",
+                  table[cols].reset_index(drop=True))
+
+
+# -- energy -------------------------------------------------------------------------------------------
+@_styled
+def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
+                  symplectic: Mapping[str, bool], quantity: str = "energy",
+                  classes: Mapping[str, str] | None = None) -> Figure | None:
+    """Relative error of an invariant against t (log-log), one panel per drift class (the class
+    the experiment measured, `classes`: stepper -> class), at most MAX_LINES_PER_PANEL lines
+    each; symplectic steppers solid, others dashed; lines thinned to the envelope of log-spaced
+    bins."""
+    g = rows[rows["quantity"] == quantity]
+    if g.empty:
+        return None
+    classes = dict(classes or {})
+    steppers = list(dict.fromkeys(g["stepper"]))
+    order = {c: i for i, c in enumerate(("bounded", "sqrt", "linear", "unstable"))}
+    steppers.sort(key=lambda s: order.get(classes.get(s, ""), len(order)))
+    groups = panels(steppers, {s: f"drift class: {classes.get(s) or 'not classified'}"
+                               for s in steppers}, pack=False)
+    fig, axes = _multiples(len(groups), sharex=True, sharey=True)
+    what = "energy" if quantity == "energy" else "angular momentum"
+    data = []
+    for ax, (title, members) in zip(axes, groups, strict=True):
+        for stepper in members:
+            s = g[g["stepper"] == stepper]
+            t = s["t"].astype(float).to_numpy()
+            t0 = float(np.nanmin(t))
+            x, y = _thin(t - t0, s["error"].astype(float).to_numpy())
+            data.append(pd.DataFrame({"stepper": stepper, "t": x, "error": y}))
+            sym = symplectic.get(stepper, False)
+            ax.plot(x, _clip_log(y), "-" if sym else "--", color=palette.colour(stepper), lw=0.9,
+                    label=f"{_label(stepper)}{' (symplectic)' if sym else ''}")
+        if quantity != "energy":
+            _rounding_bound(ax, g)
+        _loglog(ax)
+        ax.set_title(title)
+        _small_ticks(ax)
+        _panel_legend(ax, loc="best")
+    fig.supxlabel("t", fontsize=8)
+    fig.supylabel(f"relative {what} error (0 at {LOG_FLOOR:g})", fontsize=8)
+    fig.suptitle(f"{what.capitalize()} error on {_label(problem)}", fontsize=8.5)
+    return to_svg(fig, f"{quantity}-{problem}", f"relative {what} error against time on {problem}",
+                  pd.concat(data, ignore_index=True) if data else None)
+
+
+def _rounding_bound(ax: Any, g: pd.DataFrame) -> None:
+    """The bound n * eps (n steps) against t for the fixed-step runs (one step size per problem
+    in this experiment); adaptive runs take other steps and are not bounded by it."""
+    fixed = g[~np.isfinite(g["tol"].astype(float))] if "tol" in g else g
+    if fixed.empty:
+        return
+    first = fixed[fixed["stepper"] == fixed["stepper"].iloc[0]].sort_values("step")
+    n = first["step"].astype(float).to_numpy()
+    tt = first["t"].astype(float).to_numpy() - float(first["t"].astype(float).min())
+    pos = n > 0
+    tt, n = _thin(tt[pos], n[pos])
+    ax.plot(tt, tol.ANGULAR_MOMENTUM_ROUNDING_ULPS * n * tol.EPS, ":", color="k", lw=1.0,
+            label=f"rounding bound ({tol.ANGULAR_MOMENTUM_ROUNDING_ULPS:g} ulp per step)")
+
+
+def angular_momentum_figure(problem: str, rows: pd.DataFrame, palette: Palette,
+                            symplectic: Mapping[str, bool],
+                            classes: Mapping[str, str] | None = None) -> Figure | None:
+    return energy_figure(problem, rows, palette, symplectic, quantity="angular_momentum",
+                         classes=classes)
+
+

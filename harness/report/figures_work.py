@@ -1,0 +1,151 @@
+"""Work figures: error against evaluations and wall time per problem (the best method of each
+family bold), and benchmark values against commit date."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+
+from harness.report.figure_style import (
+    _LEGEND_CHAR_W,
+    LOG_CEILING,
+    Palette,
+    _label,
+    _loglog,
+    _multiples,
+    _new,
+    _small_ticks,
+    _styled,
+)
+from harness.report.figure_svg import Figure, to_svg
+
+__all__ = ['WORK_TARGET_ERROR', 'best_per_family', 'work_precision_figure', 'perf_history_figure']
+
+# -- work-precision -----------------------------------------------------------------------------------
+# The precision the "best of each family" is judged at: every method of the catalogue reaches it
+# on the work-precision problems, so the cheapest one to get there is well defined.
+WORK_TARGET_ERROR = 1e-6
+
+
+def best_per_family(rows: pd.DataFrame, families: Mapping[str, str], cost: str = "rhs_evals"
+                    ) -> dict[str, str]:
+    """family -> its method that reaches WORK_TARGET_ERROR for the least `cost` on these rows
+    (one problem); a family where none reaches it: the method with the lowest error."""
+    best: dict[str, tuple[int, float, str]] = {}
+    if rows.empty or cost not in rows:
+        return {}
+    err = rows["error"].astype(float)
+    x = rows[cost].astype(float)
+    ok = np.isfinite(err) & (err > 0) & np.isfinite(x) & (x > 0)
+    for stepper, g in rows[ok].groupby("stepper", sort=False):
+        e, c = g["error"].astype(float), g[cost].astype(float)
+        hit = c[e <= WORK_TARGET_ERROR]
+        score = (0, float(hit.min()), stepper) if len(hit) else (1, float(e.min()), stepper)
+        fam = families.get(stepper, "")
+        if fam not in best or score < best[fam]:
+            best[fam] = score
+    return {f: s[2] for f, s in best.items()}
+
+
+@_styled
+def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
+                          adaptive: Mapping[str, bool]) -> Figure | None:
+    """Error against evaluations (left) and wall time (right) on one problem, one line per
+    method; the best method of each family (`best_per_family`) drawn bold and named in the
+    legend, the others thin and faint on the left only (wall times of a shared machine are too
+    noisy to rank the rest). Adaptive peers dashed with hollow markers."""
+    from matplotlib.lines import Line2D
+
+    err = rows["error"].astype(float) if "error" in rows else pd.Series(dtype=float)
+    frame = rows[np.isfinite(err) & (err > 0) & (err <= LOG_CEILING)]
+    if frame.empty:
+        return None
+    costs = [c for c in ("rhs_evals", "wall_s") if c in frame]
+    if not costs:
+        return None
+    best = best_per_family(frame, palette.families)
+    bold = set(best.values())
+    units = {}
+    if "evals_unit" in frame:
+        units = {k: str(v.iloc[0]) for k, v in frame.groupby("stepper", sort=False)["evals_unit"]}
+    longest = max([len(_label(s)) + len(f) + 8 for f, s in best.items()] + [22])
+    fig, axes = _multiples(len(costs), ncols=2, panel=(3.3, 2.7), sharey=True,
+                           right=longest * _LEGEND_CHAR_W * 0.85 + 0.5)
+    for ax, cost in zip(axes, costs, strict=True):
+        for stepper, s in frame.groupby("stepper", sort=False):
+            x = s[cost].astype(float)
+            s = s.assign(_x=x)[np.isfinite(x) & (x > 0)].sort_values("_x")
+            if s.empty:
+                continue
+            peer = adaptive.get(stepper, False)
+            strong = stepper in bold
+            if cost == "wall_s" and not strong:
+                continue  # wall time: the best of each family only (all of them are in the CSV)
+            c = palette.colour(stepper)
+            ax.plot(s["_x"], s["error"].astype(float), "--" if peer else "-",
+                    marker=palette.marker(stepper) if strong else None, ms=3.2, lw=1.6 if strong else 0.6,
+                    alpha=1.0 if strong else 0.3, color=c,
+                    markerfacecolor="none" if peer else c, zorder=3 if strong else 2)
+        _loglog(ax)
+        ax.set_xlabel("right-hand-side or force evaluations" if cost == "rhs_evals" else "wall time (s)",
+                      fontsize=7.5)
+        _small_ticks(ax)
+    axes[0].set_ylabel("error at the final time", fontsize=7.5)
+    handles = [Line2D([], [], color=palette.colour(s), marker=palette.marker(s), ms=3, lw=1.6,
+                      ls="--" if adaptive.get(s) else "-",
+                      label=f"{_label(s)} (best {fam or 'method'})"
+                      + (f" [{units[s]}s]" if units.get(s, "f-or-force") != "f-or-force" else ""))
+               for fam, s in best.items()]
+    handles.append(Line2D([], [], color="0.6", lw=0.6, alpha=0.5, label="other methods (faint)"))
+    axes[-1].legend(handles=handles, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0,
+                    frameon=False, fontsize=6.5)
+    fig.suptitle(f"Work–precision on {_label(problem)}", fontsize=8.5)
+    cols = [c for c in ("stepper", "h", "tol", "error", "rhs_evals", "wall_s") if c in frame]
+    data = frame[cols].reset_index(drop=True).assign(
+        best_of_family=lambda d: d["stepper"].isin(bold).astype(int))
+    return to_svg(fig, f"work-{problem}", f"error against work on {problem}", data)
+
+
+
+# -- performance history --------------------------------------------------------------------------
+@_styled
+def perf_history_figure(history: pd.DataFrame, max_panels: int = 12,
+                        max_lines: int = 8) -> Figure | None:
+    """Benchmark value against commit date: one panel per benchmark (up to `max_panels`), one
+    line per parameter set (up to `max_lines`)."""
+    if history is None or history.empty:
+        return None
+    h = history.copy()
+    h["date"] = pd.to_datetime(h["date"], errors="coerce", utc=True)
+    h = h[np.isfinite(pd.to_numeric(h["value"], errors="coerce"))]
+    if h.empty:
+        return None
+    benches = list(dict.fromkeys(h["benchmark"].astype(str)))[:max_panels]
+    ncols = min(3, len(benches))
+    nrows = int(math.ceil(len(benches) / ncols))
+    fig, axes = _new(nrows, ncols, size=(3.4 * ncols + 0.6, 2.5 * nrows + 0.4))
+    for ax in axes.flat[len(benches):]:
+        ax.set_visible(False)
+    for ax, bench in zip(axes.flat, benches, strict=False):
+        g = h[h["benchmark"].astype(str) == bench]
+        unit = str(g["unit"].dropna().iloc[0]) if g["unit"].notna().any() else ""
+        for params, s in list(g.groupby(g["params"].astype(str), sort=False))[:max_lines]:
+            s = s.sort_values("date")
+            ax.plot(s["date"], pd.to_numeric(s["value"]), marker="o", ms=3, lw=1.0,
+                    label=_label(params) if params not in ("", "()", "None") else None)
+        if unit in ("seconds", "s", "bytes"):
+            _loglog(ax, x=False)
+        ax.set_title(_label(bench), fontsize=8)
+        ax.set_ylabel(unit, fontsize=7)
+        ax.tick_params(labelsize=6, axis="both")
+        for lbl in ax.get_xticklabels():
+            lbl.set_rotation(30)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=5.5, frameon=False)
+    return to_svg(fig, "perf-history", "benchmark values against commit date",
+                  h.reset_index(drop=True))
+
+
