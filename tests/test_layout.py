@@ -51,15 +51,6 @@ CONTRACT_HOOKS = {"_start", "_step", "_observe", "_reverse", "_advance", "_start
 DOCUMENTED = {"os._exit"}
 # Reads in modules owned by other helpers, to be fixed by their owners (file -> the reads).
 KNOWN = {
-    "harness/report/build.py": {"from harness.runner import _check_names",
-                                "from harness.runner import _check_plugins"},
-    "harness/report/compare.py": {"from harness.report.sections import _missing_value"},
-    "harness/report/experiment_sections.py": {"from harness.report.sections import _yn"},
-    "harness/report/fixed_sections.py": {"from harness.report.sections import _cell"},
-    "harness/report/verdicts.py": {"from harness.report.sections import _missing_value"},
-    "harness/report/figures.py": {"fig._harness_layout"},
-    "harness/report/step_control.py": {"F._styled", "F._new", "F._loglog", "F._legend_outside",
-                                       "F._thin", "F._clip_log", "F._label"},
     "implementations/rebound_adapter.py": {"clone._info"},
 }
 

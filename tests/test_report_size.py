@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 from matplotlib.figure import Figure as MplFigure
 
-from harness.report.figure_style import _styled
+from harness.report.figure_style import styled
 from harness.report.figure_svg import _relative_path, check_svg, page_css, to_svg
 from harness.report.sections import csv_download
 from harness.report.sizes import report_sizes, section_totals
@@ -59,7 +59,7 @@ def test_other_paths_are_left_as_they_are():
         assert _relative_path(d) == d
 
 
-@_styled
+@styled
 def _figure(colour: str, slug: str):
     fig = MplFigure(figsize=(3, 2))
     ax = fig.subplots()

@@ -187,13 +187,13 @@ def build_report(
     fresh = _check_flag("fresh", fresh)
     root = reports_root(output)
     from harness import registry
-    from harness.runner import _check_names, _check_plugins, run_experiments
+    from harness.runner import check_names, check_plugins, run_experiments
 
-    plugin_paths = _check_plugins(plugins)
+    plugin_paths = check_plugins(plugins)
     for p in plugin_paths:
         registry.load_plugin(p)
-    stepper_names = _check_names("steppers", steppers)
-    problem_names = _check_names("problems", problems)
+    stepper_names = check_names("steppers", steppers)
+    problem_names = check_names("problems", problems)
     if not stepper_names:
         raise InputError("`steppers` must name at least one stepper")
     if not problem_names:

@@ -22,7 +22,7 @@ from typing import Any
 
 import pandas as pd
 
-from harness.report.sections import RunView, _missing_value, anchor, experiment_key, section_spec
+from harness.report.sections import RunView, is_missing, anchor, experiment_key, section_spec
 
 __all__ = ["Previous", "Comparison", "load_previous", "compare_runs", "VERDICTS_FILE"]
 
@@ -176,7 +176,7 @@ def compare_runs(view: RunView, verdicts: pd.DataFrame, previous: Previous) -> C
 
 
 def _num(x: Any) -> float:
-    if _missing_value(x):
+    if is_missing(x):
         return math.nan
     try:
         return float(x)

@@ -22,7 +22,7 @@ from harness.report.sections import (
     RunView,
     ScoreColumn,
     Section,
-    _yn,
+    yes_no,
     anchor,
     df_table,
     fmt,
@@ -200,11 +200,11 @@ def _claimed_measured(view: RunView, name: str, stepper: str, claimed: bool,
     """'claimed / measured' with the measured part linked to a row that shows it."""
     w = list(within)
     if not w:
-        return [(f"{_yn(claimed)} / —", "")], False
+        return [(f"{yes_no(claimed)} / —", "")], False
     n = sum(1 for ok, _ in w if ok)
     measured = "yes" if n == len(w) else ("no" if n == 0 else f"mixed ({n}/{len(w)} yes)")
     witness = next((a for ok, a in w if ok != claimed), w[0][1])  # a row against the claim, if any
-    return [(f"{_yn(claimed)} / ", ""), (measured, "#" + witness)], True
+    return [(f"{yes_no(claimed)} / ", ""), (measured, "#" + witness)], True
 
 
 def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bool]:

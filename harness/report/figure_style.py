@@ -35,12 +35,12 @@ LOG_FLOOR = 1e-18
 LOG_CEILING = 1e20
 
 
-def _clip_log(y: Any) -> np.ndarray:
+def clip_log(y: Any) -> np.ndarray:
     """Values for a log axis: non-finite -> NaN (a gap), the rest clipped to [floor, ceiling]."""
     a = np.asarray(y, dtype=float)
     return np.where(np.isfinite(a), np.clip(a, LOG_FLOOR, LOG_CEILING), np.nan)
 
-_RC = {
+RC_PARAMS = {
     "svg.fonttype": "none",
     "font.family": "DejaVu Sans",
     "font.size": 9.0,
@@ -113,7 +113,7 @@ def panels(steppers: Iterable[str], group: Mapping[str, str] | Any,
     return [(", ".join(names), members) for names, members in out]
 
 
-def _styled(fn):
+def styled(fn):
     """Run a figure function with the report's matplotlib settings (text objects read them
     when they are created, so the whole drawing happens inside)."""
     import functools
@@ -122,13 +122,13 @@ def _styled(fn):
     def wrapper(*args, **kwargs):
         import matplotlib
 
-        with matplotlib.rc_context(_RC):
+        with matplotlib.rc_context(RC_PARAMS):
             return fn(*args, **kwargs)
 
     return wrapper
 
 
-def _new(nrows: int = 1, ncols: int = 1, *, size: tuple[float, float] = (7.2, 4.2), **kw: Any):
+def new_figure(nrows: int = 1, ncols: int = 1, *, size: tuple[float, float] = (7.2, 4.2), **kw: Any):
     from matplotlib.figure import Figure as MplFigure
 
     fig = MplFigure(figsize=size)
@@ -154,7 +154,7 @@ def _power_of_ten(value: float, _pos: Any = None) -> str:
     return "10" + str(k).translate(_SUPERSCRIPT)
 
 
-def _loglog(ax: Any, x: bool = True, y: bool = True) -> None:
+def loglog_axes(ax: Any, x: bool = True, y: bool = True) -> None:
     """Log scales with plain-text power-of-ten tick labels."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
 
@@ -175,7 +175,7 @@ def _loglog(ax: Any, x: bool = True, y: bool = True) -> None:
             axis.set_minor_formatter(NullFormatter())
 
 
-def _label(text: Any) -> str:
+def label_text(text: Any) -> str:
     """A name as it appears in a legend: plain text, bounded length."""
     s = str(text)
     return s if len(s) <= 40 else s[:37] + "..."
@@ -191,10 +191,10 @@ def _finite_positive(values: Iterable[float]) -> np.ndarray:
 # of the report's drawing time).
 _AX_W, _AX_H = 5.0, 3.3
 _LEFT, _BOTTOM, _TOP, _GAP = 0.95, 0.6, 0.4, 0.2
-_LEGEND_CHAR_W, _LEGEND_HANDLE_W, _LEGEND_ROW_H = 0.052, 0.6, 0.16
+LEGEND_CHAR_W, _LEGEND_HANDLE_W, _LEGEND_ROW_H = 0.052, 0.6, 0.16
 
 
-def _legend_outside(ax: Any, handles: list | None = None, *, layout: bool = True,
+def legend_outside(ax: Any, handles: list | None = None, *, layout: bool = True,
                     **kw: Any) -> None:
     """Put the legend right of the axes; with `layout`, size a one-panel figure around both
     (`to_svg` then keeps this layout instead of computing a tight bounding box)."""
@@ -209,17 +209,17 @@ def _legend_outside(ax: Any, handles: list | None = None, *, layout: bool = True
         return
     ncol = int(kw.get("ncol", 1))
     rows = math.ceil(len(labels) / ncol) if labels else 0
-    legend_w = (max((len(t) for t in labels), default=0) * _LEGEND_CHAR_W + _LEGEND_HANDLE_W) * ncol
+    legend_w = (max((len(t) for t in labels), default=0) * LEGEND_CHAR_W + _LEGEND_HANDLE_W) * ncol
     legend_h = rows * _LEGEND_ROW_H + 0.1
     width = _LEFT + _AX_W + (_GAP + legend_w if labels else 0.3)
     height = max(_BOTTOM + _AX_H + _TOP, _TOP + legend_h + 0.2)
     fig.set_size_inches(width, height)
     bottom = height - _TOP - _AX_H
     ax.set_position([_LEFT / width, bottom / height, _AX_W / width, _AX_H / height])
-    fig._harness_layout = True  # to_svg: no tight bounding box needed
+    fig.harness_layout = True  # to_svg: no tight bounding box needed
 
 
-def _thin(x: np.ndarray, y: np.ndarray, n: int = MAX_POINTS_PER_LINE) -> tuple[np.ndarray, np.ndarray]:
+def thin_line(x: np.ndarray, y: np.ndarray, n: int = MAX_POINTS_PER_LINE) -> tuple[np.ndarray, np.ndarray]:
     """Keep about `n` points log-spaced in x (x > 0), keeping the largest y in each bin so an
     envelope keeps its peaks."""
     order = np.argsort(x)
@@ -243,7 +243,7 @@ def _thin(x: np.ndarray, y: np.ndarray, n: int = MAX_POINTS_PER_LINE) -> tuple[n
 _PANEL_W, _PANEL_H = 2.9, 2.25
 
 
-def _multiples(n: int, *, ncols: int = 3, panel: tuple[float, float] = (_PANEL_W, _PANEL_H),
+def small_multiples(n: int, *, ncols: int = 3, panel: tuple[float, float] = (_PANEL_W, _PANEL_H),
                sharex: bool = False, sharey: bool = False, right: float = 0.0) -> tuple[Any, list[Any]]:
     """A grid of `n` panels (unused cells hidden), `ncols` wide at most, laid out by fixed
     margins in inches (`right`: extra room for a legend), so `to_svg` needs no tight-bbox pass."""
@@ -252,18 +252,18 @@ def _multiples(n: int, *, ncols: int = 3, panel: tuple[float, float] = (_PANEL_W
     left, bottom, top, wgap, hgap = 0.75, 0.5, 0.5, 0.35 if sharey else 0.6, 0.45
     width = left + ncols * panel[0] + (ncols - 1) * wgap + 0.15 + right
     height = bottom + nrows * panel[1] + (nrows - 1) * hgap + top
-    fig, axes = _new(nrows, ncols, size=(width, height), sharex=sharex, sharey=sharey)
+    fig, axes = new_figure(nrows, ncols, size=(width, height), sharex=sharex, sharey=sharey)
     fig.subplots_adjust(left=left / width, right=(width - 0.15 - right) / width,
                         bottom=bottom / height, top=(height - top) / height,
                         wspace=wgap / panel[0], hspace=hgap / panel[1])
-    fig._harness_layout = True  # to_svg: this layout, no tight bounding box
+    fig.harness_layout = True  # to_svg: this layout, no tight bounding box
     flat = list(axes.flat)
     for ax in flat[n:]:
         ax.set_visible(False)
     return fig, flat[:n]
 
 
-def _panel_legend(ax: Any, handles: list | None = None, **kw: Any) -> None:
+def panel_legend(ax: Any, handles: list | None = None, **kw: Any) -> None:
     if handles is None:
         handles, _ = ax.get_legend_handles_labels()
     if handles:
@@ -272,7 +272,7 @@ def _panel_legend(ax: Any, handles: list | None = None, **kw: Any) -> None:
                   labelspacing=0.25, **kw)
 
 
-def _small_ticks(ax: Any) -> None:
+def small_ticks(ax: Any) -> None:
     """Small labels; no tick marks and no vertical grid lines (the horizontal grid carries the
     reading; each mark is a few dozen bytes of SVG, times hundreds of panels)."""
     ax.tick_params(labelsize=6.5, length=0, pad=2)

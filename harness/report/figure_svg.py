@@ -18,7 +18,7 @@ from typing import Any
 
 import pandas as pd
 
-from harness.report.figure_style import _RC
+from harness.report.figure_style import RC_PARAMS
 
 __all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS"]
 
@@ -108,7 +108,7 @@ def to_svg(fig: Any, slug: str, alt: str, data: pd.DataFrame | None = None) -> F
     """Render a matplotlib figure (made without pyplot, so no global state) to checked,
     deterministic inline SVG."""
     buf = io.StringIO()
-    tight = not getattr(fig, "_harness_layout", False)
+    tight = not getattr(fig, "harness_layout", False)
     with _rc(slug):
         fig.savefig(buf, format="svg", bbox_inches="tight" if tight else None,
                     metadata={"Date": None})
@@ -353,6 +353,6 @@ def _attr(text: str) -> str:
 def _rc(slug: str):
     import matplotlib as mpl
 
-    return mpl.rc_context({**_RC, "svg.hashsalt": f"harness-report-{slug}"})
+    return mpl.rc_context({**RC_PARAMS, "svg.hashsalt": f"harness-report-{slug}"})
 
 

@@ -12,15 +12,15 @@ from harness import tolerances as tol
 from harness.report.figure_style import (
     LOG_CEILING,
     Palette,
-    _clip_log,
-    _label,
-    _legend_outside,
-    _loglog,
-    _multiples,
-    _new,
-    _panel_legend,
-    _small_ticks,
-    _styled,
+    clip_log,
+    label_text,
+    legend_outside,
+    loglog_axes,
+    small_multiples,
+    new_figure,
+    panel_legend,
+    small_ticks,
+    styled,
     panels,
 )
 from harness.report.figure_svg import Figure, to_svg
@@ -52,7 +52,7 @@ def same_curves(rows: pd.DataFrame) -> dict[str, list[str]]:
     return out
 
 
-@_styled
+@styled
 def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                        reference_error: float | None) -> Figure | None:
     """Global error against h (log-log) on one problem, one panel per family (at most
@@ -69,7 +69,7 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     twins = same_curves(g)
     shown = [s for s in dict.fromkeys(g["stepper"]) if s in twins]
     groups = panels(shown, palette.families)
-    fig, axes = _multiples(len(groups), sharey=True)
+    fig, axes = small_multiples(len(groups), sharey=True)
     floor = reference_error if reference_error is not None and np.isfinite(reference_error) \
         and reference_error > 0 else None
     data = []
@@ -94,7 +94,7 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                 ax.plot(hh, np.exp(f["intercept"]) * hh ** f["order"], "--", color=c, lw=1.8)
             fit_text = f"slope {slope:.2f}" if np.isfinite(slope) else "no fit"
             same = f" and {len(twins[stepper])} identical" if twins[stepper] else ""
-            label = f"{_label(stepper)}{same} ({fit_text})"
+            label = f"{label_text(stepper)}{same} ({fit_text})"
             handles.append(Line2D([], [], color=c, marker=palette.marker(stepper), ms=3, lw=0.8,
                                   label=label))
             excluded = s["excluded"].fillna("").astype(str).to_numpy() if "excluded" in s else \
@@ -104,47 +104,47 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                                           "in_fit": used.astype(int), "excluded": excluded}))
         if floor is not None:
             ax.axhline(floor, color="k", lw=0.9, ls=":")
-        _loglog(ax)
+        loglog_axes(ax)
         ax.set_title(title)
-        _small_ticks(ax)
-        _panel_legend(ax, handles, loc="lower right")
+        small_ticks(ax)
+        panel_legend(ax, handles, loc="lower right")
     if floor is not None:
         lo, hi = axes[0].get_ylim()
         axes[0].set_ylim(min(lo, floor / 3.0), hi)  # the floor line stays in view
     fig.supxlabel("step size h", fontsize=8)
     fig.supylabel("global error at the final time", fontsize=8)
-    fig.suptitle(f"Convergence on {_label(problem)}", fontsize=8.5)
+    fig.suptitle(f"Convergence on {label_text(problem)}", fontsize=8.5)
     frame = pd.concat(data, ignore_index=True) if data else None
     return to_svg(fig, f"convergence-{problem}", f"error against step size on {problem}", frame)
 
 
 
 # -- roundoff -------------------------------------------------------------------------------------
-@_styled
+@styled
 def roundoff_figure(rows: pd.DataFrame, palette: Palette) -> Figure | None:
     """Position error against h at a fixed step count, one panel per problem, with the
     truncation error extrapolated from the largest step."""
     if rows.empty:
         return None
     problems = list(dict.fromkeys(rows["problem"]))
-    fig, axes = _new(1, len(problems), size=(3.9 * len(problems) + 1.6, 3.8))
+    fig, axes = new_figure(1, len(problems), size=(3.9 * len(problems) + 1.6, 3.8))
     for ax, problem in zip(axes[0], problems, strict=True):
         g = rows[rows["problem"] == problem]
         for stepper, s in g.groupby("stepper", sort=False):
             s = s.sort_values("h")
-            ax.plot(s["h"], _clip_log(s["error"]), "-",
+            ax.plot(s["h"], clip_log(s["error"]), "-",
                     marker=palette.marker(stepper), ms=4, color=palette.colour(stepper),
-                    label=_label(stepper))
+                    label=label_text(stepper))
         first = g.sort_values("h").groupby("stepper").tail(1)
         if len(first):
             s = g[g["stepper"] == first["stepper"].iloc[0]].sort_values("h")
-            ax.plot(s["h"], _clip_log(s["truncation_estimate"]), ":",
+            ax.plot(s["h"], clip_log(s["truncation_estimate"]), ":",
                     color="k", lw=0.9, label="truncation alone (∝ h³ at fixed N)")
-        _loglog(ax)
+        loglog_axes(ax)
         ax.set_xlabel("step size h")
-        ax.set_title(f"{_label(problem)}, N = {int(g['n_steps'].iloc[0])} steps")
+        ax.set_title(f"{label_text(problem)}, N = {int(g['n_steps'].iloc[0])} steps")
     axes[0][0].set_ylabel("relative position error")
-    _legend_outside(axes[0][-1], layout=False)
+    legend_outside(axes[0][-1], layout=False)
     cols = [c for c in ("stepper", "problem", "n_steps", "h", "error", "truncation_estimate") if c in rows]
     return to_svg(fig, "roundoff", "position error against step size at a fixed step count",
                   rows[cols].reset_index(drop=True))

@@ -14,14 +14,14 @@ from harness.report.figure_style import (
     LOG_CEILING,
     LOG_FLOOR,
     Palette,
-    _clip_log,
-    _label,
-    _loglog,
-    _multiples,
-    _panel_legend,
-    _small_ticks,
-    _styled,
-    _thin,
+    clip_log,
+    label_text,
+    loglog_axes,
+    small_multiples,
+    panel_legend,
+    small_ticks,
+    styled,
+    thin_line,
     panels,
 )
 from harness.report.figure_svg import Figure, to_svg
@@ -29,7 +29,7 @@ from harness.report.figure_svg import Figure, to_svg
 __all__ = ['reversibility_figure', 'energy_figure', 'angular_momentum_figure']
 
 # -- reversibility ----------------------------------------------------------------------------------
-@_styled
+@styled
 def reversibility_figure(table: pd.DataFrame, palette: Palette,
                          symmetric: Mapping[str, bool]) -> Figure | None:
     """Return error over the rounding bound against the number of steps N, all problems in one
@@ -43,7 +43,7 @@ def reversibility_figure(table: pd.DataFrame, palette: Palette,
     t = table.assign(ratio=table["return_error_ulps"].astype(float)
                      / table["rounding_bound_ulps"].astype(float))
     groups = panels(list(dict.fromkeys(t["stepper"])), palette.families)
-    fig, axes = _multiples(len(groups), sharex=True, sharey=True)
+    fig, axes = small_multiples(len(groups), sharex=True, sharey=True)
     for ax, (title, members) in zip(axes, groups, strict=True):
         for stepper in members:
             sym = symmetric.get(stepper, False)
@@ -53,12 +53,12 @@ def reversibility_figure(table: pd.DataFrame, palette: Palette,
             y = np.where(np.isfinite(y), np.clip(y, 1e-3, LOG_CEILING), np.nan)
             ax.plot(worst.index.to_numpy(float), y, "-" if sym else "--", marker=palette.marker(stepper),
                     color=palette.colour(stepper), ms=3, lw=0.9,
-                    label=f"{_label(stepper)}{' (symmetric)' if sym else ''}")
+                    label=f"{label_text(stepper)}{' (symmetric)' if sym else ''}")
         ax.axhline(1.0, color="k", ls=":", lw=1.0, label="rounding bound")
-        _loglog(ax)
+        loglog_axes(ax)
         ax.set_title(title)
-        _small_ticks(ax)
-        _panel_legend(ax, loc="upper left")
+        small_ticks(ax)
+        panel_legend(ax, loc="upper left")
     fig.supxlabel("steps N forward, then N back", fontsize=8)
     fig.supylabel("return error / rounding bound (0 at 10⁻³)", fontsize=8)
     fig.suptitle("Time reversibility, every problem", fontsize=8)
@@ -69,7 +69,7 @@ def reversibility_figure(table: pd.DataFrame, palette: Palette,
 
 
 # -- energy -------------------------------------------------------------------------------------------
-@_styled
+@styled
 def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                   symplectic: Mapping[str, bool], quantity: str = "energy",
                   classes: Mapping[str, str] | None = None) -> Figure | None:
@@ -86,7 +86,7 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     steppers.sort(key=lambda s: order.get(classes.get(s, ""), len(order)))
     groups = panels(steppers, {s: f"drift class: {classes.get(s) or 'not classified'}"
                                for s in steppers}, pack=False)
-    fig, axes = _multiples(len(groups), sharex=True, sharey=True)
+    fig, axes = small_multiples(len(groups), sharex=True, sharey=True)
     what = "energy" if quantity == "energy" else "angular momentum"
     data = []
     for ax, (title, members) in zip(axes, groups, strict=True):
@@ -94,20 +94,20 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             s = g[g["stepper"] == stepper]
             t = s["t"].astype(float).to_numpy()
             t0 = float(np.nanmin(t))
-            x, y = _thin(t - t0, s["error"].astype(float).to_numpy())
+            x, y = thin_line(t - t0, s["error"].astype(float).to_numpy())
             data.append(pd.DataFrame({"stepper": stepper, "t": x, "error": y}))
             sym = symplectic.get(stepper, False)
-            ax.plot(x, _clip_log(y), "-" if sym else "--", color=palette.colour(stepper), lw=0.9,
-                    label=f"{_label(stepper)}{' (symplectic)' if sym else ''}")
+            ax.plot(x, clip_log(y), "-" if sym else "--", color=palette.colour(stepper), lw=0.9,
+                    label=f"{label_text(stepper)}{' (symplectic)' if sym else ''}")
         if quantity != "energy":
             _rounding_bound(ax, g)
-        _loglog(ax)
+        loglog_axes(ax)
         ax.set_title(title)
-        _small_ticks(ax)
-        _panel_legend(ax, loc="best")
+        small_ticks(ax)
+        panel_legend(ax, loc="best")
     fig.supxlabel("t", fontsize=8)
     fig.supylabel(f"relative {what} error (0 at {LOG_FLOOR:g})", fontsize=8)
-    fig.suptitle(f"{what.capitalize()} error on {_label(problem)}", fontsize=8.5)
+    fig.suptitle(f"{what.capitalize()} error on {label_text(problem)}", fontsize=8.5)
     return to_svg(fig, f"{quantity}-{problem}", f"relative {what} error against time on {problem}",
                   pd.concat(data, ignore_index=True) if data else None)
 
@@ -122,7 +122,7 @@ def _rounding_bound(ax: Any, g: pd.DataFrame) -> None:
     n = first["step"].astype(float).to_numpy()
     tt = first["t"].astype(float).to_numpy() - float(first["t"].astype(float).min())
     pos = n > 0
-    tt, n = _thin(tt[pos], n[pos])
+    tt, n = thin_line(tt[pos], n[pos])
     ax.plot(tt, tol.ANGULAR_MOMENTUM_ROUNDING_ULPS * n * tol.EPS, ":", color="k", lw=1.0,
             label=f"rounding bound ({tol.ANGULAR_MOMENTUM_ROUNDING_ULPS:g} ulp per step)")
 

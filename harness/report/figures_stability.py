@@ -9,14 +9,14 @@ import pandas as pd
 from harness.report.figure_style import (
     LOG_FLOOR,
     Palette,
-    _clip_log,
-    _label,
-    _loglog,
-    _multiples,
-    _new,
-    _panel_legend,
-    _small_ticks,
-    _styled,
+    clip_log,
+    label_text,
+    loglog_axes,
+    small_multiples,
+    new_figure,
+    panel_legend,
+    small_ticks,
+    styled,
     panels,
 )
 from harness.report.figure_svg import Figure, to_svg
@@ -36,7 +36,7 @@ def _grid(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray] | Non
     return pivot.columns.to_numpy(float), pivot.index.to_numpy(float), pivot.to_numpy(float)
 
 
-@_styled
+@styled
 def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | None:
     """Boundaries |R(z)| = 1 of the first-order methods, overlaid one panel per family; the
     stable side is shaded lightly for each method."""
@@ -46,7 +46,7 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | N
     if not names:
         return None
     groups = panels(names, palette.families)
-    fig, axes = _multiples(len(groups), panel=(3.1, 2.8), sharex=True, sharey=True)
+    fig, axes = small_multiples(len(groups), panel=(3.1, 2.8), sharex=True, sharey=True)
     data = []
     for ax, (title, members) in zip(axes, groups, strict=True):
         handles = []
@@ -57,19 +57,19 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | N
             if np.nanmin(z) > 1 or np.nanmax(z) <= 1:
                 where = "stable on the whole grid" if np.nanmax(z) <= 1 else "unstable on the grid"
                 handles.append(Line2D([], [], color=c, lw=0, marker="s",
-                                      label=f"{_label(stepper)} ({where})"))
+                                      label=f"{label_text(stepper)} ({where})"))
                 continue
             ax.contourf(x, y, z, levels=[-1.0, 1.0], colors=[c], alpha=0.08)
             cs = ax.contour(x, y, z, levels=[1.0], colors=[c], linewidths=1.1)
             for seg in cs.allsegs[0]:
                 data.append(pd.DataFrame({"stepper": stepper, "re": seg[:, 0], "im": seg[:, 1]}))
-            handles.append(Line2D([], [], color=c, lw=1.1, label=_label(stepper)))
+            handles.append(Line2D([], [], color=c, lw=1.1, label=label_text(stepper)))
         ax.axhline(0, color="0.5", lw=0.5)
         ax.axvline(0, color="0.5", lw=0.5)
         ax.set_aspect("equal")
         ax.set_title(title)
-        _small_ticks(ax)
-        _panel_legend(ax, handles, loc="upper left")
+        small_ticks(ax)
+        panel_legend(ax, handles, loc="upper left")
     fig.supxlabel("Re(hλ)", fontsize=8)
     fig.supylabel("Im(hλ)", fontsize=8)
     fig.suptitle("Stability boundaries |R(hλ)| = 1 (probe)", fontsize=8.5)
@@ -77,14 +77,14 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | N
                   pd.concat(data, ignore_index=True) if data else None)
 
 
-@_styled
+@styled
 def hw_limits_figure(summary: pd.DataFrame, palette: Palette) -> Figure | None:
     """Bar chart of the h omega stability limits of the Newtonian steppers (unbounded: hatched
     bar to the search limit)."""
     s = summary[summary["form"] == "newtonian"]
     if s.empty:
         return None
-    fig, axes = _new(size=(6.4, 0.22 * len(s) + 1.0))
+    fig, axes = new_figure(size=(6.4, 0.22 * len(s) + 1.0))
     ax = axes[0][0]
     names = [str(n) for n in s["stepper"]]
     values = s["hw_limit"].astype(float).to_numpy()
@@ -97,7 +97,7 @@ def hw_limits_figure(summary: pd.DataFrame, palette: Palette) -> Figure | None:
         else:
             ax.barh(i, cap, color="none", edgecolor=palette.colour(name), hatch="//")
             ax.text(cap, i, " unbounded", va="center", fontsize=6.5)
-    ax.set_yticks(range(len(names)), [_label(n) for n in names])
+    ax.set_yticks(range(len(names)), [label_text(n) for n in names])
     ax.tick_params(labelsize=6.5)
     ax.invert_yaxis()
     ax.set_xlabel("largest stable hω (harmonic oscillator x'' = -ω²x)")
@@ -109,7 +109,7 @@ def hw_limits_figure(summary: pd.DataFrame, palette: Palette) -> Figure | None:
 
 
 # -- symplecticity --------------------------------------------------------------------------------
-@_styled
+@styled
 def symplecticity_figure(summary: pd.DataFrame, palette: Palette) -> Figure | None:
     """Deviation from symplecticity per stepper (x, grouped by family) and problem (one point
     each), log scale, with the finite-difference threshold the verdict uses; claimed-symplectic
@@ -118,13 +118,13 @@ def symplecticity_figure(summary: pd.DataFrame, palette: Palette) -> Figure | No
         return None
     s = summary.assign(_d=summary["deviation"].astype(float))
     names = sorted(dict.fromkeys(s["stepper"]), key=lambda n: (palette.family(n), n))
-    fig, axes = _new(size=(max(5.0, 0.2 * len(names) + 1.6), 3.4))
+    fig, axes = new_figure(size=(max(5.0, 0.2 * len(names) + 1.6), 3.4))
     ax = axes[0][0]
     for i, name in enumerate(names):
         g = s[s["stepper"] == name]
         claimed = bool(g["claimed_symplectic"].iloc[0]) if "claimed_symplectic" in g else False
         c = palette.colour(name)
-        ax.plot(np.full(len(g), i), _clip_log(g["_d"]), linestyle="none", marker=palette.marker(name),
+        ax.plot(np.full(len(g), i), clip_log(g["_d"]), linestyle="none", marker=palette.marker(name),
                 ms=4, color=c, markerfacecolor=c if claimed else "none")
     if "threshold" in s:
         thr = s["threshold"].astype(float)
@@ -133,8 +133,8 @@ def symplecticity_figure(summary: pd.DataFrame, palette: Palette) -> Figure | No
             ax.axhline(float(thr.max()), color="k", ls=":", lw=1.0)
             ax.text(len(names) - 0.5, float(thr.max()), " threshold", fontsize=6.5, va="bottom",
                     ha="right")
-    _loglog(ax, x=False)
-    ax.set_xticks(range(len(names)), [_label(n) for n in names], rotation=60, ha="right", fontsize=6.5)
+    loglog_axes(ax, x=False)
+    ax.set_xticks(range(len(names)), [label_text(n) for n in names], rotation=60, ha="right", fontsize=6.5)
     ax.set_xlim(-0.6, len(names) - 0.4)
     ax.set_ylabel(f"‖JᵀΩJ − Ω‖ / ‖J‖² (0 at {LOG_FLOOR:g})", fontsize=7.5)
     ax.set_title("Symplecticity: filled = claimed symplectic, hollow = not claimed", fontsize=8)

@@ -10,15 +10,15 @@ import numpy as np
 import pandas as pd
 
 from harness.report.figure_style import (
-    _LEGEND_CHAR_W,
+    LEGEND_CHAR_W,
     LOG_CEILING,
     Palette,
-    _label,
-    _loglog,
-    _multiples,
-    _new,
-    _small_ticks,
-    _styled,
+    label_text,
+    loglog_axes,
+    small_multiples,
+    new_figure,
+    small_ticks,
+    styled,
 )
 from harness.report.figure_svg import Figure, to_svg
 
@@ -50,7 +50,7 @@ def best_per_family(rows: pd.DataFrame, families: Mapping[str, str], cost: str =
     return {f: s[2] for f, s in best.items()}
 
 
-@_styled
+@styled
 def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                           adaptive: Mapping[str, bool]) -> Figure | None:
     """Error against evaluations (left) and wall time (right) on one problem, one line per
@@ -71,9 +71,9 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     units = {}
     if "evals_unit" in frame:
         units = {k: str(v.iloc[0]) for k, v in frame.groupby("stepper", sort=False)["evals_unit"]}
-    longest = max([len(_label(s)) + len(f) + 8 for f, s in best.items()] + [22])
-    fig, axes = _multiples(len(costs), ncols=2, panel=(3.3, 2.7), sharey=True,
-                           right=longest * _LEGEND_CHAR_W * 0.85 + 0.5)
+    longest = max([len(label_text(s)) + len(f) + 8 for f, s in best.items()] + [22])
+    fig, axes = small_multiples(len(costs), ncols=2, panel=(3.3, 2.7), sharey=True,
+                           right=longest * LEGEND_CHAR_W * 0.85 + 0.5)
     for ax, cost in zip(axes, costs, strict=True):
         for stepper, s in frame.groupby("stepper", sort=False):
             x = s[cost].astype(float)
@@ -89,20 +89,20 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                     marker=palette.marker(stepper) if strong else None, ms=3.2, lw=1.6 if strong else 0.6,
                     alpha=1.0 if strong else 0.3, color=c,
                     markerfacecolor="none" if peer else c, zorder=3 if strong else 2)
-        _loglog(ax)
+        loglog_axes(ax)
         ax.set_xlabel("right-hand-side or force evaluations" if cost == "rhs_evals" else "wall time (s)",
                       fontsize=7.5)
-        _small_ticks(ax)
+        small_ticks(ax)
     axes[0].set_ylabel("error at the final time", fontsize=7.5)
     handles = [Line2D([], [], color=palette.colour(s), marker=palette.marker(s), ms=3, lw=1.6,
                       ls="--" if adaptive.get(s) else "-",
-                      label=f"{_label(s)} (best {fam or 'method'})"
+                      label=f"{label_text(s)} (best {fam or 'method'})"
                       + (f" [{units[s]}s]" if units.get(s, "f-or-force") != "f-or-force" else ""))
                for fam, s in best.items()]
     handles.append(Line2D([], [], color="0.6", lw=0.6, alpha=0.5, label="other methods (faint)"))
     axes[-1].legend(handles=handles, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0,
                     frameon=False, fontsize=6.5)
-    fig.suptitle(f"Work–precision on {_label(problem)}", fontsize=8.5)
+    fig.suptitle(f"Work–precision on {label_text(problem)}", fontsize=8.5)
     cols = [c for c in ("stepper", "h", "tol", "error", "rhs_evals", "wall_s") if c in frame]
     data = frame[cols].reset_index(drop=True).assign(
         best_of_family=lambda d: d["stepper"].isin(bold).astype(int))
@@ -111,7 +111,7 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
 
 
 # -- performance history --------------------------------------------------------------------------
-@_styled
+@styled
 def perf_history_figure(history: pd.DataFrame, max_panels: int = 12,
                         max_lines: int = 8) -> Figure | None:
     """Benchmark value against commit date: one panel per benchmark (up to `max_panels`), one
@@ -126,7 +126,7 @@ def perf_history_figure(history: pd.DataFrame, max_panels: int = 12,
     benches = list(dict.fromkeys(h["benchmark"].astype(str)))[:max_panels]
     ncols = min(3, len(benches))
     nrows = int(math.ceil(len(benches) / ncols))
-    fig, axes = _new(nrows, ncols, size=(3.4 * ncols + 0.6, 2.5 * nrows + 0.4))
+    fig, axes = new_figure(nrows, ncols, size=(3.4 * ncols + 0.6, 2.5 * nrows + 0.4))
     for ax in axes.flat[len(benches):]:
         ax.set_visible(False)
     for ax, bench in zip(axes.flat, benches, strict=False):
@@ -135,10 +135,10 @@ def perf_history_figure(history: pd.DataFrame, max_panels: int = 12,
         for params, s in list(g.groupby(g["params"].astype(str), sort=False))[:max_lines]:
             s = s.sort_values("date")
             ax.plot(s["date"], pd.to_numeric(s["value"]), marker="o", ms=3, lw=1.0,
-                    label=_label(params) if params not in ("", "()", "None") else None)
+                    label=label_text(params) if params not in ("", "()", "None") else None)
         if unit in ("seconds", "s", "bytes"):
-            _loglog(ax, x=False)
-        ax.set_title(_label(bench), fontsize=8)
+            loglog_axes(ax, x=False)
+        ax.set_title(label_text(bench), fontsize=8)
         ax.set_ylabel(unit, fontsize=7)
         ax.tick_params(labelsize=6, axis="both")
         for lbl in ax.get_xticklabels():

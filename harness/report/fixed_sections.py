@@ -26,7 +26,7 @@ from harness.report.sections import (
     SectionTimer,
     Table,
     TextCell,
-    _cell,
+    text_cell,
     anchor,
     df_table,
     fmt,
@@ -313,19 +313,19 @@ def provenance(view: RunView, *, run_id: str, results_path: str, timer: SectionT
                     [Row([TextCell(k, cls="key"), TextCell(v)]) for k, v in info_rows], cls="kv"))
     exp_rows = []
     for name, e in meta.get("experiments", {}).items():
-        exp_rows.append(Row([TextCell(name), _cell(e.get("wall_s"), 3), _cell(e.get("n_cells")),
-                             _cell(e.get("computed_cells")), _cell(e.get("cached_cells")),
-                             _cell(e.get("failed_cells")), _cell(len(e.get("skips", [])))]))
+        exp_rows.append(Row([TextCell(name), text_cell(e.get("wall_s"), 3), text_cell(e.get("n_cells")),
+                             text_cell(e.get("computed_cells")), text_cell(e.get("cached_cells")),
+                             text_cell(e.get("failed_cells")), text_cell(len(e.get("skips", [])))]))
     totals = meta.get("totals", {})
-    exp_rows.append(Row([TextCell("total", cls="key"), _cell(totals.get("wall_s"), 3),
-                         _cell(totals.get("cells")), _cell(totals.get("computed")),
-                         _cell(totals.get("cached")), _cell(totals.get("failed")),
-                         _cell(totals.get("skipped"))], cls="total"))
+    exp_rows.append(Row([TextCell("total", cls="key"), text_cell(totals.get("wall_s"), 3),
+                         text_cell(totals.get("cells")), text_cell(totals.get("computed")),
+                         text_cell(totals.get("cached")), text_cell(totals.get("failed")),
+                         text_cell(totals.get("skipped"))], cls="total"))
     sec.table(Table("Time per experiment (wall seconds of this run; cached cells cost only their "
                     "loading)", ["experiment", "wall s", "cells", "computed", "from cache",
                                  "failed", "not applicable"], exp_rows))
-    build_rows = [Row([TextCell(k), _cell(v, 3)]) for k, v in build_s.items()]
-    build_rows += [Row([TextCell(f"section: {k}"), _cell(v, 3)]) for k, v in timer.seconds.items()]
+    build_rows = [Row([TextCell(k), text_cell(v, 3)]) for k, v in build_s.items()]
+    build_rows += [Row([TextCell(f"section: {k}"), text_cell(v, 3)]) for k, v in timer.seconds.items()]
     sec.table(Table("Time spent building the report (seconds)", ["step", "s"], build_rows))
     fails = view.failures()
     if fails:
@@ -367,7 +367,7 @@ def performance_history() -> Section:
                "Benchmark values against commit date (one panel per benchmark, one line per "
                "parameter set; at most 12 panels).")
     latest = history.sort_values("date").groupby(["benchmark", "params"], sort=False).tail(1)
-    rows = [Row([TextCell(str(r["benchmark"])), TextCell(str(r["params"])), _cell(r["value"], 4),
+    rows = [Row([TextCell(str(r["benchmark"])), TextCell(str(r["params"])), text_cell(r["value"], 4),
                  TextCell(str(r["unit"])), TextCell(str(r["commit"])[:10]), TextCell(str(r["date"]))])
             for r in latest.head(200).to_dict("records")]
     sec.table(Table("Latest value of each benchmark", ["benchmark", "params", "value", "unit",

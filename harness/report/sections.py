@@ -170,7 +170,7 @@ def fmt(x: Any, digits: int = 3) -> str:
     return f"{v:.{digits}g}"
 
 
-def _missing_value(v: Any) -> bool:
+def is_missing(v: Any) -> bool:
     if v is None:
         return True
     try:
@@ -179,17 +179,17 @@ def _missing_value(v: Any) -> bool:
         return False
 
 
-def _yn(x: Any) -> str:
-    return "—" if _missing_value(x) else ("yes" if bool(x) else "no")
+def yes_no(x: Any) -> str:
+    return "—" if is_missing(x) else ("yes" if bool(x) else "no")
 
 
-def _cell(x: Any, digits: int = 3, cls: str = "", href: str = "") -> TextCell:
+def text_cell(x: Any, digits: int = 3, cls: str = "", href: str = "") -> TextCell:
     numeric = isinstance(x, int | float | np.number) and not isinstance(x, bool | np.bool_)
     return TextCell(fmt(x, digits), cls=cls or ("num" if numeric else ""), href=href)
 
 
 def _status_cell(passed: Any) -> TextCell:
-    if _missing_value(passed):
+    if is_missing(passed):
         return TextCell(MARK[NONE], cls="status none")
     if bool(passed):
         return TextCell(MARK[PASS], cls="status pass")
@@ -245,7 +245,7 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
     column to a column of `df` holding the href its cell links to."""
     links = dict(links or {})
     if sort_failing and status and status in df and len(df):
-        k = df[status].map(lambda v: 0 if (not _missing_value(v) and not bool(v)) else 1)
+        k = df[status].map(lambda v: 0 if (not is_missing(v) and not bool(v)) else 1)
         df = df.assign(_k=k).sort_values("_k", kind="stable").drop(columns="_k")
     headers = ([""] if status else []) + [h for _, h in columns]
     # short: every note reference repeats it
@@ -259,12 +259,12 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
         if status:
             v = rec.get(status)
             cells.append(_status_cell(v))
-            if not _missing_value(v) and not bool(v):
+            if not is_missing(v) and not bool(v):
                 rcls = "failing"
         for col, _ in columns:
             v = rec.get(col)
             if col in NOTE_COLUMNS:
-                text = "" if _missing_value(v) else " ".join(str(v).split())
+                text = "" if is_missing(v) else " ".join(str(v).split())
                 if text:
                     n = notes.setdefault(text, len(notes) + 1)
                     cells.append(TextCell(f"note {n}", cls="noteref",
@@ -272,7 +272,7 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
                 else:
                     cells.append(TextCell(""))
             else:
-                c = _cell(v, digits, href=str(rec.get(links[col]) or "") if col in links else "")
+                c = text_cell(v, digits, href=str(rec.get(links[col]) or "") if col in links else "")
                 if folded and c.cls == "num":  # folded tables align numbers by their own CSS
                     c.cls = ""
                 cells.append(c)

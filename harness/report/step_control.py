@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.report.figure_style import _clip_log, _label, _legend_outside, _loglog, _new, _styled, _thin
+from harness.report.figure_style import clip_log, label_text, legend_outside, loglog_axes, new_figure, styled, thin_line
 from harness.report.figure_svg import Figure, check_svg, to_svg
 from harness.report.sections import Section, df_table, register_section
 
@@ -30,7 +30,7 @@ TITLE = "Step control: bounded orbits?"
 _STYLE = {"fixed": "-", "naive": "--", "reversible": "-."}
 
 
-@_styled
+@styled
 def energy_control_figure(problem: str, rows: pd.DataFrame) -> Figure | None:
     """Relative energy error against t (log-log) of the fixed-step peer and each controlled
     stepper on one problem; the fixed peer is drawn once. The figure's data is what it draws
@@ -38,7 +38,7 @@ def energy_control_figure(problem: str, rows: pd.DataFrame) -> Figure | None:
     g = rows[(rows["problem"] == problem) & (rows["kind"] == "energy")]
     if g.empty:
         return None
-    fig, axes = _new(size=(7.4, 4.4))
+    fig, axes = new_figure(size=(7.4, 4.4))
     ax = axes[0][0]
     drawn_fixed = False
     data = []
@@ -49,16 +49,16 @@ def energy_control_figure(problem: str, rows: pd.DataFrame) -> Figure | None:
             label = (f"fixed steps ({r['peer'].iloc[0]})" if role == "fixed" else stepper)
             kind = "fixed" if role == "fixed" else str(r["controller"].iloc[0] if "controller" in r else "")
             t = r["t"].astype(float).to_numpy()
-            x, y = _thin(t - float(np.nanmin(t)), r["error"].astype(float).to_numpy())
+            x, y = thin_line(t - float(np.nanmin(t)), r["error"].astype(float).to_numpy())
             data.append(pd.DataFrame({"stepper": stepper, "role": role, "controller": kind, "t": x,
                                       "error": y}))
-            ax.plot(x, _clip_log(y), _STYLE.get(kind, "-"), lw=1.0, label=_label(label))
+            ax.plot(x, clip_log(y), _STYLE.get(kind, "-"), lw=1.0, label=label_text(label))
             drawn_fixed = drawn_fixed or role == "fixed"
-    _loglog(ax)
+    loglog_axes(ax)
     ax.set_xlabel("t")
     ax.set_ylabel("relative energy error")
-    ax.set_title(f"Energy error on {_label(problem)}: fixed, naive and reversible control")
-    _legend_outside(ax)
+    ax.set_title(f"Energy error on {label_text(problem)}: fixed, naive and reversible control")
+    legend_outside(ax)
     return to_svg(fig, f"step-control-{problem}", f"relative energy error against time on {problem}",
                   pd.concat(data, ignore_index=True) if data else None)
 

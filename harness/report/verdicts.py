@@ -16,7 +16,7 @@ import pandas as pd
 
 from harness.report.sections import (
     RunView,
-    _missing_value,
+    is_missing,
     anchor,
     experiment_key,
     first_sentence,
@@ -29,7 +29,7 @@ VERDICT_COLUMNS = ["experiment", "stepper", "problem", "key", "passed", "verdict
 
 
 def _key_text(values: list[Any]) -> str:
-    return json.dumps([v if isinstance(v, str | int) else (None if _missing_value(v) else float(v))
+    return json.dumps([v if isinstance(v, str | int) else (None if is_missing(v) else float(v))
                        for v in values])
 
 
@@ -41,11 +41,11 @@ def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
         return pd.DataFrame(columns=VERDICT_COLUMNS)
     for rec in table.to_dict("records"):
         passed = rec.get("passed")
-        if _missing_value(passed):
+        if is_missing(passed):
             continue
         values = [rec.get(c, "") for c in key]
         verdict = str(rec.get("verdict") or ("pass" if passed else "fail"))
-        why = first_sentence(rec.get(reason)) if not _missing_value(rec.get(reason)) else ""
+        why = first_sentence(rec.get(reason)) if not is_missing(rec.get(reason)) else ""
         if why.startswith(f"verdict {verdict}"):  # the reason only repeats the verdict
             why = why[len(f"verdict {verdict}"):].lstrip(":; ")
         if not why and not passed and rec.get("expected") and str(rec.get("expected")) != verdict:

@@ -154,10 +154,6 @@ from harness.runner.workers import (  # noqa: F401  (re-exported)
     short_traceback,
 )
 
-# the names harness/report/build.py imports (its owner moves it to the public names)
-_check_names = check_names
-_check_plugins = check_plugins
-
 __all__ = [
     "RunResult",
     "RunOptions",
