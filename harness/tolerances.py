@@ -291,3 +291,9 @@ REPORT_CHANGE_ROUNDING = 10.0
 # spans: a control parameter read against the convergence span in angle units covers ~1 t_span
 # on kepler-circular (whose orbit takes 16 pi), and a runaway clock exceeds it by far more.
 CLOCK_LIMIT_SPANS = 10.0
+
+# Extended-precision convergence runs (`harness.extended`): right-hand-side (or force)
+# evaluations one real128 sweep may spend. A real128 evaluation with its stage arithmetic costs
+# ~20-40 us in Python, so 4e5 is ~10-20 s: an order-8 method needs ~2^7 x the float64 sweep's
+# last n to go ~17 decades lower, an order-10 one fewer.
+EXTENDED_WORK_BUDGET = 400_000
