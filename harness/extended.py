@@ -264,6 +264,17 @@ def _error(y: np.ndarray, ref: list) -> float:
     return max(float(abs(hy.real(v, _REFERENCE_PREC) - r)) for v, r in zip(y, ref, strict=True))
 
 
+def _settled(rows: list[dict]) -> bool:
+    """The last two local slopes agree to EXTENDED_SETTLED_SLOPE: cheap points are taken until
+    the slopes stop drifting (a float64 sweep cannot afford to wait)."""
+    if len(rows) < 3:
+        return False
+    h = np.log([r["h"] for r in rows[-3:]])
+    e = np.log([r["error"] for r in rows[-3:]])
+    slopes = np.diff(e) / np.diff(h)
+    return bool(abs(slopes[1] - slopes[0]) <= tol.EXTENDED_SETTLED_SLOPE)
+
+
 # -- the sweep ------------------------------------------------------------------------------------
 def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget: float | None = None,
                    amplification: float = 1.0) -> dict:
@@ -303,7 +314,7 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
                 stop = "the real128 rounding floor" if reasons[-1] == "roundoff" else \
                     "the 192-bit reference's accuracy"
                 break
-            if int((reasons == "").sum()) >= tol.TARGET_FIT_POINTS:
+            if int((reasons == "").sum()) >= tol.TARGET_FIT_POINTS and _settled(rows):
                 stop = ""
                 break
         if spent + 2 * evals > budget:

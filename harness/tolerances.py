@@ -297,3 +297,6 @@ CLOCK_LIMIT_SPANS = 10.0
 # ~20-40 us in Python, so 4e5 is ~10-20 s: an order-8 method needs ~2^7 x the float64 sweep's
 # last n to go ~17 decades lower, an order-10 one fewer.
 EXTENDED_WORK_BUDGET = 400_000
+# ... which goes on halving h while two successive local slopes differ by more than this (the
+# points are cheap there, and an order-10 method's slopes still climb 9.90 -> 9.99 over 3 halvings).
+EXTENDED_SETTLED_SLOPE = 0.02

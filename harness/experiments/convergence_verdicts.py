@@ -96,7 +96,8 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         base["verdict"] = "unstable"
     else:
         base["verdict"] = "insufficient-range"
-        base["message"] = insufficient_range_reason(gl, len(kept))
+        base["message"] = "; ".join(dict.fromkeys(  # the sweep's own notes (horizon, extended precision)
+            [insufficient_range_reason(gl, len(kept)), *(m for m in gl.get("message", []) if m)]))
     base["local_exponent"] = _fit_kind(g, "local")
     base["local_exponent_q"] = _fit_kind(g, "local-q")
     if messages and not base["message"]:
