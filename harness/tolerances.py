@@ -294,9 +294,14 @@ CLOCK_LIMIT_SPANS = 10.0
 
 # Extended-precision convergence runs (`harness.extended`): right-hand-side (or force)
 # evaluations one real128 sweep may spend. A real128 evaluation with its stage arithmetic costs
-# ~20-40 us in Python, so 4e5 is ~10-20 s: an order-8 method needs ~2^7 x the float64 sweep's
+# ~20-40 us in Python, so 1e6 is ~20-40 s: an order-8 method needs ~2^7 x the float64 sweep's
 # last n to go ~17 decades lower, an order-10 one fewer.
-EXTENDED_WORK_BUDGET = 400_000
+EXTENDED_WORK_BUDGET = 1_000_000
 # ... which goes on halving h while two successive local slopes differ by more than this (the
 # points are cheap there, and an order-10 method's slopes still climb 9.90 -> 9.99 over 3 halvings).
 EXTENDED_SETTLED_SLOPE = 0.02
+
+# Energy drift of a non-symplectic, non-symmetric one-step method (`harness.rules.judge_drift`):
+# the drift predicted from the first period must exceed what rounding explains by this factor
+# to be measurable (the classifier cannot tell a drift within a few rounding units from noise).
+DRIFT_MEASURABLE_FACTOR = 10.0

@@ -328,9 +328,9 @@ def _extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, con
     except NotMeasurable as exc:
         frame = frame.copy()
         frame["message"] = frame["message"].fillna("").astype(str)
-        frame.loc[frame.kind == "global", "message"] = [
-            "; ".join(x for x in (m, f"{head}; {exc}") if x) for m in frame.loc[frame.kind == "global", "message"]
-        ]
+        mine = frame.kind == "global"
+        frame.loc[mine, "message"] = ["; ".join(x for x in (m, f"{head}; {exc}") if x)
+                                      for m in frame.loc[mine, "message"]]
         return frame
     rows = pd.DataFrame(ext["rows"])
     rows["in_fit"] = rows["excluded"] == ""

@@ -324,7 +324,7 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
     if "step failure: " in message:
         e["drift_class"] = "unstable"  # an implicit solve broke down: the motion is destroyed
     from harness.facts import method_facts
-    from harness.rules import energy_expectation
+    from harness.rules import energy_expectation, judge_drift
 
     facts = method_facts(stepper)
     expected_class, expected_reason = energy_expectation(facts, bool(info.symplectic))
@@ -359,6 +359,18 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
                 f"{expected_reason}, but it is {e['drift_class']} (growth "
                 f"{e['secular_growth']:.3g} over the fit window, rounding explains {limit:.3g})"
             )
+    elif expected_class == "linear":
+        m = max(1.0, steps_per_period)
+        first = energy[(energy.step > 0) & (energy.step <= math.ceil(m))]
+        first_err = float(first.error.max()) if len(first) else float("nan")
+        verdict, passed, why = judge_drift(
+            expected_reason, e["drift_class"], e["max_error"], first_err,
+            periods_in_fit=(n_end - e["fit_start"]) / m, periods_total=n_end / m,
+            rounding_fit=limit, rounding_period=rounding_growth(m))
+        if passed:
+            rec["message"] = "; ".join(x for x in (message, why) if x)
+        else:
+            reasons.append(why)
     else:
         verdict = "no-claim"
     L = g[g.quantity == "angular_momentum"].sort_values("step")
