@@ -22,6 +22,15 @@ Verdicts that say "not measurable here" rather than "wrong" (`tolerated`):
 The gate also needs at least one cell per stepper that measures the claim: a stepper judged on
 nothing does not pass.
 
+Adaptive steppers (`tolerance_allowance`): local error control keeps each accepted step's error
+near tol x |y|, and the flow carries every step's error to the final time, amplified by at most
+A = ||d Phi(t_k -> T)||, taken as max(1, ||d Phi(t0 -> T)||) (`harness.scales.flow_amplification`).
+Summed over the N accepted steps of a trajectory (Lady Windermere's fan, HNW I, II.3, Theorem
+3.4), the global error is at most ~N A tol |y|; TOLERANCE_ESTIMATE_FACTOR allows for the error
+estimate itself being only asymptotically correct. On y' = -y (A = 1, N ~ 2-50) that is tighter
+than a fixed 1e4, and on the e = 0.99 orbit (A ~ 7e4) it admits what the flow does to a
+perfectly controlled local error.
+
 Energy (`energy_expectation`, `judge_drift`):
 - a method whose coefficients make it symplectic must keep the energy error bounded (up to
   rounding growth; HLW IX.3);
@@ -48,7 +57,7 @@ from harness import tolerances as tol
 from harness.facts import MethodFacts, ProblemFacts
 
 __all__ = ["Expectation", "convergence_expectation", "energy_expectation", "judge_convergence",
-           "judge_drift"]
+           "judge_drift", "tolerance_allowance"]
 
 
 @dataclass(frozen=True)
@@ -131,6 +140,20 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
     expected = expectation.verdict + (f" at order {expectation.order:g}" if expectation.order else "")
     return "fail", (f"expected {expected}, got {verdict}" + (f": {msg}" if msg else "")
                     + (f" ({expectation.reason})" if expectation.reason else ""))
+
+
+def tolerance_allowance(steps_per_trajectory: float, amplification: float) -> tuple[float, str]:
+    """(factor, reason): the global error an adaptive run may reach, in units of tol x |y| (see
+    the module docstring). Without a step count or an amplification, the fixed
+    TOLERANCE_FACTOR (ten thousand steps' worth), and the reason says so."""
+    if not (math.isfinite(steps_per_trajectory) and steps_per_trajectory > 0
+            and math.isfinite(amplification) and amplification > 0):
+        return tol.TOLERANCE_FACTOR, (f"the fixed {tol.TOLERANCE_FACTOR:g} (no step count or flow "
+                                      "amplification)")
+    A = max(1.0, amplification)
+    factor = tol.TOLERANCE_ESTIMATE_FACTOR * steps_per_trajectory * A
+    return factor, (f"{tol.TOLERANCE_ESTIMATE_FACTOR:g} x {steps_per_trajectory:.4g} steps x flow "
+                    f"amplification {A:.3g} = {factor:.3g}")
 
 
 def energy_expectation(method: MethodFacts, declared_symplectic: bool = False) -> tuple[str, str]:

@@ -305,3 +305,10 @@ EXTENDED_SETTLED_SLOPE = 0.02
 # the drift predicted from the first period must exceed what rounding explains by this factor
 # to be measurable (the classifier cannot tell a drift within a few rounding units from noise).
 DRIFT_MEASURABLE_FACTOR = 10.0
+
+# Adaptive steppers (`harness.rules.tolerance_allowance`): the global error may reach this many
+# times (accepted steps per trajectory) x (flow amplification) x tol x |y|. An embedded error
+# estimate is only asymptotically the local error (at coarse tolerances it is off by a few);
+# measured worst over scipy's RK45/DOP853/LSODA and heyoka's Taylor on Kepler e = 0-0.99,
+# the harmonic oscillator and y' = -y: 0.52 of N A tol |y| (RK45, circular orbit, tol 1e-3).
+TOLERANCE_ESTIMATE_FACTOR = 10.0

@@ -205,3 +205,42 @@ def test_real128_rounding_level_is_below_float64():
 
     assert EXTENDED_EPS < 1e-33 < tol.EPS
     assert np.finfo(np.float64).eps / EXTENDED_EPS > 1e17
+
+
+# -- the adaptive tolerance rule ----------------------------------------------------------------------
+def _tolerance_rows(errors, steps, amplification, members=4):
+    tols = np.array([1e-3, 1e-5, 1e-7])
+    return pd.DataFrame({
+        "kind": "tolerance", "tol": tols, "h": np.nan, "n_steps": np.array(steps) * members,
+        "error": np.array(errors) * tols, "reference_error": 1e-18, "rounding_level": tol.EPS,
+        "excluded": "", "in_fit": True, "wall_s": 0.0, "message": "", "ensemble_size": members,
+        "flow_amplification": amplification, "reference_precision": "longdouble",
+        "implementation": "scipy", "perturbation": 0.0,
+    })
+
+
+def test_tolerance_allowance_is_steps_times_flow_amplification():
+    from harness.rules import tolerance_allowance
+
+    factor, reason = tolerance_allowance(100, 0.5)  # a contracting flow counts as 1
+    assert factor == tol.TOLERANCE_ESTIMATE_FACTOR * 100 and "100 steps" in reason
+    assert tolerance_allowance(100, 7e4)[0] == pytest.approx(tol.TOLERANCE_ESTIMATE_FACTOR * 7e6)
+    assert tolerance_allowance(0, 7e4)[0] == tol.TOLERANCE_FACTOR  # no step count: the fixed rule
+
+
+@pytest.mark.parametrize("errors, steps, amplification, verdict", [
+    ([1.0, 1.0, 1.0], [10, 20, 40], 1.0, "meets-tolerance"),
+    # 5e3 x tol passed the fixed 1e4 rule; on a non-amplifying flow with 10-40 steps it is
+    # far more than local error control can accumulate
+    ([5e3, 5e3, 5e3], [10, 20, 40], 1.0, "misses-tolerance"),
+    # the same ratio on an orbit whose flow amplifies errors 7e4-fold is what the flow does
+    ([5e3, 5e3, 5e3], [10, 20, 40], 7e4, "meets-tolerance"),
+    ([1e8, 1e8, 1e8], [10, 20, 40], 7e4, "misses-tolerance"),
+])
+def test_adaptive_verdict_uses_the_derived_allowance(errors, steps, amplification, verdict):
+    from harness.experiments.convergence_verdicts import summarize_cell
+
+    rec = summarize_cell(get_stepper("scipy-rk45"), "p", _tolerance_rows(errors, steps, amplification))
+    assert rec["verdict"] == verdict, rec["message"]
+    if verdict == "misses-tolerance":
+        assert "flow amplification" in rec["message"]

@@ -592,6 +592,9 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
                                           "reference", ""))
     frame["in_fit"] = frame["excluded"] == ""
     frame["kind"] = "tolerance"
+    # how much the flow amplifies an error over the horizon: the rules' allowance for the
+    # global error of a locally controlled run (`harness.rules.tolerance_allowance`)
+    frame["flow_amplification"] = _flow_amplification(problem, T - T0, y0[:, 0])
     frame["reference_precision"] = ref.precision
     frame["stepper"] = stepper.info.name
     frame["problem"] = problem.name
