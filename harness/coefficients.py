@@ -263,9 +263,8 @@ class SplittingScheme:
                 merged[-1][1] += value
             else:
                 merged.append([kind, value])
-        if exact is not None:  # the floats are the exact sums, rounded once
+        if exact is not None:  # the float sequence is built as from floats, so it is unchanged
             exact = [e for e in exact if e[1] != 0]
-            merged = [[k, float(v)] for k, v in exact]
         seq = tuple((k, v) for k, v in merged if v != 0.0)
         drift = sum(v for k, v in seq if k == "D")
         kick = sum(v for k, v in seq if k == "K")
