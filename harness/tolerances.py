@@ -312,3 +312,12 @@ DRIFT_MEASURABLE_FACTOR = 10.0
 # measured worst over scipy's RK45/DOP853/LSODA and heyoka's Taylor on Kepler e = 0-0.99,
 # the harmonic oscillator and y' = -y: 0.52 of N A tol |y| (RK45, circular orbit, tol 1e-3).
 TOLERANCE_ESTIMATE_FACTOR = 10.0
+
+# Close encounters in the energy experiment (`harness.experiments.energy`): a run whose fastest
+# rate (spectral radius along the orbit) rises more than ENCOUNTER_RATE_RISE-fold over its start
+# reads the bounded-energy envelope only after the rate first comes within
+# ENCOUNTER_RATE_FRACTION of its maximum over the run (a bounded error ~(h rho)^p rises with
+# each closer approach), and needs at least ENCOUNTER_MIN_DECADES decades of steps after it.
+ENCOUNTER_RATE_RISE = 10.0
+ENCOUNTER_RATE_FRACTION = 0.9
+ENCOUNTER_MIN_DECADES = 0.3
