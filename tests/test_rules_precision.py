@@ -244,3 +244,41 @@ def test_adaptive_verdict_uses_the_derived_allowance(errors, steps, amplificatio
     assert rec["verdict"] == verdict, rec["message"]
     if verdict == "misses-tolerance":
         assert "flow amplification" in rec["message"]
+
+
+# -- close encounters in the energy experiment ---------------------------------------------------------
+@pytest.fixture
+def pleiades():
+    from harness.registry import load_plugin, problems
+
+    if "pleiades" not in problems.names():
+        load_plugin(Path(__file__).parent / "plugins" / "pleiades.py", probe=False)
+    return "pleiades"
+
+
+def _energy(stepper, problem, **overrides):
+    from harness.experiments import get_experiment
+
+    exp = get_experiment("energy")
+    config = exp.config(overrides, quick=False)
+    cells, _ = exp.cells([stepper], [problem], config)
+    rows = pd.concat([exp.run_cell(c, config) for c in cells], ignore_index=True)
+    return exp.summarize(rows, config).iloc[0]
+
+
+def test_the_verlet_claim_is_read_after_the_pleiades_closest_approach(pleiades):
+    r = _energy("velocity-verlet", pleiades, ensemble=1)
+    # The error jumps to ~4e-3 at the closest approach (t ~ 1.7) and stays below it afterwards.
+    assert r.verdict == "as-claimed" and bool(r.passed), r.message
+    assert "first reached at t = 1.6" in r.message and "h rho = 0.12" in r.message
+    assert r.max_rel_energy_error > 1e-3  # the jump is there; the envelope after it is flat
+
+
+def test_a_step_beyond_the_methods_limit_during_encounters_is_not_measurable(pleiades):
+    from harness.facts import method_facts
+
+    limit = method_facts(get_stepper("yoshida8")).hw_limit  # 0.927
+    h = 1.5 / 649.7  # h rho = 1.5 at the Pleiades' closest approach
+    r = _energy("yoshida8", pleiades, ensemble=1, h=h, steps=3000)
+    assert r.verdict == "not-measurable" and bool(r.passed), r.message
+    assert f"exceeds the method's limit {limit:.4g}" in r.message
