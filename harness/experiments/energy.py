@@ -29,8 +29,17 @@ For one (stepper, problem) cell:
 4. Verdicts. A stepper claimed symplectic must be `bounded`, or show a secular growth within
    what rounding explains (Brouwer's law: rounding makes the energy error a random walk,
    ~ sqrt(n) eps; HLW VIII.5): `as-claimed`, else `claim-false`. Whether a method is symplectic
-   comes from its coefficients (`harness.rules.energy_expectation`), never from its name; other
-   methods are measured without a claim (`no-claim`). For central-force problems, steppers whose
+   comes from its coefficients (`harness.rules.energy_expectation`), never from its name. A
+   fixed-step one-step method that is neither symplectic nor symmetric is expected to drift
+   (`harness.rules.judge_drift`: `as-expected`, `unexpected`, or `not-measurable` when the drift
+   predicted from its first period is hidden by rounding); other methods are measured without
+   a claim (`no-claim`).
+   Close encounters: where the fastest rate along the run rises more than ENCOUNTER_RATE_RISE
+   times over its start after the usual fit start, the envelope is read from where that rate is
+   first reached (a bounded error ~(h rho)^p rises with each closer approach; the Pleiades'
+   energy error jumps to ~4e-3 at t ~ 1.7 and stays below it). The cell is not measurable when
+   h rho exceeds the method's h-omega stability limit there, or when less than
+   ENCOUNTER_MIN_DECADES of the run remains after it. For central-force problems, steppers whose
    structure conserves quadratic invariants (symplectic Runge-Kutta, splitting and Stormer
    methods: HLW IV.2 and VI.4) must keep the angular momentum to rounding: a relative error of
    at most ANGULAR_MOMENTUM_ROUNDING_ULPS * n * eps after n steps.
