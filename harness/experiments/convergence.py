@@ -23,8 +23,16 @@ For one (stepper, problem) cell:
    `local_exponent` q in error ~ h^q (q = p + 1 for a one-step method of order p), on the whole
    state and, for Newtonian problems, on positions alone (`local_exponent_q`).
 
+7. Where the float64 floor ends the sweep with too few asymptotic points (an order 8-10 method
+   whose local slopes still drift when the floor arrives), the same coefficients run again in
+   real128 from the problem's start against a 192-bit reference (`harness.extended`) and those
+   points replace the float64 ones, with a message saying so; a method whose coefficients are
+   given only to float64 (or a black box, an implicit or multistep method) keeps its float64
+   verdict, and the message says why it was not rerun.
+
 Adaptive steppers are measured by a tolerance sweep instead: error against requested tolerance;
-the verdict says whether the error stays within TOLERANCE_FACTOR x tol x |y|.
+the verdict says whether the error stays within the allowance `harness.rules.tolerance_allowance`
+derives from the accepted steps and the flow's amplification over the horizon.
 Reference: Hairer, Norsett & Wanner, *Solving ODEs I*, II.1 and II.4 (order, error constants).
 """
 
