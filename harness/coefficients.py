@@ -63,6 +63,42 @@ def _close(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
     return abs(a - b) <= max(COEFFICIENT_TOL, COEFFICIENT_ULPS * EPS * (terms + 1) * scale)
 
 
+def exact_value(x) -> Fraction | None:
+    """`x` as an exact rational when it is given exactly (int, Fraction, Decimal, a decimal
+    string, or a float that is a short dyadic such as 0.5), else None: a float like 1/3 is only
+    a float64 approximation, and extended-precision runs (`harness.extended`) need better."""
+    from decimal import Decimal
+
+    if isinstance(x, bool):
+        return None
+    if isinstance(x, (int, Fraction, Decimal, str)):
+        try:
+            return Fraction(x)
+        except (ValueError, ZeroDivisionError):
+            return None
+    if isinstance(x, (float, np.floating)) and np.isfinite(x):
+        f = Fraction(float(x))
+        return f if f.denominator <= _EXACT_DYADIC and abs(f.numerator) <= _EXACT_DYADIC else None
+    return None
+
+
+def _exact_rows(values, ndim: int):
+    """Nested tuples of `exact_value`s, or None when any entry is not exact."""
+    try:
+        rows = [values] if ndim == 1 else list(values)
+        out = tuple(tuple(exact_value(x) for x in row) for row in rows)
+    except TypeError:
+        return None
+    if any(v is None for row in out for v in row):
+        return None
+    return out[0] if ndim == 1 else out
+
+
+# A float with numerator and denominator (a power of two) at most this is taken as exact (0.5,
+# 0.25, 3.0): a rounded decimal such as 0.1 or 1/3 has a 2^52-sized denominator.
+_EXACT_DYADIC = 1 << 20
+
+
 @dataclass(frozen=True, eq=False)
 class ButcherTableau:
     """A Runge-Kutta method: stage matrix `A`, weights `b`, nodes `c`.
@@ -79,6 +115,7 @@ class ButcherTableau:
     b_hat: np.ndarray | None = None
     stages: int = field(init=False)
     explicit: bool = field(init=False)
+    exact: tuple | None = field(init=False, repr=False)  # (A, b, c) as Fractions, when given exactly
 
     def __init__(self, name: str, A: Sequence, b: Sequence, c: Sequence | None = None,
                  b_hat: Sequence | None = None):
@@ -121,6 +158,11 @@ class ButcherTableau:
         object.__setattr__(self, "c", c_arr)
         object.__setattr__(self, "stages", s)
         object.__setattr__(self, "explicit", bool(np.all(np.triu(A_arr) == 0.0)))
+        exact_A, exact_b = _exact_rows(A, 2), _exact_rows(b, 1)
+        exact_c = tuple(sum(row, Fraction(0)) for row in exact_A) if exact_A and c is None else (
+            _exact_rows(c, 1) if c is not None else None)
+        object.__setattr__(self, "exact", (exact_A, exact_b, exact_c)
+                           if exact_A and exact_b and exact_c else None)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         """R(z) = 1 + z b^T (I - zA)^{-1} e, evaluated for an array of complex z."""
@@ -193,9 +235,11 @@ class SplittingScheme:
     sequence: tuple[tuple[str, float], ...]
     symmetric: bool = field(init=False)
     force_evals: int = field(init=False)
+    exact: tuple | None = field(init=False, repr=False)  # the merged sequence with Fractions, if exact
 
     def __init__(self, name: str, sequence: Sequence[tuple[str, Number]]):
         merged: list[list] = []
+        exact: list[list] | None = []
         for item in sequence:
             try:
                 kind, coeff = item
@@ -208,10 +252,19 @@ class SplittingScheme:
             value = float(coeff)
             if not np.isfinite(value):
                 raise CoefficientError(f"`{name}.sequence` coefficients must be finite, got {coeff!r}")
+            exact_coeff = exact_value(coeff) if exact is not None else None
+            if exact_coeff is None:
+                exact = None
+            elif exact and exact[-1][0] == kind:
+                exact[-1][1] += exact_coeff
+            else:
+                exact.append([kind, exact_coeff])
             if merged and merged[-1][0] == kind:
                 merged[-1][1] += value
             else:
                 merged.append([kind, value])
+        if exact is not None:  # the float sequence is built as from floats, so it is unchanged
+            exact = [e for e in exact if e[1] != 0]
         seq = tuple((k, v) for k, v in merged if v != 0.0)
         drift = sum(v for k, v in seq if k == "D")
         kick = sum(v for k, v in seq if k == "K")
@@ -231,6 +284,7 @@ class SplittingScheme:
         object.__setattr__(self, "sequence", seq)
         object.__setattr__(self, "symmetric", symmetric)
         object.__setattr__(self, "force_evals", n_kicks - 1 if fsal else n_kicks)
+        object.__setattr__(self, "exact", tuple((k, v) for k, v in exact) if exact is not None else None)
 
     @property
     def kick_coefficients(self) -> np.ndarray:
@@ -265,7 +319,12 @@ class SplittingScheme:
     @classmethod
     def compose(cls, name: str, base: SplittingScheme, weights: Sequence[Number]) -> SplittingScheme:
         """The composition base(w_1 h) o ... o base(w_m h) (Yoshida's construction)."""
-        seq: list[tuple[str, float]] = []
+        seq: list[tuple[str, Number]] = []
+        exact_weights = [exact_value(w) for w in weights]
+        if base.exact is not None and all(w is not None for w in exact_weights):
+            for w in exact_weights:  # exact products: the record keeps its exact form
+                seq.extend((k, w * v) for k, v in base.exact)
+            return cls(name, seq)
         for w in weights:
             seq.extend((k, float(w) * v) for k, v in base.sequence)
         return cls(name, seq)

@@ -47,6 +47,7 @@ class MethodFacts:
     real_interval: float | None
     imag_interval: float | None
     hw_limit: float | None
+    one_step: bool | None = None  # a one-step map (Runge-Kutta, splitting); None for a black box
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -89,12 +90,13 @@ def method_facts(stepper: Stepper) -> MethodFacts:
         linear_order=linear, embedded_order=info.extra.get("embedded_order"),
         symmetric=bool(info.symmetric), symplectic=bool(info.symplectic),
         real_interval=claims.get("real_interval"), imag_interval=claims.get("imag_interval"),
-        hw_limit=claims.get("hw_limit"),
+        hw_limit=claims.get("hw_limit"), one_step=info.extra.get("one_step"),
     )
 
 
 @lru_cache(maxsize=512)
 def _coefficient_facts(fingerprint: str, box: tuple) -> dict[str, Any]:
+    from harness.coefficients import ButcherTableau, SplittingScheme
     from harness.theory import analytic_stability
 
     coeffs = box[0]
@@ -109,6 +111,7 @@ def _coefficient_facts(fingerprint: str, box: tuple) -> dict[str, Any]:
         "real_interval": stab.get("real_interval"),
         "imag_interval": stab.get("imag_interval"),
         "hw_limit": stab.get("hw_limit"),
+        "one_step": isinstance(coeffs, (ButcherTableau, SplittingScheme)),
     }
 
 

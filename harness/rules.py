@@ -22,8 +22,30 @@ Verdicts that say "not measurable here" rather than "wrong" (`tolerated`):
 The gate also needs at least one cell per stepper that measures the claim: a stepper judged on
 nothing does not pass.
 
-Energy (`energy_expectation`): a method whose coefficients make it symplectic must keep the
-energy error bounded (up to rounding growth); other methods are measured without a claim.
+Adaptive steppers (`tolerance_allowance`): local error control keeps each accepted step's error
+near tol x |y|, and the flow carries every step's error to the final time, amplified by at most
+A = ||d Phi(t_k -> T)||, taken as max(1, ||d Phi(t0 -> T)||) (`harness.scales.flow_amplification`).
+Summed over the N accepted steps of a trajectory (Lady Windermere's fan, HNW I, II.3, Theorem
+3.4), the global error is at most ~N A tol |y|; TOLERANCE_ESTIMATE_FACTOR allows for the error
+estimate itself being only asymptotically correct. On y' = -y (A = 1, N ~ 2-50) that is tighter
+than a fixed 1e4, and on the e = 0.99 orbit (A ~ 7e4) it admits what the flow does to a
+perfectly controlled local error.
+
+Energy (`energy_expectation`, `judge_drift`):
+- a method whose coefficients make it symplectic must keep the energy error bounded (up to
+  rounding growth; HLW IX.3);
+- a fixed-step one-step method that is neither symplectic nor symmetric, of order p, drifts: its
+  energy error grows like C h^p t (the modified equation has no conserved modified energy; HLW
+  IX.1 and XI.1, the rk4 drift on Kepler of HLW I.2). The drift is predicted from the run's first
+  natural period (running maximum e_1 there, so e_1 x periods over the fit window) and the
+  expectation is `linear`, or `unstable` where that prediction reaches ENERGY_BLOWUP_ERROR within
+  the run. Where the prediction is within DRIFT_MEASURABLE_FACTOR of what rounding explains, the
+  cell is not measurable, with the numbers;
+- a symmetric method that is not symplectic is measured without a claim: on reversible
+  *integrable* problems it keeps the energy error bounded (near-conservation of the actions,
+  HLW XI.3, Theorem 3.1), on non-integrable ones it may drift (HLW XI.4-XI.5), and integrability
+  is not among the derived problem facts;
+- adaptive steppers, multistep methods and black boxes are measured without a claim.
 """
 
 from __future__ import annotations
@@ -34,7 +56,8 @@ from dataclasses import dataclass
 from harness import tolerances as tol
 from harness.facts import MethodFacts, ProblemFacts
 
-__all__ = ["Expectation", "convergence_expectation", "energy_expectation", "judge_convergence"]
+__all__ = ["Expectation", "convergence_expectation", "energy_expectation", "judge_convergence",
+           "judge_drift", "tolerance_allowance"]
 
 
 @dataclass(frozen=True)
@@ -119,6 +142,20 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
                     + (f" ({expectation.reason})" if expectation.reason else ""))
 
 
+def tolerance_allowance(steps_per_trajectory: float, amplification: float) -> tuple[float, str]:
+    """(factor, reason): the global error an adaptive run may reach, in units of tol x |y| (see
+    the module docstring). Without a step count or an amplification, the fixed
+    TOLERANCE_FACTOR (ten thousand steps' worth), and the reason says so."""
+    if not (math.isfinite(steps_per_trajectory) and steps_per_trajectory > 0
+            and math.isfinite(amplification) and amplification > 0):
+        return tol.TOLERANCE_FACTOR, (f"the fixed {tol.TOLERANCE_FACTOR:g} (no step count or flow "
+                                      "amplification)")
+    A = max(1.0, amplification)
+    factor = tol.TOLERANCE_ESTIMATE_FACTOR * steps_per_trajectory * A
+    return factor, (f"{tol.TOLERANCE_ESTIMATE_FACTOR:g} x {steps_per_trajectory:.4g} steps x flow "
+                    f"amplification {A:.3g} = {factor:.3g}")
+
+
 def energy_expectation(method: MethodFacts, declared_symplectic: bool = False) -> tuple[str, str]:
     """(expected drift class or '', reason): a symplectic method keeps the energy error bounded
     (HLW IX.3; rounding adds a sqrt(t) random walk, Brouwer's law, HLW VIII.5). A declared claim
@@ -130,4 +167,34 @@ def energy_expectation(method: MethodFacts, declared_symplectic: bool = False) -
     if declared_symplectic:
         return "bounded", ("claimed symplectic (its coefficients say it is not): the energy error "
                            "should stay bounded")
+    if method.one_step and not method.adaptive and method.symmetric is False and method.order:
+        return "linear", (f"neither symplectic nor symmetric, order {method.order}: the energy error "
+                          f"drifts like h^{method.order} t")
     return "", ""
+
+
+def judge_drift(expected_reason: str, drift_class: str, max_error: float, first_period_error: float,
+                periods_in_fit: float, periods_total: float, rounding_fit: float,
+                rounding_period: float) -> tuple[str, bool, str]:
+    """(verdict, passed, reason) of an energy cell expected to drift linearly (see the module
+    docstring): `as-expected`, `not-measurable` (the predicted drift is hidden by rounding) or
+    `unexpected` (a resolved drift was predicted and not seen)."""
+    if not math.isfinite(first_period_error):
+        return "not-measurable", True, (f"{expected_reason}, but the run has no finite energy sample "
+                                        "within its first period, so the drift cannot be predicted")
+    predicted = first_period_error * periods_in_fit
+    hidden = (first_period_error <= tol.DRIFT_MEASURABLE_FACTOR * rounding_period
+              or predicted <= tol.DRIFT_MEASURABLE_FACTOR * rounding_fit)
+    numbers = (f"energy error {first_period_error:.3g} after the first period, so a drift of "
+               f"~{predicted:.3g} over the fit window ({periods_in_fit:.3g} periods); rounding "
+               f"explains {rounding_fit:.3g}")
+    if hidden:
+        return "not-measurable", True, (f"{expected_reason}, but the predicted drift is within "
+                                        f"{tol.DRIFT_MEASURABLE_FACTOR:g}x of rounding: {numbers}")
+    if drift_class == "linear":
+        return "as-expected", True, f"{expected_reason}: {numbers}"
+    saturates = first_period_error * periods_total >= tol.ENERGY_BLOWUP_ERROR
+    if drift_class == "unstable" and saturates and max_error >= tol.ENERGY_BLOWUP_ERROR:
+        return "as-expected", True, (f"{expected_reason}; the predicted drift reaches "
+                                     f"{tol.ENERGY_BLOWUP_ERROR:g} within the run: {numbers}")
+    return "unexpected", False, f"{expected_reason}, but it is {drift_class}: {numbers}"

@@ -299,3 +299,33 @@ REPORT_CHANGE_ROUNDING = 10.0
 # spans: a control parameter read against the convergence span in angle units covers ~1 t_span
 # on kepler-circular (whose orbit takes 16 pi), and a runaway clock exceeds it by far more.
 CLOCK_LIMIT_SPANS = 10.0
+
+# Extended-precision convergence runs (`harness.extended`): right-hand-side (or force)
+# evaluations one real128 sweep may spend. A real128 evaluation with its stage arithmetic costs
+# ~20-40 us in Python, so 1e6 is ~20-40 s: an order-8 method needs ~2^7 x the float64 sweep's
+# last n to go ~17 decades lower, an order-10 one fewer.
+EXTENDED_WORK_BUDGET = 1_000_000
+# ... which goes on halving h while two successive local slopes differ by more than this (the
+# points are cheap there, and an order-10 method's slopes still climb 9.90 -> 9.99 over 3 halvings).
+EXTENDED_SETTLED_SLOPE = 0.02
+
+# Energy drift of a non-symplectic, non-symmetric one-step method (`harness.rules.judge_drift`):
+# the drift predicted from the first period must exceed what rounding explains by this factor
+# to be measurable (the classifier cannot tell a drift within a few rounding units from noise).
+DRIFT_MEASURABLE_FACTOR = 10.0
+
+# Adaptive steppers (`harness.rules.tolerance_allowance`): the global error may reach this many
+# times (accepted steps per trajectory) x (flow amplification) x tol x |y|. An embedded error
+# estimate is only asymptotically the local error (at coarse tolerances it is off by a few);
+# measured worst over scipy's RK45/DOP853/LSODA and heyoka's Taylor on Kepler e = 0-0.99,
+# the harmonic oscillator and y' = -y: 0.52 of N A tol |y| (RK45, circular orbit, tol 1e-3).
+TOLERANCE_ESTIMATE_FACTOR = 10.0
+
+# Close encounters in the energy experiment (`harness.experiments.energy`): a run whose fastest
+# rate (spectral radius along the orbit) rises more than ENCOUNTER_RATE_RISE-fold over its start
+# reads the bounded-energy envelope only after the rate first comes within
+# ENCOUNTER_RATE_FRACTION of its maximum over the run (a bounded error ~(h rho)^p rises with
+# each closer approach), and needs at least ENCOUNTER_MIN_DECADES decades of steps after it.
+ENCOUNTER_RATE_RISE = 10.0
+ENCOUNTER_RATE_FRACTION = 0.9
+ENCOUNTER_MIN_DECADES = 0.3

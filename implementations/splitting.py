@@ -17,6 +17,8 @@ live at half steps, positions at whole steps; it is driven by the velocity-Verle
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 from scipy.linalg.blas import daxpy as _axpy
 
@@ -208,7 +210,9 @@ def _pefrl() -> SplittingScheme:
 def _symmetric_weights(w: list[float]) -> list[float]:
     """Yoshida's symmetric composition w_m ... w_1 w_0 w_1 ... w_m from w = (w_1, ..., w_m),
     with w_0 = 1 - 2 sum w_i."""
-    w0 = 1.0 - 2.0 * sum(w)
+    if all(isinstance(x, str) for x in w):  # exact decimal strings: keep them exact
+        w = [Fraction(x) for x in w]
+    w0 = 1 - 2 * sum(w)
     return [*reversed(w), w0, *w]
 
 
@@ -216,14 +220,17 @@ VELOCITY_VERLET = SplittingScheme("velocity-verlet", [("K", 0.5), ("D", 1.0), ("
 
 # Yoshida (1990), Table 1 (sixth order) and Table 2 (eighth order), solution A: w_1 ... w_m.
 _YOSHIDA6_A = [-1.17767998417887, 0.235573213359357, 0.784513610477560]
+# Yoshida's Table 2 solution A, refined to 40 digits from his 15-digit values by Newton's method
+# on the exact order conditions (`harness.extended.refine_composition_weights`; the published
+# values satisfy them to ~2e-12): exact enough for extended-precision convergence runs.
 _YOSHIDA8_A = [
-    -1.61582374150097,
-    -2.44699182370524,
-    -0.716989419708120e-2,
-    2.44002732616735,
-    0.157739928123617,
-    1.82020630970714,
-    1.04242620869991,
+    "-1.615823741500653784787940197458742165897",
+    "-2.446991823704245889294691452381462484561",
+    "-7.169894197095332099806129249649109481199e-3",
+    "2.440027326166344063816895897619430943538",
+    "1.577399281237083213428257830795420048405e-1",
+    "1.820206309706980069331733166121399780809",
+    "1.042426208699704264348953268397656476106",
 ]
 
 _YOSHIDA = "H. Yoshida, Construction of higher order symplectic integrators, Phys. Lett. A 150 (1990) 262-268"

@@ -23,8 +23,16 @@ For one (stepper, problem) cell:
    `local_exponent` q in error ~ h^q (q = p + 1 for a one-step method of order p), on the whole
    state and, for Newtonian problems, on positions alone (`local_exponent_q`).
 
+7. Where the float64 floor ends the sweep with too few asymptotic points (an order 8-10 method
+   whose local slopes still drift when the floor arrives), the same coefficients run again in
+   real128 from the problem's start against a 192-bit reference (`harness.extended`) and those
+   points replace the float64 ones, with a message saying so; a method whose coefficients are
+   given only to float64 (or a black box, an implicit or multistep method) keeps its float64
+   verdict, and the message says why it was not rerun.
+
 Adaptive steppers are measured by a tolerance sweep instead: error against requested tolerance;
-the verdict says whether the error stays within TOLERANCE_FACTOR x tol x |y|.
+the verdict says whether the error stays within the allowance `harness.rules.tolerance_allowance`
+derives from the accepted steps and the flow's amplification over the horizon.
 Reference: Hairer, Norsett & Wanner, *Solving ODEs I*, II.1 and II.4 (order, error constants).
 """
 
@@ -286,12 +294,74 @@ def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         notes.append(f"work budget spent with {int(g.in_fit.sum())} asymptotic point(s) up to t = {T:.6g}; "
                      f"horizon shortened to t = {new_T:.6g}")
         T = new_T
+    frame = _extended_if_floor_bound(stepper, problem, frame, config)
     if notes:
         frame["message"] = frame["message"].fillna("").astype(str)
         frame.loc[frame.kind == "global", "message"] = [
             "; ".join([*notes, m] if m else notes) for m in frame.loc[frame.kind == "global", "message"]
         ]
     return frame
+
+
+def _floor_bound(g: pd.DataFrame) -> bool:
+    """The float64 sweep ended at the rounding floor (or the reference's accuracy) with too few
+    asymptotic points, and not every point is at the floor (that is `exact`)."""
+    g = g.sort_values("h", ascending=False)
+    if len(g) == 0 or int(g.in_fit.sum()) >= tol.MIN_FIT_POINTS:
+        return False
+    at_floor = g.excluded.isin(["roundoff", "reference"])
+    return bool(at_floor.iloc[-1]) and not bool(at_floor.all())
+
+
+def _extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, config) -> pd.DataFrame:
+    """Where the float64 floor ended the sweep before the asymptotic range, the same coefficients
+    run again in real128 on the problem's own start (`harness.extended`), and those rows replace
+    the float64 global rows, with a message saying so; where they cannot (coefficients given
+    only to float64, an implicit method, ...), the float64 rows stay and the message says why."""
+    from harness.extended import NotMeasurable, extended_sweep
+
+    g = frame[frame.kind == "global"]
+    if config.get("extended") is False or not _floor_bound(g):
+        return frame
+    T = float(g["t_end"].iloc[0])
+    head = (f"the float64 floor came with {int(g.in_fit.sum())} asymptotic point(s) "
+            f"(errors down to {float(g.error.min()):.3g})")
+    coefficients = getattr(stepper, "coefficients", None)
+    try:
+        if coefficients is None:
+            raise NotMeasurable("not measurable in extended precision: a black box has no coefficients")
+        amplification = _flow_amplification(problem, T - problem.t0, problem.y0)
+        ext = extended_sweep(coefficients, problem, T=T, amplification=amplification,
+                             work_budget=config.get("extended_work_budget"))
+    except NotMeasurable as exc:
+        frame = frame.copy()
+        frame["message"] = frame["message"].fillna("").astype(str)
+        mine = frame.kind == "global"
+        frame.loc[mine, "message"] = ["; ".join(x for x in (m, f"{head}; {exc}") if x)
+                                      for m in frame.loc[mine, "message"]]
+        return frame
+    rows = pd.DataFrame(ext["rows"])
+    rows["in_fit"] = rows["excluded"] == ""
+    rows["kind"] = "global"
+    rows["tol"] = np.nan
+    rows["rhs_evals"] = np.nan
+    rows["force_evals"] = np.nan
+    rows["wall_s"] = ext["wall_s"] / len(rows)
+    rows["reference_precision"] = ext["reference_precision"]
+    fit = ext["fit"]
+    measured = (f"fitted {fit['order']:.3f} over {fit['points']} points" if fit else
+                f"{int(rows.in_fit.sum())} asymptotic point(s) before {ext['stopped_by']}")
+    rows["message"] = (f"{head}; measured in real128 from the problem's start with the exact "
+                       f"coefficients against a {ext['reference_precision']} reference: {measured}, "
+                       f"local slopes " + " ".join(f"{x:.3f}" for x in ext["local_slopes"][-5:]))
+    for col in ("stepper", "problem", "t_end"):
+        rows[col] = g[col].iloc[0]
+    rows["implementation"] = "real128"
+    rows["ensemble_size"] = 1
+    rows["perturbation"] = 0.0
+    out = pd.concat([rows, frame[frame.kind != "global"]], ignore_index=True)
+    out.attrs.update(frame.attrs)
+    return out
 
 
 def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
@@ -548,6 +618,9 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     frame.loc[skipped, "excluded"] = "cost-cap"
     frame.loc[skipped, "in_fit"] = False
     frame.loc[skipped, "kind"] = "tolerance-not-run"
+    # how much the flow amplifies an error over the horizon: the rules' allowance for the
+    # global error of a locally controlled run (`harness.rules.tolerance_allowance`)
+    frame["flow_amplification"] = _flow_amplification(problem, T - T0, y0[:, 0])
     frame["reference_precision"] = ref.precision
     frame["stepper"] = stepper.info.name
     frame["problem"] = problem.name

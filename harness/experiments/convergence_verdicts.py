@@ -57,7 +57,14 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
     if (g.kind == "tolerance").any():
         t = g[g.kind == "tolerance"]
         scale = t.rounding_level / tol.EPS  # the state's size, as the sweep measured it
-        within = (t.error <= tol.TOLERANCE_FACTOR * t.tol * scale) | (t.excluded == "reference")
+        from harness.rules import tolerance_allowance
+
+        members = t["ensemble_size"].clip(lower=1) if "ensemble_size" in t else 1
+        amp = t["flow_amplification"] if "flow_amplification" in t else np.nan
+        allowed = [tolerance_allowance(float(n), float(a)) for n, a in
+                   zip(t.n_steps / members, np.broadcast_to(amp, len(t)), strict=True)]
+        factor = np.array([a[0] for a in allowed])
+        within = (t.error <= factor * t.tol * scale) | (t.excluded == "reference")
         ok = bool(within.all()) and bool(t.error.notna().all())
         fit_rows = t[t.in_fit & (t.error >= tol.PROPORTIONALITY_MIN_RATIO * t.tol * scale)]
         if len(fit_rows) >= 2:
@@ -67,7 +74,9 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         base["verdict"] = "meets-tolerance" if ok else "misses-tolerance"
         if not ok:
             worst = float((t.error / (t.tol * scale)).max())
-            base["message"] = (f"error up to {worst:.3g} x tol x |y| (limit {tol.TOLERANCE_FACTOR:g}); "
+            k = int(np.argmax((t.error / (factor * t.tol * scale)).values))
+            base["message"] = (f"error up to {worst:.3g} x tol x |y| (allowed at tol {t.tol.iloc[k]:.0e}: "
+                               f"{allowed[k][1]}); "
                                f"tolerance exponent {base['measured_order']:.3g} "
                                f"(minimum {tol.MIN_TOLERANCE_EXPONENT:g})")
         capped = g[g.kind == "tolerance-not-run"]
@@ -102,7 +111,8 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         base["verdict"] = "unstable"
     else:
         base["verdict"] = "insufficient-range"
-        base["message"] = insufficient_range_reason(gl, len(kept))
+        base["message"] = "; ".join(dict.fromkeys(  # the sweep's own notes (horizon, extended precision)
+            [insufficient_range_reason(gl, len(kept)), *(m for m in gl.get("message", []) if m)]))
     base["local_exponent"] = _fit_kind(g, "local")
     base["local_exponent_q"] = _fit_kind(g, "local-q")
     if messages and not base["message"]:

@@ -1,0 +1,345 @@
+"""Convergence order in extended precision, for methods whose asymptotic range float64 cannot reach.
+
+A high-order method (order 8-10) on an orbit meets the float64 rounding floor (about 1e-16 |y|
+times the flow's sensitivity) while its local slopes are still drifting towards the order; the
+float64 sweep then ends `insufficient-range`. The same coefficients are run here in real128
+(113-bit significand, ~34 digits, heyoka's numpy dtype; the right-hand side is a real128
+`heyoka.cfunc` of the problem's own symbolic definition), on the problem's own start (one
+trajectory), against a ground truth in 192-bit `heyoka.real` certified by a 256-bit rerun. The
+floor drops by ~18 decades, so the slopes settle and the order is fitted by the same rules as
+the float64 sweep (`harness.experiments.convergence.classify_points`).
+
+Extended precision gains nothing unless the coefficients are themselves exact beyond float64: a
+1e-16 error in a coefficient breaks the order conditions at 1e-16 h. The coefficient objects
+keep an exact form (`ButcherTableau.exact`, `SplittingScheme.exact`: Fractions, from integers,
+Fractions or decimal strings in the record); a method given only as float64 numbers is reported
+as not measurable here, with that reason. `refine_composition_weights` computes the weights of
+a symmetric composition (Yoshida's) to any number of digits from the exact local-error series
+(`harness.theory`), Newton's method started at the published 15-digit values.
+
+References: Hairer, Norsett & Wanner, *Solving ODEs I*, II.3-II.4 (order, error constants);
+H. Yoshida, Phys. Lett. A 150 (1990) 262-268 (compositions); Hairer, Lubich & Wanner, *Geometric
+Numerical Integration*, V.3 (order conditions of compositions).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+
+from harness import tolerances as tol
+from harness.coefficients import ButcherTableau, SplittingScheme, exact_value
+
+__all__ = [
+    "NotMeasurable", "exact_form", "extended_sweep", "refine_composition_weights",
+    "EXTENDED_EPS", "extended_reference",
+]
+
+#: Unit roundoff of real128 (113-bit significand).
+EXTENDED_EPS = 2.0**-113
+# Precision (bits) of the ground truth and of its certifier.
+_REFERENCE_PREC, _CERTIFIER_PREC = 192, 256
+
+
+class NotMeasurable(Exception):
+    """An extended-precision run cannot measure this pair; the message says why."""
+
+
+# -- exact coefficients -----------------------------------------------------------------------------
+def exact_form(coefficients: Any) -> Any:
+    """The coefficient object's exact form (Fractions), or NotMeasurable with the reason."""
+    if not isinstance(coefficients, (ButcherTableau, SplittingScheme)):
+        raise NotMeasurable("extended precision runs explicit Runge-Kutta tableaux and drift/kick "
+                            "compositions; this method is neither")
+    if isinstance(coefficients, ButcherTableau) and not coefficients.explicit:
+        raise NotMeasurable("extended precision runs explicit Runge-Kutta tableaux only (this one "
+                            "is implicit)")
+    exact = getattr(coefficients, "exact", None)
+    if exact is None:
+        raise NotMeasurable("not measurable in extended precision, because the coefficients are "
+                            "given only to float64 (give them as Fractions or decimal strings)")
+    return exact
+
+
+def _composition_residuals(mp, base_exact, free, order: int) -> list:
+    """Signed coefficients of h^1..h^order in the local error of the symmetric composition
+    base(w_m h)...base(w_0 h)...base(w_m h), w_0 = 1 - 2 sum w_i, on the generic separable
+    problem of `harness.theory` (every component, both starting points): all vanish exactly
+    when the composition has that order."""
+    from harness.theory import _NEWTON_COEFFS, _NEWTON_STARTS, _exact_flow, _newton_accel, _Series
+
+    w0 = 1 - 2 * sum(free)
+    weights = [*reversed(free), w0, *free]
+    steps = [(k, w * mp.mpf(v.numerator) / v.denominator) for w in weights for k, v in base_exact]
+    S = _Series(mp, order)
+    P = {k: mp.mpf(v) for k, v in _NEWTON_COEFFS.items()}
+
+    def F(y):
+        return [y[2], y[3], *_newton_accel(S, P, y[:2])]
+
+    out = []
+    for start in _NEWTON_STARTS:
+        y0 = [mp.mpf(v) for v in start]
+        q = [S.const(y0[0]), S.const(y0[1])]
+        v = [S.const(y0[2]), S.const(y0[3])]
+        for kind, c in steps:
+            if kind == "D":
+                q = [S.add(q[i], S.scale(c, S.shift(v[i]))) for i in range(2)]
+            else:
+                a = _newton_accel(S, P, q)
+                v = [S.add(v[i], S.scale(c, S.shift(a[i]))) for i in range(2)]
+        exact = _exact_flow(S, F, y0)
+        numeric = q + v
+        out.extend(numeric[i][n] - exact[i][n] for i in range(4) for n in range(1, order + 1))
+    return out
+
+
+def refine_composition_weights(base: SplittingScheme, weights: list, order: int,
+                               digits: int = 40) -> list[str]:
+    """The free weights (w_1..w_m) of a symmetric composition of `base` with the given order,
+    to `digits` significant digits: Gauss-Newton on the exact local-error coefficients, started
+    at `weights` (for instance a paper's 15-digit values). Raises NotMeasurable when it does
+    not converge (the start is not near a solution)."""
+    import mpmath
+
+    if base.exact is None:
+        raise NotMeasurable("the base method's coefficients are given only to float64")
+    with mpmath.workdps(digits + 25):
+        mp = mpmath.mp
+        x = mpmath.matrix([mp.mpf(str(w)) for w in weights])
+        step = mp.mpf(10) ** (-(digits + 10))
+        for _ in range(12):
+            r = mpmath.matrix(_composition_residuals(mp, base.exact, list(x), order))
+            J = mpmath.matrix(len(r), len(x))
+            for j in range(len(x)):
+                xp = x.copy()
+                xp[j] += step
+                rp = _composition_residuals(mp, base.exact, list(xp), order)
+                for i in range(len(r)):
+                    J[i, j] = (rp[i] - r[i]) / step
+            dx = mpmath.lu_solve(J.T * J, -(J.T * r))
+            x = x + dx
+            if mpmath.norm(dx, mpmath.inf) < mp.mpf(10) ** (-(digits + 2)):
+                break
+        else:
+            raise NotMeasurable("the composition weights did not converge from the given start")
+        return [mpmath.nstr(v, digits, strip_zeros=False, min_fixed=-1, max_fixed=1) for v in x]
+
+
+def composition_defect(base: SplittingScheme, weights: list, order: int) -> float:
+    """Largest |coefficient of h^n|, n <= order, of the local error of the symmetric composition
+    with free weights `weights` (decimal strings or Fractions), in 60-digit arithmetic: ~0 when
+    the weights are accurate, ~1e-16 for float64 weights."""
+    import mpmath
+
+    with mpmath.workdps(60):
+        mp = mpmath.mp
+        free = [mp.mpf(Fraction(w).numerator) / Fraction(w).denominator for w in weights]
+        return float(max(abs(v) for v in _composition_residuals(mp, base.exact, free, order)))
+
+
+# -- the extended-precision step loops -----------------------------------------------------------
+def _cfunc(problem, exprs, variables):
+    import heyoka as hy
+
+    from harness.problem import _subs_pars
+
+    if problem.parameters:
+        mapping = {f"p{i}": hy.expression(float(v)) for i, v in enumerate(problem.parameter_values)}
+        exprs = [_subs_pars(e, mapping) for e in exprs]
+    return hy.cfunc(list(exprs), list(variables), fp_type=hy.real128)
+
+
+def _to_real128(values) -> np.ndarray:
+    import heyoka as hy
+
+    return np.array([hy.real128(v) if not isinstance(v, Fraction)
+                     else hy.real128(v.numerator) / hy.real128(v.denominator) for v in values])
+
+
+def _rk_runner(problem, exact):
+    """y_{n+1} = y_n + h sum b_i k_i, k_i = f(t_n + c_i h, y_n + h sum_j a_ij k_j) in real128."""
+    import heyoka as hy
+
+    if problem.time_dependent:
+        raise NotMeasurable("extended precision runs autonomous problems only")
+    A, b, _ = exact
+    A128 = [_to_real128(row) for row in A]
+    b128 = _to_real128(b)
+    f = _cfunc(problem, problem.rhs, problem.variables)
+    s = len(b)
+
+    def run(y0: np.ndarray, h: float, n: int) -> tuple[np.ndarray, int]:
+        hh = hy.real128(h)
+        y = y0.copy()
+        K = [None] * s
+        for _ in range(n):
+            for i in range(s):
+                Y = y
+                for j in range(i):
+                    if A[i][j] != 0:
+                        Y = Y + (hh * A128[i][j]) * K[j]
+                K[i] = f(Y)
+            incr = sum((b128[i] * K[i] for i in range(s) if b[i] != 0), start=0 * y)
+            y = y + hh * incr
+        return y, n * s
+
+    return run
+
+
+def _split_runner(problem, exact):
+    """Drifts q += a h v and kicks v += b h a(q) in real128."""
+    import heyoka as hy
+
+    form = problem.newtonian
+    if form is None or problem.velocity_dependent or problem.time_dependent:
+        raise NotMeasurable("a drift/kick composition needs a velocity-free, autonomous acceleration")
+    names = [str(v) for v in problem.variables]
+    qi = [names.index(str(v)) for v in form.positions]
+    vi = [names.index(str(v)) for v in form.velocities]
+    accel = _cfunc(problem, form.acceleration, form.positions)
+    seq = [(k, _to_real128([c])[0]) for k, c in exact]
+    kicks = sum(1 for k, _ in exact if k == "K")
+
+    def run(y0: np.ndarray, h: float, n: int) -> tuple[np.ndarray, int]:
+        hh = hy.real128(h)
+        coeffs = [(k, hh * c) for k, c in seq]
+        q, v = y0[qi].copy(), y0[vi].copy()
+        for _ in range(n):
+            for kind, hc in coeffs:
+                if kind == "D":
+                    q = q + hc * v
+                else:
+                    v = v + hc * accel(q)
+        y = y0.copy()
+        y[qi], y[vi] = q, v
+        return y, n * kicks
+
+    return run
+
+
+def _runner(coefficients, problem):
+    exact = exact_form(coefficients)
+    if isinstance(coefficients, ButcherTableau):
+        return _rk_runner(problem, exact)
+    return _split_runner(problem, exact)
+
+
+# -- ground truth in 192 bits, certified by 256 ----------------------------------------------------
+def _taylor(problem, T: float, prec: int) -> list:
+    import heyoka as hy
+
+    from harness import cache
+
+    cache.configure_heyoka_cache()
+    sys = list(zip(problem.variables, problem.rhs, strict=True))
+    state = [hy.real(float(v), prec) for v in problem.y0]
+    kwargs: dict[str, Any] = {"tol": hy.real(2.0 ** (1 - prec), prec), "high_accuracy": True,
+                              "compact_mode": True, "fp_type": hy.real, "prec": prec}
+    if problem.parameters:
+        kwargs["pars"] = [hy.real(float(v), prec) for v in problem.parameter_values]
+    ta = hy.taylor_adaptive(sys, state, **kwargs)
+    ta.time = hy.real(float(problem.t0), prec)
+    outcome = ta.propagate_until(hy.real(float(T), prec))[0]
+    if outcome != hy.taylor_outcome.time_limit:
+        raise NotMeasurable(f"the {prec}-bit ground truth stopped with {outcome}")
+    return list(ta.state)
+
+
+def extended_reference(problem, T: float) -> tuple[list, float]:
+    """The state at T in 192-bit arithmetic and its certified error (max over components of the
+    difference with a 256-bit rerun)."""
+    ref = _taylor(problem, T, _REFERENCE_PREC)
+    cert = _taylor(problem, T, _CERTIFIER_PREC)
+    return ref, max(float(abs(a - b)) for a, b in zip(ref, cert, strict=True))
+
+
+def _error(y: np.ndarray, ref: list) -> float:
+    import heyoka as hy
+
+    return max(float(abs(hy.real(v, _REFERENCE_PREC) - r)) for v, r in zip(y, ref, strict=True))
+
+
+def _settled(rows: list[dict]) -> bool:
+    """The last two local slopes agree to EXTENDED_SETTLED_SLOPE: cheap points are taken until
+    the slopes stop drifting (a float64 sweep cannot afford to wait)."""
+    if len(rows) < 3:
+        return False
+    h = np.log([r["h"] for r in rows[-3:]])
+    e = np.log([r["error"] for r in rows[-3:]])
+    slopes = np.diff(e) / np.diff(h)
+    return bool(abs(slopes[1] - slopes[0]) <= tol.EXTENDED_SETTLED_SLOPE)
+
+
+# -- the sweep ------------------------------------------------------------------------------------
+def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget: float | None = None,
+                   amplification: float = 1.0) -> dict:
+    """Global error against step size in real128 for one trajectory from the problem's start,
+    n = 1, 2, 4, ... steps until the asymptotic window holds TARGET_FIT_POINTS points, the
+    real128 floor is reached or `work_budget` function evaluations are spent. Returns the rows
+    (h, n_steps, error, reference_error, rounding_level, excluded), the fit (order, points,
+    h range) or None, and the reference error. Raises NotMeasurable with the reason."""
+    from harness.experiments.convergence import classify_points, fit_order
+
+    runner = _runner(coefficients, problem)
+    T = float(problem.convergence_t_end if T is None else T)
+    budget = float(tol.EXTENDED_WORK_BUDGET if work_budget is None else work_budget)
+    started = time.perf_counter()
+    ref, ref_err = extended_reference(problem, T)
+    y0 = _to_real128([float(v) for v in problem.y0])
+    scale = max(tol.SCALE_FLOOR, float(np.max(np.abs(problem.y0))),
+                max(abs(float(r)) for r in ref))
+    start_error = tol.SWEEP_START_ERROR * scale
+    span = T - float(problem.t0)
+    rows: list[dict] = []
+    spent = 0
+    n = 1
+    stop = "the work budget"
+    while True:
+        y, evals = runner(y0, span / n, n)
+        spent += evals
+        err = _error(y, ref)
+        rows.append({"h": span / n, "n_steps": n, "error": err, "reference_error": ref_err,
+                     "rounding_level": math.sqrt(n) * EXTENDED_EPS * scale * max(1.0, amplification)})
+        h_arr = np.array([r["h"] for r in rows])
+        e_arr = np.array([r["error"] for r in rows])
+        reasons = classify_points(h_arr, e_arr, np.array([r["reference_error"] for r in rows]),
+                                  np.array([r["rounding_level"] for r in rows]), start_error)
+        if math.isfinite(err) and err < start_error:
+            if reasons[-1] in ("roundoff", "reference"):
+                stop = "the real128 rounding floor" if reasons[-1] == "roundoff" else \
+                    "the 192-bit reference's accuracy"
+                break
+            if int((reasons == "").sum()) >= tol.TARGET_FIT_POINTS and _settled(rows):
+                stop = ""
+                break
+        if spent + 2 * evals > budget:
+            break
+        n *= 2
+    for r, why in zip(rows, reasons, strict=True):
+        r["excluded"] = why
+    kept = [r for r in rows if not r["excluded"]]
+    fit = None
+    if len(kept) >= tol.MIN_FIT_POINTS:
+        f = fit_order([r["h"] for r in kept], [r["error"] for r in kept])
+        fit = {"order": f["order"], "ci_low": f["ci_low"], "ci_high": f["ci_high"],
+               "residual": f["residual"], "points": len(kept), "h_min": min(r["h"] for r in kept),
+               "h_max": max(r["h"] for r in kept), "error_min": min(r["error"] for r in kept),
+               "error_max": max(r["error"] for r in kept)}
+    slopes = np.diff(np.log([r["error"] for r in rows])) / np.diff(np.log([r["h"] for r in rows]))
+    return {"rows": rows, "fit": fit, "reference_error": ref_err, "stopped_by": stop,
+            "evals": spent, "wall_s": time.perf_counter() - started, "t_end": T,
+            "local_slopes": [float(s) for s in slopes], "precision": "real128",
+            "reference_precision": f"real{_REFERENCE_PREC} certified by real{_CERTIFIER_PREC}"}
+
+
+def exact_weights(values) -> list[Fraction]:
+    """Helper for records: decimal strings or Fractions as Fractions (None entries rejected)."""
+    out = [exact_value(v) for v in values]
+    if any(v is None for v in out):
+        raise NotMeasurable("a weight is not given exactly")
+    return out
