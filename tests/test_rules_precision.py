@@ -112,7 +112,7 @@ def test_fifteen_digit_weights_do_not_reach_order_8_in_real128():
 
 
 def test_floor_bound_sweeps_are_rerun_only_with_exact_coefficients():
-    from harness.experiments.convergence import _floor_bound
+    from harness.experiments.convergence_extended import floor_bound as _floor_bound
 
     g = pd.DataFrame({"h": [1.0, 0.5, 0.25, 0.125], "in_fit": [False, True, True, False],
                       "excluded": ["pre-asymptotic", "", "", "roundoff"]})

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -49,6 +49,8 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
 from harness.experiments.common import perturbation_used
+from harness.experiments.convergence_extended import extended_if_floor_bound
+from harness.experiments.convergence_fit import classify_points, fit_order
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
@@ -67,106 +69,6 @@ SUMMARY_COLUMNS = [
 
 
 # -- fitting ----------------------------------------------------------------------------------
-def _local_slopes(h: np.ndarray, e: np.ndarray) -> np.ndarray:
-    return np.diff(np.log(e)) / np.diff(np.log(h))
-
-
-def fit_order(h: Sequence[float], error: Sequence[float]) -> dict[str, float]:
-    """Least-squares slope of log(error) against log(h), with RMS residual (in log10 units) and
-    a 95 % confidence interval from Student's t."""
-    from scipy import stats
-
-    x = np.log(np.asarray(h, dtype=float))
-    y = np.log(np.asarray(error, dtype=float))
-    n = x.size
-    if n < 2:
-        raise ValueError("`h` needs at least two points to fit a slope")
-    A = np.vstack([x, np.ones_like(x)]).T
-    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-    slope, intercept = float(coef[0]), float(coef[1])
-    resid = y - (slope * x + intercept)
-    rms = float(np.sqrt(np.mean(resid**2)) / math.log(10))
-    if n > 2:
-        s2 = float(resid @ resid) / (n - 2)
-        se = math.sqrt(s2 / float(((x - x.mean()) ** 2).sum()))
-        half = float(stats.t.ppf(0.975, n - 2)) * se
-    else:
-        half = float("nan")
-    return {"order": slope, "intercept": intercept, "residual": rms, "ci_low": slope - half,
-            "ci_high": slope + half}
-
-
-def asymptotic_window(h: np.ndarray, error: np.ndarray, usable: np.ndarray) -> tuple[int, int] | None:
-    """The asymptotic range among the usable points (ordered from large h to small h): the run
-    of consecutive usable points nearest the floor, extended from its small-h end towards
-    larger h for as long as each local slope stays within the plateau tolerance of the slopes
-    next to the floor. Anchoring at the small-h end keeps a slowly drifting pre-asymptotic
-    start out of the fit. Returns (first, last) indices, or None for fewer than two points."""
-    idx = np.flatnonzero(usable)
-    if idx.size < 2:
-        return None
-    runs: list[list[int]] = [[int(idx[0])]]
-    for i in idx[1:]:
-        if i == runs[-1][-1] + 1:
-            runs[-1].append(int(i))
-        else:
-            runs.append([int(i)])
-    long_runs = [r for r in runs if len(r) >= tol.MIN_FIT_POINTS]
-    run = long_runs[-1] if long_runs else max(runs, key=len)
-    if len(run) < 2:
-        return None
-    pts = np.array(run)
-    slopes = _local_slopes(h[pts], error[pts])
-    plateau = float(np.median(slopes[-min(3, slopes.size):]))
-    width = max(tol.PLATEAU_SLOPE_TOL, tol.PLATEAU_SLOPE_RTOL * abs(plateau))
-    first = slopes.size  # index into pts of the window's first point
-    while first > 0 and abs(slopes[first - 1] - plateau) <= width:
-        first -= 1
-    if first == slopes.size:  # even the last slope disagrees with its neighbours
-        first = slopes.size - 1
-    # Still drifting: local slopes that move monotonically by more than PLATEAU_DRIFT_TOL across
-    # the window are not yet asymptotic (an order-8 method rising 7.6 -> 7.9 as the floor
-    # arrives); its large-h end is dropped until they settle or too few points remain.
-    while slopes.size - first >= tol.MIN_FIT_POINTS - 1:
-        w = slopes[first:]
-        steps = np.diff(w)
-        monotone = bool(np.all(steps > 0) or np.all(steps < 0))
-        if not (monotone and abs(w[-1] - w[0]) > tol.PLATEAU_DRIFT_TOL):
-            break
-        first += 1
-    return int(pts[first]), int(pts[-1])
-
-
-def classify_points(
-    h: np.ndarray,
-    error: np.ndarray,
-    reference_error: np.ndarray,
-    rounding_level: np.ndarray,
-    start_error: float | None = None,
-) -> np.ndarray:
-    """Reason each point is excluded from the fit ('' when it is kept), by the rules above.
-    Points must be ordered from the largest h to the smallest; `start_error` is absolute (the
-    caller scales it by the state's size)."""
-    n = h.size
-    reason = np.array([""] * n, dtype=object)
-    for i in range(n):
-        if not np.isfinite(error[i]) or error[i] > tol.BLOWUP_ERROR:
-            reason[i] = "blow-up"
-        elif error[i] < tol.REFERENCE_MARGIN * reference_error[i]:
-            reason[i] = "reference"
-        elif error[i] < tol.ROUNDOFF_MARGIN * rounding_level[i]:
-            reason[i] = "roundoff"
-        elif start_error is not None and error[i] >= start_error:
-            reason[i] = "pre-asymptotic"
-    usable = reason == ""
-    window = asymptotic_window(h, error, usable)
-    for i in np.flatnonzero(usable):
-        if window is None or not (window[0] <= i <= window[1]):
-            reason[i] = "pre-asymptotic"
-    return reason
-
-
-# -- the experiment ---------------------------------------------------------------------------
 class ConvergenceExperiment(Experiment):
     name = "convergence"
     description = "Global and local error order against step size (tolerance for adaptive steppers)."
@@ -294,74 +196,15 @@ def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         notes.append(f"work budget spent with {int(g.in_fit.sum())} asymptotic point(s) up to t = {T:.6g}; "
                      f"horizon shortened to t = {new_T:.6g}")
         T = new_T
-    frame = _extended_if_floor_bound(stepper, problem, frame, config)
+    frame = extended_if_floor_bound(
+        stepper, problem, frame, config,
+        amplification=lambda T: _flow_amplification(problem, T - problem.t0, problem.y0))
     if notes:
         frame["message"] = frame["message"].fillna("").astype(str)
         frame.loc[frame.kind == "global", "message"] = [
             "; ".join([*notes, m] if m else notes) for m in frame.loc[frame.kind == "global", "message"]
         ]
     return frame
-
-
-def _floor_bound(g: pd.DataFrame) -> bool:
-    """The float64 sweep ended at the rounding floor (or the reference's accuracy) with too few
-    asymptotic points, and not every point is at the floor (that is `exact`)."""
-    g = g.sort_values("h", ascending=False)
-    if len(g) == 0 or int(g.in_fit.sum()) >= tol.MIN_FIT_POINTS:
-        return False
-    at_floor = g.excluded.isin(["roundoff", "reference"])
-    return bool(at_floor.iloc[-1]) and not bool(at_floor.all())
-
-
-def _extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, config) -> pd.DataFrame:
-    """Where the float64 floor ended the sweep before the asymptotic range, the same coefficients
-    run again in real128 on the problem's own start (`harness.extended`), and those rows replace
-    the float64 global rows, with a message saying so; where they cannot (coefficients given
-    only to float64, an implicit method, ...), the float64 rows stay and the message says why."""
-    from harness.extended import NotMeasurable, extended_sweep
-
-    g = frame[frame.kind == "global"]
-    if config.get("extended") is False or not _floor_bound(g):
-        return frame
-    T = float(g["t_end"].iloc[0])
-    head = (f"the float64 floor came with {int(g.in_fit.sum())} asymptotic point(s) "
-            f"(errors down to {float(g.error.min()):.3g})")
-    coefficients = getattr(stepper, "coefficients", None)
-    try:
-        if coefficients is None:
-            raise NotMeasurable("not measurable in extended precision: a black box has no coefficients")
-        amplification = _flow_amplification(problem, T - problem.t0, problem.y0)
-        ext = extended_sweep(coefficients, problem, T=T, amplification=amplification,
-                             work_budget=config.get("extended_work_budget"))
-    except NotMeasurable as exc:
-        frame = frame.copy()
-        frame["message"] = frame["message"].fillna("").astype(str)
-        mine = frame.kind == "global"
-        frame.loc[mine, "message"] = ["; ".join(x for x in (m, f"{head}; {exc}") if x)
-                                      for m in frame.loc[mine, "message"]]
-        return frame
-    rows = pd.DataFrame(ext["rows"])
-    rows["in_fit"] = rows["excluded"] == ""
-    rows["kind"] = "global"
-    rows["tol"] = np.nan
-    rows["rhs_evals"] = np.nan
-    rows["force_evals"] = np.nan
-    rows["wall_s"] = ext["wall_s"] / len(rows)
-    rows["reference_precision"] = ext["reference_precision"]
-    fit = ext["fit"]
-    measured = (f"fitted {fit['order']:.3f} over {fit['points']} points" if fit else
-                f"{int(rows.in_fit.sum())} asymptotic point(s) before {ext['stopped_by']}")
-    rows["message"] = (f"{head}; measured in real128 from the problem's start with the exact "
-                       f"coefficients against a {ext['reference_precision']} reference: {measured}, "
-                       f"local slopes " + " ".join(f"{x:.3f}" for x in ext["local_slopes"][-5:]))
-    for col in ("stepper", "problem", "t_end"):
-        rows[col] = g[col].iloc[0]
-    rows["implementation"] = "real128"
-    rows["ensemble_size"] = 1
-    rows["perturbation"] = 0.0
-    out = pd.concat([rows, frame[frame.kind != "global"]], ignore_index=True)
-    out.attrs.update(frame.attrs)
-    return out
 
 
 def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:

@@ -299,7 +299,7 @@ class Problem:
             raise InputError(f"`kind` must be rhs, accel, accel_q, jac or inv, got {kind!r}")
         if constants is not None and self.parameters:
             mapping = {f"p{i}": hy.expression(float(v)) for i, v in enumerate(constants)}
-            exprs = [_subs_pars(e, mapping) for e in exprs]
+            exprs = [subs_pars(e, mapping) for e in exprs]
         cache.configure_heyoka_cache()
         variables = list(self.newtonian.positions) if kind == "accel_q" else list(self.variables)
         fn = hy.cfunc(exprs, variables) if exprs else None
@@ -350,7 +350,7 @@ def _check_structure(name: str, structure: Any, var_names: list[str]) -> None:
         )
 
 
-def _subs_pars(e: hy.expression, mapping: dict[str, hy.expression]) -> hy.expression:
+def subs_pars(e: hy.expression, mapping: dict[str, hy.expression]) -> hy.expression:
     """Replace runtime parameters p0, p1, ... by constants."""
     pars = [hy.par[int(k[1:])] for k in mapping]
     return hy.subs(e, dict(zip(pars, mapping.values(), strict=True)))

@@ -22,7 +22,7 @@ from typing import Any
 
 import pandas as pd
 
-from harness.report.sections import RunView, is_missing, anchor, experiment_key, section_spec
+from harness.report.sections import RunView, anchor, experiment_key, is_missing, section_spec
 
 __all__ = ["Previous", "Comparison", "load_previous", "compare_runs", "VERDICTS_FILE"]
 

@@ -22,11 +22,11 @@ from harness.report.sections import (
     RunView,
     ScoreColumn,
     Section,
-    yes_no,
     anchor,
     df_table,
     fmt,
     register_section,
+    yes_no,
 )
 
 __all__: list[str] = []

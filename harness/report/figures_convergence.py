@@ -16,12 +16,12 @@ from harness.report.figure_style import (
     label_text,
     legend_outside,
     loglog_axes,
-    small_multiples,
     new_figure,
     panel_legend,
+    panels,
+    small_multiples,
     small_ticks,
     styled,
-    panels,
 )
 from harness.report.figure_svg import Figure, to_svg
 

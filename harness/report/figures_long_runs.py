@@ -17,12 +17,12 @@ from harness.report.figure_style import (
     clip_log,
     label_text,
     loglog_axes,
-    small_multiples,
     panel_legend,
+    panels,
+    small_multiples,
     small_ticks,
     styled,
     thin_line,
-    panels,
 )
 from harness.report.figure_svg import Figure, to_svg
 

@@ -12,12 +12,12 @@ from harness.report.figure_style import (
     clip_log,
     label_text,
     loglog_axes,
-    small_multiples,
     new_figure,
     panel_legend,
+    panels,
+    small_multiples,
     small_ticks,
     styled,
-    panels,
 )
 from harness.report.figure_svg import Figure, to_svg
 

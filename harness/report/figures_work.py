@@ -15,8 +15,8 @@ from harness.report.figure_style import (
     Palette,
     label_text,
     loglog_axes,
-    small_multiples,
     new_figure,
+    small_multiples,
     small_ticks,
     styled,
 )

@@ -26,11 +26,11 @@ from harness.report.sections import (
     SectionTimer,
     Table,
     TextCell,
-    text_cell,
     anchor,
     df_table,
     fmt,
     section_spec,
+    text_cell,
 )
 
 __all__ = ["verdicts_section", "changes_section", "ground_truth", "claims", "gate_trust", "provenance",

@@ -19,7 +19,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.report.figure_style import clip_log, label_text, legend_outside, loglog_axes, new_figure, styled, thin_line
+from harness.report.figure_style import (
+    clip_log,
+    label_text,
+    legend_outside,
+    loglog_axes,
+    new_figure,
+    styled,
+    thin_line,
+)
 from harness.report.figure_svg import Figure, check_svg, to_svg
 from harness.report.sections import Section, df_table, register_section
 

@@ -16,10 +16,10 @@ import pandas as pd
 
 from harness.report.sections import (
     RunView,
-    is_missing,
     anchor,
     experiment_key,
     first_sentence,
+    is_missing,
     section_spec,
 )
 

@@ -26,11 +26,11 @@ __all__ = ["splitting_local_error_series", "splitting_order", "rk_order_series"]
 # differential of any tree (any bracket of the split vector fields) can show up in the error.
 _SERIES_DPS = 60
 # U(q) = k1 q1^2/2 + k2 q2^2/2 + kap q1 q2 + c1 q1^2 q2 + c2 q2^3/3 + eps exp(al q1 + be q2)
-_NEWTON_COEFFS = {
+NEWTON_COEFFS = {
     "k1": "1.1319", "k2": "0.7853", "kap": "0.3183", "c1": "0.2718", "c2": "-0.4142",
     "eps": "0.5772", "al": "0.6931", "be": "-0.3679",
 }
-_NEWTON_STARTS = (("0.3141", "-0.2236", "0.1732", "0.4472"),
+NEWTON_STARTS = (("0.3141", "-0.2236", "0.1732", "0.4472"),
                   ("-0.1618", "0.2646", "-0.3317", "0.1414"))
 _FIRST_COEFFS = {
     "a1": "0.6180", "a2": "-0.4142", "a3": "0.5772", "a4": "0.6931", "a5": "-0.3679",
@@ -40,7 +40,7 @@ _FIRST_COEFFS = {
 _FIRST_STARTS = (("0.3141", "-0.2236", "0.1732"), ("-0.1618", "0.2646", "-0.3317"))
 
 
-class _Series:
+class Series:
     """Truncated power series arithmetic on lists of mpmath numbers (degree `N`)."""
 
     def __init__(self, mp, N: int):
@@ -71,7 +71,7 @@ class _Series:
         return e
 
 
-def _newton_accel(S: _Series, P: dict, q: list[list]) -> list[list]:
+def newton_accel(S: Series, P: dict, q: list[list]) -> list[list]:
     q1, q2 = q
     E = S.exp(S.add(S.scale(P["al"], q1), S.scale(P["be"], q2)))
     q1q2 = S.mul(q1, q2)
@@ -82,7 +82,7 @@ def _newton_accel(S: _Series, P: dict, q: list[list]) -> list[list]:
     return [S.scale(-1, a1), S.scale(-1, a2)]
 
 
-def _first_rhs(S: _Series, P: dict, y: list[list]) -> list[list]:
+def _first_rhs(S: Series, P: dict, y: list[list]) -> list[list]:
     y1, y2, y3 = y
     E1 = S.exp(S.add(S.scale(P["a4"], y1), S.scale(P["a5"], y3)))
     E2 = S.exp(S.scale(P["c2"], y2))
@@ -92,7 +92,7 @@ def _first_rhs(S: _Series, P: dict, y: list[list]) -> list[list]:
     return [f1, f2, f3]
 
 
-def _exact_flow(S: _Series, F: Callable[[list], list], y0: list) -> list[list]:
+def exact_flow(S: Series, F: Callable[[list], list], y0: list) -> list[list]:
     """Taylor coefficients of the exact solution of y' = F(y), y(0) = y0, by Picard iteration
     on series (each sweep fixes one more coefficient)."""
     y = [S.const(c) for c in y0]
@@ -102,7 +102,7 @@ def _exact_flow(S: _Series, F: Callable[[list], list], y0: list) -> list[list]:
     return y
 
 
-def _error_profile(S: _Series, numeric: list[list], exact: list[list]):
+def _error_profile(S: Series, numeric: list[list], exact: list[list]):
     err = [max(abs(numeric[i][n] - exact[i][n]) for i in range(len(exact))) for n in range(S.N + 1)]
     size = [max(abs(exact[i][n]) for i in range(len(exact))) for n in range(S.N + 1)]
     return err, size
@@ -119,14 +119,14 @@ def splitting_local_error_series(scheme: SplittingScheme, degree: int = 11) -> l
     out = [0.0] * (degree + 1)
     with mpmath.workdps(_SERIES_DPS):
         mp = mpmath.mp
-        S = _Series(mp, degree)
-        P = {k: mp.mpf(v) for k, v in _NEWTON_COEFFS.items()}
+        S = Series(mp, degree)
+        P = {k: mp.mpf(v) for k, v in NEWTON_COEFFS.items()}
         steps = [(kind, mp.mpf(float(c))) for kind, c in scheme.sequence]  # exact float values
 
         def F(y):
-            return [y[2], y[3], *_newton_accel(S, P, y[:2])]
+            return [y[2], y[3], *newton_accel(S, P, y[:2])]
 
-        for start in _NEWTON_STARTS:
+        for start in NEWTON_STARTS:
             y0 = [mp.mpf(v) for v in start]
             q = [S.const(y0[0]), S.const(y0[1])]
             v = [S.const(y0[2]), S.const(y0[3])]
@@ -134,9 +134,9 @@ def splitting_local_error_series(scheme: SplittingScheme, degree: int = 11) -> l
                 if kind == "D":
                     q = [S.add(q[i], S.scale(c, S.shift(v[i]))) for i in range(2)]
                 else:
-                    a = _newton_accel(S, P, q)
+                    a = newton_accel(S, P, q)
                     v = [S.add(v[i], S.scale(c, S.shift(a[i]))) for i in range(2)]
-            err, size = _error_profile(S, q + v, _exact_flow(S, F, y0))
+            err, size = _error_profile(S, q + v, exact_flow(S, F, y0))
             for n in range(degree + 1):
                 out[n] = max(out[n], float(err[n] / max(mp.mpf(1), size[n])))
     return out
@@ -188,7 +188,7 @@ def rk_order_series(tableau: ButcherTableau, max_order: int = 8) -> int:
     worst = [0.0] * (degree + 1)
     with mpmath.workdps(_SERIES_DPS):
         mp = mpmath.mp
-        S = _Series(mp, degree)
+        S = Series(mp, degree)
         P = {k: mp.mpf(v) for k, v in _FIRST_COEFFS.items()}
         A = [[mp.mpf(float(x)) for x in row] for row in tableau.A]
         b = [mp.mpf(float(x)) for x in tableau.b]
@@ -208,7 +208,7 @@ def rk_order_series(tableau: ButcherTableau, max_order: int = 8) -> int:
                     K[i] = F(Yi)
             y1 = [S.add(Y0[m], S.shift(S.add(*[S.scale(b[j], K[j][m]) for j in range(s)])))
                   for m in range(3)]
-            err, size = _error_profile(S, y1, _exact_flow(S, F, y0))
+            err, size = _error_profile(S, y1, exact_flow(S, F, y0))
             for n in range(degree + 1):
                 worst[n] = max(worst[n], float(err[n] / max(mp.mpf(1), size[n])))
     return _order_from_series(worst, max_order)

@@ -1,0 +1,116 @@
+"""Fitting an order to (h, error) points: least-squares slope with its 95 % interval, the
+asymptotic window (where the local slopes have settled), and each point's classification
+(blow-up, reference, roundoff, pre-asymptotic) with its reason."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from harness import tolerances as tol
+
+__all__ = ["fit_order", "asymptotic_window", "classify_points"]
+
+
+def _local_slopes(h: np.ndarray, e: np.ndarray) -> np.ndarray:
+    return np.diff(np.log(e)) / np.diff(np.log(h))
+
+
+def fit_order(h: Sequence[float], error: Sequence[float]) -> dict[str, float]:
+    """Least-squares slope of log(error) against log(h), with RMS residual (in log10 units) and
+    a 95 % confidence interval from Student's t."""
+    from scipy import stats
+
+    x = np.log(np.asarray(h, dtype=float))
+    y = np.log(np.asarray(error, dtype=float))
+    n = x.size
+    if n < 2:
+        raise ValueError("`h` needs at least two points to fit a slope")
+    A = np.vstack([x, np.ones_like(x)]).T
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    slope, intercept = float(coef[0]), float(coef[1])
+    resid = y - (slope * x + intercept)
+    rms = float(np.sqrt(np.mean(resid**2)) / math.log(10))
+    if n > 2:
+        s2 = float(resid @ resid) / (n - 2)
+        se = math.sqrt(s2 / float(((x - x.mean()) ** 2).sum()))
+        half = float(stats.t.ppf(0.975, n - 2)) * se
+    else:
+        half = float("nan")
+    return {"order": slope, "intercept": intercept, "residual": rms, "ci_low": slope - half,
+            "ci_high": slope + half}
+
+
+def asymptotic_window(h: np.ndarray, error: np.ndarray, usable: np.ndarray) -> tuple[int, int] | None:
+    """The asymptotic range among the usable points (ordered from large h to small h): the run
+    of consecutive usable points nearest the floor, extended from its small-h end towards
+    larger h for as long as each local slope stays within the plateau tolerance of the slopes
+    next to the floor. Anchoring at the small-h end keeps a slowly drifting pre-asymptotic
+    start out of the fit. Returns (first, last) indices, or None for fewer than two points."""
+    idx = np.flatnonzero(usable)
+    if idx.size < 2:
+        return None
+    runs: list[list[int]] = [[int(idx[0])]]
+    for i in idx[1:]:
+        if i == runs[-1][-1] + 1:
+            runs[-1].append(int(i))
+        else:
+            runs.append([int(i)])
+    long_runs = [r for r in runs if len(r) >= tol.MIN_FIT_POINTS]
+    run = long_runs[-1] if long_runs else max(runs, key=len)
+    if len(run) < 2:
+        return None
+    pts = np.array(run)
+    slopes = _local_slopes(h[pts], error[pts])
+    plateau = float(np.median(slopes[-min(3, slopes.size):]))
+    width = max(tol.PLATEAU_SLOPE_TOL, tol.PLATEAU_SLOPE_RTOL * abs(plateau))
+    first = slopes.size  # index into pts of the window's first point
+    while first > 0 and abs(slopes[first - 1] - plateau) <= width:
+        first -= 1
+    if first == slopes.size:  # even the last slope disagrees with its neighbours
+        first = slopes.size - 1
+    # Still drifting: local slopes that move monotonically by more than PLATEAU_DRIFT_TOL across
+    # the window are not yet asymptotic (an order-8 method rising 7.6 -> 7.9 as the floor
+    # arrives); its large-h end is dropped until they settle or too few points remain.
+    while slopes.size - first >= tol.MIN_FIT_POINTS - 1:
+        w = slopes[first:]
+        steps = np.diff(w)
+        monotone = bool(np.all(steps > 0) or np.all(steps < 0))
+        if not (monotone and abs(w[-1] - w[0]) > tol.PLATEAU_DRIFT_TOL):
+            break
+        first += 1
+    return int(pts[first]), int(pts[-1])
+
+
+def classify_points(
+    h: np.ndarray,
+    error: np.ndarray,
+    reference_error: np.ndarray,
+    rounding_level: np.ndarray,
+    start_error: float | None = None,
+) -> np.ndarray:
+    """Reason each point is excluded from the fit ('' when it is kept), by the rules above.
+    Points must be ordered from the largest h to the smallest; `start_error` is absolute (the
+    caller scales it by the state's size)."""
+    n = h.size
+    reason = np.array([""] * n, dtype=object)
+    for i in range(n):
+        if not np.isfinite(error[i]) or error[i] > tol.BLOWUP_ERROR:
+            reason[i] = "blow-up"
+        elif error[i] < tol.REFERENCE_MARGIN * reference_error[i]:
+            reason[i] = "reference"
+        elif error[i] < tol.ROUNDOFF_MARGIN * rounding_level[i]:
+            reason[i] = "roundoff"
+        elif start_error is not None and error[i] >= start_error:
+            reason[i] = "pre-asymptotic"
+    usable = reason == ""
+    window = asymptotic_window(h, error, usable)
+    for i in np.flatnonzero(usable):
+        if window is None or not (window[0] <= i <= window[1]):
+            reason[i] = "pre-asymptotic"
+    return reason
+
+
+# -- the experiment ---------------------------------------------------------------------------
