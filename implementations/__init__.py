@@ -19,10 +19,11 @@ FAMILY_MODULES = (
     "compiled",
     "step_control",
     "rebound_adapter",
+    "sundials_adapter",
 )
 # Adapters of outside libraries whose package is an optional extra: they register no steppers
 # when it is missing and say so in `UNAVAILABLE` (listed by `unavailable_steppers()`).
-OPTIONAL_MODULES = ("rebound_adapter",)
+OPTIONAL_MODULES = ("rebound_adapter", "sundials_adapter")
 
 
 def builtin_steppers() -> list:
