@@ -1,8 +1,15 @@
 """SUNDIALS CVODE through scikit-sundae, wrapped as adaptive steppers: `cvode-bdf`, `cvode-adams`.
 
-An optional extra like REBOUND: `pip install .[sundials]` (pins scikit-sundae==1.2.0). Without
-it the module registers nothing and `implementations.unavailable_steppers()` lists it with the
-install command; loaded as a plugin file it fails with that one line.
+An optional extra: `pip install .[sundials]` (pins scikit-sundae==1.2.0; requirements.txt pins it
+too, so CI installs it). Without it the module registers nothing and
+`implementations.unavailable_steppers()` lists it with the install command; loaded as a plugin
+file it fails with that one line.
+
+Opt-in (`--plugin implementations/sundials_adapter.py`), not in the default registry: the gate's
+adaptive rule (global error within 1e4 x tol x |y| over the tolerance sweep) fails CVODE on long
+orbital spans, measured at load ~13: kepler-circular BDF 1.03e4 x tol; planets-pair BDF 1.65e5,
+Adams 1.28e4 x tol. CVODE controls the local error per step, as documented; over ten orbits the
+global error outgrows that factor. Every other default problem meets it.
 
 CVODE is adaptive only (no fixed-step mode): variable-order, variable-step linear multistep
 methods, BDF of orders 1-5 (Newton iteration with a dense direct solver and the problem's
