@@ -1,17 +1,19 @@
 """REBOUND's N-body integrators, driven as REBOUND's users drive them, as harness steppers.
 
-A plugin like any user's: `--plugin implementations/rebound_adapter.py` (or `load_plugin`) registers
-its steppers when `rebound` imports; without REBOUND, loading it as a plugin fails with one line
-naming the install command, and `implementations.unavailable_steppers()` lists it (importing the
-module itself never fails: `STEPPERS` is then empty). Install: `pip install .[rebound]` (pins
-rebound==5.2.2; requirements.txt pins it too).
+In the default registry (`implementations.FAMILY_MODULES`); it registers its steppers when
+`rebound` imports. Without REBOUND it registers nothing, `implementations.unavailable_steppers()`
+lists it with the install command, and loading the file as a plugin fails with that one line
+(importing the module itself never fails: `STEPPERS` is then empty). Install:
+`pip install .[rebound]` (pins rebound==5.2.2; requirements.txt pins it too).
 
-Not yet in the default registry (`implementations.FAMILY_MODULES`): on the unperturbed Kepler
-problems the Wisdom-Holman-type maps are exact (`exact`, or `insufficient-range` where the
-17th-order corrector's or MERCURIUS's extra drifts put the rounding floor above the sweep's
-rounding level), and SABAC4 on `outer-solar-system` is at its rounding floor from the coarsest
-step: the registry-wide gate fails these cells until its rules read the facts this module and
-`NBody.perturbation_free` provide. Adding "rebound_adapter" to FAMILY_MODULES registers it.
+The gate judges the Wisdom-Holman-type maps by their declared error law
+(`info.extra['perturbation_error']`, read by `harness.perturbation_law`) and the problem's masses:
+exact on the unperturbed Kepler problems, and on `outer-solar-system` and `planets-pair` the
+power of h of the term that dominates at the fitted steps (crossover steps printed where none
+does). Measured (load 9-15): WHFast 2.009 / 2.001, MERCURIUS 2.000 / 1.982, WHFast-c17 1.992 and
+SABA4 2.002 on planets-pair (their eps^2 h^2 term); SABAC4's eps^2 h^4 term shows slopes 3.9-4.0
+only within 100x of the rounding level on planets-pair, so its order cells are
+`insufficient-range` (not measurable) and its passing cells are the Kepler-exactness ones.
 
 Each ensemble member is its own `rebound.Simulation`, built from the problem's declared N-body
 structure (`harness.problem.NBody`: masses, G, the central body, the frame), with REBOUND's own
@@ -20,10 +22,12 @@ gravity: the problem's symbolic right-hand side is never called. The central bod
 heliocentric problem it starts at rest at the origin and the state is read back relative to it.
 Fixed-step integrators take `sim.dt = h` and `sim.steps(n)` (exactly n steps, REBOUND's default
 `safe_mode = 1`, so every output is synchronised; with the 17th-order corrector, `safe_mode = 0`
-and `sim.synchronize()` after each `sim.steps(n)`, as REBOUND's documentation advises for
-correctors: the same map, without applying the corrector and its inverse around every step,
-which cost 36x the time and added their rounding at each step); IAS15 is adaptive: each output step is
-`sim.integrate(t + h)` (exact finish time) at `epsilon = tol`. Time reversal sets `sim.dt` to -dt.
+and `sim.synchronize()` after each `sim.steps(n)` (REBOUND's `safe_mode` docstring in its WHFast
+and SABA integrator classes: turning it off makes the integrator faster and more accurate, with
+outputs synchronised explicitly): the same map, without the corrector and its inverse around
+every step, which cost 36x the time here and added their rounding at each step); IAS15 is
+adaptive: each output step is `sim.integrate(t + h)` (exact finish time) at `epsilon = tol`.
+Time reversal sets `sim.dt` to -dt.
 A problem without an N-body structure is incompatible (recorded as a skipped cell with the reason).
 
 Claims are REBOUND's documented ones (docstrings of rebound 5.2 and the papers they cite):
