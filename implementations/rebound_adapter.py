@@ -10,10 +10,11 @@ The gate judges the Wisdom-Holman-type maps by their declared error law
 (`info.extra['perturbation_error']`, read by `harness.perturbation_law`) and the problem's masses:
 exact on the unperturbed Kepler problems, and on `outer-solar-system` and `planets-pair` the
 power of h of the term that dominates at the fitted steps (crossover steps printed where none
-does). Measured (load 9-15): WHFast 2.009 / 2.001, MERCURIUS 2.000 / 1.982, WHFast-c17 1.992 and
-SABA4 2.002 on planets-pair (their eps^2 h^2 term); SABAC4's eps^2 h^4 term shows slopes 3.9-4.0
-only within 100x of the rounding level on planets-pair, so its order cells are
-`insufficient-range` (not measurable) and its passing cells are the Kepler-exactness ones.
+does). Measured (load 6-15), outer-solar-system / planets-pair: WHFast 2.009 / 2.000, MERCURIUS
+2.000 / 2.008; on planets-pair WHFast-c17 2.001 and SABA4 2.004 (their eps^2 h^2 term). SABAC4's
+eps^2 h^4 term shows local slopes 3.9-4.0 only within 100x of the rounding level on planets-pair,
+so its order cells are `insufficient-range` (not measurable) and its passing cells are the
+Kepler-exactness ones.
 
 Each ensemble member is its own `rebound.Simulation`, built from the problem's declared N-body
 structure (`harness.problem.NBody`: masses, G, the central body, the frame), with REBOUND's own

@@ -6,7 +6,9 @@ Jupiter's ratio, so the interaction terms of Wisdom-Holman-type maps, eps^2 h^2 
 stand well above float64 rounding over a decade of steps) on near-circular orbits at a = 1 and
 a = 2.5 (e = 0.05, mutual inclination 0.02): 4.5 mutual Hill radii apart, beyond the 2 sqrt(3)
 Hill-stability limit (Gladman 1993), so no encounter ever happens. Span: 20 inner orbits;
-convergence horizon: 10 (t = 20 pi). In the default catalogue.
+convergence horizon: 2 inner orbits (t = 4 pi): over 10 the built-in RK4 and RK3/8 sweeps stay
+pre-asymptotic (4.37, 4.23) and scipy's RK45 and BDF miss their tolerance. In the default
+catalogue.
 
 A star of unit mass and two Jupiter-mass planets (m = 1e-3, G = 1, so the inner orbit has period
 2 pi). The inner planet starts on a circular orbit at a = 1 (true anomaly 3.2); the outer one on
@@ -125,7 +127,7 @@ PLANETS_PAIR = Problem(
     newtonian=_PAIR_NEWTONIAN,
     y0=_initial_state(_PAIR_MASSES, _NAMES, _PAIR_ELEMENTS),
     t_span=(0.0, 40.0 * math.pi),
-    convergence_t_end=20.0 * math.pi,
+    convergence_t_end=4.0 * math.pi,
     invariants=_PAIR_INVARIANTS,
     conservative=True,
     structure=_PAIR_STRUCTURE,
