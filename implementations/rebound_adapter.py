@@ -14,7 +14,10 @@ does). Measured (load 6-15), outer-solar-system / planets-pair: WHFast 2.009 / 2
 2.000 / 2.008; on planets-pair WHFast-c17 2.001 and SABA4 2.004 (their eps^2 h^2 term). SABAC4's
 eps^2 h^4 term shows local slopes 3.9-4.0 only within 100x of the rounding level on planets-pair,
 so its order cells are `insufficient-range` (not measurable) and its passing cells are the
-Kepler-exactness ones.
+Kepler-exactness ones. Open in the symplecticity experiment (finite-difference level 1e-10):
+WHFast-c17 on outer-solar-system measures 5.7e-10 (with safe_mode 0 or 1 alike), and IAS15, run
+there at tol 1e-4, is neither clearly non-symplectic (<= 6.1e-10, below the 1e-9 "clear" level)
+nor symplectic at that level on kepler-elliptic: both are `claim-false` rows of the report.
 
 Each ensemble member is its own `rebound.Simulation`, built from the problem's declared N-body
 structure (`harness.problem.NBody`: masses, G, the central body, the frame), with REBOUND's own
