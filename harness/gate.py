@@ -9,6 +9,8 @@ tolerated verdict. Besides the cells, a stepper fails when
   symmetry or symplecticity contradicts what its coefficients say (a mislabelled table fails even
   if a measurement happens to look right);
 - none of its cells measured the claim (a stepper judged on nothing does not pass).
+A map that declares an error law in the perturbation (eps^a h^b terms) on an N-body problem is
+judged by `harness.perturbation_law` from that law and the problem's masses instead.
 No stepper is named here: the same coefficients get the same verdicts under any name.
 """
 
@@ -20,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from harness.facts import MethodFacts, method_facts, problem_facts
+from harness.perturbation_law import judge_split_map
 from harness.rules import convergence_expectation, judge_convergence
 
 __all__ = ["judge", "gate_table", "claim_contradictions", "GATE_COLUMNS"]
@@ -54,8 +57,12 @@ def judge(record: Mapping, facts: MethodFacts | None = None,
     """(outcome, expected verdict, reason, expected order) for one convergence summary record."""
     from harness.registry import get_problem, get_stepper
 
-    facts = facts or method_facts(get_stepper(record["stepper"]))
+    stepper = get_stepper(record["stepper"])
+    facts = facts or method_facts(stepper)
     problem = problem if problem is not None else get_problem(record["problem"])
+    split = judge_split_map(record, stepper, problem)  # a declared error law in eps h^p
+    if split is not None:
+        return split
     expectation = convergence_expectation(facts, problem_facts(problem))
     outcome, reason = judge_convergence(dict(record), expectation)
     return outcome, expectation.verdict, reason, expectation.order

@@ -329,3 +329,10 @@ TOLERANCE_ESTIMATE_FACTOR = 10.0
 ENCOUNTER_RATE_RISE = 10.0
 ENCOUNTER_RATE_FRACTION = 0.9
 ENCOUNTER_MIN_DECADES = 0.3
+
+# Maps with an error law eps^a h^b + ... (harness.perturbation_law): a term is taken to set the
+# measured slope where, with unit constants, it exceeds every other term by this factor over
+# the fitted steps; the constants are unknown, so a single decade is the least that makes the
+# dominant term's exponent the slope to within GATE_ORDER_TOL (a 10 % second term moves a
+# two-point slope by at most log(1.1)/log(2) ~ 0.14 per unit of exponent difference, damped).
+SPLIT_TERM_DOMINANCE = 10.0

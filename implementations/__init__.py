@@ -22,10 +22,12 @@ FAMILY_MODULES = (
     "external",
     "compiled",
     "step_control",
+    "rebound_adapter",
 )
-# Adapters of outside libraries, registered with `--plugin implementations/<module>.py` (or by
-# adding them to FAMILY_MODULES once the gate's rules cover what they measure; see each module).
-OPTIONAL_MODULES = ("rebound_adapter",)
+# Adapters of outside libraries whose package is an optional extra: they register no steppers
+# when it is missing and say so in `UNAVAILABLE` (listed by `unavailable_steppers()`). Those not
+# in FAMILY_MODULES are registered with `--plugin implementations/<module>.py` (see each module).
+OPTIONAL_MODULES = ("rebound_adapter", "sundials_adapter")
 
 
 class ProblemCache:

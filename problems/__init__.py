@@ -13,6 +13,7 @@ PROBLEM_MODULES = (
     "kepler",
     "many_body",
     "stiff",
+    "planetary",
 )
 
 

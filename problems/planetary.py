@@ -1,4 +1,14 @@
-"""A planetary system with a close encounter: `planets-encounter`.
+"""Planetary systems: two well-separated massive planets (`planets-pair`) and a close encounter
+(`planets-encounter`).
+
+`planets-pair`: a star of unit mass and two planets of mass 1e-2 (G = 1; eps = 1e-2, ten times
+Jupiter's ratio, so the interaction terms of Wisdom-Holman-type maps, eps^2 h^2 and eps^2 h^4,
+stand well above float64 rounding over a decade of steps) on near-circular orbits at a = 1 and
+a = 2.5 (e = 0.05, mutual inclination 0.02): 4.5 mutual Hill radii apart, beyond the 2 sqrt(3)
+Hill-stability limit (Gladman 1993), so no encounter ever happens. Span: 20 inner orbits;
+convergence horizon: 2 inner orbits (t = 4 pi): over 10 the built-in RK4 and RK3/8 sweeps stay
+pre-asymptotic (4.37, 4.23) and scipy's RK45 and BDF miss their tolerance. In the default
+catalogue.
 
 A star of unit mass and two Jupiter-mass planets (m = 1e-3, G = 1, so the inner orbit has period
 2 pi). The inner planet starts on a circular orbit at a = 1 (true anomaly 3.2); the outer one on
@@ -9,8 +19,8 @@ hundredfold for a fraction of an orbit, the regime for which hybrid schemes swit
 Wisdom-Holman map to a direct integrator. Span [0, 4 pi] (two inner orbits) holds the encounter;
 the convergence experiment uses the whole span, so every step-size sweep has to resolve it.
 
-Not in the default catalogue (`problems.PROBLEM_MODULES`): load it with
-`--plugin problems/planetary.py` (or `load_plugin`). Measured on the convergence experiment's full
+`planets-encounter` is listed on request only (tag `on-request`: `--problem planets-encounter`).
+Measured on the convergence experiment's full
 settings, the encounter leaves euler, symplectic Euler, backward Euler, rk38, yoshida6, yoshida8
 and SABAC4 `insufficient-range` (the encounter amplifies rounding above the sweep's rounding level
 sqrt(n) eps |y|, so the floor is read as a pre-asymptotic range) and scipy's RK45 and BDF miss their
@@ -33,7 +43,7 @@ import numpy as np
 
 from harness.problem import NBody, Problem
 
-__all__ = ["PROBLEMS", "PLANETS_ENCOUNTER", "elements_to_cartesian"]
+__all__ = ["PROBLEMS", "PLANETS_PAIR", "PLANETS_ENCOUNTER", "elements_to_cartesian"]
 
 
 def elements_to_cartesian(
@@ -59,14 +69,17 @@ _ELEMENTS = {  # body: (a, e, inclination, true anomaly)
 }
 
 
-def _initial_state() -> list[float]:
+def _initial_state(masses: tuple[float, ...] = _MASSES, names: tuple[str, ...] = _NAMES,
+                   elements: dict | None = None) -> list[float]:
+    """Barycentric Cartesian state of a star (first body) and planets given by their elements."""
+    elements = _ELEMENTS if elements is None else elements
     pos = [np.zeros(3)]
     vel = [np.zeros(3)]
-    for name, m in zip(_NAMES[1:], _MASSES[1:], strict=True):
-        r, v = elements_to_cartesian(_G * (_MASSES[0] + m), *_ELEMENTS[name])
+    for name, m in zip(names[1:], masses[1:], strict=True):
+        r, v = elements_to_cartesian(_G * (masses[0] + m), *elements[name])
         pos.append(r)
         vel.append(v)
-    masses = np.array(_MASSES)
+    masses = np.array(masses)
     com_r = sum(m * r for m, r in zip(masses, pos, strict=True)) / masses.sum()
     com_v = sum(m * v for m, v in zip(masses, vel, strict=True)) / masses.sum()
     pos = [r - com_r for r in pos]
@@ -100,7 +113,37 @@ PLANETS_ENCOUNTER = Problem(
         "integration); elements to Cartesian coordinates: Murray & Dermott, Solar System Dynamics "
         "(1999), 2.8."
     ),
-    tags=("newtonian", "hamiltonian", "n-body", "close-encounter"),
+    tags=("newtonian", "hamiltonian", "n-body", "close-encounter", "on-request"),
 )
 
-PROBLEMS: list[Problem] = [PLANETS_ENCOUNTER]
+_PAIR_MASSES = (1.0, 1.0e-2, 1.0e-2)
+_PAIR_ELEMENTS = {"b": (1.0, 0.05, 0.0, 0.3), "c": (2.5, 0.05, 0.02, 2.0)}
+_PAIR_STRUCTURE = NBody(masses=_PAIR_MASSES, G=_G, central=0, frame="inertial", names=_NAMES)
+_PAIR_VARIABLES, _PAIR_NEWTONIAN, _PAIR_INVARIANTS = _PAIR_STRUCTURE.derive()
+
+PLANETS_PAIR = Problem(
+    "planets-pair",
+    variables=_PAIR_VARIABLES,
+    newtonian=_PAIR_NEWTONIAN,
+    y0=_initial_state(_PAIR_MASSES, _NAMES, _PAIR_ELEMENTS),
+    t_span=(0.0, 40.0 * math.pi),
+    convergence_t_end=4.0 * math.pi,
+    invariants=_PAIR_INVARIANTS,
+    conservative=True,
+    structure=_PAIR_STRUCTURE,
+    # Members move each component by at most 1e-6 (relative): far below the 1.5 separation.
+    perturbation=1e-6,
+    description=(
+        "Star (m = 1) and two planets (m = 1e-2) in G = 1 units on near-circular orbits at a = 1 "
+        "and a = 2.5 (e = 0.05), 4.5 mutual Hill radii apart: a perturbed Kepler problem with "
+        "eps = 1e-2 and no encounter. 18 state variables, barycentric frame."
+    ),
+    reference=(
+        "J. Laskar, P. Robutel, Celest. Mech. Dyn. Astron. 80 (2001) 39-62 (perturbed Kepler "
+        "problems, eps-h error laws); B. Gladman, Icarus 106 (1993) 247 (Hill stability); "
+        "Murray & Dermott, Solar System Dynamics (1999), 2.8."
+    ),
+    tags=("newtonian", "hamiltonian", "n-body"),
+)
+
+PROBLEMS: list[Problem] = [PLANETS_PAIR, PLANETS_ENCOUNTER]

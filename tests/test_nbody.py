@@ -3,7 +3,7 @@ central body; the catalogue's N-body problems declare it; bad structures are one
 
 from __future__ import annotations
 
-from pathlib import Path
+import math
 
 import numpy as np
 import pytest
@@ -21,7 +21,7 @@ def _problem(name: str) -> Problem:
 
 
 @pytest.mark.parametrize("name", ["kepler-circular", "kepler-elliptic", "outer-solar-system",
-                                  "planets-encounter"])
+                                  "planets-encounter", "planets-pair"])
 def test_catalogue_nbody_problems_declare_the_structure_their_rhs_comes_from(name):
     problem = _problem(name)
     s = problem.structure
@@ -108,18 +108,30 @@ def test_perturbation_free_structures():
     assert not NBody(masses=(1.0, 1e-3, 0.0), G=1.0).perturbation_free
 
 
-def test_the_planetary_system_is_a_plugin_file_with_its_encounter():
-    from harness.registry import load_plugin, problems
+def test_the_encounter_is_listed_on_request_and_passes_within_the_hill_radius():
+    from harness.registry import problems
 
-    path = Path(__file__).resolve().parents[1] / "problems" / "planetary.py"
-    assert "planets-encounter" not in problems
-    try:
-        assert load_plugin(path) == ["planets-encounter"]
-        P = problems.get("planets-encounter")
-        times = np.linspace(8.3, 8.6, 31)
-        y = reference(P, times, P.y0[:, None], t0=P.t0).y[:, :, 0]
-        closest = np.min(np.linalg.norm(y[:, 3:6] - y[:, 6:9], axis=1))
-        hill = (1e-3 / 3.0) ** (1.0 / 3.0)
-        assert 0.5 * hill < closest < 0.7 * hill
-    finally:
-        problems.unregister("planets-encounter")
+    assert "planets-encounter" not in problems.names()
+    assert "planets-encounter" in problems.names(variants=True)
+    P = problems.get("planets-encounter")
+    times = np.linspace(8.3, 8.6, 31)
+    y = reference(P, times, P.y0[:, None], t0=P.t0).y[:, :, 0]
+    closest = np.min(np.linalg.norm(y[:, 3:6] - y[:, 6:9], axis=1))
+    hill = (1e-3 / 3.0) ** (1.0 / 3.0)
+    assert 0.5 * hill < closest < 0.7 * hill
+
+
+def test_the_planet_pair_stays_beyond_the_hill_stability_limit_over_its_span():
+    """planets-pair (default catalogue): eps = 1e-2 and the planets never closer than
+    2 sqrt(3) mutual Hill radii (Gladman 1993) over the whole span."""
+    from harness.perturbation_law import perturbation_size
+    from harness.registry import problems
+
+    P = problems.get("planets-pair")
+    assert "planets-pair" in problems.names()
+    assert perturbation_size(P) == pytest.approx(1e-2)
+    times = np.linspace(P.t0, P.t_end, 400)[1:]
+    y = reference(P, times, P.y0[:, None], t0=P.t0).y[:, :, 0]
+    closest = np.min(np.linalg.norm(y[:, 3:6] - y[:, 6:9], axis=1))
+    mutual_hill = (2e-2 / 3.0) ** (1.0 / 3.0) * (1.0 + 2.5) / 2.0
+    assert closest > 2.0 * math.sqrt(3.0) * mutual_hill

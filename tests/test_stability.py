@@ -237,8 +237,9 @@ def test_every_registered_stepper_has_a_row_or_a_reason(run):
     for s in run["skips"]:
         assert s.reason
         stepper = get_stepper(s.stepper)
-        assert isinstance(stepper, AdaptiveStepper) or getattr(stepper, "history_length", 1) < getattr(
-            stepper.coefficients, "steps", 1)
+        cannot_run = "cannot run the test equation" in s.reason  # e.g. needs an N-body structure
+        assert cannot_run or isinstance(stepper, AdaptiveStepper) or getattr(
+            stepper, "history_length", 1) < getattr(stepper.coefficients, "steps", 1)
 
 
 def test_registered_steppers_agree_with_their_coefficients(run):

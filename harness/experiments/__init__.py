@@ -24,6 +24,7 @@ EXPERIMENT_MODULES = {
     "work-precision": "work_precision",
     "roundoff": "roundoff",
     "step-control": "step_control",
+    "side-by-side": "side_by_side",
 }
 EXPERIMENT_NAMES = tuple(EXPERIMENT_MODULES)
 

@@ -191,6 +191,10 @@ class StabilityExperiment(Experiment):
             if p not in problem_registry:
                 skips.append(Skip(self.name, s, p, f"test problem {p!r} is not registered"))
                 continue
+            incompatible = stepper.incompatibility(problem_registry.get(p))
+            if incompatible:  # e.g. a map that needs an N-body structure: no linear test equation
+                skips.append(Skip(self.name, s, p, f"cannot run the test equation {p!r}: {incompatible}"))
+                continue
             coeffs = stepper.coefficients
             k = int(getattr(stepper, "history_length", 1))
             steps = getattr(coeffs, "steps", 1)
