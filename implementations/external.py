@@ -34,7 +34,7 @@ from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
 from harness.tolerances import ADAPTIVE_MAX_EVALS, SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
 
-__all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS"]
+__all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS", "MemberDynamics"]
 
 _SCIPY = "P. Virtanen et al., SciPy 1.0, Nature Methods 17 (2020) 261-272"
 _HNW1 = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I"
@@ -106,7 +106,7 @@ class _WorkLimit(Exception):
     """One output step needed more evaluations than ADAPTIVE_MAX_EVALS allows."""
 
 
-class _MemberDynamics:
+class MemberDynamics:
     """One ensemble member's view of a run's `Dynamics`: same compiled functions and the same
     counters (so every call is booked), that member's parameters.
 
@@ -193,7 +193,7 @@ class ScipyStepper(AdaptiveStepper):
         return clone
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        members = [_MemberDynamics(dyn, m) for m in range(y0.shape[1])]
+        members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]
         for key in ("internal_steps", "member_rhs", "member_jac", "scipy_nfev", "scipy_njev",
                     "scipy_nlu"):
             dyn.counts.setdefault(key, 0)

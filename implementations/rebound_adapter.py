@@ -57,7 +57,6 @@ counted, its evaluations estimated from them (`evals_unit` says so).
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
 
 import numpy as np
@@ -266,9 +265,10 @@ class ReboundIAS15(_ReboundBase, AdaptiveStepper):
     def __init__(self, tol: float = 1e-9):
         self.tol = float(tol)
         self.settings = {"integrator": "ias15"}
-        self.info = self._info()
+        self.info = self.info_record()
 
-    def _info(self) -> StepperInfo:
+    def info_record(self) -> StepperInfo:
+        """The stepper record at this tolerance."""
         return StepperInfo(
             name="rebound-ias15", family="external", claimed_order=15, explicit=True,
             symplectic=False, symmetric=True, evals_per_step=_IAS15_EVALS_PER_STEP,
@@ -290,7 +290,7 @@ class ReboundIAS15(_ReboundBase, AdaptiveStepper):
 
     def with_tolerance(self, tol: float) -> ReboundIAS15:
         clone = super().with_tolerance(tol)
-        clone.info = dataclasses.replace(clone._info())
+        clone.info = clone.info_record()
         return clone
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:

@@ -33,7 +33,7 @@ import numpy as np
 from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, StepperInfo
 from harness.tolerances import SCIPY_MIN_RTOL
-from implementations.external import _MemberDynamics
+from implementations.external import MemberDynamics
 
 __all__ = ["STEPPERS", "UNAVAILABLE", "INSTALL", "SUNDAE_VERSION", "CvodeStepper"]
 
@@ -73,25 +73,25 @@ class CvodeStepper(AdaptiveStepper):
             symmetric=False, evals_per_step=2.0, form="first-order", velocity_dependent=True,
             reference=_REF, description=description + " Each output step restarts CVODE for "
             "every member from t to t + h at rtol = atol = tol.",
-            adaptive=True, implementation="sundials", extra=self._extra(),
+            adaptive=True, implementation="sundials", extra=self.extra_info(),
         )
 
-    def _extra(self) -> dict:
+    def extra_info(self) -> dict:
         return {"tol": self.tol, "rtol": max(self.tol, SCIPY_MIN_RTOL), "atol": self.tol,
                 "cvode_method": self.method, "scikit_sundae_version": SUNDAE_VERSION,
                 "evals_unit": "ensemble evaluations (member calls / N)"}
 
     def with_tolerance(self, tol: float) -> CvodeStepper:
         clone = super().with_tolerance(tol)
-        clone.info = dataclasses.replace(clone.info, extra=clone._extra())
+        clone.info = dataclasses.replace(clone.info, extra=clone.extra_info())
         return clone
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        members = [_MemberDynamics(dyn, m) for m in range(y0.shape[1])]
+        members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]
         dyn.counts.setdefault("internal_steps", 0)
         return Carry(t0, h, y0, members=members)
 
-    def _solver(self, member: _MemberDynamics):
+    def _solver(self, member: MemberDynamics):
         def rhs(t, y, yp):
             yp[:] = member.f(t, y)
 
