@@ -23,10 +23,10 @@ FAMILY_MODULES = (
     "compiled",
     "step_control",
     "rebound_adapter",
+    "sundials_adapter",
 )
 # Adapters of outside libraries whose package is an optional extra: they register no steppers
-# when it is missing and say so in `UNAVAILABLE` (listed by `unavailable_steppers()`). Those not
-# in FAMILY_MODULES are registered with `--plugin implementations/<module>.py` (see each module).
+# when it is missing and say so in `UNAVAILABLE` (listed by `unavailable_steppers()`).
 OPTIONAL_MODULES = ("rebound_adapter", "sundials_adapter")
 
 
