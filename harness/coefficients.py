@@ -364,8 +364,26 @@ def _set_multistep(method: object, name: str, a: np.ndarray, b: np.ndarray) -> N
     object.__setattr__(method, "explicit", b[-1] == 0.0)
 
 
+class _MultistepFacts:
+    """Facts both multistep classes share: the linear order is the order (the error constants do
+    not depend on the problem), and the method is symmetric when its coefficients are
+    palindromic, alpha_j = ALPHA_SIGN alpha_{k-j} and beta_j = beta_{k-j} (first-order methods:
+    -1, HLW XV.1; second-order methods: +1, HNW I, III.10)."""
+
+    ALPHA_SIGN = -1.0
+
+    def linear_order(self) -> int:
+        """The same as `order`: the error constants do not depend on the problem."""
+        return self.order()
+
+    @property
+    def symmetric(self) -> bool:
+        """Palindromic coefficients, to their rounding (see the class docstring)."""
+        return _palindromic(self.alpha, self.beta, alpha_sign=self.ALPHA_SIGN)
+
+
 @dataclass(frozen=True, eq=False)
-class LinearMultistep:
+class LinearMultistep(_MultistepFacts):
     """A k-step method sum_{j=0}^{k} alpha_j y_{n+j} = h sum_{j=0}^{k} beta_j f_{n+j}.
 
     Coefficients are ordered from the oldest value (j = 0) to the newest (j = k), with
@@ -404,18 +422,10 @@ class LinearMultistep:
 
         return lmm_order(self)
 
-    def linear_order(self) -> int:
-        """The same as `order`: the error constants do not depend on the problem."""
-        return self.order()
-
-    @property
-    def symmetric(self) -> bool:
-        """alpha_j = -alpha_{k-j} and beta_j = beta_{k-j} (HLW XV.1)."""
-        return _palindromic(self.alpha, self.beta, alpha_sign=-1.0)
 
 
 @dataclass(frozen=True, eq=False)
-class SecondOrderMultistep:
+class SecondOrderMultistep(_MultistepFacts):
     """A k-step method for x'' = a: sum_j alpha_j x_{n+j} = h^2 sum_j beta_j a_{n+j}.
 
     Checks on creation: alpha_k = 1, consistency of order >= 1 for second-order equations
@@ -449,6 +459,7 @@ class SecondOrderMultistep:
         """alpha and beta, exactly, as text (what a cell key records of the method)."""
         return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
 
+    ALPHA_SIGN = 1.0
     # A multistep recurrence is not a map of phase space: symplecticity is a property of the
     # one-step method it may be equivalent to, which the coefficients alone do not decide.
     symplectic = None
@@ -459,11 +470,3 @@ class SecondOrderMultistep:
 
         return second_order_lmm_order(self)
 
-    def linear_order(self) -> int:
-        """The same as `order`: the error constants do not depend on the problem."""
-        return self.order()
-
-    @property
-    def symmetric(self) -> bool:
-        """alpha_j = alpha_{k-j} and beta_j = beta_{k-j} (HNW I, III.10)."""
-        return _palindromic(self.alpha, self.beta, alpha_sign=1.0)

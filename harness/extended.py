@@ -70,30 +70,14 @@ def _composition_residuals(mp, base_exact, free, order: int) -> list:
     base(w_m h)...base(w_0 h)...base(w_m h), w_0 = 1 - 2 sum w_i, on the generic separable
     problem of `harness.theory` (every component, both starting points): all vanish exactly
     when the composition has that order."""
-    from harness.theory.series import NEWTON_COEFFS, NEWTON_STARTS, Series, exact_flow, newton_accel
+    from harness.theory.series import Series, composition_series
 
     w0 = 1 - 2 * sum(free)
     weights = [*reversed(free), w0, *free]
     steps = [(k, w * mp.mpf(v.numerator) / v.denominator) for w in weights for k, v in base_exact]
     S = Series(mp, order)
-    P = {k: mp.mpf(v) for k, v in NEWTON_COEFFS.items()}
-
-    def F(y):
-        return [y[2], y[3], *newton_accel(S, P, y[:2])]
-
     out = []
-    for start in NEWTON_STARTS:
-        y0 = [mp.mpf(v) for v in start]
-        q = [S.const(y0[0]), S.const(y0[1])]
-        v = [S.const(y0[2]), S.const(y0[3])]
-        for kind, c in steps:
-            if kind == "D":
-                q = [S.add(q[i], S.scale(c, S.shift(v[i]))) for i in range(2)]
-            else:
-                a = newton_accel(S, P, q)
-                v = [S.add(v[i], S.scale(c, S.shift(a[i]))) for i in range(2)]
-        exact = exact_flow(S, F, y0)
-        numeric = q + v
+    for numeric, exact in composition_series(mp, S, steps):
         out.extend(numeric[i][n] - exact[i][n] for i in range(4) for n in range(1, order + 1))
     return out
 

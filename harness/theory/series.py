@@ -120,25 +120,46 @@ def splitting_local_error_series(scheme: SplittingScheme, degree: int = 11) -> l
     with mpmath.workdps(_SERIES_DPS):
         mp = mpmath.mp
         S = Series(mp, degree)
-        P = {k: mp.mpf(v) for k, v in NEWTON_COEFFS.items()}
         steps = [(kind, mp.mpf(float(c))) for kind, c in scheme.sequence]  # exact float values
-
-        def F(y):
-            return [y[2], y[3], *newton_accel(S, P, y[:2])]
-
-        for start in NEWTON_STARTS:
-            y0 = [mp.mpf(v) for v in start]
-            q = [S.const(y0[0]), S.const(y0[1])]
-            v = [S.const(y0[2]), S.const(y0[3])]
-            for kind, c in steps:
-                if kind == "D":
-                    q = [S.add(q[i], S.scale(c, S.shift(v[i]))) for i in range(2)]
-                else:
-                    a = newton_accel(S, P, q)
-                    v = [S.add(v[i], S.scale(c, S.shift(a[i]))) for i in range(2)]
-            err, size = _error_profile(S, q + v, exact_flow(S, F, y0))
+        for numeric, exact in composition_series(mp, S, steps):
+            err, size = _error_profile(S, numeric, exact)
             for n in range(degree + 1):
                 out[n] = max(out[n], float(err[n] / max(mp.mpf(1), size[n])))
+    return out
+
+
+def composition_series(mp, S: Series, steps: list) -> list[tuple[list, list]]:
+    """For each starting point of the generic separable problem (`NEWTON_STARTS`): the Taylor
+    series in h of the drift/kick composition `steps` ([(kind, coefficient)], mp numbers) and of
+    the exact flow, each as the four components [q1, q2, v1, v2].
+
+    Parameters
+    ----------
+    mp : the mpmath context (its precision is the caller's).
+    S : the truncated power-series arithmetic.
+    steps : the composition's (kind, coefficient) sequence, "D" drifts and "K" kicks.
+
+    Returns
+    -------
+    One (numeric, exact) pair of series lists per starting point.
+    """
+    P = {k: mp.mpf(v) for k, v in NEWTON_COEFFS.items()}
+
+    def F(y):
+        return [y[2], y[3], *newton_accel(S, P, y[:2])]
+
+    out = []
+    for start in NEWTON_STARTS:
+        y0 = [mp.mpf(v) for v in start]
+        q = [S.const(y0[0]), S.const(y0[1])]
+        v = [S.const(y0[2]), S.const(y0[3])]
+        for kind, c in steps:
+            if kind == "D":
+                q = [S.add(q[i], S.scale(c, S.shift(v[i]))) for i in range(2)]
+            else:
+                a = newton_accel(S, P, q)
+                v = [S.add(v[i], S.scale(c, S.shift(a[i]))) for i in range(2)]
+        out.append((q + v, exact_flow(S, F, y0)))
     return out
 
 
