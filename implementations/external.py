@@ -24,7 +24,6 @@ Comput. 4 (1983) 136-148 (LSODA, automatic Adams/BDF switching).
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
 
 import numpy as np
@@ -186,11 +185,6 @@ class ScipyStepper(AdaptiveStepper):
             "jacobian": "symbolic (dyn.jac)" if self.uses_jacobian else "not used",
             "evals_unit": "ensemble evaluations (member calls / N)",
         }
-
-    def with_tolerance(self, tol: float) -> ScipyStepper:
-        clone = super().with_tolerance(tol)
-        clone.info = dataclasses.replace(clone.info, extra=clone.extra_info())
-        return clone
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]

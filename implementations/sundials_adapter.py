@@ -27,8 +27,6 @@ ACM TOMS 48 (2022) 31 (SUNDIALS 6); S. D. Cohen, A. C. Hindmarsh, Computers in P
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from harness.problem import Dynamics
@@ -81,11 +79,6 @@ class CvodeStepper(AdaptiveStepper):
         return {"tol": self.tol, "rtol": max(self.tol, SCIPY_MIN_RTOL), "atol": self.tol,
                 "cvode_method": self.method, "scikit_sundae_version": SUNDAE_VERSION,
                 "evals_unit": "ensemble evaluations (member calls / N)"}
-
-    def with_tolerance(self, tol: float) -> CvodeStepper:
-        clone = super().with_tolerance(tol)
-        clone.info = dataclasses.replace(clone.info, extra=clone.extra_info())
-        return clone
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]

@@ -47,8 +47,8 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.experiments.base import Cell, Experiment, Skip, register_experiment
-from harness.experiments.common import perturbation_used
+from harness.experiments.base import Cell, Experiment, register_experiment
+from harness.experiments.common import perturbation_used, problem_cells
 from harness.experiments.convergence_extended import extended_if_floor_bound
 from harness.experiments.convergence_fit import classify_points, fit_order
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
@@ -90,22 +90,7 @@ class ConvergenceExperiment(Experiment):
     quick_config: Mapping[str, Any] = {"ensemble": 8, "work_budget": tol.SWEEP_WORK_BUDGET // 4}
 
     def cells(self, steppers, problems, config):
-        from harness.errors import IncompatibleError
-        from harness.registry import get_problem, get_stepper
-        from harness.stepper import check_compatible
-
-        cells, skips = [], []
-        for s in steppers:
-            stepper = get_stepper(s)
-            for p in problems:
-                problem = get_problem(p)
-                try:
-                    check_compatible(stepper, problem)
-                except IncompatibleError as exc:
-                    skips.append(Skip(self.name, s, p, str(exc)))
-                    continue
-                cells.append(Cell(self.name, s, p))
-        return cells, skips
+        return problem_cells(self.name, steppers, problems, lambda problem: None)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
         from harness.registry import get_problem, get_stepper

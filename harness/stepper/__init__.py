@@ -29,6 +29,7 @@ This module holds the `Stepper` base class; `records` holds the records and chec
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from abc import ABC, abstractmethod
@@ -443,4 +444,12 @@ class AdaptiveStepper(Stepper):
             raise InputError(f"`tol` must be positive and finite, got {tol!r}")
         clone = copy.copy(self)
         clone.tol = tol
+        extra = clone.extra_info()
+        if extra is not None:
+            clone.info = dataclasses.replace(clone.info, extra=extra)
         return clone
+
+    def extra_info(self) -> dict | None:
+        """The record's `extra` entries at this stepper's tolerance, or None to keep them as
+        they are; `with_tolerance` puts them on the copy's record."""
+        return None
