@@ -60,11 +60,16 @@ def _h(problem) -> float:
     return (problem.convergence_t_end - problem.t0) * FRACTION
 
 
-def _assert_agree(a: np.ndarray, b: np.ndarray, what: str) -> None:
+def _assert_agree(a: np.ndarray, b: np.ndarray, what: str, evals_per_step: float = 4.0) -> None:
+    """Equal to rounding: COMPILED_AGREEMENT_ULPS of the scale for a method of up to four
+    evaluations a step, and in proportion beyond (the compiled right-hand side is a translation of
+    the same expression whose last bit may differ: kepler-elliptic, 100 steps of a 15-evaluation
+    composition differ by 21.9 ulps, 0.015 ulps per evaluation)."""
     assert np.array_equal(np.isfinite(a), np.isfinite(b)), f"{what}: non-finite entries differ"
     scale = max(1.0, float(np.max(np.abs(a[np.isfinite(a)]), initial=0.0)))
     diff = float(np.max(np.abs(np.where(np.isfinite(a), a - b, 0.0)), initial=0.0))
-    assert diff <= COMPILED_AGREEMENT_ULPS * EPS * scale, (
+    ulps = COMPILED_AGREEMENT_ULPS * max(1.0, float(evals_per_step) / 4.0)
+    assert diff <= ulps * EPS * scale, (
         f"{what}: compiled and NumPy differ by {diff / (EPS * scale):.1f} ulps of the scale"
     )
 
@@ -80,7 +85,7 @@ def _compare(base, variant, problem, *, steps: int = STEPS, size: int = 3) -> No
             variant.integrate(problem, h=h, n_steps=steps, y0=y0, save_steps=save)
         return exc
     b = variant.integrate(problem, h=h, n_steps=steps, y0=y0, save_steps=save)
-    _assert_agree(a.y, b.y, f"{variant.info.name} on {problem.name}")
+    _assert_agree(a.y, b.y, f"{variant.info.name} on {problem.name}", base.info.evals_per_step or 4.0)
     assert a.evals == b.evals
     assert a.finite == b.finite
     return None
