@@ -232,6 +232,13 @@ SYMPLECTIC_FD_TOL = 1e-10
 SYMPLECTIC_FD_REFINEMENTS = 2
 # ... and a method claimed not symplectic must exceed it tenfold to count as clearly above it.
 SYMPLECTIC_CLEAR_FACTOR = 10.0
+# A map that does more arithmetic per step (a black box's corrector stages, a long composition)
+# has more rounding in its difference quotients than the registry's maps the 1e-10 was set on.
+# Its own finite-difference error is estimated per base state by the gap between the Jacobians at
+# the two neighbouring difference steps (relative to ||J||); the error E in J enters the deviation
+# twice (E^T Omega J + J^T Omega E) and the gap estimates E to within a factor two, so the
+# cell's finite-difference level is max(SYMPLECTIC_FD_TOL, this factor x the largest gap).
+SYMPLECTIC_GAP_FACTOR = 4.0
 # Report, ground truth: an exact solution evaluated in float64 (trigonometric functions, Kepler's
 # equation solved by Newton's method) is off by a few ulps per operation; a reference may differ
 # from it by its certified error plus this many ulps of the state's scale.

@@ -88,9 +88,14 @@ def test_registry_jacobians_match_the_symplecticity_claim(name, registry_table):
         assert bool(r.passed), (r.problem, r.deviation, r.message)
         if stepper.info.symplectic:
             assert r.verdict == "symplectic" and r.deviation <= tol.SYMPLECTIC_FD_TOL
-        elif r.problem == "kepler-elliptic":  # nonlinear: every non-symplectic map shows it
+        elif r.problem == "kepler-elliptic" and r.verdict != "not-measurable":
+            # nonlinear: every non-symplectic map shows it, unless it is too close to the exact
+            # flow at this step (a black box run at a tolerance it beats by far), said as such
             assert r.verdict == "non-symplectic"
             assert r.deviation >= tol.SYMPLECTIC_CLEAR_FACTOR * tol.SYMPLECTIC_FD_TOL
+        elif r.verdict == "not-measurable":
+            assert r.message.startswith("not measurable") and r.deviation < (
+                tol.SYMPLECTIC_CLEAR_FACTOR * tol.SYMPLECTIC_FD_TOL)
 
 
 def test_trapezoid_is_symplectic_on_the_linear_oscillator_only(registry_table):
