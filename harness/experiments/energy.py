@@ -372,7 +372,16 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
         f"first reached at t = {encounter['t']:.4g} (step {encounter['step']:.0f}; at the start the rate is "
         f"{encounter['rate_start']:.3g})")
     hw_limit = facts.hw_limit
-    if expected_class == "bounded" and encounter is not None and (
+    span_decades = math.log10(n_end / max(fit_start, 1.0)) if n_end > 0 else -math.inf
+    if expected_class in ("bounded", "linear") and encounter is None and (
+            span_decades < tol.ENCOUNTER_MIN_DECADES):
+        verdict = "not-measurable"
+        rec["message"] = "; ".join(x for x in (message, (
+            f"not measurable on this run: it ends at step {n_end}, less than "
+            f"{tol.ENCOUNTER_MIN_DECADES:g} decade after the fit's start (step {fit_start:.3g}: "
+            f"{tol.FIT_MIN_PERIODS:g} natural periods at least), too short to tell a drift from a "
+            "bounded error")) if x)
+    elif expected_class == "bounded" and encounter is not None and (
             hw_limit is not None and math.isfinite(hw_limit) and encounter["h_rho"] > hw_limit):
         verdict = "not-measurable"
         reasons_nm = (f"not measurable at this step: h omega_max = {encounter['h_rho']:.3g} exceeds the "
