@@ -360,12 +360,20 @@ HANG_GUARD_S = 120.0
 
 @pytest.mark.parametrize("stepper", ADAPTIVE, ids=[s.info.name for s in ADAPTIVE])
 def test_adaptive_steppers_bound_their_work_on_huge_spans(stepper):
+    from harness.errors import StepperOutputError
     from harness.stepper import StepFailure
 
-    problem = registry.get_problem("harmonic") if "harmonic" in registry.problems else TINY_PROBLEM
+    candidates = [registry.get_problem(p) for p in ("harmonic", "kepler-circular") if p in registry.problems]
+    problem = next((p for p in candidates if stepper.compatible(p)), TINY_PROBLEM)
+    if not stepper.compatible(problem):
+        pytest.skip(f"{stepper.info.name} runs none of harmonic, kepler-circular or the tiny problem")
     try:
         with runner.time_limit(HANG_GUARD_S):
-            with pytest.raises(StepFailure, match=r"too long for tol="):
+            # the harness's own work bound, the library's own refusal (CVODE stops at its minimum
+            # step), or the harness catching the library's NaN (REBOUND's IAS15): a clear error
+            # naming the stepper, not a hang
+            with pytest.raises((StepFailure, StepperOutputError),
+                               match=r"too long for tol=|failed|turned a finite state"):
                 stepper.with_tolerance(1e-6).integrate(problem, h=1e300, n_steps=2)
     except runner.CellTimeout:
         pytest.fail(f"{stepper.info.name}: integrate(h=1e300, n_steps=2) still running after "
