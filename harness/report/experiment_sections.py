@@ -210,6 +210,8 @@ def _claimed_measured(view: RunView, name: str, stepper: str, claimed: bool,
 def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bool]:
     info = view.infos.get(stepper)
     s = _rows_of(view, "reversibility", stepper)
+    if not s.empty and "verdict" in s:
+        s = s[s.verdict != "not-measurable"]  # a saturated flow: says nothing either way
     within = [] if s.empty else [
         (bool(np.isfinite(float(r["return_error_ulps"]))
               and float(r["return_error_ulps"]) <= float(r["rounding_bound_ulps"])),
