@@ -4,14 +4,13 @@ nothing and says how to install it."""
 
 from __future__ import annotations
 
-import builtins
 import importlib.util
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import adapter_without
 
 from harness.errors import IncompatibleError, PluginError
 from harness.ground_truth import reference
@@ -34,21 +33,9 @@ def get_stepper(name: str):
 
 
 def test_without_rebound_the_adapter_registers_nothing_and_says_how_to_install(monkeypatch):
-    real_import = builtins.__import__
-
-    def no_rebound(name, *args, **kwargs):
-        if name == "rebound" or name.startswith("rebound."):
-            raise ImportError("No module named 'rebound'")
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_rebound)
-    monkeypatch.delitem(sys.modules, "rebound", raising=False)
-    spec = importlib.util.spec_from_file_location("implementations.rebound_adapter", ADAPTER)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = adapter_without(monkeypatch, "rebound", ADAPTER, "implementations.rebound_adapter")
     assert module.STEPPERS == []
     assert "pip install rebound==" in module.UNAVAILABLE["rebound"]
-    monkeypatch.setitem(sys.modules, "implementations.rebound_adapter", module)
     from implementations import unavailable_steppers
 
     assert "pip install rebound==" in unavailable_steppers()["rebound"]

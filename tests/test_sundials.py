@@ -4,13 +4,12 @@ how to install it."""
 
 from __future__ import annotations
 
-import builtins
 import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import adapter_without
 
 from harness.errors import PluginError
 from harness.ground_truth import reference
@@ -23,22 +22,9 @@ needs_sundae = pytest.mark.skipif(
 
 
 def test_without_scikit_sundae_the_adapter_registers_nothing_and_says_how_to_install(monkeypatch):
-    real_import = builtins.__import__
-
-    def no_sundae(name, *args, **kwargs):
-        if name == "sksundae" or name.startswith("sksundae."):
-            raise ImportError("No module named 'sksundae'")
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_sundae)
-    for mod in [m for m in sys.modules if m == "sksundae" or m.startswith("sksundae.")]:
-        monkeypatch.delitem(sys.modules, mod)
-    spec = importlib.util.spec_from_file_location("implementations.sundials_adapter", ADAPTER)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = adapter_without(monkeypatch, "sksundae", ADAPTER, "implementations.sundials_adapter")
     assert module.STEPPERS == []
     assert "pip install scikit-sundae==" in module.UNAVAILABLE["scikit-sundae"]
-    monkeypatch.setitem(sys.modules, "implementations.sundials_adapter", module)
     from implementations import unavailable_steppers
 
     assert "pip install scikit-sundae==" in unavailable_steppers()["scikit-sundae"]
