@@ -43,6 +43,7 @@ import pandas as pd
 
 from harness.errors import InputError
 from harness.problem import Dynamics, Problem
+from harness.sources import source_of
 from harness.stepper import FORMS, Carry, Stepper, StepperInfo
 
 __all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "CLAIM_COLUMNS", "ENERGY_CLAIMS"]
@@ -137,7 +138,7 @@ class FunctionStepper(Stepper):
 
     def fingerprint(self) -> str:
         try:
-            source = inspect.getsource(self.step_function)
+            source = source_of(self.step_function)
         except (OSError, TypeError):
             code = getattr(self.step_function, "__code__", None)
             source = repr(code.co_code + repr(code.co_consts).encode()) if code else repr(self.step_function)

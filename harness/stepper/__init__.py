@@ -108,7 +108,7 @@ class Stepper(ABC):
 
     def fingerprint(self) -> str:
         """Changes whenever the method changes: its coefficients and its class's source."""
-        import inspect
+        from harness.sources import source_of
 
         parts = [self.info.name, repr(sorted(self.info.as_dict().items()))]
         if self.coefficients is not None and hasattr(self.coefficients, "fingerprint"):
@@ -117,7 +117,7 @@ class Stepper(ABC):
             if cls in (object, ABC, Stepper):
                 continue
             try:
-                parts.append(inspect.getsource(cls))
+                parts.append(source_of(cls))
             except (OSError, TypeError):
                 parts.append(cls.__qualname__)
         return "\n".join(parts)

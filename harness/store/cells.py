@@ -15,7 +15,7 @@ import pandas as pd
 
 from harness.errors import InputError, describe_os_error
 from harness.provenance import to_jsonable
-from harness.store.files import atomic_write_bytes, decode_parquet, encode_parquet
+from harness.store.files import arrow_table, atomic_write_bytes, decode_parquet, table_bytes
 from harness.store.schema import CELL_SCHEMA, CorruptResultsError
 
 _CELL_KEY = re.compile(r"^[0-9a-f]{32}$")
@@ -47,10 +47,11 @@ def encode_cell(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[
     metadata holds `info`, the key, the schema, the column dtypes, the row count and the content
     checksum. Raises `InputError` when the rows cannot be stored as Parquet."""
     plain = {**to_jsonable(dict(info)), "schema": CELL_SCHEMA, "key": key}
-    back, _ = decode_parquet(encode_parquet(rows, plain))
+    table = arrow_table(rows)
+    back = table.to_pandas()  # what a Parquet file of `table` reads back as (its Arrow schema)
     meta = {**plain, "columns": _cell_schema(back), "n_rows": int(len(back)),
             "content_sha256": _content_sha256(back)}
-    return back, encode_parquet(rows, meta)
+    return back, table_bytes(table, meta)
 
 
 def decode_cell(data: bytes, path: str | os.PathLike, key: str | None = None) -> tuple[pd.DataFrame, dict]:

@@ -84,17 +84,25 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def encode_parquet(df: pd.DataFrame, extra: Mapping[str, Any] | None = None) -> bytes:
-    """`df` (index dropped) as Parquet bytes, `extra` in the file's metadata. Raises
+def arrow_table(df: pd.DataFrame) -> Any:
+    """`df` (index dropped) as a pyarrow Table, the form `table_bytes` writes. Raises
     `InputError` when `df` cannot be stored (say, a column of mixed Python objects), with the
     reason pyarrow gives."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
     if not isinstance(df, pd.DataFrame):
         raise InputError(f"a results table must be a pandas DataFrame, got {type(df).__name__}")
     try:
-        table = pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False)
+        return pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False)
+    except Exception as exc:  # pyarrow's ArrowInvalid / ArrowTypeError / TypeError
+        raise _unstorable(exc) from None
+
+
+def table_bytes(table: Any, extra: Mapping[str, Any] | None = None) -> bytes:
+    """An `arrow_table` as Parquet bytes, `extra` in the file's metadata."""
+    import pyarrow.parquet as pq
+
+    try:
         if extra is not None:
             meta = dict(table.schema.metadata or {})
             meta[_META_MARK] = json.dumps(to_jsonable(extra), allow_nan=False).encode()
@@ -102,9 +110,20 @@ def encode_parquet(df: pd.DataFrame, extra: Mapping[str, Any] | None = None) -> 
         buf = io.BytesIO()
         pq.write_table(table, buf)
     except Exception as exc:  # pyarrow's ArrowInvalid / ArrowTypeError / TypeError
-        msg = " ".join(str(exc).split())[:200]
-        raise InputError(f"table cannot be stored as Parquet: {type(exc).__name__}: {msg}") from None
+        raise _unstorable(exc) from None
     return buf.getvalue()
+
+
+def _unstorable(exc: Exception) -> InputError:
+    msg = " ".join(str(exc).split())[:200]
+    return InputError(f"table cannot be stored as Parquet: {type(exc).__name__}: {msg}")
+
+
+def encode_parquet(df: pd.DataFrame, extra: Mapping[str, Any] | None = None) -> bytes:
+    """`df` (index dropped) as Parquet bytes, `extra` in the file's metadata. Raises
+    `InputError` when `df` cannot be stored (say, a column of mixed Python objects), with the
+    reason pyarrow gives."""
+    return table_bytes(arrow_table(df), extra)
 
 
 def decode_parquet(data: bytes, path: str | os.PathLike = "<bytes>") -> tuple[pd.DataFrame, dict]:
