@@ -860,57 +860,80 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
 # (8.10)); LU with partial pivoting per member. Status 1: no convergence; 2: singular matrix.
 _NEWTON = f'''
 {_JIT_INLINE}
-def lu_solve(M, b, x):
-    m = b.shape[0]
-    for i in range(m):
-        x[i] = b[i]
+def lu_factor(M, piv):
+    # M = P L U in place (Gaussian elimination with partial pivoting, whole rows swapped, the
+    # multipliers stored below the diagonal); False on an exactly zero pivot
+    m = M.shape[0]
     for col in range(m):
-        piv = col
+        p = col
         best = abs(M[col, col])
         for r in range(col + 1, m):
             if abs(M[r, col]) > best:
                 best = abs(M[r, col])
-                piv = r
-        if M[piv, col] == 0.0:
+                p = r
+        piv[col] = p
+        if M[p, col] == 0.0:
             return False
-        if piv != col:
+        if p != col:
             for q in range(m):
                 tmp = M[col, q]
-                M[col, q] = M[piv, q]
-                M[piv, q] = tmp
-            tmp = x[col]
-            x[col] = x[piv]
-            x[piv] = tmp
+                M[col, q] = M[p, q]
+                M[p, q] = tmp
         inv = 1.0 / M[col, col]
         for r in range(col + 1, m):
             l = M[r, col] * inv
+            M[r, col] = l
             if l != 0.0:
                 for q in range(col + 1, m):
                     M[r, q] -= l * M[col, q]
+    return True
+
+
+{_JIT_INLINE}
+def lu_apply(M, piv, b, x):
+    # x = M^-1 b from `lu_factor`'s factors: every row swap first, then the two substitutions (each
+    # entry sees the same operations in the same order as elimination interleaved with the swaps)
+    m = b.shape[0]
+    for i in range(m):
+        x[i] = b[i]
+    for col in range(m):
+        p = piv[col]
+        if p != col:
+            tmp = x[col]
+            x[col] = x[p]
+            x[p] = tmp
+    for col in range(m):
+        for r in range(col + 1, m):
+            l = M[r, col]
+            if l != 0.0:
                 x[r] -= l * x[col]
     for i in range(m - 1, -1, -1):
         acc = x[i]
         for q in range(i + 1, m):
             acc -= M[i, q] * x[q]
         x[i] = acc / M[i, i]
+
+
+{_JIT_INLINE}
+def newton_factor_members(Mats, Piv):
+    # every member's Newton matrix factored in place (once per matrix, whatever the number of
+    # iterations that solve with it); False on a singular matrix
+    for j in range(Mats.shape[0]):
+        if not lu_factor(Mats[j], Piv[j]):
+            return False
     return True
 
 
 {_JIT_INLINE}
-def newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
-    # DX[:, j] = -Mats[j]^-1 G[:, j] for every member; False on a singular matrix
-    m = Mw.shape[0]
+def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
+    # DX[:, j] = -Mats[j]^-1 G[:, j] for every member, from the factors of `newton_factor_members`
+    m = rhs_w.shape[0]
     for j in range(G.shape[1]):
         for r in range(m):
-            for q in range(m):
-                Mw[r, q] = Mats[j, r, q]
-        for r in range(m):
             rhs_w[r] = -G[r, j]
-        if not lu_solve(Mw, rhs_w, sol):
-            return False
+        lu_apply(Mats[j], Piv[j], rhs_w, sol)
         for r in range(m):
             DX[r, j] = sol[r]
-    return True
 
 
 {_JIT_INLINE}
@@ -978,6 +1001,7 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
     G = np.empty((m, N))
     DX = np.empty((m, N))
     Mats = np.empty((N, m, m))
+    Piv = np.empty((N, m), dtype=np.int64)
     Fimp = np.empty((impl, dim, N))
     Fexp = np.empty((dim, N))
     Const = np.zeros((impl, dim))
@@ -986,7 +1010,6 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
     out = np.empty(dim)
     Jb = np.empty(dim * dim)
     Jall = np.empty((impl, dim * dim))
-    Mw = np.empty((m, m))
     rhs_w = np.empty(m)
     sol = np.empty(m)
     p = np.empty(npar)
@@ -1092,10 +1115,12 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
                                         v += 1.0
                                     Mats[j, i * dim + a, q * dim + bb] = v
                 n_jac += impl if full else 1
+                if not newton_factor_members(Mats, Piv):
+                    n_iter += 1
+                    status = 2
+                    break
             n_iter += 1
-            if not newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
-                status = 2
-                break
+            newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
             norm = newton_update(X, DX, inv_scale)
             if norm != norm:
                 break
@@ -1150,11 +1175,11 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
     G = np.empty((dim, N))
     DX = np.empty((dim, N))
     Mats = np.empty((N, dim, dim))
+    Piv = np.empty((N, dim), dtype=np.int64)
     inv_scale = np.empty((dim, N))
     y = np.empty(dim)
     out = np.empty(dim)
     Jb = np.empty(dim * dim)
-    Mw = np.empty((dim, dim))
     rhs_w = np.empty(dim)
     sol = np.empty(dim)
     p = np.empty(npar)
@@ -1221,10 +1246,12 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                                 v += 1.0
                             Mats[j, a, bb] = v
                 n_jac += 1
+                if not newton_factor_members(Mats, Piv):
+                    n_iter += 1
+                    status = 2
+                    break
             n_iter += 1
-            if not newton_solve_members(Mats, G, DX, Mw, rhs_w, sol):
-                status = 2
-                break
+            newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
             norm = newton_update(X, DX, inv_scale)
             if norm != norm:
                 break
