@@ -437,5 +437,5 @@ def test_taylor_uses_each_members_parameters():
 
 
 def test_taylor_rejects_a_bad_tolerance():
-    with pytest.raises(InputError, match=r"`tol` must be positive and finite, got -1.0"):
+    with pytest.raises(InputError, match=r"`tol` must be a positive finite number, got -1.0"):
         get_stepper("taylor").with_tolerance(-1.0)
