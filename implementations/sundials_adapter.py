@@ -32,21 +32,16 @@ import numpy as np
 from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, StepperInfo
 from harness.tolerances import SCIPY_MIN_RTOL
+from implementations import optional_library
 from implementations.external import MemberDynamics
 
 __all__ = ["STEPPERS", "UNAVAILABLE", "INSTALL", "SUNDAE_VERSION", "CvodeStepper"]
 
 SUNDAE_VERSION = "1.2.0"
-INSTALL = f"pip install scikit-sundae=={SUNDAE_VERSION}  (or: pip install .[sundials])"
-
-try:
-    from sksundae.cvode import CVODE
-except ImportError:  # the adapter is optional
-    CVODE = None
-
-UNAVAILABLE: dict[str, str] = {} if CVODE is not None else {
-    "scikit-sundae": f"scikit-sundae (SUNDIALS CVODE) is not installed; install it with: {INSTALL}"
-}
+cvode, INSTALL, UNAVAILABLE = optional_library(
+    "sksundae.cvode", package="scikit-sundae", version=SUNDAE_VERSION, extra="sundials",
+    label="scikit-sundae (SUNDIALS CVODE)")
+CVODE = None if cvode is None else cvode.CVODE
 
 _REF = ("S. D. Cohen, A. C. Hindmarsh, Computers in Physics 10 (1996) 138-143 (CVODE); "
         "A. C. Hindmarsh et al., ACM TOMS 31 (2005) 363-396 (SUNDIALS)")
