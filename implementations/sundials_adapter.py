@@ -29,11 +29,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.problem import Dynamics
-from harness.stepper import AdaptiveStepper, Carry, StepFailure, StepperInfo
+from harness.stepper import AdaptiveStepper, StepFailure, StepperInfo
 from harness.tolerances import SCIPY_MIN_RTOL
 from implementations import optional_library
-from implementations.external import MemberDynamics
+from implementations.external import MemberByMemberStepper, MemberDynamics
 
 __all__ = ["STEPPERS", "UNAVAILABLE", "INSTALL", "SUNDAE_VERSION", "CvodeStepper"]
 
@@ -55,7 +54,7 @@ _METHODS = {
 _MAX_STEPS_PER_OUTPUT = 100_000  # CVODE's default 500 stops long output steps at tight tol
 
 
-class CvodeStepper(AdaptiveStepper):
+class CvodeStepper(MemberByMemberStepper):
     """CVODE (`method` BDF or Adams) advancing each member to the next output time."""
 
     def __init__(self, name: str, tol: float = AdaptiveStepper.tol):
@@ -75,11 +74,6 @@ class CvodeStepper(AdaptiveStepper):
                 "cvode_method": self.method, "scikit_sundae_version": SUNDAE_VERSION,
                 "evals_unit": "ensemble evaluations (member calls / N)"}
 
-    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]
-        dyn.counts.setdefault("internal_steps", 0)
-        return Carry(t0, h, y0, members=members)
-
     def _solver(self, member: MemberDynamics):
         def rhs(t, y, yp):
             yp[:] = member.f(t, y)
@@ -90,32 +84,18 @@ class CvodeStepper(AdaptiveStepper):
         return CVODE(rhs, method=self.method, rtol=max(self.tol, SCIPY_MIN_RTOL), atol=self.tol,
                      jacfn=jac, max_num_steps=_MAX_STEPS_PER_OUTPUT)
 
-    def _step(self, dyn: Dynamics, c: Carry) -> None:
-        y = c.y
-        N = y.shape[1]
-        t, target = c.t, c.t0 + (c.n + 1) * c.h
-        rhs0, jac0 = dyn.counts["rhs"], dyn.counts["jac"]
+    def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
+                      y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         try:
-            for m in range(N):
-                if not np.all(np.isfinite(y[:, m])):
-                    continue
-                member = c.members[m]
-                member.reset()
-                try:
-                    sol = self._solver(member).solve(np.array([t, target]), y[:, m].copy())
-                except Exception as exc:  # the adapter's work limit, or CVODE refusing the input
-                    raise StepFailure(f"stepper {self.info.name!r}: CVODE stopped for ensemble "
-                                      f"member {m} between t={t!r} and t={target!r}: "
-                                      f"{type(exc).__name__}: {exc}") from None
-                if not sol.success:
-                    raise StepFailure(f"stepper {self.info.name!r}: CVODE failed for ensemble member "
-                                      f"{m} between t={t!r} and t={target!r}: {sol.message}")
-                y[:, m] = sol.y[-1]
-                dyn.counts["internal_steps"] += int(sol.t.size - 1)  # every internal step is returned
-        finally:
-            dyn.counts["rhs"] = rhs0 + (dyn.counts["rhs"] - rhs0) / N
-            dyn.counts["jac"] = jac0 + (dyn.counts["jac"] - jac0) / N
-        c.y = y
+            sol = self._solver(member).solve(np.array([t, target]), y)
+        except Exception as exc:  # the adapter's work limit, or CVODE refusing the input
+            raise StepFailure(f"stepper {self.info.name!r}: CVODE stopped for ensemble "
+                              f"member {m} between t={t!r} and t={target!r}: "
+                              f"{type(exc).__name__}: {exc}") from None
+        if not sol.success:
+            raise StepFailure(f"stepper {self.info.name!r}: CVODE failed for ensemble member "
+                              f"{m} between t={t!r} and t={target!r}: {sol.message}")
+        return sol.y[-1], {"internal_steps": int(sol.t.size - 1)}  # every internal step is returned
 
 
 STEPPERS: list = [CvodeStepper(name) for name in _METHODS] if CVODE is not None else []
