@@ -71,6 +71,7 @@ from harness.experiments.common import (
     perturbation_used,
     primary_invariant,
     problem_cells,
+    summary_per_cell,
 )
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
@@ -217,13 +218,7 @@ class EnergyExperiment(Experiment):
         return _run(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
-        from harness.registry import get_stepper
-
-        if rows.empty:
-            return pd.DataFrame(columns=SUMMARY_COLUMNS)
-        out = [_summarize_cell(get_stepper(s), p, g, config)
-               for (s, p), g in rows.groupby(["stepper", "problem"], sort=False)]
-        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+        return summary_per_cell(rows, SUMMARY_COLUMNS, _summarize_cell, config)
 
 
 def _plan(stepper: Stepper, problem, config: Mapping[str, Any]) -> tuple[float, int, float]:
