@@ -150,6 +150,13 @@ class MemberByMemberStepper(AdaptiveStepper):
 
     COUNTERS: tuple[str, ...] = ("internal_steps",)
 
+    def _library_info(self, **fields) -> StepperInfo:
+        """The record of a wrapped solver: adaptive, first-order form for any right-hand side,
+        family 'external', with no symplectic or symmetric claim and `extra_info()` for this
+        tolerance; `fields` gives the rest (name, claimed order, cost, reference, ...)."""
+        return StepperInfo(family="external", symplectic=False, symmetric=False, form="first-order",
+                           velocity_dependent=True, adaptive=True, extra=self.extra_info(), **fields)
+
     def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
                       y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         """Member `m`'s state at `target` from `y` at `t`, and what to add to its `COUNTERS`;
@@ -199,17 +206,9 @@ class ScipyStepper(MemberByMemberStepper):
         self.method = method
         self.uses_jacobian = uses_jac
         self.tol = float(tol)
-        self.info = StepperInfo(
-            name=name,
-            family="external",
-            claimed_order=order,
-            explicit=explicit,
-            symplectic=False,
-            symmetric=False,
-            evals_per_step=evals,
-            form="first-order",
-            velocity_dependent=True,
-            reference=reference,
+        self.info = self._library_info(
+            name=name, claimed_order=order, explicit=explicit, evals_per_step=evals, reference=reference,
+            implementation="scipy",
             description=(
                 f"scipy.integrate.solve_ivp(method={method!r}), wrapped: {description} "
                 "Each output step restarts the solver for every member from t to t + h at "
@@ -217,9 +216,6 @@ class ScipyStepper(MemberByMemberStepper):
                 "accepted internal step; counts['rhs'] and counts['jac'] are in ensemble units "
                 "(member calls / N), counts['internal_steps'] is summed over members."
             ),
-            adaptive=True,
-            implementation="scipy",
-            extra=self.extra_info(),
         )
 
     def extra_info(self) -> dict:

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.stepper import AdaptiveStepper, StepFailure, StepperInfo
+from harness.stepper import AdaptiveStepper, StepFailure
 from harness.tolerances import SCIPY_MIN_RTOL
 from implementations import optional_library
 from implementations.external import MemberByMemberStepper, MemberDynamics
@@ -61,12 +61,10 @@ class CvodeStepper(MemberByMemberStepper):
         method, order, description = _METHODS[name]
         self.method = method
         self.tol = float(tol)
-        self.info = StepperInfo(
-            name=name, family="external", claimed_order=order, explicit=False, symplectic=False,
-            symmetric=False, evals_per_step=2.0, form="first-order", velocity_dependent=True,
-            reference=_REF, description=description + " Each output step restarts CVODE for "
-            "every member from t to t + h at rtol = atol = tol.",
-            adaptive=True, implementation="sundials", extra=self.extra_info(),
+        self.info = self._library_info(
+            name=name, claimed_order=order, explicit=False, evals_per_step=2.0, reference=_REF,
+            implementation="sundials", description=description + " Each output step restarts CVODE "
+            "for every member from t to t + h at rtol = atol = tol.",
         )
 
     def extra_info(self) -> dict:
