@@ -231,11 +231,16 @@ def stage_split(tableau: ButcherTableau, label: str) -> StageSplit:
 
 class NewtonStepper(Stepper):
     """What the implicit families share: `newton`, the settings of the Newton iteration on their
-    implicit equations, and `_construct`, the constructor keywords that rebuild the same method
-    with other settings (`with_newton` and its kin)."""
+    implicit equations, and rebuilding the same method with other settings (`with_newton` and
+    its kin) from the keywords it was built with, recorded here once for every family."""
 
     newton: NewtonSettings
-    _construct: dict
+
+    def __new__(cls, *coefficients, **keywords):
+        self = super().__new__(cls)
+        # Unpickling and copying pass no keywords; the object's saved state then restores these.
+        self._construct = keywords
+        return self
 
     def _rebuild(self, **changes) -> Stepper:
         """The same method built again, with `changes` to its constructor keywords."""
@@ -283,15 +288,6 @@ class ImplicitRungeKutta(NewtonStepper):
         symplectic = bool(tableau.symplectic) if symplectic is None else symplectic
         symmetric = bool(tableau.symmetric) if symmetric is None else symmetric
         self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
-        self._construct = dict(
-            name=name,
-            claimed_order=claimed_order,
-            symplectic=symplectic,
-            symmetric=symmetric,
-            reference=reference,
-            description=description,
-            stability=stability,
-        )
         self._split = split = stage_split(tableau, f"`tableau` {tableau.name!r}")
         n_impl = split.implicit.size
         explicit_evals = 0 if split.fsal or split.explicit.size == 0 else 1

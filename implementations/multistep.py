@@ -96,14 +96,6 @@ class LinearMultistepStepper(NewtonStepper):
         self.starter = starter
         self.starter_name = starter_name
         self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
-        self._construct = dict(
-            name=name,
-            claimed_order=claimed_order,
-            reference=reference,
-            description=description,
-            starter=starter,
-            stability=stability,
-        )
         k = table.steps
         explicit = bool(table.explicit)
         if explicit:
