@@ -43,6 +43,7 @@ import pandas as pd
 
 from harness.errors import InputError
 from harness.problem import Dynamics, Problem
+from harness.problem.checks import check_positive
 from harness.sources import source_of
 from harness.stepper import FORMS, Carry, Stepper, StepperInfo
 
@@ -113,12 +114,7 @@ class FunctionStepper(Stepper):
             raise InputError(f"`step` must be a function, got {type(step).__name__}")
         if form not in FORMS:
             raise InputError(f"`form` must be one of {FORMS}, got {form!r}")
-        try:
-            evals = float(evals_per_step)
-        except (TypeError, ValueError):
-            raise InputError(f"`evals_per_step` must be a positive number, got {evals_per_step!r}") from None
-        if not (np.isfinite(evals) and evals > 0):
-            raise InputError(f"`evals_per_step` must be a positive number, got {evals_per_step!r}")
+        evals = check_positive(evals_per_step, "`evals_per_step`")
         where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
         self.step_function = step
         self.info = StepperInfo(

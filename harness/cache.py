@@ -1,4 +1,5 @@
-"""Where the harness keeps compiled code: one directory it controls.
+"""Where the harness keeps compiled code: one directory it controls, and the heyoka integrators
+built in this process (`IntegratorPool`).
 
 `HARNESS_CACHE_DIR` overrides the default `.cache/` at the project root (or the current
 directory when the package is installed elsewhere). heyoka's on-disk JIT cache lives in its
@@ -8,9 +9,12 @@ directory when the package is installed elsewhere). heyoka's on-disk JIT cache l
 from __future__ import annotations
 
 import os
+import threading
+from collections.abc import Callable, Hashable
 from pathlib import Path
+from typing import Any
 
-__all__ = ["cache_dir", "configure_heyoka_cache"]
+__all__ = ["cache_dir", "configure_heyoka_cache", "IntegratorPool"]
 
 _configured: Path | None = None
 
@@ -44,3 +48,32 @@ def configure_heyoka_cache() -> Path:
         hy.llvm_state.set_diskcache_path(str(target))
         _configured = target
     return target
+
+
+class IntegratorPool:
+    """heyoka integrators built once per key in this process, each with the lock its users hold
+    while they set its time and state and propagate it (an integrator is stateful). Building
+    (a compile, or a load from heyoka's disk cache) happens outside the pool's own lock."""
+
+    def __init__(self):
+        self._entries: dict[Hashable, tuple[threading.Lock, Any]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, key: Hashable, build: Callable[[], Any]) -> tuple[threading.Lock, Any]:
+        """(lock, integrator) for `key`; the integrator is `build()` on first use."""
+        with self._lock:
+            found = self._entries.get(key)
+        if found is not None:
+            return found
+        configure_heyoka_cache()
+        entry = (threading.Lock(), build())
+        with self._lock:
+            return self._entries.setdefault(key, entry)
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def clear(self) -> None:
+        """Forget every integrator (benchmarks time a cold start)."""
+        with self._lock:
+            self._entries.clear()

@@ -364,11 +364,19 @@ def _set_multistep(method: object, name: str, a: np.ndarray, b: np.ndarray) -> N
     object.__setattr__(method, "explicit", b[-1] == 0.0)
 
 
+@dataclass(frozen=True, eq=False)
 class _MultistepFacts:
-    """Facts both multistep classes share: the linear order is the order (the error constants do
-    not depend on the problem), and the method is symmetric when its coefficients are
-    palindromic, alpha_j = ALPHA_SIGN alpha_{k-j} and beta_j = beta_{k-j} (first-order methods:
-    -1, HLW XV.1; second-order methods: +1, HNW I, III.10)."""
+    """The record both multistep classes share (name, alpha, beta, with the derived `steps` and
+    `explicit` filled by `_set_multistep`) and their common facts: the linear order is the order
+    (the error constants do not depend on the problem), and the method is symmetric when its
+    coefficients are palindromic, alpha_j = ALPHA_SIGN alpha_{k-j} and beta_j = beta_{k-j}
+    (first-order methods: -1, HLW XV.1; second-order methods: +1, HNW I, III.10)."""
+
+    name: str
+    alpha: np.ndarray
+    beta: np.ndarray
+    steps: int = field(init=False)
+    explicit: bool = field(init=False)
 
     ALPHA_SIGN = -1.0
 
@@ -390,12 +398,6 @@ class LinearMultistep(_MultistepFacts):
     alpha_k normalised to 1. Checks on creation: equal lengths, alpha_k = 1, consistency
     (sum alpha = 0 and sum j alpha_j = sum beta_j). Derived: `steps` (k), `explicit` (beta_k = 0).
     """
-
-    name: str
-    alpha: np.ndarray
-    beta: np.ndarray
-    steps: int = field(init=False)
-    explicit: bool = field(init=False)
 
     def __init__(self, name: str, alpha: Sequence[Number], beta: Sequence[Number]):
         a, b = _multistep_arrays(name, alpha, beta, 2)
@@ -432,12 +434,6 @@ class SecondOrderMultistep(_MultistepFacts):
     (sum alpha = 0, sum j alpha_j = 0, sum j^2 alpha_j / 2 = sum beta_j).
     Stormer's rule (the two-step Verlet form) is alpha = (1, -2, 1), beta = (0, 1, 0).
     """
-
-    name: str
-    alpha: np.ndarray
-    beta: np.ndarray
-    steps: int = field(init=False)
-    explicit: bool = field(init=False)
 
     def __init__(self, name: str, alpha: Sequence[Number], beta: Sequence[Number]):
         a, b = _multistep_arrays(name, alpha, beta, 3)

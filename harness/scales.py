@@ -107,17 +107,15 @@ class Orbit:
 
 
 # -- the reference orbit --------------------------------------------------------------------------
-_integrators: dict[str, tuple[threading.Lock, Any]] = {}
-_integrators_lock = threading.Lock()
+_integrators = cache.IntegratorPool()  # by problem
 
 
 def _integrator(problem) -> tuple[threading.Lock, Any]:
-    key = problem.fingerprint()
-    with _integrators_lock:
-        found = _integrators.get(key)
-    if found is not None:
-        return found
-    cache.configure_heyoka_cache()
+    return _integrators.get(problem.fingerprint(), lambda: _build(problem))
+
+
+def _build(problem):
+    """heyoka's float64 Taylor integrator for `problem`."""
     sys = list(zip(problem.variables, problem.rhs, strict=True))
     # The float64 ground truth's settings (harness.ground_truth): heyoka's disk cache then holds
     # one compiled integrator for both.
@@ -125,10 +123,7 @@ def _integrator(problem) -> tuple[threading.Lock, Any]:
                               "compact_mode": sum(len(str(e)) for e in problem.rhs) > 1000}
     if problem.parameters:
         kwargs["pars"] = problem.parameter_values
-    ta = hy.taylor_adaptive(sys, np.array(problem.y0, dtype=np.float64), **kwargs)
-    entry = (threading.Lock(), ta)
-    with _integrators_lock:
-        return _integrators.setdefault(key, entry)
+    return hy.taylor_adaptive(sys, np.array(problem.y0, dtype=np.float64), **kwargs)
 
 
 def sample_orbit(problem, y0: np.ndarray | None = None, t_end: float | None = None) -> Orbit:

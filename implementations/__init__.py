@@ -9,7 +9,7 @@ from importlib import import_module
 
 __all__ = [
     "ProblemCache", "builtin_steppers", "build_stepper", "coefficient_info", "unavailable_steppers",
-    "FAMILY_MODULES", "OPTIONAL_MODULES",
+    "FAMILY_MODULES", "OPTIONAL_MODULES", "optional_library",
 ]
 
 FAMILY_MODULES = (
@@ -28,6 +28,28 @@ FAMILY_MODULES = (
 # Adapters of outside libraries whose package is an optional extra: they register no steppers
 # when it is missing and say so in `UNAVAILABLE` (listed by `unavailable_steppers()`).
 OPTIONAL_MODULES = ("rebound_adapter", "sundials_adapter")
+
+
+def optional_library(module: str, *, package: str, version: str, extra: str, label: str):
+    """Import an optional adapter's library, which may be missing.
+
+    Parameters
+    ----------
+    module : what to import (e.g. 'sksundae.cvode'); package : its name on PyPI; version : the
+    pinned version; extra : the project's optional extra that installs it; label : how the
+    message names the library.
+
+    Returns
+    -------
+    (module or None, install command, the adapter's `UNAVAILABLE`: {} when the import worked,
+    else {package: what is missing and how to install it})
+    """
+    install = f"pip install {package}=={version}  (or: pip install .[{extra}])"
+    try:
+        library = import_module(module)
+    except ImportError:
+        return None, install, {package: f"{label} is not installed; install it with: {install}"}
+    return library, install, {}
 
 
 class ProblemCache:

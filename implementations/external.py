@@ -33,7 +33,7 @@ from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
 from harness.tolerances import ADAPTIVE_MAX_EVALS, SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
 
-__all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS", "MemberDynamics"]
+__all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS", "MemberDynamics", "MemberByMemberStepper"]
 
 _SCIPY = "P. Virtanen et al., SciPy 1.0, Nature Methods 17 (2020) 261-272"
 _HNW1 = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I"
@@ -139,8 +139,63 @@ class MemberDynamics:
         return self._view.jac(t, np.ascontiguousarray(y).reshape(-1, 1))[:, :, 0]
 
 
-class ScipyStepper(AdaptiveStepper):
+class MemberByMemberStepper(AdaptiveStepper):
+    """An outside library's adaptive solver run on one ensemble member at a time, from t to the
+    next output time, as its users call it. Every evaluation goes through the run's `Dynamics`
+    (through `MemberDynamics`) and is booked in ensemble units: counts['rhs'] and counts['jac']
+    grow by the member calls / N, counts['member_rhs'] and counts['member_jac'] by the raw calls.
+
+    A subclass writes `_solve_member` and lists in `COUNTERS` the counts it adds to.
+    """
+
+    COUNTERS: tuple[str, ...] = ("internal_steps",)
+
+    def _library_info(self, **fields) -> StepperInfo:
+        """The record of a wrapped solver: adaptive, first-order form for any right-hand side,
+        family 'external', with no symplectic or symmetric claim and `extra_info()` for this
+        tolerance; `fields` gives the rest (name, claimed order, cost, reference, ...)."""
+        return StepperInfo(family="external", symplectic=False, symmetric=False, form="first-order",
+                           velocity_dependent=True, adaptive=True, extra=self.extra_info(), **fields)
+
+    def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
+                      y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
+        """Member `m`'s state at `target` from `y` at `t`, and what to add to its `COUNTERS`;
+        raises `StepFailure` (naming the member and the span) where the solver fails."""
+        raise NotImplementedError
+
+    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]
+        for key in ("member_rhs", "member_jac", *self.COUNTERS):
+            dyn.counts.setdefault(key, 0)
+        return Carry(t0, h, y0, members=members)
+
+    def _step(self, dyn: Dynamics, c: Carry) -> None:
+        y = c.y
+        N = y.shape[1]
+        t, target = c.t, c.t0 + (c.n + 1) * c.h
+        rhs0, jac0 = dyn.counts["rhs"], dyn.counts["jac"]
+        try:
+            for m in range(N):
+                if not np.all(np.isfinite(y[:, m])):
+                    continue
+                member = c.members[m]
+                member.reset()
+                y[:, m], added = self._solve_member(member, m, t, target, y[:, m].copy())
+                for key, value in added.items():
+                    dyn.counts[key] += value
+        finally:
+            member_rhs = dyn.counts["rhs"] - rhs0
+            member_jac = dyn.counts["jac"] - jac0
+            dyn.counts["rhs"] = rhs0 + member_rhs / N
+            dyn.counts["jac"] = jac0 + member_jac / N
+            dyn.counts["member_rhs"] += member_rhs
+            dyn.counts["member_jac"] += member_jac
+
+
+class ScipyStepper(MemberByMemberStepper):
     """`scipy.integrate.solve_ivp(method=...)` advancing each member to the next output time."""
+
+    COUNTERS = ("internal_steps", "scipy_nfev", "scipy_njev", "scipy_nlu")
 
     def __init__(self, method: str, tol: float = AdaptiveStepper.tol):
         if method not in SCIPY_METHODS:
@@ -151,17 +206,9 @@ class ScipyStepper(AdaptiveStepper):
         self.method = method
         self.uses_jacobian = uses_jac
         self.tol = float(tol)
-        self.info = StepperInfo(
-            name=name,
-            family="external",
-            claimed_order=order,
-            explicit=explicit,
-            symplectic=False,
-            symmetric=False,
-            evals_per_step=evals,
-            form="first-order",
-            velocity_dependent=True,
-            reference=reference,
+        self.info = self._library_info(
+            name=name, claimed_order=order, explicit=explicit, evals_per_step=evals, reference=reference,
+            implementation="scipy",
             description=(
                 f"scipy.integrate.solve_ivp(method={method!r}), wrapped: {description} "
                 "Each output step restarts the solver for every member from t to t + h at "
@@ -169,9 +216,6 @@ class ScipyStepper(AdaptiveStepper):
                 "accepted internal step; counts['rhs'] and counts['jac'] are in ensemble units "
                 "(member calls / N), counts['internal_steps'] is summed over members."
             ),
-            adaptive=True,
-            implementation="scipy",
-            extra=self.extra_info(),
         )
 
     def extra_info(self) -> dict:
@@ -186,73 +230,36 @@ class ScipyStepper(AdaptiveStepper):
             "evals_unit": "ensemble evaluations (member calls / N)",
         }
 
-    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]
-        for key in ("internal_steps", "member_rhs", "member_jac", "scipy_nfev", "scipy_njev",
-                    "scipy_nlu"):
-            dyn.counts.setdefault(key, 0)
-        return Carry(t0, h, y0, members=members)
-
-    def _step(self, dyn: Dynamics, c: Carry) -> None:
-        y = c.y
-        N = y.shape[1]
-        t, target = c.t, c.t0 + (c.n + 1) * c.h
-        rtol, atol = max(self.tol, SCIPY_MIN_RTOL), self.tol
-        rhs0, jac0 = dyn.counts["rhs"], dyn.counts["jac"]
-        totals = {"internal_steps": 0, "scipy_nfev": 0, "scipy_njev": 0, "scipy_nlu": 0}
+    def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
+                      y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
+        options = {"jac": member.jac} if self.uses_jacobian else {}
         try:
-            for m in range(N):
-                if not np.all(np.isfinite(y[:, m])):
-                    continue
-                member = c.members[m]
-                member.reset()
-                options = {"jac": member.jac} if self.uses_jacobian else {}
-                try:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore", RuntimeWarning)  # overflow: see below
-                        sol = solve_ivp(
-                            member.f,
-                            (t, target),
-                            y[:, m].copy(),
-                            method=self.method,
-                            rtol=rtol,
-                            atol=atol,
-                            **options,
-                        )
-                except _Stalled as stall:
-                    raise StepFailure(
-                        f"stepper {self.info.name!r}: scipy {self.method} stalled for ensemble "
-                        f"member {m} between t={t!r} and t={target!r}: {SCIPY_STALL_CALLS} "
-                        f"consecutive evaluations at t={stall.args[0]!r} (step size collapsed "
-                        "to zero)"
-                    ) from None
-                except _WorkLimit as limit:
-                    raise StepFailure(
-                        f"stepper {self.info.name!r}: scipy {self.method} needed more than "
-                        f"{ADAPTIVE_MAX_EVALS} evaluations for ensemble member {m} between "
-                        f"t={t!r} and t={target!r} (stopped at t={limit.args[0]!r}); the span is "
-                        f"too long for tol={self.tol:g}"
-                    ) from None
-                if sol.status < 0:
-                    raise StepFailure(
-                        f"stepper {self.info.name!r}: scipy {self.method} failed for ensemble "
-                        f"member {m} between t={t!r} and t={target!r} (reached "
-                        f"t={float(sol.t[-1])!r}): {sol.message}"
-                    )
-                y[:, m] = sol.y[:, -1]
-                totals["internal_steps"] += sol.t.size - 1
-                totals["scipy_nfev"] += int(sol.nfev)
-                totals["scipy_njev"] += int(sol.njev)
-                totals["scipy_nlu"] += int(sol.nlu)
-        finally:
-            member_rhs = dyn.counts["rhs"] - rhs0
-            member_jac = dyn.counts["jac"] - jac0
-            dyn.counts["rhs"] = rhs0 + member_rhs / N
-            dyn.counts["jac"] = jac0 + member_jac / N
-            dyn.counts["member_rhs"] += member_rhs
-            dyn.counts["member_jac"] += member_jac
-            for key, value in totals.items():
-                dyn.counts[key] += value
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # overflow: sol.status says it
+                sol = solve_ivp(member.f, (t, target), y, method=self.method,
+                                rtol=max(self.tol, SCIPY_MIN_RTOL), atol=self.tol, **options)
+        except _Stalled as stall:
+            raise StepFailure(
+                f"stepper {self.info.name!r}: scipy {self.method} stalled for ensemble "
+                f"member {m} between t={t!r} and t={target!r}: {SCIPY_STALL_CALLS} "
+                f"consecutive evaluations at t={stall.args[0]!r} (step size collapsed "
+                "to zero)"
+            ) from None
+        except _WorkLimit as limit:
+            raise StepFailure(
+                f"stepper {self.info.name!r}: scipy {self.method} needed more than "
+                f"{ADAPTIVE_MAX_EVALS} evaluations for ensemble member {m} between "
+                f"t={t!r} and t={target!r} (stopped at t={limit.args[0]!r}); the span is "
+                f"too long for tol={self.tol:g}"
+            ) from None
+        if sol.status < 0:
+            raise StepFailure(
+                f"stepper {self.info.name!r}: scipy {self.method} failed for ensemble "
+                f"member {m} between t={t!r} and t={target!r} (reached "
+                f"t={float(sol.t[-1])!r}): {sol.message}"
+            )
+        return sol.y[:, -1], {"internal_steps": sol.t.size - 1, "scipy_nfev": int(sol.nfev),
+                              "scipy_njev": int(sol.njev), "scipy_nlu": int(sol.nlu)}
 
 
 STEPPERS: list[Stepper] = [ScipyStepper(method) for method in SCIPY_METHODS]

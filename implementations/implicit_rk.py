@@ -39,6 +39,9 @@ __all__ = [
     "STEPPERS",
     "ImplicitRungeKutta",
     "NewtonSettings",
+    "NewtonStepper",
+    "StageSplit",
+    "stage_split",
     "newton_solve",
     "scaled_norm",
     "extrapolation_matrix",
@@ -185,8 +188,72 @@ def extrapolation_matrix(nodes: np.ndarray) -> np.ndarray | None:
     return E
 
 
+@dataclass(frozen=True, eq=False)
+class StageSplit:
+    """An implicit tableau split for the Newton step (Hairer & Wanner II, IV.8). Stages whose row
+    of A is zero are explicit (one evaluation at (t_n, y_n)); the others are the unknowns Z, and
+    y_{n+1} = y_n + h w . F_explicit + d . Z with d = A_ii^{-T} b_implicit, w = b_explicit -
+    A_ie^T d. `fsal`: the first stage is the only explicit one, the last row of A is b and
+    c_s = 1, so the derivative at the step's end is recovered from Z (h F_last =
+    `last_row_inv` . (Z - h A_ie F_e)) instead of evaluated. `predictor`: the extrapolation of
+    the previous step's stages (`extrapolation_matrix`), or None."""
+
+    explicit: np.ndarray
+    implicit: np.ndarray
+    A_ii: np.ndarray
+    A_ie: np.ndarray
+    c_implicit: np.ndarray
+    d: np.ndarray
+    w: np.ndarray
+    last_row_inv: np.ndarray
+    fsal: bool
+    predictor: np.ndarray | None
+
+
+def stage_split(tableau: ButcherTableau, label: str) -> StageSplit:
+    """`tableau` split into explicit and implicit stages; `InputError` starting with `label`
+    (how the caller names the tableau) when the implicit block of A is singular."""
+    A, b, c = tableau.A, tableau.b, tableau.c
+    zero_rows = np.all(A == 0.0, axis=1)
+    expl, impl = np.flatnonzero(zero_rows), np.flatnonzero(~zero_rows)
+    A_ii, A_ie = A[np.ix_(impl, impl)], A[np.ix_(impl, expl)]
+    try:
+        A_ii_inv = np.linalg.inv(A_ii)
+    except np.linalg.LinAlgError:
+        raise InputError(f"{label}: the implicit block of A must be invertible") from None
+    d = A_ii_inv.T @ b[impl]
+    fsal = bool(expl.size == 1 and expl[0] == 0 and impl.size == tableau.stages - 1
+                and np.array_equal(A[-1], b) and c[-1] == 1.0)
+    return StageSplit(explicit=expl, implicit=impl, A_ii=A_ii, A_ie=A_ie, c_implicit=c[impl], d=d,
+                      w=b[expl] - A_ie.T @ d, last_row_inv=A_ii_inv[-1], fsal=fsal,
+                      predictor=extrapolation_matrix(c[impl]))
+
+
+class NewtonStepper(Stepper):
+    """What the implicit families share: `newton`, the settings of the Newton iteration on their
+    implicit equations, and rebuilding the same method with other settings (`with_newton` and
+    its kin) from the keywords it was built with, recorded here once for every family."""
+
+    newton: NewtonSettings
+
+    def __new__(cls, *coefficients, **keywords):
+        self = super().__new__(cls)
+        # Unpickling and copying pass no keywords; the object's saved state then restores these.
+        self._construct = keywords
+        return self
+
+    def _rebuild(self, **changes) -> Stepper:
+        """The same method built again, with `changes` to its constructor keywords."""
+        return type(self)(self.coefficients, **{**self._construct, **self.newton.keywords(), **changes})
+
+    def with_newton(self, mode: str | None = None, tol: float | None = None,
+                    max_iter: int | None = None) -> Stepper:
+        """The same method with other Newton settings (unchanged where None)."""
+        return self._rebuild(**self.newton.keywords(mode, tol, max_iter))
+
+
 # -- the step loop ------------------------------------------------------------------------------
-class ImplicitRungeKutta(Stepper):
+class ImplicitRungeKutta(NewtonStepper):
     """One step loop for every implicit Runge-Kutta tableau.
 
     Stages whose row of A is zero (the first stage of Lobatto IIIA) are explicit: they cost one
@@ -221,46 +288,9 @@ class ImplicitRungeKutta(Stepper):
         symplectic = bool(tableau.symplectic) if symplectic is None else symplectic
         symmetric = bool(tableau.symmetric) if symmetric is None else symmetric
         self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
-        self._construct = dict(
-            name=name,
-            claimed_order=claimed_order,
-            symplectic=symplectic,
-            symmetric=symmetric,
-            reference=reference,
-            description=description,
-            stability=stability,
-        )
-        A, b, c = tableau.A, tableau.b, tableau.c
-        zero_rows = np.all(A == 0.0, axis=1)
-        self._expl = np.flatnonzero(zero_rows)
-        self._impl = np.flatnonzero(~zero_rows)
-        A_ii = A[np.ix_(self._impl, self._impl)]
-        A_ie = A[np.ix_(self._impl, self._expl)]
-        try:
-            A_ii_inv = np.linalg.inv(A_ii)
-        except np.linalg.LinAlgError:
-            raise InputError(
-                f"`tableau` {tableau.name!r}: the implicit block of A must be invertible"
-            ) from None
-        # y_{n+1} = y_n + h * w . F_explicit + d . Z_implicit
-        self._d = A_ii_inv.T @ b[self._impl]
-        self._w = b[self._expl] - A_ie.T @ self._d
-        self._A_ii = A_ii
-        self._A_ie = A_ie
-        self._c_impl = c[self._impl]
-        s = tableau.stages
-        self._fsal = bool(
-            self._expl.size == 1
-            and self._expl[0] == 0
-            and self._impl.size == s - 1
-            and np.array_equal(A[-1], b)
-            and c[-1] == 1.0
-        )
-        self._predictor = extrapolation_matrix(self._c_impl)
-        # the derivative at the last stage, recovered from Z: h F_impl = A_ii^{-1} (Z - h A_ie F_e)
-        self._last_row_inv = A_ii_inv[-1]
-        n_impl = self._impl.size
-        explicit_evals = 0 if self._fsal or self._expl.size == 0 else 1
+        self._split = split = stage_split(tableau, f"`tableau` {tableau.name!r}")
+        n_impl = split.implicit.size
+        explicit_evals = 0 if split.fsal or split.explicit.size == 0 else 1
         per_iter = n_impl
         self._jac_note = (
             f"{n_impl} Jacobian evaluation(s) per iteration"
@@ -286,7 +316,7 @@ class ImplicitRungeKutta(Stepper):
                     "by 1 + |y_n|), all ensemble members in one batched solve;",
                     f"per iteration {per_iter} f evaluation(s); {self._jac_note};",
                     "1 f evaluation per step for the explicit stage;" if explicit_evals else "",
-                    "the derivative at the step end is reused (first same as last);" if self._fsal else "",
+                    "the derivative at the step end is reused (first same as last);" if split.fsal else "",
                     "first iterate: the previous step's collocation polynomial, extrapolated;",
                     "evals_per_step is a typical figure (two Newton iterations on a smooth "
                     "solution; large stiff steps take three or more); measured counts, with "
@@ -298,18 +328,11 @@ class ImplicitRungeKutta(Stepper):
                 "newton": self.newton.mode,
                 "newton_tol": self.newton.tol,
                 "newton_max_iter": self.newton.max_iter,
-                "stages": s,
+                "stages": tableau.stages,
                 "implicit_stages": n_impl,
                 **({"stability": dict(stability)} if stability else {}),
             },
         )
-
-    def with_newton(
-        self, mode: str | None = None, tol: float | None = None, max_iter: int | None = None
-    ) -> ImplicitRungeKutta:
-        """The same method with other Newton settings (unchanged where None)."""
-        return ImplicitRungeKutta(self.coefficients, **self.newton.keywords(mode, tol, max_iter),
-                                  **self._construct)
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         return Carry(t0, h, y0, f_start=None, z_prev=None)
@@ -321,17 +344,18 @@ class ImplicitRungeKutta(Stepper):
             c.f_start = c.z_prev = None
             return
         dim, N = y.shape
-        impl = self._impl.size
+        split = self._split
+        impl = split.implicit.size
         m = impl * dim
-        c_impl = self._c_impl
-        A_ii = self._A_ii
+        c_impl = split.c_implicit
+        A_ii = split.A_ii
         f_expl = None
-        if self._expl.size:
+        if split.explicit.size:
             f_expl = c.f_start if c.f_start is not None else dyn.f(t, y)
         # constant part of the residual: h * A_ie F_e, shaped (impl, dim, N)
         const = None
         if f_expl is not None:
-            const = (h * self._A_ie.sum(axis=1))[:, None, None] * f_expl[None]
+            const = (h * split.A_ie.sum(axis=1))[:, None, None] * f_expl[None]
         inv_scale = np.broadcast_to(1.0 / (1.0 + np.abs(y)), (impl, dim, N)).reshape(m, N)
         eye = np.eye(m)
         hA = h * A_ii
@@ -363,8 +387,8 @@ class ImplicitRungeKutta(Stepper):
 
         # first iterate: the previous step's collocation polynomial, extrapolated (Hairer &
         # Wanner II, IV.8); zero on the first step and after a reversal.
-        if c.z_prev is not None and self._predictor is not None:
-            x0 = np.einsum("ij,jdn->idn", self._predictor, c.z_prev).reshape(m, N)
+        if c.z_prev is not None and split.predictor is not None:
+            x0 = np.einsum("ij,jdn->idn", split.predictor, c.z_prev).reshape(m, N)
         else:
             x0 = np.zeros((m, N))
         x = newton_solve(
@@ -378,11 +402,11 @@ class ImplicitRungeKutta(Stepper):
             t=t,
         )
         Z = x.reshape(impl, dim, N)
-        y_new = y + np.einsum("i,idn->dn", self._d, Z)
+        y_new = y + np.einsum("i,idn->dn", split.d, Z)
         if f_expl is not None:
-            y_new += h * float(self._w.sum()) * f_expl
-        if self._fsal:
-            hF_last = np.einsum("i,idn->dn", self._last_row_inv, Z if const is None else Z - const)
+            y_new += h * float(split.w.sum()) * f_expl
+        if split.fsal:
+            hF_last = np.einsum("i,idn->dn", split.last_row_inv, Z if const is None else Z - const)
             c.f_start = hF_last / h
         c.z_prev = Z
         c.y = y_new

@@ -32,7 +32,7 @@ from harness.problem import Dynamics
 from harness.stepper import Carry, Stepper, check_compatible
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations import coefficient_info
-from implementations.implicit_rk import NewtonSettings, newton_solve
+from implementations.implicit_rk import NewtonSettings, NewtonStepper, newton_solve
 
 __all__ = ["METHODS", "STEPPERS", "LinearMultistepStepper", "AB2", "AB3", "AB4", "AM3", "BDF2"]
 
@@ -47,7 +47,7 @@ def _starting_values_text(k: int) -> str:
     return f"The starting values y_1..y_{k - 1} come"
 
 
-class LinearMultistepStepper(Stepper):
+class LinearMultistepStepper(NewtonStepper):
     """One step loop for every linear multistep table, explicit or implicit.
 
     The carry holds the last k states (oldest first) with their derivatives (evaluated lazily,
@@ -96,13 +96,6 @@ class LinearMultistepStepper(Stepper):
         self.starter = starter
         self.starter_name = starter_name
         self.newton = NewtonSettings(newton_tol, newton_max_iter, newton)
-        self._construct = dict(
-            name=name,
-            claimed_order=claimed_order,
-            reference=reference,
-            description=description,
-            stability=stability,
-        )
         k = table.steps
         explicit = bool(table.explicit)
         if explicit:
@@ -144,15 +137,7 @@ class LinearMultistepStepper(Stepper):
 
     def with_starter(self, starter: str | Stepper) -> LinearMultistepStepper:
         """The same method with another source of starting values."""
-        return LinearMultistepStepper(self.coefficients, starter=starter, **self.newton.keywords(),
-                                      **self._construct)
-
-    def with_newton(
-        self, mode: str | None = None, tol: float | None = None, max_iter: int | None = None
-    ) -> LinearMultistepStepper:
-        """The same method with other Newton settings (unchanged where None)."""
-        return LinearMultistepStepper(self.coefficients, starter=self.starter,
-                                      **self.newton.keywords(mode, tol, max_iter), **self._construct)
+        return self._rebuild(starter=starter)
 
     def incompatibility(self, problem) -> str | None:
         if self.starter_name == "reference":

@@ -63,20 +63,13 @@ import numpy as np
 
 from harness.problem import Dynamics, NBody, Problem
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
+from implementations import optional_library
 
 __all__ = ["STEPPERS", "UNAVAILABLE", "REBOUND_VERSION", "INSTALL", "ReboundStepper", "ReboundIAS15"]
 
 REBOUND_VERSION = "5.2.2"
-INSTALL = f"pip install rebound=={REBOUND_VERSION}  (or: pip install .[rebound])"
-
-try:
-    import rebound
-except ImportError:  # the adapter is optional
-    rebound = None
-
-UNAVAILABLE: dict[str, str] = {} if rebound is not None else {
-    "rebound": f"REBOUND is not installed; install it with: {INSTALL}"
-}
+rebound, INSTALL, UNAVAILABLE = optional_library(
+    "rebound", package="rebound", version=REBOUND_VERSION, extra="rebound", label="REBOUND")
 
 _RT15 = "H. Rein, D. Tamayo, MNRAS 452 (2015) 376-388 (WHFast)"
 _RTB19 = "H. Rein, D. Tamayo, G. Brown, MNRAS 489 (2019) 4632-4640 (high-order symplectic integrators)"

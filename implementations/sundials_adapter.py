@@ -29,24 +29,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.problem import Dynamics
-from harness.stepper import AdaptiveStepper, Carry, StepFailure, StepperInfo
+from harness.stepper import AdaptiveStepper, StepFailure
 from harness.tolerances import SCIPY_MIN_RTOL
-from implementations.external import MemberDynamics
+from implementations import optional_library
+from implementations.external import MemberByMemberStepper, MemberDynamics
 
 __all__ = ["STEPPERS", "UNAVAILABLE", "INSTALL", "SUNDAE_VERSION", "CvodeStepper"]
 
 SUNDAE_VERSION = "1.2.0"
-INSTALL = f"pip install scikit-sundae=={SUNDAE_VERSION}  (or: pip install .[sundials])"
-
-try:
-    from sksundae.cvode import CVODE
-except ImportError:  # the adapter is optional
-    CVODE = None
-
-UNAVAILABLE: dict[str, str] = {} if CVODE is not None else {
-    "scikit-sundae": f"scikit-sundae (SUNDIALS CVODE) is not installed; install it with: {INSTALL}"
-}
+cvode, INSTALL, UNAVAILABLE = optional_library(
+    "sksundae.cvode", package="scikit-sundae", version=SUNDAE_VERSION, extra="sundials",
+    label="scikit-sundae (SUNDIALS CVODE)")
+CVODE = None if cvode is None else cvode.CVODE
 
 _REF = ("S. D. Cohen, A. C. Hindmarsh, Computers in Physics 10 (1996) 138-143 (CVODE); "
         "A. C. Hindmarsh et al., ACM TOMS 31 (2005) 363-396 (SUNDIALS)")
@@ -60,30 +54,23 @@ _METHODS = {
 _MAX_STEPS_PER_OUTPUT = 100_000  # CVODE's default 500 stops long output steps at tight tol
 
 
-class CvodeStepper(AdaptiveStepper):
+class CvodeStepper(MemberByMemberStepper):
     """CVODE (`method` BDF or Adams) advancing each member to the next output time."""
 
     def __init__(self, name: str, tol: float = AdaptiveStepper.tol):
         method, order, description = _METHODS[name]
         self.method = method
         self.tol = float(tol)
-        self.info = StepperInfo(
-            name=name, family="external", claimed_order=order, explicit=False, symplectic=False,
-            symmetric=False, evals_per_step=2.0, form="first-order", velocity_dependent=True,
-            reference=_REF, description=description + " Each output step restarts CVODE for "
-            "every member from t to t + h at rtol = atol = tol.",
-            adaptive=True, implementation="sundials", extra=self.extra_info(),
+        self.info = self._library_info(
+            name=name, claimed_order=order, explicit=False, evals_per_step=2.0, reference=_REF,
+            implementation="sundials", description=description + " Each output step restarts CVODE "
+            "for every member from t to t + h at rtol = atol = tol.",
         )
 
     def extra_info(self) -> dict:
         return {"tol": self.tol, "rtol": max(self.tol, SCIPY_MIN_RTOL), "atol": self.tol,
                 "cvode_method": self.method, "scikit_sundae_version": SUNDAE_VERSION,
                 "evals_unit": "ensemble evaluations (member calls / N)"}
-
-    def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]
-        dyn.counts.setdefault("internal_steps", 0)
-        return Carry(t0, h, y0, members=members)
 
     def _solver(self, member: MemberDynamics):
         def rhs(t, y, yp):
@@ -95,32 +82,18 @@ class CvodeStepper(AdaptiveStepper):
         return CVODE(rhs, method=self.method, rtol=max(self.tol, SCIPY_MIN_RTOL), atol=self.tol,
                      jacfn=jac, max_num_steps=_MAX_STEPS_PER_OUTPUT)
 
-    def _step(self, dyn: Dynamics, c: Carry) -> None:
-        y = c.y
-        N = y.shape[1]
-        t, target = c.t, c.t0 + (c.n + 1) * c.h
-        rhs0, jac0 = dyn.counts["rhs"], dyn.counts["jac"]
+    def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
+                      y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         try:
-            for m in range(N):
-                if not np.all(np.isfinite(y[:, m])):
-                    continue
-                member = c.members[m]
-                member.reset()
-                try:
-                    sol = self._solver(member).solve(np.array([t, target]), y[:, m].copy())
-                except Exception as exc:  # the adapter's work limit, or CVODE refusing the input
-                    raise StepFailure(f"stepper {self.info.name!r}: CVODE stopped for ensemble "
-                                      f"member {m} between t={t!r} and t={target!r}: "
-                                      f"{type(exc).__name__}: {exc}") from None
-                if not sol.success:
-                    raise StepFailure(f"stepper {self.info.name!r}: CVODE failed for ensemble member "
-                                      f"{m} between t={t!r} and t={target!r}: {sol.message}")
-                y[:, m] = sol.y[-1]
-                dyn.counts["internal_steps"] += int(sol.t.size - 1)  # every internal step is returned
-        finally:
-            dyn.counts["rhs"] = rhs0 + (dyn.counts["rhs"] - rhs0) / N
-            dyn.counts["jac"] = jac0 + (dyn.counts["jac"] - jac0) / N
-        c.y = y
+            sol = self._solver(member).solve(np.array([t, target]), y)
+        except Exception as exc:  # the adapter's work limit, or CVODE refusing the input
+            raise StepFailure(f"stepper {self.info.name!r}: CVODE stopped for ensemble "
+                              f"member {m} between t={t!r} and t={target!r}: "
+                              f"{type(exc).__name__}: {exc}") from None
+        if not sol.success:
+            raise StepFailure(f"stepper {self.info.name!r}: CVODE failed for ensemble member "
+                              f"{m} between t={t!r} and t={target!r}: {sol.message}")
+        return sol.y[-1], {"internal_steps": int(sol.t.size - 1)}  # every internal step is returned
 
 
 STEPPERS: list = [CvodeStepper(name) for name in _METHODS] if CVODE is not None else []

@@ -61,21 +61,14 @@ def elements_to_cartesian(
 
 
 _G = 1.0
-_MASSES = (1.0, 1.0e-3, 1.0e-3)
 _NAMES = ("star", "b", "c")
-_ELEMENTS = {  # body: (a, e, inclination, true anomaly)
-    "b": (1.0, 0.0, 0.0, 3.2),
-    "c": (1.35, 0.3, 0.02, 0.785),
-}
 
 
-def _initial_state(masses: tuple[float, ...] = _MASSES, names: tuple[str, ...] = _NAMES,
-                   elements: dict | None = None) -> list[float]:
+def _initial_state(masses: tuple[float, ...], elements: dict) -> list[float]:
     """Barycentric Cartesian state of a star (first body) and planets given by their elements."""
-    elements = _ELEMENTS if elements is None else elements
     pos = [np.zeros(3)]
     vel = [np.zeros(3)]
-    for name, m in zip(names[1:], masses[1:], strict=True):
+    for name, m in zip(_NAMES[1:], masses[1:], strict=True):
         r, v = elements_to_cartesian(_G * (masses[0] + m), *elements[name])
         pos.append(r)
         vel.append(v)
@@ -87,18 +80,21 @@ def _initial_state(masses: tuple[float, ...] = _MASSES, names: tuple[str, ...] =
     return [float(c) for r in pos for c in r] + [float(c) for v in vel for c in v]
 
 
-_STRUCTURE = NBody(masses=_MASSES, G=_G, central=0, frame="inertial", names=_NAMES)
-_VARIABLES, _NEWTONIAN, _INVARIANTS = _STRUCTURE.derive()
+def _star_and_two_planets(name: str, masses: tuple[float, ...], elements: dict, **fields) -> Problem:
+    """A star (the first of `masses`) and planets b and c started from their heliocentric
+    `elements` (body: (a, e, inclination, true anomaly)), in G = 1 units and the barycentric frame:
+    the equations of motion and the invariants are derived from the N-body structure."""
+    structure = NBody(masses=masses, G=_G, central=0, frame="inertial", names=_NAMES)
+    variables, newtonian, invariants = structure.derive()
+    return Problem(name, variables=variables, newtonian=newtonian, y0=_initial_state(masses, elements),
+                   invariants=invariants, conservative=True, structure=structure, **fields)
 
-PLANETS_ENCOUNTER = Problem(
+
+PLANETS_ENCOUNTER = _star_and_two_planets(
     "planets-encounter",
-    variables=_VARIABLES,
-    newtonian=_NEWTONIAN,
-    y0=_initial_state(),
+    masses=(1.0, 1.0e-3, 1.0e-3),
+    elements={"b": (1.0, 0.0, 0.0, 3.2), "c": (1.35, 0.3, 0.02, 0.785)},
     t_span=(0.0, 4.0 * math.pi),
-    invariants=_INVARIANTS,
-    conservative=True,
-    structure=_STRUCTURE,
     # Ensemble members move each component by at most 1e-7 (relative; absolute for the star's
     # zero components): the encounter distance then changes by ~1e-6, far below its 0.04.
     perturbation=1e-7,
@@ -116,21 +112,12 @@ PLANETS_ENCOUNTER = Problem(
     tags=("newtonian", "hamiltonian", "n-body", "close-encounter", "on-request"),
 )
 
-_PAIR_MASSES = (1.0, 1.0e-2, 1.0e-2)
-_PAIR_ELEMENTS = {"b": (1.0, 0.05, 0.0, 0.3), "c": (2.5, 0.05, 0.02, 2.0)}
-_PAIR_STRUCTURE = NBody(masses=_PAIR_MASSES, G=_G, central=0, frame="inertial", names=_NAMES)
-_PAIR_VARIABLES, _PAIR_NEWTONIAN, _PAIR_INVARIANTS = _PAIR_STRUCTURE.derive()
-
-PLANETS_PAIR = Problem(
+PLANETS_PAIR = _star_and_two_planets(
     "planets-pair",
-    variables=_PAIR_VARIABLES,
-    newtonian=_PAIR_NEWTONIAN,
-    y0=_initial_state(_PAIR_MASSES, _NAMES, _PAIR_ELEMENTS),
+    masses=(1.0, 1.0e-2, 1.0e-2),
+    elements={"b": (1.0, 0.05, 0.0, 0.3), "c": (2.5, 0.05, 0.02, 2.0)},
     t_span=(0.0, 40.0 * math.pi),
     convergence_t_end=4.0 * math.pi,
-    invariants=_PAIR_INVARIANTS,
-    conservative=True,
-    structure=_PAIR_STRUCTURE,
     # Members move each component by at most 1e-6 (relative): far below the 1.5 separation.
     perturbation=1e-6,
     description=(

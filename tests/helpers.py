@@ -127,20 +127,12 @@ def adapter_without(monkeypatch, package: str, adapter_path, module_name: str):
     """The adapter module at `adapter_path`, executed afresh as `module_name` while importing
     `package` (or any of its submodules) fails as if it were not installed; it is also put in
     `sys.modules`, so `implementations.unavailable_steppers()` reads it (monkeypatch undoes both)."""
-    import builtins
     import importlib.util
     import sys
 
-    real_import = builtins.__import__
-
-    def hidden(name, *args, **kwargs):
-        if name == package or name.startswith(package + "."):
-            raise ImportError(f"No module named {package!r}")
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", hidden)
     for mod in [m for m in sys.modules if m == package or m.startswith(package + ".")]:
         monkeypatch.delitem(sys.modules, mod)
+    monkeypatch.setitem(sys.modules, package, None)  # what the import system reads as "not installed"
     spec = importlib.util.spec_from_file_location(module_name, adapter_path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

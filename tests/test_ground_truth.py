@@ -170,7 +170,7 @@ def test_blow_up_is_a_clear_error():
         ({"times": [[1.0, 2.0]]}, r"`times` must be a number or a non-empty 1-D array"),
         ({"times": 1.0, "y0": [1.0, np.nan]}, r"`y0` must be finite"),
         ({"times": 1.0, "y0": [1.0, 0.0, 0.0]}, r"`y0` must have shape \(2,\)"),
-        ({"times": 1.0, "required_error": -1e-3}, r"`required_error` must be positive"),
+        ({"times": 1.0, "required_error": -1e-3}, r"`required_error` must be a positive finite number"),
         ({"times": 1.0, "t0": float("inf")}, r"`t0` must be finite"),
     ],
     ids=[

@@ -287,6 +287,24 @@ def test_bad_newton_settings(stepper, kwargs, pattern):
         stepper.with_newton(**kwargs)
 
 
+@pytest.mark.parametrize("build", [
+    lambda: ImplicitRungeKutta(implicit_rk.GAUSS_LEGENDRE_4, name="g4-stated", claimed_order=4,
+                               symplectic=False, symmetric=False, reference="r", description="d",
+                               stability={"real_interval": 2.0}),
+    lambda: LinearMultistepStepper(multistep.BDF2, name="bdf2-euler", claimed_order=2, reference="r",
+                                   description="d", starter="euler", stability={"real_interval": 3.0}),
+], ids=["irk", "lmm"])
+def test_other_newton_settings_keep_every_keyword_the_method_was_built_with(build):
+    stepper = build()
+    rebuilt = stepper.with_newton(mode="simplified", tol=1e-8, max_iter=7)
+    assert (rebuilt.newton.mode, rebuilt.newton.tol, rebuilt.newton.max_iter) == ("simplified", 1e-8, 7)
+    for field in ("name", "claimed_order", "symplectic", "symmetric", "reference"):
+        assert getattr(rebuilt.info, field) == getattr(stepper.info, field)
+    assert rebuilt.info.extra["stability"] == stepper.info.extra["stability"]
+    assert getattr(rebuilt, "starter_name", None) == getattr(stepper, "starter_name", None)
+    assert rebuilt.with_newton(mode="full").newton.max_iter == 7
+
+
 def test_wrong_coefficient_objects_are_refused():
     with pytest.raises(InputError, match=r"`table` must be a LinearMultistep, got ButcherTableau"):
         LinearMultistepStepper(

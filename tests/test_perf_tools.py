@@ -135,6 +135,14 @@ def test_accuracy_suites_skip_in_setup_and_track_the_column(suite, column):
         bench.setup({"_error": "older commit: no such experiment"}, "a")
 
 
+def test_the_energy_columns_share_one_run_of_the_energy_experiment():
+    """asv keys a setup_cache by the function's place in the source: one function, one run."""
+    from benchmarks import bench_accuracy as b
+
+    assert b.EnergyDriftSlope.setup_cache is b.MaxEnergyError.setup_cache
+    assert b.EnergyDriftSlope.setup_cache is not b.MeasuredOrder.setup_cache
+
+
 def test_one_step_benchmark_advances_one_step():
     from benchmarks.bench_steppers import StepTime
 

@@ -1,26 +1,23 @@
 """The REBOUND adapter (implementations/rebound_adapter.py): REBOUND's integrators run with its own
-gravity on problems that declare an N-body structure; absent REBOUND, the adapter registers
-nothing and says how to install it."""
+gravity on problems that declare an N-body structure. The adapter without REBOUND is tested with
+the other optional adapters in tests/test_steppers.py."""
 
 from __future__ import annotations
 
 import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import adapter_without
 
-from harness.errors import IncompatibleError, PluginError
+from harness.errors import IncompatibleError
 from harness.ground_truth import reference
 from harness.problem import NBody, Problem
-from harness.registry import get_problem, load_plugin, steppers
+from harness.registry import get_problem, steppers
 from harness.stepper import check_compatible
 from implementations import rebound_adapter
 from problems.planetary import PLANETS_ENCOUNTER
 
-ADAPTER = Path(__file__).resolve().parents[1] / "implementations" / "rebound_adapter.py"
 HAVE_REBOUND = importlib.util.find_spec("rebound") is not None
 needs_rebound = pytest.mark.skipif(
     not HAVE_REBOUND, reason="REBOUND is not installed (optional extra: pip install .[rebound])"
@@ -30,17 +27,6 @@ ADAPTED = {s.info.name: s for s in rebound_adapter.STEPPERS}
 
 def get_stepper(name: str):
     return ADAPTED[name]
-
-
-def test_without_rebound_the_adapter_registers_nothing_and_says_how_to_install(monkeypatch):
-    module = adapter_without(monkeypatch, "rebound", ADAPTER, "implementations.rebound_adapter")
-    assert module.STEPPERS == []
-    assert "pip install rebound==" in module.UNAVAILABLE["rebound"]
-    from implementations import unavailable_steppers
-
-    assert "pip install rebound==" in unavailable_steppers()["rebound"]
-    with pytest.raises(PluginError, match=r"ImportError: REBOUND is not installed.*pip install rebound"):
-        load_plugin(ADAPTER)
 
 
 @needs_rebound

@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import functools
 import math
+from pathlib import Path
 
 import heyoka as hy
 import numpy as np
 import pytest
+from helpers import adapter_without
 
-from harness.errors import IncompatibleError, InputError
+import implementations
+from harness.errors import IncompatibleError, InputError, PluginError
 from harness.problem import NewtonianForm, Problem
-from harness.registry import get_problem, get_stepper, steppers
+from harness.registry import get_problem, get_stepper, load_plugin, steppers
 from harness.stepper import StepFailure
 from harness.tolerances import EPS, ROUNDOFF_MARGIN
 from implementations import ProblemCache, runge_kutta, splitting, taylor, verlet
@@ -45,6 +48,34 @@ def test_a_missing_family_module_is_an_error_not_a_smaller_registry(monkeypatch,
     monkeypatch.setattr(implementations, modules, (*getattr(implementations, modules), "renamed_family"))
     with pytest.raises(ModuleNotFoundError, match="implementations.renamed_family"):
         getattr(implementations, listing)()
+
+
+# Each optional adapter: (module, the library it imports, the package that installs it).
+OPTIONAL_ADAPTERS = [
+    ("rebound_adapter", "rebound", "rebound"),
+    ("sundials_adapter", "sksundae", "scikit-sundae"),
+]
+
+
+def test_every_optional_adapter_is_tested_without_its_library():
+    import implementations
+
+    assert {a for a, _, _ in OPTIONAL_ADAPTERS} == set(implementations.OPTIONAL_MODULES)
+
+
+@pytest.mark.parametrize("adapter, library, package", OPTIONAL_ADAPTERS)
+def test_without_its_library_an_optional_adapter_registers_nothing_and_says_how_to_install(
+        monkeypatch, adapter, library, package):
+    from implementations import unavailable_steppers
+
+    path = Path(implementations.__file__).parent / f"{adapter}.py"
+    module = adapter_without(monkeypatch, library, path, f"implementations.{adapter}")
+    install = f"pip install {package}=="
+    assert module.STEPPERS == []
+    assert install in module.UNAVAILABLE[package]
+    assert install in unavailable_steppers()[package]
+    with pytest.raises(PluginError, match=rf"ImportError: .+ is not installed; install it with: {install}"):
+        load_plugin(path)
 
 
 def counted(stepper, evals):
@@ -437,5 +468,5 @@ def test_taylor_uses_each_members_parameters():
 
 
 def test_taylor_rejects_a_bad_tolerance():
-    with pytest.raises(InputError, match=r"`tol` must be positive and finite, got -1.0"):
+    with pytest.raises(InputError, match=r"`tol` must be a positive finite number, got -1.0"):
         get_stepper("taylor").with_tolerance(-1.0)

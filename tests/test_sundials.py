@@ -1,35 +1,20 @@
 """The SUNDIALS CVODE adapter (implementations/sundials_adapter.py, scikit-sundae): CVODE's BDF and
-Adams methods as adaptive steppers; absent scikit-sundae, the adapter registers nothing and says
-how to install it."""
+Adams methods as adaptive steppers. The adapter without scikit-sundae is tested with the other
+optional adapters in tests/test_steppers.py."""
 
 from __future__ import annotations
 
 import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import adapter_without
 
-from harness.errors import PluginError
 from harness.ground_truth import reference
-from harness.registry import get_problem, load_plugin, steppers
+from harness.registry import get_problem, steppers
 
-ADAPTER = Path(__file__).resolve().parents[1] / "implementations" / "sundials_adapter.py"
 HAVE_SUNDAE = importlib.util.find_spec("sksundae") is not None
 needs_sundae = pytest.mark.skipif(
     not HAVE_SUNDAE, reason="scikit-sundae is not installed (optional extra: pip install .[sundials])")
-
-
-def test_without_scikit_sundae_the_adapter_registers_nothing_and_says_how_to_install(monkeypatch):
-    module = adapter_without(monkeypatch, "sksundae", ADAPTER, "implementations.sundials_adapter")
-    assert module.STEPPERS == []
-    assert "pip install scikit-sundae==" in module.UNAVAILABLE["scikit-sundae"]
-    from implementations import unavailable_steppers
-
-    assert "pip install scikit-sundae==" in unavailable_steppers()["scikit-sundae"]
-    with pytest.raises(PluginError, match=r"ImportError: scikit-sundae .*pip install scikit-sundae"):
-        load_plugin(ADAPTER)
 
 
 @pytest.fixture(scope="module")

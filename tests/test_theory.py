@@ -227,7 +227,7 @@ def test_bad_input_is_named():
         theory.splitting_order(get_stepper("rk4").coefficients)
     with pytest.raises(InputError, match="`method` must be a LinearMultistep"):
         theory.lmm_order(VV)
-    with pytest.raises(InputError, match="`limit` must be positive and finite"):
+    with pytest.raises(InputError, match="`limit` must be a positive finite number"):
         theory.stability_boundary(lambda x: x, limit=-1.0)
     with pytest.raises(InputError, match="`amplification` must return one value per point"):
         theory.stability_boundary(lambda x: np.ones(3))

@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from harness.errors import InputError
 from harness.experiments.base import Cell, Skip
@@ -283,6 +284,20 @@ def problem_cells(
                 continue
             cells.append(Cell(experiment, s, p))
     return cells, skips
+
+
+def summary_per_cell(rows: pd.DataFrame, columns: Sequence[str],
+                     summarize_cell: Callable[..., dict], *args: Any) -> pd.DataFrame:
+    """The summary table of `rows`: one row per (stepper, problem), in the order they first
+    appear, from `summarize_cell(stepper, problem_name, rows_of_that_cell, *args)`; the table
+    has `columns` (and no rows when `rows` is empty)."""
+    from harness.registry import get_stepper
+
+    if rows.empty:
+        return pd.DataFrame(columns=columns)
+    out = [summarize_cell(get_stepper(s), p, g, *args)
+           for (s, p), g in rows.groupby(["stepper", "problem"], sort=False)]
+    return pd.DataFrame(out, columns=columns)
 
 
 # -- initial states and the fixed-step plan ------------------------------------------------------------

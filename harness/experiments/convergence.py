@@ -48,7 +48,7 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.experiments.base import Cell, Experiment, register_experiment
-from harness.experiments.common import perturbation_used, problem_cells
+from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
 from harness.experiments.convergence_extended import extended_if_floor_bound
 from harness.experiments.convergence_fit import classify_points, fit_order
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
@@ -102,15 +102,9 @@ class ConvergenceExperiment(Experiment):
         return _shrinking_sweep(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
-        from harness.experiments.convergence_verdicts import summarize_cell as _summarize_cell
-        from harness.registry import get_stepper
+        from harness.experiments.convergence_verdicts import summarize_cell
 
-        out = []
-        if rows.empty:
-            return pd.DataFrame(columns=SUMMARY_COLUMNS)
-        for (s, p), g in rows.groupby(["stepper", "problem"], sort=False):
-            out.append(_summarize_cell(get_stepper(s), p, g))
-        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+        return summary_per_cell(rows, SUMMARY_COLUMNS, summarize_cell)
 
 
 def _scale(*arrays: np.ndarray) -> float:

@@ -71,6 +71,7 @@ from harness.experiments.common import (
     perturbation_used,
     primary_invariant,
     problem_cells,
+    summary_per_cell,
 )
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
@@ -217,13 +218,12 @@ class EnergyExperiment(Experiment):
         return _run(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
-        from harness.registry import get_stepper
+        return summary_per_cell(rows, SUMMARY_COLUMNS, _summarize_cell, config)
 
-        if rows.empty:
-            return pd.DataFrame(columns=SUMMARY_COLUMNS)
-        out = [_summarize_cell(get_stepper(s), p, g, config)
-               for (s, p), g in rows.groupby(["stepper", "problem"], sort=False)]
-        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+
+def _with_note(message: str, note: str) -> str:
+    """The cell's `message` with `note` added after '; ' (either left out where empty)."""
+    return "; ".join(x for x in (message, note) if x)
 
 
 def _plan(stepper: Stepper, problem, config: Mapping[str, Any]) -> tuple[float, int, float]:
@@ -367,52 +367,22 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
     }
     reasons: list[str] = []
     passed = True
-    encounter_note = "" if encounter is None else (
-        f"the fastest rate along the run, {encounter['rate']:.4g} (h rho = {encounter['h_rho']:.3g}), is "
-        f"first reached at t = {encounter['t']:.4g} (step {encounter['step']:.0f}; at the start the rate is "
-        f"{encounter['rate_start']:.3g})")
-    hw_limit = facts.hw_limit
-    span_decades = math.log10(n_end / max(fit_start, 1.0)) if n_end > 0 else -math.inf
-    if expected_class in ("bounded", "linear") and encounter is None and (
-            span_decades < tol.ENCOUNTER_MIN_DECADES):
+    why_not = _not_measurable(expected_class, expected_reason, encounter, n_end, fit_start, facts.hw_limit)
+    if why_not:
         verdict = "not-measurable"
-        rec["message"] = "; ".join(x for x in (message, (
-            f"not measurable on this run: it ends at step {n_end}, less than "
-            f"{tol.ENCOUNTER_MIN_DECADES:g} decade after the fit's start (step {fit_start:.3g}: "
-            f"{tol.FIT_MIN_PERIODS:g} natural periods at least), too short to tell a drift from a "
-            "bounded error")) if x)
-    elif expected_class == "bounded" and encounter is not None and (
-            hw_limit is not None and math.isfinite(hw_limit) and encounter["h_rho"] > hw_limit):
-        verdict = "not-measurable"
-        reasons_nm = (f"not measurable at this step: h omega_max = {encounter['h_rho']:.3g} exceeds the "
-                      f"method's limit {hw_limit:.4g} during close encounters; {encounter_note}")
-        rec["message"] = "; ".join(x for x in (message, reasons_nm) if x)
-    elif expected_class == "bounded" and encounter is not None and (
-            math.log10(n_end / max(encounter["step"], 1.0)) < tol.ENCOUNTER_MIN_DECADES):
-        verdict = "not-measurable"
-        rec["message"] = "; ".join(x for x in (message, (
-            f"not measurable on this run: {encounter_note}, leaving less than "
-            f"{tol.ENCOUNTER_MIN_DECADES:g} decade of steps after it to tell drift from the "
-            "error's rise with closer approaches")) if x)
+        rec["message"] = _with_note(message, why_not)
     elif expected_class == "bounded":
-        ok = e["drift_class"] == "bounded" or (
-            e["drift_class"] in ("sqrt", "linear") and e["secular_growth"] <= limit
-        )
+        ok = e["drift_class"] == "bounded" or (e["drift_class"] in ("sqrt", "linear")
+                                               and e["secular_growth"] <= limit)
         verdict = "as-claimed" if ok else "claim-false"
         if encounter is not None:
-            rec["message"] = "; ".join(x for x in (message, f"envelope read after it: {encounter_note}") if x)
+            rec["message"] = _with_note(message, f"envelope read after it: {_encounter_note(encounter)}")
         if not ok:
             passed = False
             reasons.append(
                 f"{expected_reason}, but it is {e['drift_class']} (growth "
                 f"{e['secular_growth']:.3g} over the fit window, rounding explains {limit:.3g})"
             )
-    elif expected_class == "linear" and encounter is not None:
-        verdict = "not-measurable"
-        rec["message"] = "; ".join(x for x in (message, (
-            f"{expected_reason}, but not measurable on this run: {encounter_note}; the error's jump "
-            f"there dominates the envelope and {math.log10(n_end / max(encounter['step'], 1.0)):.2g} "
-            "decade(s) of steps after it cannot resolve a drift proportional to t")) if x)
     elif expected_class == "linear":
         m = max(1.0, steps_per_period)
         first = energy[(energy.step > 0) & (energy.step <= math.ceil(m))]
@@ -422,7 +392,7 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
             periods_in_fit=(n_end - e["fit_start"]) / m, periods_total=n_end / m,
             rounding_fit=limit, rounding_period=rounding_growth(m))
         if passed:
-            rec["message"] = "; ".join(x for x in (message, why) if x)
+            rec["message"] = _with_note(message, why)
         else:
             reasons.append(why)
     else:
@@ -450,6 +420,42 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
     if reasons:
         rec["message"] = "; ".join([m for m in [message] if m] + reasons)
     return rec
+
+
+def _encounter_note(encounter: dict) -> str:
+    return (f"the fastest rate along the run, {encounter['rate']:.4g} (h rho = {encounter['h_rho']:.3g}), "
+            f"is first reached at t = {encounter['t']:.4g} (step {encounter['step']:.0f}; at the start the "
+            f"rate is {encounter['rate_start']:.3g})")
+
+
+def _not_measurable(expected_class: str, expected_reason: str, encounter: dict | None, n_end: int,
+                    fit_start: float, hw_limit: float | None) -> str | None:
+    """Why this run cannot tell whether the energy error is `expected_class`, or None (too short a
+    run, or a close `encounter`: the module docstring, item 4)."""
+    if expected_class not in ("bounded", "linear"):
+        return None
+    if encounter is None:
+        span_decades = math.log10(n_end / max(fit_start, 1.0)) if n_end > 0 else -math.inf
+        if span_decades >= tol.ENCOUNTER_MIN_DECADES:
+            return None
+        return (f"not measurable on this run: it ends at step {n_end}, less than "
+                f"{tol.ENCOUNTER_MIN_DECADES:g} decade after the fit's start (step {fit_start:.3g}: "
+                f"{tol.FIT_MIN_PERIODS:g} natural periods at least), too short to tell a drift from a "
+                "bounded error")
+    note = _encounter_note(encounter)
+    decades_after = math.log10(n_end / max(encounter["step"], 1.0))
+    if expected_class == "linear":
+        return (f"{expected_reason}, but not measurable on this run: {note}; the error's jump there "
+                f"dominates the envelope and {decades_after:.2g} decade(s) of steps after it cannot "
+                "resolve a drift proportional to t")
+    if hw_limit is not None and math.isfinite(hw_limit) and encounter["h_rho"] > hw_limit:
+        return (f"not measurable at this step: h omega_max = {encounter['h_rho']:.3g} exceeds the "
+                f"method's limit {hw_limit:.4g} during close encounters; {note}")
+    if decades_after < tol.ENCOUNTER_MIN_DECADES:
+        return (f"not measurable on this run: {note}, leaving less than "
+                f"{tol.ENCOUNTER_MIN_DECADES:g} decade of steps after it to tell drift from the "
+                "error's rise with closer approaches")
+    return None
 
 
 def _last_closest_approach(problem, energy: pd.DataFrame, h: float) -> dict | None:

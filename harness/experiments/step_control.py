@@ -39,6 +39,7 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.coefficients import SplittingScheme
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.experiments.common import summary_per_cell
 from harness.experiments.convergence import classify_points, fit_order
 from harness.experiments.energy import check_config, classify_drift, rounding_growth, save_grid
 
@@ -190,13 +191,7 @@ class StepControlExperiment(Experiment):
         return out[ROW_COLUMNS + ["peer"]]
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
-        from harness.registry import get_stepper
-
-        if rows.empty:
-            return pd.DataFrame(columns=SUMMARY_COLUMNS)
-        out = [_summarize_cell(get_stepper(s), p, g, config)
-               for (s, p), g in rows.groupby(["stepper", "problem"], sort=False)]
-        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+        return summary_per_cell(rows, SUMMARY_COLUMNS, _summarize_cell, config)
 
 
 # -- measuring --------------------------------------------------------------------------------------

@@ -38,7 +38,6 @@ comparison), `propagation` (bounded Taylor propagation) and `disk` (the referenc
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from collections.abc import Mapping
@@ -67,6 +66,7 @@ from harness.ground_truth.levels import (
 )
 from harness.ground_truth.propagation import certifier_tol, integrators, propagate, reference_tol
 from harness.problem import Problem, check_state, check_time
+from harness.problem.checks import check_positive
 
 # the integrators built in this process, by (problem, level, tolerance); benchmarks clear it
 _integrators = integrators
@@ -102,18 +102,6 @@ def _check_times(times: Any, t0: float) -> np.ndarray:
     return arr
 
 
-def _check_required(required_error: Any) -> float | None:
-    if required_error is None:
-        return None
-    try:
-        r = float(required_error)
-    except (TypeError, ValueError):
-        raise InputError(f"`required_error` must be a positive number, got {required_error!r}") from None
-    if not (math.isfinite(r) and r > 0):
-        raise InputError(f"`required_error` must be positive and finite, got {required_error!r}")
-    return r
-
-
 def reference(
     problem: Problem | str,
     times: Any,
@@ -138,7 +126,7 @@ def reference(
     y = check_state(problem.y0 if y0 is None else y0, problem.dim, "y0")
     n_members = y.shape[1]
     P = problem.pars_for(n_members, pars)
-    required = _check_required(required_error)
+    required = None if required_error is None else check_positive(required_error, "`required_error`")
     if not available_levels():
         raise ReferenceError_(
             f"ground truth for problem {problem.name!r} cannot be certified: no precision above "

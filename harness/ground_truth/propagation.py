@@ -87,17 +87,15 @@ def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray
 
 
 # -- integrators ---------------------------------------------------------------------------------
-integrators: dict[tuple[str, str], tuple[threading.Lock, Any]] = {}
-_integrators_lock = threading.Lock()
+integrators = cache.IntegratorPool()  # by (problem, level, tolerance)
 
 
 def _integrator(problem: Problem, level: Level, tol: float) -> tuple[threading.Lock, Any]:
-    key = (problem.fingerprint(), level.name, tol)
-    with _integrators_lock:
-        found = integrators.get(key)
-    if found is not None:
-        return found
-    cache.configure_heyoka_cache()
+    return integrators.get((problem.fingerprint(), level.name, tol), lambda: _build(problem, level, tol))
+
+
+def _build(problem: Problem, level: Level, tol: float):
+    """heyoka's Taylor integrator for `problem` at `level` and tolerance `tol`."""
     sys = list(zip(problem.variables, problem.rhs, strict=True))
     kwargs: dict[str, Any] = {
         "tol": level.scalar(tol),
@@ -109,10 +107,7 @@ def _integrator(problem: Problem, level: Level, tol: float) -> tuple[threading.L
         kwargs["fp_type"] = level.fp_type
     if problem.parameters:
         kwargs["pars"] = level.array(problem.parameter_values)
-    ta = hy.taylor_adaptive(sys, level.array(problem.y0), **kwargs)
-    entry = (threading.Lock(), ta)
-    with _integrators_lock:
-        return integrators.setdefault(key, entry)
+    return hy.taylor_adaptive(sys, level.array(problem.y0), **kwargs)
 
 
 def reference_tol(level: Level) -> float:

@@ -22,10 +22,7 @@ def check_time(value: Any, name: str) -> float:
     -------
     float
     """
-    try:
-        x = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"`{name}` must be a real number, got {value!r}") from None
+    x = _as_float(value, f"`{name}` must be a real number, got {value!r}")
     if not math.isfinite(x):
         raise InputError(f"`{name}` must be finite, got {x!r}")
     return x
@@ -85,10 +82,16 @@ def check_positive(value: Any, label: str) -> float:
     -------
     float
     """
-    try:
-        x = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"{label} must be a positive finite number, got {value!r}") from None
+    message = f"{label} must be a positive finite number, got {value!r}"
+    x = _as_float(value, message)
     if not (math.isfinite(x) and x > 0.0):
-        raise InputError(f"{label} must be a positive finite number, got {value!r}")
+        raise InputError(message)
     return x
+
+
+def _as_float(value: Any, message: str) -> float:
+    """`float(value)`, or `InputError(message)` where `value` is not a real number."""
+    try:
+        return float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(message) from None

@@ -30,7 +30,6 @@ This module holds the `Stepper` base class; `records` holds the records and chec
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
@@ -40,6 +39,7 @@ import numpy as np
 
 from harness.errors import IncompatibleError, InputError, StepperOutputError
 from harness.problem import Dynamics, Problem, check_state, check_time
+from harness.problem.checks import check_positive
 from harness.stepper.records import (
     FORMS,
     MAX_STEPS,
@@ -436,12 +436,7 @@ class AdaptiveStepper(Stepper):
         """A copy of this stepper with tolerance `tol` (a positive finite number)."""
         import copy
 
-        try:
-            tol = float(tol)
-        except (TypeError, ValueError, OverflowError):
-            raise InputError(f"`tol` must be a real number, got {tol!r}") from None
-        if not (math.isfinite(tol) and tol > 0.0):
-            raise InputError(f"`tol` must be positive and finite, got {tol!r}")
+        tol = check_positive(tol, "`tol`")
         clone = copy.copy(self)
         clone.tol = tol
         extra = clone.extra_info()

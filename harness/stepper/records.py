@@ -4,7 +4,6 @@ size, step count and stepper/problem compatibility."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -12,7 +11,7 @@ import numpy as np
 
 from harness.errors import HarnessError, IncompatibleError, InputError
 from harness.problem import Problem
-from harness.problem.checks import check_count
+from harness.problem.checks import check_count, check_time
 
 if TYPE_CHECKING:
     from harness.stepper import Stepper
@@ -108,12 +107,7 @@ class Trajectory:
 
 def check_step_size(h: Any) -> float:
     """`h` as a positive finite float, or `InputError` naming `h`."""
-    try:
-        x = float(h)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"`h` must be a real number, got {h!r}") from None
-    if math.isnan(x) or math.isinf(x):
-        raise InputError(f"`h` must be finite, got {x!r}")
+    x = check_time(h, "h")
     if x <= 0.0:
         raise InputError(f"`h` must be positive, got {x!r}")
     return x

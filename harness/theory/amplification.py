@@ -20,6 +20,7 @@ import numpy as np
 from harness import tolerances as tol
 from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
 from harness.errors import InputError
+from harness.problem.checks import check_positive
 from harness.theory.checks import check_type
 
 __all__ = ["rk_stability_function", "lmm_amplification", "second_order_lmm_amplification",
@@ -161,12 +162,7 @@ def stability_boundary(
     """
     from scipy.optimize import brentq
 
-    try:
-        limit = float(limit)
-    except (TypeError, ValueError):
-        raise InputError(f"`limit` must be a positive number, got {limit!r}") from None
-    if not (math.isfinite(limit) and limit > 0):
-        raise InputError(f"`limit` must be positive and finite, got {limit!r}")
+    limit = check_positive(limit, "`limit`")
     if not (isinstance(scan_step, int | float) and 0 < scan_step <= min(limit, 1.0)):
         raise InputError(f"`scan_step` must lie in (0, min(limit, 1)], got {scan_step!r}")
     grid = _scan_grid(limit, float(scan_step))

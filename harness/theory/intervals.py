@@ -18,16 +18,7 @@ import numpy as np
 
 from harness import tolerances as tol
 from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
-from harness.theory.amplification import (
-    hw_stability_limit,
-    imag_stability_interval,
-    lmm_amplification,
-    real_stability_interval,
-    rk_stability_function,
-    second_order_lmm_amplification,
-    splitting_amplification,
-    splitting_propagator,
-)
+from harness.theory import amplification
 from harness.theory.checks import check_type
 from harness.theory.orders import rk_linear_order, rk_stability_coefficients
 
@@ -166,7 +157,7 @@ def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
         direction = 1j if imaginary else -1.0
 
         def excess(x: float, direction=direction) -> float:
-            value = abs(rk_stability_function(tableau, np.array([direction * x]))[0])
+            value = abs(amplification.rk_stability_function(tableau, np.array([direction * x]))[0])
             return value - 1.0 - tol.STABILITY_AMPLIFICATION_TOL if np.isfinite(value) else math.nan
 
         out.append(_interval_end(F, F_abs, p_lin if imaginary else 0, excess))
@@ -221,7 +212,7 @@ def splitting_hw_limit(scheme: SplittingScheme) -> float:
     F_abs = _poly_add(np.array([4.0]), _poly_mul(tr_abs, tr_abs))
 
     def excess(hw: float) -> float:
-        M = splitting_propagator(scheme, np.array([hw]))[0]
+        M = amplification.splitting_propagator(scheme, np.array([hw]))[0]
         return abs(M[0, 0] + M[1, 1]) / 2.0 - 1.0 - tol.STABILITY_AMPLIFICATION_TOL
 
     return _interval_end(F, F_abs, 1, excess)
@@ -257,7 +248,7 @@ def lmm_real_interval(method: LinearMultistep, scanned: float) -> float:
     negative = sorted(-x for x in crossings if np.isfinite(x) and x < 0)
 
     def amp(x: float) -> float:
-        return float(lmm_amplification(method, np.array([-x + 0j]))[0])
+        return float(amplification.lmm_amplification(method, np.array([-x + 0j]))[0])
 
     if math.isfinite(scanned):
         return scanned
@@ -277,30 +268,24 @@ def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH
     hw -> spectral radius, 'hw_limit'}."""
     if isinstance(coefficients, ButcherTableau):
         def amp(z):
-            return np.abs(rk_stability_function(coefficients, z))
-    elif isinstance(coefficients, LinearMultistep):
-        def amp(z):
-            return lmm_amplification(coefficients, z)
-    elif isinstance(coefficients, SplittingScheme):
-        def hw_amp(hw):
-            return splitting_amplification(coefficients, hw)
-    elif isinstance(coefficients, SecondOrderMultistep):
-        def hw_amp(hw):
-            return second_order_lmm_amplification(coefficients, hw)
-    else:
-        return None
-    if isinstance(coefficients, ButcherTableau):
+            return np.abs(amplification.rk_stability_function(coefficients, z))
         real, imag = rk_stability_intervals(coefficients)
         return {"kind": "first-order", "amplification": amp, "real_interval": real,
                 "imag_interval": imag}
     if isinstance(coefficients, LinearMultistep):
-        return {
-            "kind": "first-order",
-            "amplification": amp,
-            "real_interval": lmm_real_interval(coefficients, real_stability_interval(amp, limit=limit)),
-            "imag_interval": imag_stability_interval(amp, limit=limit),
-        }
+        def amp(z):
+            return amplification.lmm_amplification(coefficients, z)
+        real = amplification.real_stability_interval(amp, limit=limit)
+        return {"kind": "first-order", "amplification": amp,
+                "real_interval": lmm_real_interval(coefficients, real),
+                "imag_interval": amplification.imag_stability_interval(amp, limit=limit)}
     if isinstance(coefficients, SplittingScheme):
+        def hw_amp(hw):
+            return amplification.splitting_amplification(coefficients, hw)
         return {"kind": "newtonian", "amplification": hw_amp, "hw_limit": splitting_hw_limit(coefficients)}
-    return {"kind": "newtonian", "amplification": hw_amp,
-            "hw_limit": hw_stability_limit(hw_amp, limit=limit)}
+    if isinstance(coefficients, SecondOrderMultistep):
+        def hw_amp(hw):
+            return amplification.second_order_lmm_amplification(coefficients, hw)
+        return {"kind": "newtonian", "amplification": hw_amp,
+                "hw_limit": amplification.hw_stability_limit(hw_amp, limit=limit)}
+    return None
