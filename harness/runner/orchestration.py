@@ -158,6 +158,7 @@ def run_experiment(
     allow_empty: bool = False,
     _client: Any = None,
     _counted: bool = False,
+    _listed: tuple[list, list] | None = None,
 ) -> RunResult:
     """Run one experiment over `steppers` x `problems` (None: the whole registry).
 
@@ -205,7 +206,7 @@ def run_experiment(
     cfg = resolve_config(exp, config, quick)
 
     try:
-        listed = exp.cells(stepper_names, problem_names, cfg)
+        listed = _listed if _listed is not None else exp.cells(stepper_names, problem_names, cfg)
         cells, skips = listed
         cells, skips = list(cells), list(skips)
     except HarnessError:
@@ -409,17 +410,19 @@ def run_experiments(
     stepper_names = check_names("steppers", steppers)
     problem_names = check_names("problems", problems)
     bar, own_bar = progress_display(progress, "cells")
-    sizes = []
-    for exp in exps:  # the whole run's size first, so the display's total does not grow
+    # Every experiment's cells are listed once, here: the whole run's size first, so the
+    # display's total does not grow; each `run_experiment` takes its list.
+    listed: dict[str, tuple[list, list]] = {}
+    for exp in exps:
         try:
             cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
-            sizes.append(len(list(exp.cells(stepper_names, problem_names, cfg)[0])))
-        except Exception:  # run_experiment reports it properly below
-            sizes = None
+            cells, skips = exp.cells(stepper_names, problem_names, cfg)
+            listed[exp.name] = (list(cells), list(skips))
+        except Exception:  # run_experiment lists it again and reports the failure properly
             break
-    counted = sizes is not None
+    counted = len(listed) == len(exps)
     if counted:
-        bar.add_total(sum(sizes))
+        bar.add_total(sum(len(cells) for cells, _ in listed.values()))
     client = None
     own_client = False
     out: dict[str, RunResult] = {}
@@ -431,6 +434,7 @@ def run_experiments(
             out[exp.name] = run_experiment(
                 exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
                 options=options, progress=bar, _client=client, _counted=counted, allow_empty=True,
+                _listed=listed.get(exp.name),
             )
             if sched is not None:
                 out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None

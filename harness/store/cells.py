@@ -27,11 +27,13 @@ def _content_sha256(df: pd.DataFrame) -> str:
     import numpy as np
 
     h = hashlib.sha256()
-    h.update(json.dumps([[str(c), str(df[c].dtype)] for c in df.columns]).encode())
+    dtypes = list(df.dtypes)
+    h.update(json.dumps([[str(c), str(d)] for c, d in zip(df.columns, dtypes, strict=True)]).encode())
     h.update(str(len(df)).encode())
-    for c in df.columns:
-        col = df[c]
-        if pd.api.types.is_numeric_dtype(col) and not pd.api.types.is_object_dtype(col):
+    for (_, col), dtype in zip(df.items(), dtypes, strict=True):
+        numeric = (dtype.kind in "biufc" if isinstance(dtype, np.dtype)
+                   else pd.api.types.is_numeric_dtype(dtype))
+        if numeric:
             h.update(np.ascontiguousarray(col.to_numpy()).tobytes())
         else:
             h.update(json.dumps([None if v is None else repr(v) for v in col.tolist()]).encode())
@@ -39,7 +41,7 @@ def _content_sha256(df: pd.DataFrame) -> str:
 
 
 def _cell_schema(df: pd.DataFrame) -> dict[str, str]:
-    return {str(c): str(df[c].dtype) for c in df.columns}
+    return {str(c): str(d) for c, d in df.dtypes.items()}
 
 
 def encode_cell(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
