@@ -37,7 +37,7 @@ from harness.errors import HarnessError
 from harness.experiments.base import Cell, Experiment
 from harness.provenance import to_jsonable
 
-__all__ = ["cell_key", "code_version", "experiment_fingerprint", "measuring_modules",
+__all__ = ["cell_key", "code_version", "experiment_fingerprint", "measuring_modules", "module_version",
            "MEASURING_MODULES", "JUDGING_MODULES", "PROJECT_PACKAGES"]
 
 PROJECT_PACKAGES = ("harness", "problems", "implementations")
@@ -254,6 +254,28 @@ def measuring_modules(experiment: Experiment) -> tuple[dict[str, str], set[str]]
         root = next(r for r in MEASURING_MODULES if m == r or m.startswith(r + "."))
         todo += [s for s in sorted(modules) if s.startswith(root + ".") and s not in counted]
     return counted, tol_names
+
+
+def module_version(name: str) -> str:
+    """sha256 of a project module's source and of every project module it imports, directly or
+    through others (imports inside functions count; judging-only modules are not followed), with
+    the values of the thresholds they read: what a value computed by that module depends on."""
+    parts: list[str] = []
+    tol_names: set[str] = set()
+    todo, seen = [name], set()
+    while todo:
+        m = todo.pop()
+        if m in seen or m == TOLERANCES:
+            continue
+        seen.add(m)
+        text = _source(m)
+        parts.append(m + "\n" + hashlib.sha256((text or f"<no source: {m}>").encode()).hexdigest())
+        tree = _parse(text) if text is not None else None
+        modules, names = _imports(m, [tree]) if tree is not None else (set(), set())
+        tol_names |= names
+        todo += [i for i in sorted(modules) if _is_project(i) and not _excluded(i) and i not in seen]
+    parts.append(_tolerance_values(tol_names))
+    return hashlib.sha256("\n".join(sorted(parts)).encode()).hexdigest()
 
 
 def _tolerance_values(names: set[str]) -> str:

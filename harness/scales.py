@@ -40,6 +40,7 @@ import numpy as np
 
 from harness import cache
 from harness import tolerances as tol
+from harness.derived import remembered
 
 __all__ = [
     "TimeScale",
@@ -359,8 +360,14 @@ def regime_end(problem, t_end: float) -> tuple[float, str]:
     cap), whichever comes first, and never before the span's end. t_stop = t_end and reason ""
     when the regime holds throughout."""
     key = (problem.fingerprint(), float(t_end))
-    if key in _regime_ends:
-        return _regime_ends[key]
+    if key not in _regime_ends:
+        stop, reason = remembered("harness.scales", "regime_end", key,
+                                  lambda: list(_regime_end(problem, float(t_end))))
+        _regime_ends[key] = (float(stop), str(reason))
+    return _regime_ends[key]
+
+
+def _regime_end(problem, t_end: float) -> tuple[float, str]:
     base = problem.time_scale.fastest_rate
     orbit = sample_orbit(problem, t_end=t_end)
     idx = np.arange(orbit.t.size)
@@ -402,9 +409,7 @@ def regime_end(problem, t_end: float) -> tuple[float, str]:
         stop = float(orbit.t[-1])
         reason = f"the orbit could not be followed past t = {stop:.6g}"
     stop = max(stop, problem.t_end) if stop < t_end else stop
-    out = (min(stop, float(t_end)), reason)
-    _regime_ends[key] = out
-    return out
+    return (min(stop, float(t_end)), reason)
 
 
 def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> float:
@@ -415,8 +420,14 @@ def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> fl
     reference (minutes for a many-body problem over 10^5 steps) is needed."""
     base = np.asarray(problem.y0 if y0 is None else y0, dtype=float).reshape(problem.dim)
     key = (problem.fingerprint(), float(span), base.tobytes())
-    if key in _amplifications:  # every stepper's cell of one (problem, N) asks for the same
-        return _amplifications[key]
+    if key not in _amplifications:  # every stepper's cell of one (problem, N) asks for the same
+        parts = (key[0], key[1], tuple(base.tolist()))
+        _amplifications[key] = float(remembered("harness.scales", "flow_amplification", parts,
+                                                lambda: _flow_amplification(problem, float(span), base)))
+    return _amplifications[key]
+
+
+def _flow_amplification(problem, span: float, base: np.ndarray) -> float:
     scale = np.where(base != 0.0, np.abs(base), 1.0)
     delta = tol.REVERSIBILITY_FLOW_DELTA * scale
     end = [problem.t0 + span]
@@ -426,8 +437,34 @@ def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> fl
         plus[j] += delta[j]
         minus[j] -= delta[j]
         J[:, j] = (states_at(problem, end, plus) - states_at(problem, end, minus))[:, 0] / (2.0 * delta[j])
-    _amplifications[key] = float(np.max(np.sum(np.abs(J), axis=1)))
-    return _amplifications[key]
+    return float(np.max(np.sum(np.abs(J), axis=1)))
 
 
 _amplifications: dict[tuple[str, float, bytes], float] = {}
+
+
+def fastest_approach(problem, t_end: float) -> tuple[float, float, float] | None:
+    """(t, rate, rate at the start) where the fastest rate rho (the Jacobian's spectral radius,
+    `orbit_rates`) along the float64 orbit from the problem's start over [t0, t_end] first comes
+    within ENCOUNTER_RATE_FRACTION of its maximum `rate`; None when the orbit cannot be had."""
+    key = (problem.fingerprint(), float(t_end))
+    if key not in _approaches:
+        found = remembered("harness.scales", "fastest_approach", key,
+                           lambda: _fastest_approach(problem, float(t_end)))
+        _approaches[key] = None if found is None else tuple(float(v) for v in found)
+    return _approaches[key]
+
+
+def _fastest_approach(problem, t_end: float) -> list[float] | None:
+    try:
+        orbit = sample_orbit(problem, t_end=t_end)
+        rate = np.asarray(orbit_rates(problem, orbit)["spectral"], dtype=float)
+        t = orbit.t if orbit.t.size == rate.size else np.linspace(problem.t0, t_end, rate.size)
+        top = float(np.max(rate))
+        k = int(np.argmax(rate >= tol.ENCOUNTER_RATE_FRACTION * top))
+        return [float(t[k]), top, float(rate[0])]
+    except Exception:  # no float64 orbit
+        return None
+
+
+_approaches: dict[tuple[str, float], tuple[float, float, float] | None] = {}

@@ -464,31 +464,16 @@ def _last_closest_approach(problem, energy: pd.DataFrame, h: float) -> dict | No
     its maximum over the run, when that is more than ENCOUNTER_RATE_RISE times the rate at the
     start (a close encounter the run meets late); None otherwise (an oscillator, a Kepler orbit
     whose pericentre comes within the first period) or when the orbit cannot be had."""
-    from harness.scales import orbit_rates, sample_orbit
+    from harness.scales import fastest_approach
 
-    t_end = float(energy.t.iloc[-1])
-    key = (problem.fingerprint(), t_end)
-    if key not in _approaches:
-        try:
-            orbit = sample_orbit(problem, t_end=t_end)
-            rate = np.asarray(orbit_rates(problem, orbit)["spectral"], dtype=float)
-            t = orbit.t if orbit.t.size == rate.size else np.linspace(problem.t0, t_end, rate.size)
-            top = float(np.max(rate))
-            k = int(np.argmax(rate >= tol.ENCOUNTER_RATE_FRACTION * top))
-            _approaches[key] = (float(t[k]), top, float(rate[0]))
-        except Exception:  # no float64 orbit: no correction
-            _approaches[key] = None
-    found = _approaches[key]
-    if found is None:
+    found = fastest_approach(problem, float(energy.t.iloc[-1]))
+    if found is None:  # no float64 orbit: no correction
         return None
     t_fast, top, start = found
     if not (top > tol.ENCOUNTER_RATE_RISE * max(start, 1e-300)):
         return None
     step = float(energy.step.values[min(np.searchsorted(energy.t.values, t_fast), len(energy) - 1)])
     return {"t": t_fast, "rate": top, "rate_start": start, "step": step, "h_rho": h * top}
-
-
-_approaches: dict[tuple[str, float], tuple[float, float, float] | None] = {}
 
 
 def _problem(name: str):

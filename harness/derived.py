@@ -1,0 +1,84 @@
+"""Derived facts of a problem, computed once and kept on disk beside the cell cache.
+
+Some facts are slow to derive and asked by many processes: where a long run leaves the
+dynamical regime of a problem's span (`harness.scales.regime_end`), how much the flow amplifies
+a perturbation over a span (`flow_amplification`), where an orbit meets its fastest rate
+(`fastest_approach`). The parent lists cells with them, every worker measures with them, and
+the judging code reads them again; each process would follow the same float64 Taylor orbit.
+
+`remembered(module, function, parts, compute)` returns the value from
+`<cache root>/derived/<k[:2]>/<k>.json`, where `k` hashes the function's name, `parts` (the
+problem's fingerprint and the arguments) and `harness.keys.module_version` of `module` and of
+`harness.problem` (the source of each and of everything it imports, with the thresholds it
+reads) with heyoka's version: an edit to that code is a new key, so a value is never served
+after the code that made it changed. A file that cannot be read or parsed is recomputed and
+replaced; a cache that cannot be written costs only time. Values are JSON (floats, strings,
+lists; NaN and infinities kept).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from harness.errors import OutputError
+
+__all__ = ["remembered"]
+
+
+def _project_files_signature() -> tuple:
+    """(path, mtime, size) of every project source file: unchanged, no module version can be."""
+    from harness.keys import PROJECT_PACKAGES
+    from harness.provenance import PROJECT_ROOT
+
+    out = []
+    for package in PROJECT_PACKAGES:
+        for path in sorted((PROJECT_ROOT / package).rglob("*.py")):
+            with contextlib.suppress(OSError):
+                st = path.stat()
+                out.append((str(path), st.st_mtime_ns, st.st_size))
+    return tuple(out)
+
+
+_versions: dict[str, tuple[tuple, str]] = {}
+
+
+def _version(module: str) -> str:
+    from harness.keys import module_version
+
+    signature = _project_files_signature()
+    known = _versions.get(module)
+    if known is None or known[0] != signature:
+        from importlib.metadata import version
+
+        # the module's code, the problem's (a derived fact is of a problem's dynamics, reached
+        # through its object), and the integrator that follows the orbits
+        known = (signature, "\n".join([module_version(module), module_version("harness.problem"),
+                                        version("heyoka")]))
+        _versions[module] = known
+    return known[1]
+
+
+def remembered(module: str, function: str, parts: Sequence[Any], compute: Callable[[], Any]) -> Any:
+    """`compute()`, or the value it returned before for the same `parts` with the same code of
+    `module` (see the module docstring)."""
+    from harness.cache import cache_dir
+    from harness.store import atomic_write_bytes
+
+    text = json.dumps([module, function, _version(module), *map(repr, parts)])
+    key = hashlib.sha256(text.encode()).hexdigest()[:32]
+    try:
+        path = cache_dir() / "derived" / key[:2] / f"{key}.json"
+    except OutputError:  # no cache directory: the value is computed every time
+        return compute()
+    with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+        stored = json.loads(path.read_text())
+        if stored["key"] == key:
+            return stored["value"]
+    value = compute()
+    with contextlib.suppress(OutputError):
+        atomic_write_bytes(path, json.dumps({"key": key, "function": function, "value": value}).encode())
+    return value
