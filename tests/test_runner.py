@@ -274,16 +274,47 @@ def test_an_experiment_that_cannot_list_its_cells_raises_experiment_error(run, m
         run()
 
 
-def test_a_corrupt_cache_file_raises_and_fresh_overwrites_it(run, tmp_path):
+def _pack_of(result, cache_dir: Path) -> Path:
+    cache = CellCache(cache_dir)
+    return cache.pack_path(cache.pack_key(result.experiment, list(result.cells.key)))
+
+
+@pytest.mark.parametrize("damaged", ["cell", "pack"])
+def test_a_corrupt_cache_file_raises_and_fresh_overwrites_it(run, tmp_path, damaged):
+    """A damaged cell file (read when the run is not one whole pack) or a damaged pack is an
+    error naming the file; --fresh rewrites it and the next run is served from the cache."""
     first = run()
-    victim = CellCache(tmp_path / "cache").path(first.cells.key[0])
+    pack = _pack_of(first, tmp_path / "cache")
+    assert pack.is_file()
+    if damaged == "cell":
+        victim = CellCache(tmp_path / "cache").path(first.cells.key[0])
+        pack.unlink()  # the cells are read one by one
+    else:
+        victim = pack
     victim.write_bytes(b"not parquet at all")
     with pytest.raises(CorruptResultsError, match="not a readable Parquet file") as info:
         run()
     assert str(victim) in str(info.value)
     repaired = run(fresh=True)
     pd.testing.assert_frame_equal(first.rows, repaired.rows)
-    assert run().cached_cells == 9
+    again = run()
+    assert again.cached_cells == 9 and again.computed_cells == 0
+    pd.testing.assert_frame_equal(first.rows, again.rows)
+
+
+def test_a_run_of_cached_cells_reads_one_pack_and_equals_the_fresh_run(run, tmp_path):
+    first = run()
+    cells = CellCache(tmp_path / "cache").root
+    for f in cells.rglob("*.parquet"):  # only the pack remains: the run must not need the cells
+        f.unlink()
+    again = run()
+    assert again.cached_cells == 9 and again.computed_cells == 0
+    pd.testing.assert_frame_equal(first.rows, again.rows)
+    pd.testing.assert_frame_equal(first.summary, again.summary)
+    assert list(again.cells.wall_s) == list(first.cells.wall_s)
+    # one cell fewer is another pack: read cell by cell (and the cells are gone: recomputed)
+    fewer = run(problems=("toy-decay",))
+    assert fewer.computed_cells == len(fewer.cells) > 0
 
 
 # -- arguments ------------------------------------------------------------------------------------

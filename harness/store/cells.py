@@ -1,5 +1,7 @@
-"""The per-cell cache: one checked Parquet file per finished cell, named by the cell's key;
-`encode_cell`/`decode_cell` are the only code that writes or reads a cell file's format."""
+"""The per-cell cache: one checked Parquet file per finished cell, named by the cell's key, and
+one pack per finished experiment run (every cell's rows in one file, so a cached run reads one
+file, not thousands); `encode_cell`/`decode_cell` are the only code that writes or reads their
+format."""
 
 from __future__ import annotations
 
@@ -7,7 +9,7 @@ import hashlib
 import json
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -110,7 +112,9 @@ class CellCache:
 
     def get(self, key: str) -> tuple[pd.DataFrame, dict] | None:
         """(rows, info) of a finished cell, or None when it is not cached."""
-        p = self.path(key)
+        return self._read(self.path(key), key)
+
+    def _read(self, p: Path, key: str) -> tuple[pd.DataFrame, dict] | None:
         try:
             if not p.is_file():
                 if p.exists() or p.is_symlink():
@@ -124,6 +128,29 @@ class CellCache:
             return decode_cell(data, p, key)
         except CorruptResultsError as exc:
             raise CorruptResultsError(p, exc.problem + self.HINT) from None
+
+    # -- packs: every cell of one experiment's run in one file --------------------------------------
+    @staticmethod
+    def pack_key(experiment: str, keys: Sequence[str]) -> str:
+        """The key of the pack holding exactly the cells `keys` of `experiment`, in that order."""
+        text = "\n".join(["harness-pack", str(experiment), *keys])
+        return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+    def pack_path(self, key: str) -> Path:
+        """The file of the pack with key `key` (beside the cell files, under `packs/`)."""
+        if not isinstance(key, str) or not _CELL_KEY.match(key):
+            raise InputError(f"`key` must be 32 lowercase hex digits, got {key!r}")
+        return self.root.parent / "packs" / key[:2] / f"{key}.parquet"
+
+    def get_pack(self, key: str) -> tuple[pd.DataFrame, dict] | None:
+        """(rows of every cell, info) of a pack, or None; checked like a cell file."""
+        return self._read(self.pack_path(key), key)
+
+    def put_pack(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> pd.DataFrame:
+        """Write a pack atomically; return its rows as they read back from the file."""
+        back, data = encode_cell(key, rows, info)
+        atomic_write_bytes(self.pack_path(key), data)
+        return back
 
     def put(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> Path:
         """Write a finished cell (encoded by `encode_cell`) atomically; return its path."""
