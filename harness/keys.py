@@ -38,6 +38,7 @@ from harness.experiments.base import Cell, Experiment
 from harness.provenance import to_jsonable
 
 __all__ = ["cell_key", "code_version", "experiment_fingerprint", "measuring_modules", "module_version",
+           "judging_version",
            "MEASURING_MODULES", "JUDGING_MODULES", "PROJECT_PACKAGES"]
 
 PROJECT_PACKAGES = ("harness", "problems", "implementations")
@@ -256,13 +257,39 @@ def measuring_modules(experiment: Experiment) -> tuple[dict[str, str], set[str]]
     return counted, tol_names
 
 
-def module_version(name: str) -> str:
-    """sha256 of a project module's source and of every project module it imports, directly or
-    through others (imports inside functions count; judging-only modules are not followed), with
-    the values of the thresholds they read: what a value computed by that module depends on."""
-    parts: list[str] = []
+# Modules that only list, look up, run, store or show: what a summary is computed from never
+# passes through them (followed by neither version).
+LISTING_MODULES = ("harness.registry", "harness.runner", "harness.keys", "harness.store",
+                   "harness.cli", "harness.progress", "harness.report")
+
+
+def judging_version(experiment: Experiment) -> str:
+    """sha256 of everything an experiment's `summarize` may run: the experiment's modules and
+    every project module they import (judging modules such as the rules and the gate included,
+    listing modules not), the modules every cell steps through (`MEASURING_MODULES`) and every
+    threshold. A summary cached under it is recomputed whenever a rule or threshold changes."""
+    own = [c.__module__ for c in type(experiment).__mro__
+           if c not in (object, Experiment) and c.__module__ not in ("abc", "builtins")]
+    import importlib
+
+    every = {n for n in dir(importlib.import_module(TOLERANCES)) if n.isupper()}
+    return module_version(*dict.fromkeys(own), *MEASURING_MODULES, judging=True,
+                          extra=_tolerance_values(every))
+
+
+def module_version(*names: str, judging: bool = False, extra: str = "") -> str:
+    """sha256 of project modules' source and of every project module they import, directly or
+    through others (imports inside functions count; judging-only modules are followed only with
+    `judging`), with the values of the thresholds they read: what a value computed by those
+    modules depends on."""
+    def skipped(m: str) -> bool:
+        if judging:
+            return m == "harness.experiments" or any(m == x or m.startswith(x + ".") for x in LISTING_MODULES)
+        return _excluded(m)
+
+    parts: list[str] = [extra]
     tol_names: set[str] = set()
-    todo, seen = [name], set()
+    todo, seen = list(names), set()
     while todo:
         m = todo.pop()
         if m in seen or m == TOLERANCES:
@@ -273,7 +300,7 @@ def module_version(name: str) -> str:
         tree = _parse(text) if text is not None else None
         modules, names = _imports(m, [tree]) if tree is not None else (set(), set())
         tol_names |= names
-        todo += [i for i in sorted(modules) if _is_project(i) and not _excluded(i) and i not in seen]
+        todo += [i for i in sorted(modules) if _is_project(i) and not skipped(i) and i not in seen]
     parts.append(_tolerance_values(tol_names))
     return hashlib.sha256("\n".join(sorted(parts)).encode()).hexdigest()
 

@@ -167,3 +167,26 @@ def test_an_experiment_that_imports_no_stepper_still_counts_the_measuring_packag
     counted = keys.measuring_modules(exp)[0]
     wanted = {"harness.stepper.records", "harness.problem.dynamics", "harness.problem.definition"}
     assert wanted <= set(counted)
+
+
+def test_a_packed_run_caches_its_summary_until_a_rule_or_threshold_changes(key_toy, tmp_path,
+                                                                          monkeypatch):
+    """A run whose cells are all cached reads its summary from the cache too; changing a
+    threshold or the judging code recomputes the summary (never the cells)."""
+    exp, path = key_toy
+    calls = []
+    real = type(exp).summarize
+    monkeypatch.setattr(type(exp), "summarize",
+                        lambda self, rows, config: calls.append(1) or real(self, rows, config))
+    run = lambda: run_experiment(exp, [], [], jobs=1, cache_dir=tmp_path / "cache",  # noqa: E731
+                                 progress=False)
+    first = run()
+    again = run()
+    assert len(calls) == 1 and again.computed_cells == 0
+    assert again.summary.equals(first.summary)
+    monkeypatch.setattr(tol, "COEFFICIENT_ULPS", tol.COEFFICIENT_ULPS * 2)  # one it does not read
+    run()
+    assert len(calls) == 2  # every threshold is part of the judging version
+    path.write_text(path.read_text().replace('"good" if', '"fine" if'))
+    changed = run()  # the judging code's source changed (the loaded module is the old one)
+    assert len(calls) == 3 and changed.computed_cells == 0

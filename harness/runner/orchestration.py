@@ -44,6 +44,7 @@ from harness.runner.limits import (
 from harness.runner.memory import (
     guard_memory,
 )
+from harness.runner.packs import read_pack, summarize_packed, write_pack
 from harness.runner.result import (
     CELL_COLUMNS,
     FAILURE_COLUMNS,
@@ -59,7 +60,6 @@ from harness.runner.workers import (
 )
 from harness.store import (
     CellCache,
-    CorruptResultsError,
     encode_cell,
 )
 
@@ -96,21 +96,6 @@ def no_cells_error(experiments: Sequence[str], skips: Sequence[Skip] | pd.DataFr
 def _few(names: Sequence[str], n: int = 4) -> str:
     shown = ", ".join(names[:n]) if names else "(none)"
     return shown + (f" (+{len(names) - n} more)" if len(names) > n else "")
-
-
-def _read_pack(store: CellCache, key: str, keyed: Sequence[tuple]) -> tuple[pd.DataFrame, list[dict]] | None:
-    """(rows, per-cell records) of the pack `key` holding the cells `keyed`, or None; a pack
-    that lists other cells is `CorruptResultsError` naming it."""
-    hit = store.get_pack(key)
-    if hit is None:
-        return None
-    rows, info = hit
-    listed = info.get("cells")
-    if (not isinstance(listed, list) or not all(isinstance(c, dict) for c in listed)
-            or [c.get("key") for c in listed] != [k for _, _, k, _ in keyed]):
-        raise CorruptResultsError(store.pack_path(key), "its cell list is not the run's; delete "
-                                  "it, or recompute with fresh=True (--fresh)")
-    return rows, listed
 
 
 def _params_json(cell: Cell) -> str:
@@ -298,7 +283,7 @@ def run_experiment(
         # every cell keyed: the whole run may be one pack (one file read instead of one per cell)
         if store is not None and keyed and len(keyed) == len(cells):
             pack_key = store.pack_key(exp.name, [k for _, _, k, _ in keyed])
-            packed = _read_pack(store, pack_key, keyed) if not fresh else None
+            packed = read_pack(store, pack_key, [k for _, _, k, _ in keyed]) if not fresh else None
         if packed is not None:
             for (i, cell, key, _), c in zip(keyed, packed[1], strict=True):
                 record(i, cell, key, "ok", True, float(c["wall_s"]), int(c["n_rows"]), str(c["worker"]))
@@ -360,17 +345,18 @@ def run_experiment(
     elif order:
         with_rows = [frames[i] for i in order if len(frames[i].columns)]
         rows_df = pd.concat(with_rows, ignore_index=True) if with_rows else pd.DataFrame(columns=ID_COLUMNS)
-        if pack_key is not None and not failures:
-            # the rows as the pack reads back, so a fresh run and a cached one are the same
-            cells_info = [{k: records[i][k] for k in ("key", "n_rows", "wall_s", "worker")}
-                          for i in sorted(records)]
-            rows_df = store.put_pack(pack_key, rows_df, {"experiment": exp.name, "cells": cells_info})
+        if pack_key is not None and not failures:  # continue with the rows as the pack reads back
+            rows_df = write_pack(store, pack_key, exp.name, rows_df, [records[i] for i in sorted(records)])
     else:
         rows_df = pd.DataFrame(columns=ID_COLUMNS)
     summary = pd.DataFrame()
     if order or packed is not None:
         try:
-            summary = exp.summarize(rows_df.copy(), cfg)
+            if pack_key is not None and not failures:  # a whole run: its summary may be cached
+                summary = summarize_packed(store, pack_key, exp, rows_df,
+                                           lambda: exp.summarize(rows_df.copy(), cfg), fresh)
+            else:
+                summary = exp.summarize(rows_df.copy(), cfg)
             if not isinstance(summary, pd.DataFrame):
                 raise CellOutputError(
                     f"summarize returned {type(summary).__name__}, expected a pandas DataFrame"

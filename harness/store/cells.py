@@ -136,20 +136,24 @@ class CellCache:
         text = "\n".join(["harness-pack", str(experiment), *keys])
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
-    def pack_path(self, key: str) -> Path:
-        """The file of the pack with key `key` (beside the cell files, under `packs/`)."""
+    def pack_path(self, key: str, kind: str = "packs") -> Path:
+        """The file of the pack with key `key` (beside the cell files, under `packs/`; a run's
+        cached summary under `summaries/`)."""
         if not isinstance(key, str) or not _CELL_KEY.match(key):
             raise InputError(f"`key` must be 32 lowercase hex digits, got {key!r}")
-        return self.root.parent / "packs" / key[:2] / f"{key}.parquet"
+        if kind not in ("packs", "summaries"):
+            raise InputError(f"`kind` must be 'packs' or 'summaries', got {kind!r}")
+        return self.root.parent / kind / key[:2] / f"{key}.parquet"
 
-    def get_pack(self, key: str) -> tuple[pd.DataFrame, dict] | None:
+    def get_pack(self, key: str, kind: str = "packs") -> tuple[pd.DataFrame, dict] | None:
         """(rows of every cell, info) of a pack, or None; checked like a cell file."""
-        return self._read(self.pack_path(key), key)
+        return self._read(self.pack_path(key, kind), key)
 
-    def put_pack(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> pd.DataFrame:
+    def put_pack(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any],
+                 kind: str = "packs") -> pd.DataFrame:
         """Write a pack atomically; return its rows as they read back from the file."""
         back, data = encode_cell(key, rows, info)
-        atomic_write_bytes(self.pack_path(key), data)
+        atomic_write_bytes(self.pack_path(key, kind), data)
         return back
 
     def put(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> Path:
