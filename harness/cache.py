@@ -37,6 +37,20 @@ def cache_dir() -> Path:
     return root
 
 
+# heyoka's compact mode compiles the Taylor recurrences as loops instead of unrolled code: for
+# right-hand sides longer than this many characters of printed form (a cheap size measure) the
+# unrolled code takes far longer to compile than the run it serves (the 36-dimensional outer
+# solar system at order 18: 43 s unrolled against 0.9 s compact, load 4.7; the 3-atom
+# Lennard-Jones system ~20 s in real128, 7 atoms ~300 s in long double, against under 1 s).
+COMPACT_MODE_SIZE = 1000
+
+
+def compact_mode(problem) -> bool:
+    """Whether heyoka should compile `problem`'s Taylor integrators in compact mode (its
+    right-hand side is longer than COMPACT_MODE_SIZE characters printed)."""
+    return sum(len(str(e)) for e in problem.rhs) > COMPACT_MODE_SIZE
+
+
 def configure_heyoka_cache() -> Path:
     """Point heyoka's on-disk JIT cache at the harness's cache directory (once per process)."""
     global _configured

@@ -121,7 +121,7 @@ def _build(problem):
     # The float64 ground truth's settings (harness.ground_truth): heyoka's disk cache then holds
     # one compiled integrator for both.
     kwargs: dict[str, Any] = {"tol": tol.EPS, "high_accuracy": True,
-                              "compact_mode": sum(len(str(e)) for e in problem.rhs) > 1000}
+                              "compact_mode": cache.compact_mode(problem)}
     if problem.parameters:
         kwargs["pars"] = problem.parameter_values
     return hy.taylor_adaptive(sys, np.array(problem.y0, dtype=np.float64), **kwargs)

@@ -74,6 +74,7 @@ class TaylorStepper(AdaptiveStepper):
                 tol=self.tol,
                 high_accuracy=self.high_accuracy,
                 pars=problem.parameter_values.tolist(),
+                compact_mode=cache.compact_mode(problem),  # compiles in ~1 s, not ~40 s, when large
             )
 
         return self._templates.get((problem.fingerprint(), self.tol, self.high_accuracy), build)

@@ -17,10 +17,7 @@ REFERENCE_SCHEMA = 1
 # heyoka's compact mode compiles the Taylor recurrences as loops instead of unrolled code. It is
 # used for every software-emulated level (real128, real192): there it compiles 3-5x faster
 # (pendulum: 0.24 s instead of 0.73 s cold) for 10-25 % more time per step; and at any level
-# for right-hand sides longer than this many characters of printed form (a cheap size measure):
-# the unrolled 3-atom Lennard-Jones system takes ~20 s to compile in real128, 7 atoms ~300 s in
-# long double, against under 1 s in compact mode.
-COMPACT_MODE_SIZE = 1000
+# for large right-hand sides (`harness.cache.compact_mode`).
 SOFTWARE_LEVELS = ("real128", "real192")
 
 

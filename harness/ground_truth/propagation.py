@@ -14,7 +14,7 @@ import numpy as np
 
 from harness import cache
 from harness.errors import InputError, ReferenceError_, WorkLimitError
-from harness.ground_truth.levels import COMPACT_MODE_SIZE, SOFTWARE_LEVELS, Level
+from harness.ground_truth.levels import SOFTWARE_LEVELS, Level
 from harness.problem import Problem
 from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
 
@@ -100,8 +100,7 @@ def _build(problem: Problem, level: Level, tol: float):
     kwargs: dict[str, Any] = {
         "tol": level.scalar(tol),
         "high_accuracy": True,
-        "compact_mode": level.name in SOFTWARE_LEVELS
-        or sum(len(str(e)) for e in problem.rhs) > COMPACT_MODE_SIZE,
+        "compact_mode": level.name in SOFTWARE_LEVELS or cache.compact_mode(problem),
     }
     if level.name != "float64":
         kwargs["fp_type"] = level.fp_type
