@@ -283,7 +283,7 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
     if "xlink:" not in text.split(">", 1)[1]:
         text = text.replace(f' xmlns:xlink="{_XLINK_NS}"', "", 1)
     # shorter ids (every marker use repeats one): salted, since ids are page-wide
-    ids = sorted(set(re.findall(r'\sid="([\w.-]+)"', text)), key=len, reverse=True)
+    ids = sorted(dict.fromkeys(re.findall(r'\sid="([\w.-]+)"', text)), key=len, reverse=True)
     for i, old in enumerate(ids):
         text = text.replace(f'id="{old}"', f'id="{salt}i{i}"').replace(f'"#{old}"', f'"#{salt}i{i}"') \
             .replace(f"url(#{old})", f"url(#{salt}i{i})")
