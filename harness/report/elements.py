@@ -146,8 +146,16 @@ def fmt(x: Any, digits: int = 3) -> str:
     if math.isinf(v):
         return "unbounded" if v > 0 else "-inf"
     if v != 0 and (abs(v) < 1e-3 or abs(v) >= 1e5):
-        return f"{v:.{max(digits - 1, 0)}e}"
+        # 4.63e-4, 1.31e5: the exponent without its padding zero and plus sign (thousands of
+        # table cells)
+        mantissa, exponent = f"{v:.{max(digits - 1, 0)}e}".split("e")
+        if "." in mantissa:  # trailing zeros go, as in the plain numbers' `g` format
+            mantissa = mantissa.rstrip("0").rstrip(".")
+        return mantissa + _EXPONENT.sub(r"e\1\2", "e" + exponent)
     return f"{v:.{digits}g}"
+
+
+_EXPONENT = re.compile(r"e\+?(-?)0*(\d)")
 
 
 def is_missing(v: Any) -> bool:
@@ -168,12 +176,13 @@ def text_cell(x: Any, digits: int = 3, cls: str = "", href: str = "") -> TextCel
     return TextCell(fmt(x, digits), cls=cls or ("num" if numeric else ""), href=href)
 
 
-def status_cell(passed: Any) -> TextCell:
-    if is_missing(passed):
-        return TextCell(MARK[NONE], cls="status none")
-    if bool(passed):
-        return TextCell(MARK[PASS], cls="status pass")
-    return TextCell(MARK[FAIL], cls="status fail")
+# Status cells of folded per-cell tables (thousands of rows): one short class each.
+FOLDED_STATUS_CLASS = {FAIL: "sf", PASS: "sp", NONE: "sn"}
+
+
+def status_cell(passed: Any, folded: bool = False) -> TextCell:
+    status = NONE if is_missing(passed) else (PASS if bool(passed) else FAIL)
+    return TextCell(MARK[status], cls=FOLDED_STATUS_CLASS[status] if folded else f"status {status}")
 
 
 def anchor(*parts: Any) -> str:
@@ -197,6 +206,8 @@ def first_sentence(text: Any, limit: int = 220) -> str:
 # Significant digits of the numbers in a figure's CSV: what the figure shows and more (the full
 # precision is in the run's saved tables, results/<run id>/).
 CSV_DIGITS = 4
+# ... and of wall times (seconds), which vary by more than that from run to run.
+WALL_DIGITS = 2
 
 
 def csv_download(df: pd.DataFrame | None, filename: str) -> Download | None:
@@ -206,6 +217,10 @@ def csv_download(df: pd.DataFrame | None, filename: str) -> Download | None:
     no date, so a report's bytes depend on its data only."""
     if df is None or not len(df.columns):
         return None
+    timed = [c for c in df.columns if str(c) == "wall_s" or str(c).endswith("_wall_s")]
+    if timed:  # a wall time on a shared machine is good to a few per cent: two digits
+        df = df.assign(**{c: pd.to_numeric(df[c], errors="coerce").map(
+            lambda v: float(f"{v:.{WALL_DIGITS}g}") if np.isfinite(v) else v) for c in timed})
     text = df.to_csv(index=False, float_format=f"%.{CSV_DIGITS}g", lineterminator="\n")
     packed = gzip.compress(text.encode("utf-8"), compresslevel=9, mtime=0)
     uri = "data:application/gzip;base64," + base64.b64encode(packed).decode("ascii")
@@ -238,7 +253,7 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
         rcls = ""
         if status:
             v = rec.get(status)
-            cells.append(status_cell(v))
+            cells.append(status_cell(v, folded))
             if not is_missing(v) and not bool(v):
                 rcls = "failing"
         for col, _ in columns:
@@ -261,3 +276,27 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
     return Table(caption, headers, rows, cls=cls, id=table_id,
                  notes=[(n, t) for t, n in notes.items()], folded=folded)
 
+
+def drop_unlinked_row_ids(sections: Sequence[Section]) -> int:
+    """Clear the id of every folded table's row that no link of the page points to (a row id
+    costs ~35 bytes, over thousands of rows; the rows that the scoreboard, the verdict list or
+    the changed-since section link to keep theirs). Returns how many ids were cleared."""
+    linked: set[str] = set()
+    for sec in sections:
+        for b in sec.blocks:
+            linked.update(h[1:] for _, h in b.items if h.startswith("#"))
+            if b.table is not None:
+                for r in b.table.rows:
+                    for c in r.cells:
+                        if c.href.startswith("#"):
+                            linked.add(c.href[1:])
+                        linked.update(h[1:] for _, h in c.parts if h.startswith("#"))
+    cleared = 0
+    for sec in sections:
+        for b in sec.blocks:
+            if b.table is not None and b.table.folded:
+                for r in b.table.rows:
+                    if r.id and r.id not in linked:
+                        r.id = ""
+                        cleared += 1
+    return cleared

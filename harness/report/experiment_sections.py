@@ -25,6 +25,7 @@ from harness.report.sections import (
     anchor,
     df_table,
     fmt,
+    is_missing,
     register_section,
     yes_no,
 )
@@ -215,7 +216,7 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
     within = [] if s.empty else [
         (bool(np.isfinite(float(r["return_error_ulps"]))
               and float(r["return_error_ulps"]) <= float(r["rounding_bound_ulps"])),
-         anchor("reversibility", stepper, r["problem"], r["steps"])) for r in s.to_dict("records")]
+         anchor("reversibility", stepper, r["problem"])) for r in s.to_dict("records")]
     return _claimed_measured(view, "reversibility", stepper, bool(getattr(info, "symmetric", False)), within)
 
 
@@ -225,7 +226,7 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
            "of the rounding bound (what rounding alone explains), against N. A method claimed "
            "symmetric (solid) must stay under the dotted line at 1 on every problem; one not "
            "claimed symmetric (dashed) must stay above it."),
-    key=("stepper", "problem", "steps"),
+    key=("stepper", "problem", "steps"), row_key=("stepper", "problem"),
     measures=(Measure("return_error_ulps", "return error (ulps)", factor=tol.REPORT_CHANGE_ROUNDING),),
     score=(ScoreColumn("reversible claimed / measured", _reversible_score),),
 )
@@ -236,12 +237,61 @@ def reversibility(view: RunView, sec: Section) -> None:
                "Return error over the rounding bound against N, every problem in one figure: for "
                "each method the worst case against its claim (largest ratio over the problems if "
                "claimed symmetric, smallest if not). Each problem's values: the CSV and the table.")
-    cols = [("stepper", "stepper"), ("problem", "problem"), ("steps", "N"), ("h", "h"),
-            ("return_error_ulps", "return error (ulps)"), ("rounding_bound_ulps", "rounding bound (ulps)"),
-            ("claimed_symmetric", "claimed symmetric"), ("growth_exponent", "growth exponent"),
-            ("verdict", "verdict"), ("message", "why")]
-    sec.table(df_table(summ, cols, f"Per round trip: {len(summ)} rows", experiment="reversibility",
-                       key=("stepper", "problem", "steps")))
+    cols = [("stepper", "stepper"), ("problem", "problem"), ("h", "h"),
+            ("claimed_symmetric", "claimed symmetric"), ("steps", "N"),
+            ("return_error_ulps", "return error (ulps), per N"),
+            ("rounding_bound_ulps", "rounding bound (ulps), per N"),
+            ("growth_exponent", "growth exponent"), ("verdict", "verdict, per N"), ("message", "why")]
+    folded = fold_per_n(summ)
+    sec.table(df_table(folded, cols, f"Per stepper and problem: {len(summ)} round trips in "
+                       f"{len(folded)} rows, the values of each N in order",
+                       experiment="reversibility", key=("stepper", "problem")))
+
+
+def _steps_text(n: object) -> str:
+    """A step count as a reader takes it in: 10⁴ for a power of ten, else the integer."""
+    try:
+        k = int(n)  # type: ignore[call-overload]
+    except (TypeError, ValueError):
+        return fmt(n)
+    e = len(str(k)) - 1
+    if k >= 100 and k == 10 ** e:
+        return "10" + str(e).translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))
+    return str(k)
+
+
+def fold_per_n(summ: pd.DataFrame) -> pd.DataFrame:
+    """Reversibility rows folded to one per (stepper, problem): the per-N figures listed in the
+    order of N (`steps`), one verdict word when every N has the same, the reasons of the Ns
+    joined; `passed` False when any N failed, True when all that were judged passed. Every
+    value of every round trip stays (and each is in the figure's CSV at full precision)."""
+    if summ.empty or not {"stepper", "problem", "steps"} <= set(summ.columns):
+        return summ
+    groups: dict[tuple, list[dict]] = {}
+    for rec in summ.to_dict("records"):
+        groups.setdefault((rec["stepper"], rec["problem"]), []).append(rec)
+    out = []
+    for (stepper, problem), recs in groups.items():
+        recs.sort(key=lambda r: float(r["steps"]))
+        ns = [_steps_text(r["steps"]) for r in recs]
+        judged = [bool(r["passed"]) for r in recs if not is_missing(r.get("passed"))]
+        verdicts = [str(r.get("verdict", "")) for r in recs]
+        reasons = [(n, " ".join(str(r.get("message") or "").split())) for n, r in zip(ns, recs, strict=True)]
+        reasons = [(n, m) for n, m in reasons if m and m != "nan"]
+        if len({m for _, m in reasons}) == 1 and len(reasons) == len(recs):
+            why = reasons[0][1]
+        else:
+            why = "; ".join(f"N = {n}: {m}" for n, m in reasons)
+        first = recs[0]
+        out.append({
+            "stepper": stepper, "problem": problem, "h": first.get("h"),
+            "claimed_symmetric": first.get("claimed_symmetric"), "steps": ", ".join(ns),
+            "return_error_ulps": ", ".join(fmt(r.get("return_error_ulps")) for r in recs),
+            "rounding_bound_ulps": ", ".join(fmt(r.get("rounding_bound_ulps")) for r in recs),
+            "growth_exponent": first.get("growth_exponent"),
+            "verdict": verdicts[0] if len(set(verdicts)) == 1 else ", ".join(verdicts),
+            "passed": (all(judged) if judged else None), "message": why})
+    return pd.DataFrame(out)
 
 
 def _energy_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bool]:
@@ -366,8 +416,8 @@ def work_precision(view: RunView, sec: Section) -> None:
                                            adaptive),
                    f"Error against evaluations (left) and wall time (right) on {problem}; bold: the "
                    f"best of each family (fewest evaluations to reach {F.WORK_TARGET_ERROR:g}), "
-                   "faint (left only): the others. Wall times depend on this machine and its load "
-                   "(see Provenance); every method's are in the CSV.")
+                   "faint (left only): the others; markers on the left only. Wall times depend on "
+                   "this machine and its load (see Provenance); every method's are in the CSV.")
     summ = view.summary(name)
     if len(summ) and {"stepper", "problem", "error"} <= set(summ.columns):
         table = _work_table(summ)

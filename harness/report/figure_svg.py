@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import hashlib
 import io
+import math
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,7 +21,7 @@ import pandas as pd
 
 from harness.report.figure_style import RC_PARAMS
 
-__all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS"]
+__all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS", "page_css", "short_classes"]
 
 # Coordinates in the SVG are rounded to this many decimals of a point (1/10 pt is far below
 # what a screen shows; the full-precision numbers are in each figure's CSV).
@@ -70,6 +71,39 @@ def page_css(figures: Iterable[Figure]) -> str:
         raise UnsafeFigureError("figure style rules hold a '<'")
     return css
 
+
+
+_CLASS = re.compile(r'(?<=class=")k[0-9a-f]{7}(?=")|(?<=^\.)k[0-9a-f]{7}(?=\{)|(?<=\}\.)k[0-9a-f]{7}(?=\{)')
+# lower case only: class names are case-insensitive in a page without a doctype (quirks mode)
+_DIGITS = "0123456789abcdefghijklmnopqrstuvwxyz"
+
+
+def _short_name(i: int) -> str:
+    out = ""
+    while True:
+        i, r = divmod(i, len(_DIGITS))
+        out = _DIGITS[r] + out
+        if i == 0:
+            return "z" + out
+        i -= 1
+
+
+def short_classes(svgs: Sequence[str], css: str) -> tuple[list[str], str]:
+    """The page's figures and their style rules with each hashed class name (`k` + 7 hex
+    digits, thousands of uses) replaced by a short one, the most used shortest: `z` and one to
+    three letters or digits (no class of the page's own stylesheet starts with `z`)."""
+    counts: dict[str, int] = {}
+    for text in svgs:
+        for m in _CLASS.finditer(text):
+            counts[m.group(0)] = counts.get(m.group(0), 0) + 1
+    for m in _CLASS.finditer(css):
+        counts.setdefault(m.group(0), 0)
+    names = {c: _short_name(i) for i, c in enumerate(sorted(counts, key=lambda c: (-counts[c], c)))}
+
+    def sub(text: str) -> str:
+        return _CLASS.sub(lambda m: names[m.group(0)], text)
+
+    return [sub(t) for t in svgs], sub(css)
 
 
 # -- SVG output -----------------------------------------------------------------------------------
@@ -145,7 +179,7 @@ def _round_numbers(text: str) -> str:
 
 def _compact_path(d: str) -> str:
     d = _round_numbers(" ".join(d.split()))
-    return _relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d))
+    return _relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d), tolerance=LINE_TOLERANCE)
 
 
 def _dedupe_style(style: str) -> str:
@@ -174,17 +208,57 @@ _MOVE_LINE = re.compile(r"([ML])(-?[\d.]+) (-?[\d.]+)")
 # pixels at the figure's own size and less where the page scales it down, so the line looks the
 # same; its numbers are in the figure's CSV.
 LINE_SCALE = 1
+# A data line's vertices closer than this (in points) to the straight line through their
+# neighbours are left out (Douglas-Peucker): a matplotlib line of a few dozen points is never
+# simplified by matplotlib itself, yet runs of nearly collinear points are most of its bytes.
+LINE_TOLERANCE = 0.4
 
 
-def _relative_path(d: str, scale: int = LINE_SCALE) -> str:
+def _simplify(points: list[tuple[int, int]], tolerance: float) -> list[tuple[int, int]]:
+    """Douglas-Peucker: the points whose omission moves the line by more than `tolerance`."""
+    if len(points) < 3:
+        return points
+    keep = [False] * len(points)
+    keep[0] = keep[-1] = True
+    stack = [(0, len(points) - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j <= i + 1:
+            continue
+        (ax, ay), (bx, by) = points[i], points[j]
+        dx, dy = bx - ax, by - ay
+        norm = math.hypot(dx, dy)
+        worst, at = -1.0, i
+        for k in range(i + 1, j):
+            px, py = points[k]
+            dist = (abs(dx * (py - ay) - dy * (px - ax)) / norm if norm
+                    else math.hypot(px - ax, py - ay))
+            if dist > worst:
+                worst, at = dist, k
+        if worst > tolerance:
+            keep[at] = True
+            stack += [(i, at), (at, j)]
+    return [p for p, k in zip(points, keep, strict=True) if k]
+
+
+def _relative_path(d: str, scale: int = LINE_SCALE, tolerance: float = 0.0) -> str:
     """A path of absolute moves and lines only (what matplotlib writes for data lines) in
     relative steps of 1/`scale` point: the points rounded first, so no error accumulates; about
-    half the bytes. Any other path is returned unchanged."""
+    half the bytes. With `tolerance` (points), each sub-path is thinned by `_simplify`. Any
+    other path is returned unchanged."""
     if not d.startswith("M"):
         return d
     pieces = _MOVE_LINE.findall(d)
     if len(pieces) < 3 or sum(len(c) + len(x) + len(y) + 1 for c, x, y in pieces) != len(d):
         return d
+    if tolerance > 0:
+        runs: list[list[tuple[int, int]]] = []
+        for cmd, x, y in pieces:
+            if cmd == "M":
+                runs.append([])
+            runs[-1].append((round(float(x) * scale), round(float(y) * scale)))
+        pieces = [("M" if k == 0 else "L", str(X / scale), str(Y / scale))
+                  for run in runs for k, (X, Y) in enumerate(_simplify(run, tolerance * scale))]
     out, px, py, last = [], 0, 0, ""
     for k, (cmd, x, y) in enumerate(pieces):
         X, Y = round(float(x) * scale), round(float(y) * scale)
@@ -238,6 +312,7 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
     unwrap(root)
     _merge_marker_defs(root)
     _merge_siblings(root)
+    _group_runs(root, "clip-path", _clip_hoistable)
     styles: dict[str, int] = {}
     for el in root.iter():
         for name in ("d", "x", "y", "points"):
@@ -259,6 +334,9 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
         if st in classes:
             del el.attrib["style"]
             el.set("class", classes[st])
+    inherited = {c for st, c in classes.items() if _only_inherited(st)}
+    _group_runs(root, "class", lambda el: _local(el.tag) == "text" and el.attrib.get("class") in inherited,
+                min_run=3)
     for g in root.iter(f"{{{_NS}}}g"):  # a run of markers of one style: the class once, on the group
         kids = list(g)
         first = kids[0].attrib.get("class") if kids else None
@@ -288,6 +366,52 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
         text = text.replace(f'id="{old}"', f'id="{salt}i{i}"').replace(f'"#{old}"', f'"#{salt}i{i}"') \
             .replace(f"url(#{old})", f"url(#{salt}i{i})")
     return text, css
+
+
+# Properties a child takes from its group when it does not set them (and that the one global
+# rule matplotlib writes, for stroke joins and caps, does not set on every element).
+_INHERITED = {"fill", "fill-opacity", "font", "font-family", "font-size", "font-style", "font-weight",
+              "text-anchor"}
+
+
+def _only_inherited(style: str) -> bool:
+    return all(d.partition(":")[0] in _INHERITED for d in style.split(";") if d)
+
+
+def _clip_hoistable(el: ET.Element) -> bool:
+    # a clip path is drawn in the user space of the element it is set on: a group's equals its
+    # children's only where the child has no transform of its own
+    return "clip-path" in el.attrib and "transform" not in el.attrib
+
+
+def _group_runs(root: ET.Element, attr: str, eligible: Any, min_run: int = 2) -> None:
+    """Runs of at least `min_run` consecutive siblings that are `eligible` and share one value
+    of `attr` become a `<g attr=value>` around them, the attribute written once (the drawing
+    order is unchanged)."""
+    for parent in list(root.iter()):
+        kids = list(parent)
+        if len(kids) < min_run:
+            continue
+        out: list[ET.Element] = []
+        k = 0
+        while k < len(kids):
+            el = kids[k]
+            value = el.attrib.get(attr) if eligible(el) else None
+            j = k + 1
+            while value is not None and j < len(kids) and eligible(kids[j]) \
+                    and kids[j].attrib.get(attr) == value:
+                j += 1
+            if value is not None and j - k >= min_run:
+                g = ET.Element(f"{{{_NS}}}g", {attr: value})
+                for child in kids[k:j]:
+                    del child.attrib[attr]
+                    g.append(child)
+                out.append(g)
+            else:
+                out.extend(kids[k:j])
+            k = j
+        if len(out) != len(kids):
+            parent[:] = out
 
 
 def _merge_siblings(root: ET.Element) -> None:

@@ -56,7 +56,8 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     """Error against evaluations (left) and wall time (right) on one problem, one line per
     method; the best method of each family (`best_per_family`) drawn bold and named in the
     legend, the others thin and faint on the left only (wall times of a shared machine are too
-    noisy to rank the rest). Adaptive peers dashed with hollow markers."""
+    noisy to rank the rest). Adaptive peers dashed with hollow markers. Markers on the left
+    panel only: the right one draws the same methods in the same colours and line styles."""
     from matplotlib.lines import Line2D
 
     err = rows["error"].astype(float) if "error" in rows else pd.Series(dtype=float)
@@ -86,7 +87,8 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                 continue  # wall time: the best of each family only (all of them are in the CSV)
             c = palette.colour(stepper)
             ax.plot(s["_x"], s["error"].astype(float), "--" if peer else "-",
-                    marker=palette.marker(stepper) if strong else None, ms=3.2, lw=1.6 if strong else 0.6,
+                    marker=palette.marker(stepper) if strong and cost != "wall_s" else None, ms=3.2,
+                    lw=1.6 if strong else 0.6,
                     alpha=1.0 if strong else 0.3, color=c,
                     markerfacecolor="none" if peer else c, zorder=3 if strong else 2)
         loglog_axes(ax)
