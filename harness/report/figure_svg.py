@@ -203,7 +203,6 @@ def _short_number(v: int, scale: int) -> str:
     return f"{sign}{whole if whole else ''}.{frac}"
 
 
-_MOVE_LINE = re.compile(r"([ML])(-?[\d.]+) (-?[\d.]+)")
 # Data lines (paths of three points or more) are drawn to whole points: a point is 1.3 CSS
 # pixels at the figure's own size and less where the page scales it down, so the line looks the
 # same; its numbers are in the figure's CSV.
@@ -241,40 +240,95 @@ def _simplify(points: list[tuple[int, int]], tolerance: float) -> list[tuple[int
     return [p for p, k in zip(points, keep, strict=True) if k]
 
 
-def _relative_path(d: str, scale: int = LINE_SCALE, tolerance: float = 0.0) -> str:
-    """A path of absolute moves and lines only (what matplotlib writes for data lines) in
-    relative steps of 1/`scale` point: the points rounded first, so no error accumulates; about
-    half the bytes. With `tolerance` (points), each sub-path is thinned by `_simplify`. Any
-    other path is returned unchanged."""
-    if not d.startswith("M"):
-        return d
-    pieces = _MOVE_LINE.findall(d)
-    if len(pieces) < 3 or sum(len(c) + len(x) + len(y) + 1 for c, x, y in pieces) != len(d):
-        return d
-    if tolerance > 0:
-        runs: list[list[tuple[int, int]]] = []
-        for cmd, x, y in pieces:
-            if cmd == "M":
-                runs.append([])
-            runs[-1].append((round(float(x) * scale), round(float(y) * scale)))
-        pieces = [("M" if k == 0 else "L", str(X / scale), str(Y / scale))
-                  for run in runs for k, (X, Y) in enumerate(_simplify(run, tolerance * scale))]
-    out, px, py, last = [], 0, 0, ""
-    for k, (cmd, x, y) in enumerate(pieces):
-        X, Y = round(float(x) * scale), round(float(y) * scale)
-        if k == 0:
-            out.append(f"M{_short_number(X, scale)} {_short_number(Y, scale)}")
+_COMMAND = re.compile(r"([MLZz])([^MLZz]*)")
+_PAIR = re.compile(r"(-?[\d.]+) (-?[\d.]+)")
+# Closed shapes (filled regions, bars) keep tenths of a point: their edges meet other shapes.
+CLOSED_SCALE = 10
+
+
+def _subpaths(d: str) -> list[tuple[list[tuple[float, float]], bool]] | None:
+    """`d` as (points, closed) sub-paths when it holds only absolute moves, lines (one point
+    each) and closes; None otherwise."""
+    out: list[tuple[list[tuple[float, float]], bool]] = []
+    covered = 0
+    for m in _COMMAND.finditer(d):
+        if m.start() != covered:
+            return None
+        covered = m.end()
+        cmd, args = m.group(1), m.group(2)
+        if cmd in "Zz":
+            if args or not out or out[-1][1]:
+                return None
+            out[-1] = (out[-1][0], True)
+            continue
+        pair = _PAIR.fullmatch(args)
+        if pair is None:
+            return None
+        point = (float(pair.group(1)), float(pair.group(2)))
+        if cmd == "M":
+            out.append(([point], False))
+        elif not out or out[-1][1]:
+            return None
         else:
-            c = cmd.lower()
-            if c == "l" and X == px and Y == py:
+            out[-1][0].append(point)
+    return out if covered == len(d) and out else None
+
+
+def _relative_path(d: str, scale: int = LINE_SCALE, tolerance: float = 0.0) -> str:
+    """A path of absolute moves, lines and closes only (what matplotlib writes for data lines,
+    filled regions and bars) in relative steps of 1/`scale` point (closed sub-paths: of
+    1/CLOSED_SCALE point), horizontal and vertical steps as `h`/`v`: the points rounded first,
+    so no error accumulates; about half the bytes. With `tolerance` (points), each sub-path is
+    thinned by `_simplify`. Any other path, or one of fewer than three points, is returned
+    unchanged."""
+    subs = _subpaths(d) if d.startswith("M") else None
+    if subs is None or sum(len(p) for p, _ in subs) < 3:
+        return d
+    if any(closed for _, closed in subs):
+        scale = max(scale, CLOSED_SCALE)
+    out: list[str] = []
+    px = py = 0
+    last = ""
+
+    def put(letter: str, *values: int) -> None:
+        nonlocal last
+        nums = [_short_number(v, scale) for v in values]
+        text = ""
+        # a repeated command (after a move, a line) needs no letter, only a separator
+        implicit = letter == last or (letter == "l" and last == "m")
+        for k, n in enumerate(nums):
+            if k == 0 and not implicit:
+                text += letter + n
+            else:
+                text += ("" if n.startswith("-") else " ") + n
+        out.append(text)
+        last = "l" if letter == "m" else letter
+
+    for points, closed in subs:
+        grid = [(round(x * scale), round(y * scale)) for x, y in points]
+        if tolerance > 0:
+            grid = _simplify(grid, tolerance * scale)
+        sx, sy = grid[0]
+        if not out:
+            out.append(f"M{_short_number(sx, scale)} {_short_number(sy, scale)}")
+            last = "M"  # pairs after an absolute move would be absolute lines: letters needed
+        else:
+            put("m", sx - px, sy - py)
+        px, py = sx, sy
+        for X, Y in grid[1:]:
+            if X == px and Y == py:
                 continue  # a step of zero length draws nothing
-            dx, dy = _short_number(X - px, scale), _short_number(Y - py, scale)
-            # after a move or a line, further pairs are lines: the letter can go
-            implicit = c == "l" and last in ("l", "m")
-            head = ("" if dx.startswith("-") else " ") if implicit else c
-            out.append(f"{head}{dx}{'' if dy.startswith('-') else ' '}{dy}")
-            last = c
-        px, py = X, Y
+            if Y == py:
+                put("h", X - px)
+            elif X == px:
+                put("v", Y - py)
+            else:
+                put("l", X - px, Y - py)
+            px, py = X, Y
+        if closed:
+            out.append("z")
+            last = "z"
+            px, py = sx, sy  # a close returns to the sub-path's start
     return "".join(out)
 
 

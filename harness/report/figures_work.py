@@ -28,6 +28,9 @@ __all__ = ['WORK_TARGET_ERROR', 'best_per_family', 'work_precision_figure', 'per
 # The precision the "best of each family" is judged at: every method of the catalogue reaches it
 # on the work-precision problems, so the cheapest one to get there is well defined.
 WORK_TARGET_ERROR = 1e-6
+# Markers on a bold line: enough to tell the family (a marker shape each), not one per point
+# of a sweep of dozens (every point is in the CSV).
+MARKERS_PER_LINE = 8
 
 
 def best_per_family(rows: pd.DataFrame, families: Mapping[str, str], cost: str = "rhs_evals"
@@ -88,7 +91,7 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             c = palette.colour(stepper)
             ax.plot(s["_x"], s["error"].astype(float), "--" if peer else "-",
                     marker=palette.marker(stepper) if strong and cost != "wall_s" else None, ms=3.2,
-                    lw=1.6 if strong else 0.6,
+                    lw=1.6 if strong else 0.6, markevery=max(1, math.ceil(len(s) / MARKERS_PER_LINE)),
                     alpha=1.0 if strong else 0.3, color=c,
                     markerfacecolor="none" if peer else c, zorder=3 if strong else 2)
         loglog_axes(ax)
