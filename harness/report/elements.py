@@ -186,11 +186,11 @@ def status_cell(passed: Any, folded: bool = False) -> TextCell:
 
 
 def anchor(*parts: Any) -> str:
-    """A stable, safe HTML id for a table row: readable slug plus a short hash of the exact
-    key (names from plugins may hold any character)."""
+    """A stable, safe HTML id for a table row: a short hash of the exact key (names from
+    plugins may hold any character)."""
     key = "\x1f".join(str(p) for p in parts)
-    slug = re.sub(r"[^a-z0-9]+", "-", key.lower()).strip("-")[:16]  # every link repeats it
-    return f"r-{slug}-{hashlib.sha1(key.encode()).hexdigest()[:6]}"
+    # a short hash only: every link repeats it (hundreds in the scoreboard)
+    return f"r-{hashlib.sha1(key.encode()).hexdigest()[:10]}"
 
 
 def first_sentence(text: Any, limit: int = 220) -> str:

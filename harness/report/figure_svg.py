@@ -21,7 +21,8 @@ import pandas as pd
 
 from harness.report.figure_style import RC_PARAMS
 
-__all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS", "page_css", "short_classes"]
+__all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS", "page_css", "short_classes",
+           "short_ids"]
 
 # Coordinates in the SVG are rounded to this many decimals of a point (1/10 pt is far below
 # what a screen shows; the full-precision numbers are in each figure's CSV).
@@ -104,6 +105,25 @@ def short_classes(svgs: Sequence[str], css: str) -> tuple[list[str], str]:
         return _CLASS.sub(lambda m: names[m.group(0)], text)
 
     return [sub(t) for t in svgs], sub(css)
+
+
+_FIGURE_ID = re.compile(r'(id="|href="#|url\(#)(f[0-9a-f]{5}i\d+)(?=[")])')
+
+
+def short_ids(html: str) -> str:
+    """The page with every figure's ids (salted per figure so they are unique on the page:
+    `f` + 5 hex digits + `i` + a number, repeated by every marker and clip reference) replaced
+    by short page-wide ones (`y` + letters or digits), none taken by another id of the page."""
+    found = list(dict.fromkeys(m.group(2) for m in _FIGURE_ID.finditer(html) if m.group(1) == 'id="'))
+    taken = set(re.findall(r'\bid="([^"]+)"', html)) - set(found)
+    names: dict[str, str] = {}
+    i = 0
+    for old in found:
+        while (name := "y" + _short_name(i)[1:]) in taken:
+            i += 1
+        names[old] = name
+        i += 1
+    return _FIGURE_ID.sub(lambda m: m.group(1) + names.get(m.group(2), m.group(2)), html)
 
 
 # -- SVG output -----------------------------------------------------------------------------------
@@ -369,10 +389,16 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
     _group_runs(root, "clip-path", _clip_hoistable)
     styles: dict[str, int] = {}
     for el in root.iter():
+        whole = _local(el.tag) in ("text", "use")  # labels and markers: to whole points, as lines
         for name in ("d", "x", "y", "points"):
             if name in el.attrib:
                 value = el.attrib[name]
-                el.set(name, _compact_path(value) if name == "d" else _round_numbers(value))
+                if name == "d":
+                    el.set(name, _compact_path(value))
+                elif whole and name in ("x", "y") and re.fullmatch(r"-?[\d.]+", value.strip()):
+                    el.set(name, str(round(float(value))))
+                else:
+                    el.set(name, _round_numbers(value))
         tr = el.attrib.get("transform", "")
         if re.fullmatch(r"rotate\(-?0(?:\s[^)]*)?\)", tr):
             del el.attrib["transform"]
