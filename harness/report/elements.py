@@ -23,6 +23,9 @@ FAIL, PASS, NONE = "fail", "pass", "none"
 MARK = {FAIL: "✗ FAIL", PASS: "✓ pass", NONE: "– not measured"}
 # Columns whose text is a reason: written once per table as a numbered note.
 NOTE_COLUMNS = ("message", "reason")
+# Columns of folded tables whose value is written once per run of equal rows (the rows of one
+# problem follow each other); a row a link points to shows it in full.
+DITTO_COLUMNS = ("problem", "h", "steps", "states")
 # Columns never shown in a generic table (bookkeeping, not measurement).
 HIDDEN_COLUMNS = ("wall_s", "ensemble_size", "params", "key")
 
@@ -59,6 +62,8 @@ class Table:
     notes: list[tuple[int, str]] = field(default_factory=list)
     # folded tables are rendered inside <details> with the caption as summary
     folded: bool = False
+    # columns (indices) whose cell is left blank where it repeats the row above (folded tables)
+    ditto: list[int] = field(default_factory=list)
 
 
 @dataclass
@@ -152,7 +157,7 @@ def fmt(x: Any, digits: int = 3) -> str:
         if "." in mantissa:  # trailing zeros go, as in the plain numbers' `g` format
             mantissa = mantissa.rstrip("0").rstrip(".")
         return mantissa + _EXPONENT.sub(r"e\1\2", "e" + exponent)
-    return f"{v:.{digits}g}"
+    return _EXPONENT.sub(r"e\1\2", f"{v:.{digits}g}")  # `g` writes 1e+04 for 10000 at 3 digits
 
 
 _EXPONENT = re.compile(r"e\+?(-?)0*(\d)")
@@ -177,12 +182,21 @@ def text_cell(x: Any, digits: int = 3, cls: str = "", href: str = "") -> TextCel
 
 
 # Status cells of folded per-cell tables (thousands of rows): one short class each.
-FOLDED_STATUS_CLASS = {FAIL: "sf", PASS: "sp", NONE: "sn"}
+# (a pass or a failure needs none: the table's `st` class colours its first column, the row's
+# `failing` class says which)
+FOLDED_STATUS_CLASS = {FAIL: "", PASS: "", NONE: "sn"}
+
+
+# ... and their marks: a failure spelled out, a pass or nothing measured as its sign alone (the
+# colour and the column say the rest).
+FOLDED_MARK = {FAIL: MARK[FAIL], PASS: "✓", NONE: "–"}
 
 
 def status_cell(passed: Any, folded: bool = False) -> TextCell:
     status = NONE if is_missing(passed) else (PASS if bool(passed) else FAIL)
-    return TextCell(MARK[status], cls=FOLDED_STATUS_CLASS[status] if folded else f"status {status}")
+    if folded:
+        return TextCell(FOLDED_MARK[status], cls=FOLDED_STATUS_CLASS[status])
+    return TextCell(MARK[status], cls=f"status {status}")
 
 
 def anchor(*parts: Any) -> str:
@@ -242,7 +256,8 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
     if sort_failing and status and status in df and len(df):
         k = df[status].map(lambda v: 0 if (not is_missing(v) and not bool(v)) else 1)
         df = df.assign(_k=k).sort_values("_k", kind="stable").drop(columns="_k")
-    headers = ([""] if status else []) + [h for _, h in columns]
+    headers = ([""] if status else []) + [f"{h} (note)" if folded and c in NOTE_COLUMNS else h
+                                          for c, h in columns]
     # short: every note reference repeats it
     table_id = id or (f"t-{hashlib.sha1(f'{experiment}{caption}'.encode()).hexdigest()[:6]}"
                       if experiment else "")
@@ -262,7 +277,7 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
                 text = "" if is_missing(v) else " ".join(str(v).split())
                 if text:
                     n = notes.setdefault(text, len(notes) + 1)
-                    cells.append(TextCell(f"note {n}", cls="noteref",
+                    cells.append(TextCell(f"note {n}" if not folded else str(n), cls="" if folded else "nr",
                                           href=f"#{table_id}-n{n}" if table_id else ""))
                 else:
                     cells.append(TextCell(""))
@@ -270,17 +285,28 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
                 c = text_cell(v, digits, href=str(rec.get(links[col]) or "") if col in links else "")
                 if folded and c.cls == "num":  # folded tables align numbers by their own CSS
                     c.cls = ""
+                if folded and c.text == "—" and not c.href:  # nothing measured: an empty cell
+                    c.text = ""
                 cells.append(c)
         rid = anchor(experiment, *(rec.get(c, "") for c in key)) if experiment else ""
         rows.append(Row(cells, cls=rcls, id=rid))
+    ditto = []
+    if folded:
+        for k, (col, _) in enumerate(columns):
+            if col in DITTO_COLUMNS:
+                ditto.append(k + (1 if status else 0))
+                headers[ditto[-1]] += " (blank: as above)"
+    if folded and status:
+        cls = f"{cls} st".strip()
     return Table(caption, headers, rows, cls=cls, id=table_id,
-                 notes=[(n, t) for t, n in notes.items()], folded=folded)
+                 notes=[(n, t) for t, n in notes.items()], folded=folded, ditto=ditto)
 
 
 def drop_unlinked_row_ids(sections: Sequence[Section]) -> int:
     """Clear the id of every folded table's row that no link of the page points to (a row id
-    costs ~35 bytes, over thousands of rows; the rows that the scoreboard, the verdict list or
-    the changed-since section link to keep theirs). Returns how many ids were cleared."""
+    costs ~20 bytes, over thousands of rows; the rows that the scoreboard, the verdict list or
+    the changed-since section link to keep theirs), and blank the cells that repeat the row
+    above (`Table.ditto`). Returns how many ids were cleared."""
     linked: set[str] = set()
     for sec in sections:
         for b in sec.blocks:
@@ -299,4 +325,19 @@ def drop_unlinked_row_ids(sections: Sequence[Section]) -> int:
                     if r.id and r.id not in linked:
                         r.id = ""
                         cleared += 1
+                _blank_repeats(b.table)
     return cleared
+
+
+def _blank_repeats(table: Table) -> None:
+    """Blank the `ditto` cells that repeat the row above (not in a row a link points to)."""
+    for k in table.ditto:
+        previous = None
+        for r in table.rows:
+            if k >= len(r.cells):
+                continue
+            c = r.cells[k]
+            text = c.text
+            if text == previous and not r.id and not c.href and not c.parts:
+                r.cells[k] = TextCell("", cls=c.cls)
+            previous = text

@@ -127,6 +127,10 @@ def _evals_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bo
 def convergence(view: RunView, sec: Section) -> None:
     rows = view.rowtable("convergence")
     judged = _convergence_judged(view)
+    sec.note("Each figure: error against h, markers at the two ends of the range the order fit "
+             "used, the thin line alone beyond them where points were excluded (pre-asymptotic, "
+             "roundoff or reference floor; the CSV says which point is which); dashed, the fitted "
+             "slope over that range; dotted, the reference floor.")
     for problem in _problems_in(view, judged):
         g = rows[rows["problem"] == problem] if "problem" in rows else pd.DataFrame()
         ref = judged.loc[judged["problem"] == problem, "reference_error"].astype(float)
@@ -135,10 +139,7 @@ def convergence(view: RunView, sec: Section) -> None:
             glob = g[g["kind"] == "global"] if "kind" in g else g
             same = [" = ".join([k, *v]) for k, v in F.same_curves(glob).items() if v] if len(glob) else []
             sec.figure(F.convergence_figure(problem, g, view.palette, ref_err),
-                       f"Error against h on {problem}: markers at the two ends of the range the "
-                       "order fit used, the thin line alone beyond them where points were excluded "
-                       "(pre-asymptotic, roundoff or reference floor; the CSV says which point is "
-                       "which); dashed, the fitted slope over that range; dotted, the reference floor."
+                       f"Error against h on {problem}."
                        + (f" Identical curves drawn once: {'; '.join(same)}." if same else ""))
     cols = [("stepper", "stepper"), ("problem", "problem"), ("claimed_order", "claimed"),
             ("measured_order", "measured"), ("order_ci_low", "95% CI low"),
@@ -325,12 +326,14 @@ def energy(view: RunView, sec: Section) -> None:
         s = summ[summ["problem"] == problem]
         sec.figure(F.energy_figure(problem, g, view.palette, symplectic,
                                    classes=dict(zip(s["stepper"], s["drift_class"], strict=True))),
-                   f"Relative energy error on {problem}, by drift class.")
+                   f"Relative energy error on {problem}, by drift class; solid: symplectic "
+                   "steppers, dashed: the others.")
         if "quantity" in g and (g["quantity"] == "angular_momentum").any():
             sec.figure(F.angular_momentum_figure(
                 problem, g, view.palette, symplectic,
                 classes=dict(zip(s["stepper"], s["angular_momentum_class"], strict=True))),
-                f"Relative change of the angular momentum on {problem}, with the rounding bound of "
+                f"Relative change of the angular momentum on {problem} (solid: symplectic "
+                f"steppers, dashed: the others), with the rounding bound of "
                 f"a method that conserves it exactly ({tol.ANGULAR_MOMENTUM_ROUNDING_ULPS:g} ulp per step).")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("h", "h"), ("steps", "steps"),
             ("claimed_symplectic", "claimed symplectic"), ("drift_class", "drift class"),
@@ -398,9 +401,10 @@ def _work_table(summ: pd.DataFrame) -> pd.DataFrame:
 @register_section(
     "work-precision", title="Work–precision",
     intro=("Error at the final time against the work spent — right-hand-side (or force) "
-           "evaluations, and wall time — over a step-size sweep (fixed-step methods) or a "
-           "tolerance sweep (adaptive ones, dashed). Lower and further left is better; the best "
-           "method of each family (fewest evaluations to reach the target error) is drawn bold."),
+           "evaluations — over a step-size sweep (fixed-step methods) or a tolerance sweep "
+           "(adaptive ones, dashed); the wall time each needs is in the table and the CSVs. "
+           "Lower and further left is better; the best method of each family (fewest "
+           "evaluations to reach the target error) is drawn bold."),
     measures=(Measure("evals_to_target", "evaluations to reach the target error",
                       rtol=tol.REPORT_CHANGE_RTOL),),
 )
@@ -411,13 +415,14 @@ def work_precision(view: RunView, sec: Section) -> None:
     if "error" not in rows:
         sec.note("The work-precision rows have no `error` column; nothing to draw.", cls="warning")
         return
+    sec.note(f"Each figure: error against evaluations on one problem; bold, the best of each "
+             f"family (fewest evaluations to reach {F.WORK_TARGET_ERROR:g}), faint, the others. "
+             "Wall times (they depend on this machine and its load, see Provenance): the table "
+             "below to reach the target, every point's in the figure's CSV.")
     for problem in _problems_in(view, rows):
         sec.figure(F.work_precision_figure(problem, rows[rows["problem"] == problem], view.palette,
                                            adaptive),
-                   f"Error against evaluations (left) and wall time (right) on {problem}; bold: the "
-                   f"best of each family (fewest evaluations to reach {F.WORK_TARGET_ERROR:g}), "
-                   "faint (left only): the others; markers on the left only. Wall times depend on "
-                   "this machine and its load (see Provenance); every method's are in the CSV.")
+                   f"Error against evaluations on {problem}.")
     summ = view.summary(name)
     if len(summ) and {"stepper", "problem", "error"} <= set(summ.columns):
         table = _work_table(summ)

@@ -54,10 +54,12 @@ class Figure:
 
     def standalone(self) -> str:
         """The SVG with its style rules inside (for use outside the report page)."""
+        svg = self.svg if "xmlns=" in self.svg.split(">", 1)[0] else \
+            self.svg.replace("<svg", '<svg xmlns="http://www.w3.org/2000/svg"', 1)
         if not self.css:
-            return self.svg
-        head_end = self.svg.find(">") + 1
-        return f"{self.svg[:head_end]}<style>{self.css}</style>{self.svg[head_end:]}"
+            return svg
+        head_end = svg.find(">") + 1
+        return f"{svg[:head_end]}<style>{self.css}</style>{svg[head_end:]}"
 
 
 def page_css(figures: Iterable[Figure]) -> str:
@@ -181,6 +183,9 @@ def to_svg(fig: Any, slug: str, alt: str, data: pd.DataFrame | None = None) -> F
                   text[:head_end], count=1)
     text = head + text[head_end:]
     text = text.replace("<svg", f'<svg role="img" class="figure" data-slug="{_attr(slug)}"', 1)
+    # inline in HTML, an <svg> needs neither its namespace nor a version (`standalone` output
+    # puts the namespace back)
+    text = text.replace(f' xmlns="{_NS}"', "", 1).replace(' version="1.1"', "", 1)
     return Figure(slug=slug, svg=text, alt=alt, data=data, css=css)
 
 
