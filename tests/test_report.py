@@ -140,6 +140,16 @@ def test_every_scoreboard_link_points_at_a_row_of_the_page(report):
     assert set(links) <= ids, set(links) - ids
 
 
+def test_every_link_of_the_page_finds_its_target(report):
+    """Row ids no link points to are dropped and figure ids shortened: every in-page link
+    (scoreboard, verdict list, notes, figure markers and clip paths) still finds one target."""
+    text = report["html"]
+    ids = re.findall(r'\bid="([^"]+)"', text)
+    assert len(ids) == len(set(ids))
+    targets = re.findall(r'(?:href="#|url\(#)([^")]+)', text)
+    assert targets and set(targets) <= set(ids), set(targets) - set(ids)
+
+
 def test_reasons_are_numbered_notes_written_once_per_table(report):
     text = report["html"]
     tables = re.findall(r'<table class="[^"]*" id="([\w-]+)">(.*?)</table>\s*</div>\s*'

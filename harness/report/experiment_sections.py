@@ -33,11 +33,26 @@ from harness.report.sections import (
 __all__: list[str] = []
 
 
+def _split(view: RunView, table: pd.DataFrame, column: str) -> dict:
+    """`table`'s rows by their value of `column`, split once per table and view (sections ask
+    for one stepper's or one problem's rows many times; a boolean mask each time scans all)."""
+    cache = view.__dict__.setdefault("_splits", {})
+    key = (id(table), column)
+    if key not in cache:
+        cache[key] = (table, dict(tuple(table.groupby(column, sort=False))) if column in table else {})
+    return cache[key][1]
+
+
+def _part(view: RunView, table: pd.DataFrame, column: str, value: object) -> pd.DataFrame:
+    part = _split(view, table, column).get(value)
+    return part if part is not None else table.iloc[0:0]
+
+
 def _rows_of(view: RunView, name: str, stepper: str) -> pd.DataFrame:
     s = view.summary(name)
     if s.empty or "stepper" not in s:
         return s
-    return s[s["stepper"] == stepper]
+    return _part(view, s, "stepper", stepper)
 
 
 def _problems_in(view: RunView, table: pd.DataFrame) -> list[str]:
@@ -94,7 +109,8 @@ def _evals_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bo
     rows = view.rowtable("convergence")
     if rows.empty or not {"kind", "stepper", "n_steps"} <= set(rows.columns):
         return [(f"{declared} / —", "")], False
-    g = rows[(rows["stepper"] == stepper) & (rows["kind"] == "global")]
+    g = _part(view, rows, "stepper", stepper)
+    g = g[g["kind"] == "global"]
     if "message" in g:  # a failed step counts no evaluations
         g = g[g["message"].fillna("").astype(str) == ""]
     if "error" in g:
@@ -132,8 +148,8 @@ def convergence(view: RunView, sec: Section) -> None:
              "roundoff or reference floor; the CSV says which point is which); dashed, the fitted "
              "slope over that range; dotted, the reference floor.")
     for problem in _problems_in(view, judged):
-        g = rows[rows["problem"] == problem] if "problem" in rows else pd.DataFrame()
-        ref = judged.loc[judged["problem"] == problem, "reference_error"].astype(float)
+        g = _part(view, rows, "problem", problem) if "problem" in rows else pd.DataFrame()
+        ref = _part(view, judged, "problem", problem)["reference_error"].astype(float)
         ref_err = float(ref.max()) if len(ref) and np.isfinite(ref).any() else None
         if len(g):
             glob = g[g["kind"] == "global"] if "kind" in g else g
@@ -322,8 +338,8 @@ def energy(view: RunView, sec: Section) -> None:
     summ = view.summary("energy")
     symplectic = view.flag("symplectic")
     for problem in _problems_in(view, summ):
-        g = rows[rows["problem"] == problem]
-        s = summ[summ["problem"] == problem]
+        g = _part(view, rows, "problem", problem)
+        s = _part(view, summ, "problem", problem)
         sec.figure(F.energy_figure(problem, g, view.palette, symplectic,
                                    classes=dict(zip(s["stepper"], s["drift_class"], strict=True))),
                    f"Relative energy error on {problem}, by drift class; solid: symplectic "
@@ -376,26 +392,35 @@ def symplecticity(view: RunView, sec: Section) -> None:
 
 # -- work-precision -------------------------------------------------------------------------------
 def _work_table(summ: pd.DataFrame) -> pd.DataFrame:
-    out = []
-    for (stepper, problem), g in summ.groupby(["stepper", "problem"], sort=False):
-        err = g["error"].astype(float)
-        evals = g["rhs_evals"].astype(float) if "rhs_evals" in g else pd.Series(np.nan, index=g.index)
-        wall = g["wall_s"].astype(float) if "wall_s" in g else pd.Series(np.nan, index=g.index)
-        finite = np.isfinite(err)
-        rec = {"stepper": stepper, "problem": problem,
-               "kind": str(g["kind"].iloc[0]) if "kind" in g else "",
-               "points": int(len(g)), "lowest_error": math.nan, "evals_at_lowest": math.nan,
-               "evals_to_target": math.nan, "wall_to_target": math.nan,
-               "unit": str(g["evals_unit"].iloc[0]) if "evals_unit" in g else ""}
-        if finite.any():
-            k = err[finite].idxmin()
-            rec.update(lowest_error=float(err[k]), evals_at_lowest=float(evals[k]))
-            hit = g[finite & (err <= F.WORK_TARGET_ERROR)]
-            if len(hit):
-                j = evals[hit.index].idxmin()
-                rec.update(evals_to_target=float(evals[j]), wall_to_target=float(wall[j]))
-        out.append(rec)
-    return pd.DataFrame(out)
+    """One row per (stepper, problem) of the work-precision summary: its sweep kind, number of
+    points, lowest error and the evaluations there, and the evaluations and wall time of the
+    cheapest point at or below WORK_TARGET_ERROR (grouped operations: thousands of rows)."""
+    keys = ["stepper", "problem"]
+    cols = ["stepper", "problem", "kind", "points", "lowest_error", "evals_at_lowest",
+            "evals_to_target", "wall_to_target", "unit"]
+    if summ.empty:
+        return pd.DataFrame(columns=cols)
+    nan = pd.Series(np.nan, index=summ.index)
+    df = pd.DataFrame({
+        "stepper": summ["stepper"], "problem": summ["problem"],
+        "kind": summ["kind"].astype(str) if "kind" in summ else "",
+        "unit": summ["evals_unit"].astype(str) if "evals_unit" in summ else "",
+        "err": summ["error"].astype(float),
+        "evals": summ["rhs_evals"].astype(float) if "rhs_evals" in summ else nan,
+        "wall": summ["wall_s"].astype(float) if "wall_s" in summ else nan})
+    grouped = df.groupby(keys, sort=False)
+    out = grouped.agg(kind=("kind", "first"), points=("err", "size"), unit=("unit", "first"))
+    finite = df[np.isfinite(df["err"])]
+    lowest = finite.loc[finite.groupby(keys, sort=False)["err"].idxmin()].set_index(keys)
+    out["lowest_error"] = lowest["err"]
+    out["evals_at_lowest"] = lowest["evals"]
+    hit = finite[(finite["err"] <= F.WORK_TARGET_ERROR) & finite["evals"].notna()]
+    cheapest = hit.loc[hit.groupby(keys, sort=False)["evals"].idxmin()].set_index(keys)
+    out["evals_to_target"] = cheapest["evals"]
+    out["wall_to_target"] = cheapest["wall"]
+    out = out.reset_index()
+    out["points"] = out["points"].astype(int)
+    return out[cols]
 
 
 @register_section(
@@ -420,7 +445,7 @@ def work_precision(view: RunView, sec: Section) -> None:
              "Wall times (they depend on this machine and its load, see Provenance): the table "
              "below to reach the target, every point's in the figure's CSV.")
     for problem in _problems_in(view, rows):
-        sec.figure(F.work_precision_figure(problem, rows[rows["problem"] == problem], view.palette,
+        sec.figure(F.work_precision_figure(problem, _part(view, rows, "problem", problem), view.palette,
                                            adaptive),
                    f"Error against evaluations on {problem}.")
     summ = view.summary(name)

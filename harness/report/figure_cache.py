@@ -2,8 +2,8 @@
 
 A figure function's result (a `figure_svg.Figure`, or None) depends only on its arguments (data
 frames, the palette, flags), the report's drawing code and matplotlib. `cached_call` hashes all
-of them (the arguments pickled; the source of every module of `harness.report` and of
-`harness.tolerances`; matplotlib's version) and keeps the result in
+of them (the arguments pickled; the source of every module of the `harness` package, since a
+figure may use any of it; matplotlib's version) and keeps the result in
 `<harness cache>/figures/<hash>.pkl` (`harness.cache.cache_dir`, `HARNESS_CACHE_DIR`). Matplotlib
 takes most of a report's build time, and a rerun whose cells all come from the cell cache hands
 every figure function the same data, so the figures come from here. Any change of data or
@@ -33,13 +33,12 @@ _DISABLE_ENV = "HARNESS_FIGURE_CACHE"  # "off": always draw
 @functools.lru_cache(maxsize=1)
 def code_version() -> str:
     """A hash of everything a figure's drawing depends on besides its arguments."""
-    import matplotlib
+    from importlib.metadata import version  # without importing matplotlib (a second)
 
-    h = hashlib.sha256(matplotlib.__version__.encode())
-    here = Path(__file__).resolve().parent
-    files = sorted(here.rglob("*.py")) + [here.parent / "tolerances.py"]
-    for f in files:
-        h.update(f.name.encode())
+    h = hashlib.sha256(version("matplotlib").encode())
+    package = Path(__file__).resolve().parent.parent  # all of `harness`: a figure may use any
+    for f in sorted(package.rglob("*.py")):           # of it (the convergence fit, tolerances)
+        h.update(str(f.relative_to(package)).encode())
         h.update(f.read_bytes())
     return h.hexdigest()[:20]
 
