@@ -285,8 +285,8 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
                 c = text_cell(v, digits, href=str(rec.get(links[col]) or "") if col in links else "")
                 if folded and c.cls == "num":  # folded tables align numbers by their own CSS
                     c.cls = ""
-                if folded and c.text == "—" and not c.href:  # nothing measured: an empty cell
-                    c.text = ""
+                if folded and c.text == "—" and not c.href and col not in DITTO_COLUMNS:
+                    c.text = ""  # nothing measured: an empty cell (a blank ditto cell repeats)
                 cells.append(c)
         rid = anchor(experiment, *(rec.get(c, "") for c in key)) if experiment else ""
         rows.append(Row(cells, cls=rcls, id=rid))
@@ -295,7 +295,11 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
         for k, (col, _) in enumerate(columns):
             if col in DITTO_COLUMNS:
                 ditto.append(k + (1 if status else 0))
-                headers[ditto[-1]] += " (blank: as above)"
+        if ditto:
+            named = [headers[k] for k in ditto]
+            shown = ", ".join(named[:-1]) + (" or " if len(named) > 1 else "") + named[-1]
+            caption = (f"{caption} (a blank {shown} cell: as in the row above; a blank elsewhere: "
+                       "nothing measured)")
     if folded and status:
         cls = f"{cls} st".strip()
     return Table(caption, headers, rows, cls=cls, id=table_id,
