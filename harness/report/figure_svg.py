@@ -202,9 +202,10 @@ def _round_numbers(text: str) -> str:
     return _NUMBER.sub(one, text)
 
 
-def _compact_path(d: str) -> str:
+def _compact_path(d: str, min_points: int = 3) -> str:
     d = _round_numbers(" ".join(d.split()))
-    return _relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d), tolerance=LINE_TOLERANCE)
+    return _relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d), tolerance=LINE_TOLERANCE,
+                          min_points=min_points)
 
 
 def _dedupe_style(style: str) -> str:
@@ -299,15 +300,15 @@ def _subpaths(d: str) -> list[tuple[list[tuple[float, float]], bool]] | None:
     return out if covered == len(d) and out else None
 
 
-def _relative_path(d: str, scale: int = LINE_SCALE, tolerance: float = 0.0) -> str:
+def _relative_path(d: str, scale: int = LINE_SCALE, tolerance: float = 0.0, min_points: int = 3) -> str:
     """A path of absolute moves, lines and closes only (what matplotlib writes for data lines,
     filled regions and bars) in relative steps of 1/`scale` point (closed sub-paths: of
     1/CLOSED_SCALE point), horizontal and vertical steps as `h`/`v`: the points rounded first,
     so no error accumulates; about half the bytes. With `tolerance` (points), each sub-path is
-    thinned by `_simplify`. Any other path, or one of fewer than three points, is returned
-    unchanged."""
+    thinned by `_simplify`. Any other path, or one of fewer than `min_points` points, is
+    returned unchanged."""
     subs = _subpaths(d) if d.startswith("M") else None
-    if subs is None or sum(len(p) for p, _ in subs) < 3:
+    if subs is None or sum(len(p) for p, _ in subs) < min_points:
         return d
     if any(closed for _, closed in subs):
         scale = max(scale, CLOSED_SCALE)
@@ -399,7 +400,9 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
             if name in el.attrib:
                 value = el.attrib[name]
                 if name == "d":
-                    el.set(name, _compact_path(value))
+                    # a two-point data line (a fitted slope, a floor) too; not a marker's
+                    # shape (defined once, with an id), whose tenths of a point matter
+                    el.set(name, _compact_path(value, 3 if "id" in el.attrib else 2))
                 elif whole and name in ("x", "y") and re.fullmatch(r"-?[\d.]+", value.strip()):
                     el.set(name, str(round(float(value))))
                 else:
