@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import gzip
 import io
+import math
 import re
 
 import numpy as np
@@ -25,17 +26,29 @@ from harness.report.sizes import report_sizes, section_totals
 
 
 def _absolute_points(d: str) -> list[tuple[float, float]]:
-    """The points of an M/L path (absolute or relative, implicit repeats) in absolute numbers."""
-    points, x, y, cmd = [], 0.0, 0.0, ""
-    for letter, nums in re.findall(r"([MLml])([^MLml]*)", d):
+    """The points of a path of moves, lines, horizontal/vertical lines and closes (absolute or
+    relative, implicit repeats) in absolute numbers (a close adds nothing)."""
+    points, x, y, sx, sy = [], 0.0, 0.0, 0.0, 0.0
+    for letter, nums in re.findall(r"([MLHVZmlhvz])([^MLHVZmlhvz]*)", d):
         values = [float(v) for v in re.findall(r"-?(?:\d+\.?\d*|\.\d+)", nums)]
-        for k in range(0, len(values), 2):
-            c = letter if k == 0 else ("l" if letter in "ml" else "L")
-            dx, dy = values[k], values[k + 1]
-            x, y = (x + dx, y + dy) if c.islower() else (dx, dy)
+        if letter in "Zz":
+            x, y = sx, sy
+            continue
+        step = 1 if letter in "HVhv" else 2
+        for k in range(0, len(values), step):
+            c = letter if k == 0 else {"M": "L", "m": "l"}.get(letter, letter)
+            rel = c.islower()
+            if c in "Hh":
+                x = x + values[k] if rel else values[k]
+            elif c in "Vv":
+                y = y + values[k] if rel else values[k]
+            else:
+                dx, dy = values[k], values[k + 1]
+                x, y = (x + dx, y + dy) if rel else (dx, dy)
+            if c in "Mm":
+                sx, sy = x, y
             points.append((round(x, 6), round(y, 6)))
-            cmd = c
-    assert cmd
+    assert points
     return points
 
 
@@ -43,6 +56,7 @@ def _absolute_points(d: str) -> list[tuple[float, float]]:
     "M10 20L11.5 19.5L12 22M30 30L31 31",
     "M0.1 0.9L0.2 0.8L-3.4 5L-3.4 5.1L100 0",
     "M5 5L5 5L5 5",
+    "M10 10L20 10L20 30L10 10",
 ])
 def test_relative_paths_draw_the_same_points(d):
     for scale in (1, 10):  # whole points, tenths
@@ -52,6 +66,36 @@ def test_relative_paths_draw_the_same_points(d):
         # zero-length steps are dropped; every point drawn is the exact one, rounded
         assert [p for k, p in enumerate(exact) if k == 0 or p != exact[k - 1]] == drawn
         assert len(short) <= len(d)
+
+
+def test_closed_shapes_keep_tenths_and_return_to_their_start():
+    d = "M54 230.4L291.6 230.4L291.6 36L54 36zM10 10L20 10L20 20z"
+    short = _relative_path(d, 1)
+    assert short == "M54 230.4h237.6v-194.4h-237.6zm-44-220.4h10v10z"
+    assert _absolute_points(short) == _absolute_points(d)
+
+
+def _distance_to_polyline(p, line) -> float:
+    best = math.inf
+    for (ax, ay), (bx, by) in zip(line, line[1:], strict=False):
+        dx, dy = bx - ax, by - ay
+        t = 0.0 if dx == dy == 0 else max(0.0, min(1.0, ((p[0] - ax) * dx + (p[1] - ay) * dy)
+                                                    / (dx * dx + dy * dy)))
+        best = min(best, math.hypot(p[0] - ax - t * dx, p[1] - ay - t * dy))
+    return best
+
+
+def test_thinned_lines_stay_within_the_tolerance_of_every_point():
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.uniform(0.5, 3, 200))
+    y = 100 + np.cumsum(rng.normal(0, 0.3, 200))
+    d = "M" + "L".join(f"{a:.2f} {b:.2f}" for a, b in zip(x, y, strict=True))
+    thin = _relative_path(d, 1, tolerance=0.4)
+    drawn = _absolute_points(thin)
+    assert len(drawn) < 150
+    assert drawn[0] == (round(x[0]), round(y[0])) and drawn[-1] == (round(x[-1]), round(y[-1]))
+    # every original point: within the tolerance plus the rounding to whole points
+    assert max(_distance_to_polyline(p, drawn) for p in zip(x, y, strict=True)) <= 0.4 + 0.71
 
 
 def test_other_paths_are_left_as_they_are():

@@ -324,16 +324,21 @@ def write_report(
                 f"{totals.get('cells', 0)} cells ({totals.get('computed', 0)} computed, "
                 f"{totals.get('cached', 0)} from cache, {totals.get('failed', 0)} failed) in "
                 f"{len(meta.get('experiments', {}))} experiments.")
-    from harness.report.figure_svg import page_css
+    import dataclasses
 
-    figure_css = page_css(b.figure for sec in sections for b in sec.blocks if b.figure is not None)
-    html = render_html({
+    from harness.report.figure_svg import page_css, short_classes, short_ids
+
+    blocks = [b for sec in sections for b in sec.blocks if b.figure is not None]
+    svgs, figure_css = short_classes([b.figure.svg for b in blocks], page_css(b.figure for b in blocks))
+    for b, svg in zip(blocks, svgs, strict=True):
+        b.figure = dataclasses.replace(b.figure, svg=svg)
+    html = short_ids(render_html({
         "sections": sections, "figure_css": figure_css, "run_id": stored.run_id,
         "generated": meta.get("created_utc", ""),
         "commit": git.get("short_sha") or "unknown", "dirty": bool(git.get("dirty")),
         "mode": "quick mode (CI-sized settings)" if view.quick else "full settings",
         "headline": headline, "version": __version__, "results_path": str(stored.path),
-    })
+    }))
     verdicts_csv = counts["verdicts"].drop(columns=["anchor"]).to_csv(index=False)
     path = _write_report(root, stored.run_id, html, {VERDICTS_FILE: verdicts_csv})
     _say(bar, f"sections built in {t_sections:.1f} s; {counts['checked']} claims checked, "

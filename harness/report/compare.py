@@ -156,11 +156,12 @@ def compare_runs(view: RunView, verdicts: pd.DataFrame, previous: Previous) -> C
                 bound = _moved(m, rec, x, x0)
                 if bound:
                     values = [rec.get(c) for c in key]
+                    row = [rec.get(c) for c in spec.row_key] if spec.row_key else values
                     moved.append({"experiment": name, "stepper": rec.get("stepper", ""),
                                   "problem": rec.get("problem", ""),
                                   "where": ", ".join(str(v) for v in values[2:]), "figure": m.label,
                                   "before": x0, "after": x, "bound": bound,
-                                  "href": "#" + anchor(name, *values)})
+                                  "href": "#" + anchor(name, *row)})
     moved_df = pd.DataFrame(moved, columns=["experiment", "stepper", "problem", "where", "figure",
                                             "before", "after", "bound", "href"])
     only_then, only_now = len(a.index.difference(b.index)), len(b.index.difference(a.index))

@@ -23,6 +23,9 @@ FAIL, PASS, NONE = "fail", "pass", "none"
 MARK = {FAIL: "✗ FAIL", PASS: "✓ pass", NONE: "– not measured"}
 # Columns whose text is a reason: written once per table as a numbered note.
 NOTE_COLUMNS = ("message", "reason")
+# Columns of folded tables whose value is written once per run of equal rows (the rows of one
+# problem follow each other); a row a link points to shows it in full.
+DITTO_COLUMNS = ("problem", "h", "steps", "states")
 # Columns never shown in a generic table (bookkeeping, not measurement).
 HIDDEN_COLUMNS = ("wall_s", "ensemble_size", "params", "key")
 
@@ -59,6 +62,8 @@ class Table:
     notes: list[tuple[int, str]] = field(default_factory=list)
     # folded tables are rendered inside <details> with the caption as summary
     folded: bool = False
+    # columns (indices) whose cell is left blank where it repeats the row above (folded tables)
+    ditto: list[int] = field(default_factory=list)
 
 
 @dataclass
@@ -146,8 +151,16 @@ def fmt(x: Any, digits: int = 3) -> str:
     if math.isinf(v):
         return "unbounded" if v > 0 else "-inf"
     if v != 0 and (abs(v) < 1e-3 or abs(v) >= 1e5):
-        return f"{v:.{max(digits - 1, 0)}e}"
-    return f"{v:.{digits}g}"
+        # 4.63e-4, 1.31e5: the exponent without its padding zero and plus sign (thousands of
+        # table cells)
+        mantissa, exponent = f"{v:.{max(digits - 1, 0)}e}".split("e")
+        if "." in mantissa:  # trailing zeros go, as in the plain numbers' `g` format
+            mantissa = mantissa.rstrip("0").rstrip(".")
+        return mantissa + _EXPONENT.sub(r"e\1\2", "e" + exponent)
+    return _EXPONENT.sub(r"e\1\2", f"{v:.{digits}g}")  # `g` writes 1e+04 for 10000 at 3 digits
+
+
+_EXPONENT = re.compile(r"e\+?(-?)0*(\d)")
 
 
 def is_missing(v: Any) -> bool:
@@ -168,20 +181,30 @@ def text_cell(x: Any, digits: int = 3, cls: str = "", href: str = "") -> TextCel
     return TextCell(fmt(x, digits), cls=cls or ("num" if numeric else ""), href=href)
 
 
-def status_cell(passed: Any) -> TextCell:
-    if is_missing(passed):
-        return TextCell(MARK[NONE], cls="status none")
-    if bool(passed):
-        return TextCell(MARK[PASS], cls="status pass")
-    return TextCell(MARK[FAIL], cls="status fail")
+# Status cells of folded per-cell tables (thousands of rows): one short class each.
+# (a pass or a failure needs none: the table's `st` class colours its first column, the row's
+# `failing` class says which)
+FOLDED_STATUS_CLASS = {FAIL: "", PASS: "", NONE: "sn"}
+
+
+# ... and their marks: a failure spelled out, a pass or nothing measured as its sign alone (the
+# colour and the column say the rest).
+FOLDED_MARK = {FAIL: MARK[FAIL], PASS: "✓", NONE: "–"}
+
+
+def status_cell(passed: Any, folded: bool = False) -> TextCell:
+    status = NONE if is_missing(passed) else (PASS if bool(passed) else FAIL)
+    if folded:
+        return TextCell(FOLDED_MARK[status], cls=FOLDED_STATUS_CLASS[status])
+    return TextCell(MARK[status], cls=f"status {status}")
 
 
 def anchor(*parts: Any) -> str:
-    """A stable, safe HTML id for a table row: readable slug plus a short hash of the exact
-    key (names from plugins may hold any character)."""
+    """A stable, safe HTML id for a table row: a short hash of the exact key (names from
+    plugins may hold any character)."""
     key = "\x1f".join(str(p) for p in parts)
-    slug = re.sub(r"[^a-z0-9]+", "-", key.lower()).strip("-")[:16]  # every link repeats it
-    return f"r-{slug}-{hashlib.sha1(key.encode()).hexdigest()[:6]}"
+    # a short hash only: every link repeats it (hundreds in the scoreboard)
+    return f"r-{hashlib.sha1(key.encode()).hexdigest()[:10]}"
 
 
 def first_sentence(text: Any, limit: int = 220) -> str:
@@ -197,6 +220,8 @@ def first_sentence(text: Any, limit: int = 220) -> str:
 # Significant digits of the numbers in a figure's CSV: what the figure shows and more (the full
 # precision is in the run's saved tables, results/<run id>/).
 CSV_DIGITS = 4
+# ... and of wall times (seconds), which vary by more than that from run to run.
+WALL_DIGITS = 2
 
 
 def csv_download(df: pd.DataFrame | None, filename: str) -> Download | None:
@@ -206,6 +231,10 @@ def csv_download(df: pd.DataFrame | None, filename: str) -> Download | None:
     no date, so a report's bytes depend on its data only."""
     if df is None or not len(df.columns):
         return None
+    timed = [c for c in df.columns if str(c) == "wall_s" or str(c).endswith("_wall_s")]
+    if timed:  # a wall time on a shared machine is good to a few per cent: two digits
+        df = df.assign(**{c: pd.to_numeric(df[c], errors="coerce").map(
+            lambda v: float(f"{v:.{WALL_DIGITS}g}") if np.isfinite(v) else v) for c in timed})
     text = df.to_csv(index=False, float_format=f"%.{CSV_DIGITS}g", lineterminator="\n")
     packed = gzip.compress(text.encode("utf-8"), compresslevel=9, mtime=0)
     uri = "data:application/gzip;base64," + base64.b64encode(packed).decode("ascii")
@@ -227,7 +256,8 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
     if sort_failing and status and status in df and len(df):
         k = df[status].map(lambda v: 0 if (not is_missing(v) and not bool(v)) else 1)
         df = df.assign(_k=k).sort_values("_k", kind="stable").drop(columns="_k")
-    headers = ([""] if status else []) + [h for _, h in columns]
+    headers = ([""] if status else []) + [f"{h} (note)" if folded and c in NOTE_COLUMNS else h
+                                          for c, h in columns]
     # short: every note reference repeats it
     table_id = id or (f"t-{hashlib.sha1(f'{experiment}{caption}'.encode()).hexdigest()[:6]}"
                       if experiment else "")
@@ -238,7 +268,7 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
         rcls = ""
         if status:
             v = rec.get(status)
-            cells.append(status_cell(v))
+            cells.append(status_cell(v, folded))
             if not is_missing(v) and not bool(v):
                 rcls = "failing"
         for col, _ in columns:
@@ -247,7 +277,7 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
                 text = "" if is_missing(v) else " ".join(str(v).split())
                 if text:
                     n = notes.setdefault(text, len(notes) + 1)
-                    cells.append(TextCell(f"note {n}", cls="noteref",
+                    cells.append(TextCell(f"note {n}" if not folded else str(n), cls="" if folded else "nr",
                                           href=f"#{table_id}-n{n}" if table_id else ""))
                 else:
                     cells.append(TextCell(""))
@@ -255,9 +285,63 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
                 c = text_cell(v, digits, href=str(rec.get(links[col]) or "") if col in links else "")
                 if folded and c.cls == "num":  # folded tables align numbers by their own CSS
                     c.cls = ""
+                if folded and c.text == "—" and not c.href and col not in DITTO_COLUMNS:
+                    c.text = ""  # nothing measured: an empty cell (a blank ditto cell repeats)
                 cells.append(c)
         rid = anchor(experiment, *(rec.get(c, "") for c in key)) if experiment else ""
         rows.append(Row(cells, cls=rcls, id=rid))
+    ditto = []
+    if folded:
+        for k, (col, _) in enumerate(columns):
+            if col in DITTO_COLUMNS:
+                ditto.append(k + (1 if status else 0))
+        if ditto:
+            named = [headers[k] for k in ditto]
+            shown = ", ".join(named[:-1]) + (" or " if len(named) > 1 else "") + named[-1]
+            caption = (f"{caption} (a blank {shown} cell: as in the row above; a blank elsewhere: "
+                       "nothing measured)")
+    if folded and status:
+        cls = f"{cls} st".strip()
     return Table(caption, headers, rows, cls=cls, id=table_id,
-                 notes=[(n, t) for t, n in notes.items()], folded=folded)
+                 notes=[(n, t) for t, n in notes.items()], folded=folded, ditto=ditto)
 
+
+def drop_unlinked_row_ids(sections: Sequence[Section]) -> int:
+    """Clear the id of every folded table's row that no link of the page points to (a row id
+    costs ~20 bytes, over thousands of rows; the rows that the scoreboard, the verdict list or
+    the changed-since section link to keep theirs), and blank the cells that repeat the row
+    above (`Table.ditto`). Returns how many ids were cleared."""
+    linked: set[str] = set()
+    for sec in sections:
+        for b in sec.blocks:
+            linked.update(h[1:] for _, h in b.items if h.startswith("#"))
+            if b.table is not None:
+                for r in b.table.rows:
+                    for c in r.cells:
+                        if c.href.startswith("#"):
+                            linked.add(c.href[1:])
+                        linked.update(h[1:] for _, h in c.parts if h.startswith("#"))
+    cleared = 0
+    for sec in sections:
+        for b in sec.blocks:
+            if b.table is not None and b.table.folded:
+                for r in b.table.rows:
+                    if r.id and r.id not in linked:
+                        r.id = ""
+                        cleared += 1
+                _blank_repeats(b.table)
+    return cleared
+
+
+def _blank_repeats(table: Table) -> None:
+    """Blank the `ditto` cells that repeat the row above (not in a row a link points to)."""
+    for k in table.ditto:
+        previous = None
+        for r in table.rows:
+            if k >= len(r.cells):
+                continue
+            c = r.cells[k]
+            text = c.text
+            if text == previous and not r.id and not c.href and not c.parts:
+                r.cells[k] = TextCell("", cls=c.cls)
+            previous = text

@@ -25,6 +25,7 @@ from harness.report.sections import (
     anchor,
     df_table,
     fmt,
+    is_missing,
     register_section,
     yes_no,
 )
@@ -32,11 +33,26 @@ from harness.report.sections import (
 __all__: list[str] = []
 
 
+def _split(view: RunView, table: pd.DataFrame, column: str) -> dict:
+    """`table`'s rows by their value of `column`, split once per table and view (sections ask
+    for one stepper's or one problem's rows many times; a boolean mask each time scans all)."""
+    cache = view.__dict__.setdefault("_splits", {})
+    key = (id(table), column)
+    if key not in cache:
+        cache[key] = (table, dict(tuple(table.groupby(column, sort=False))) if column in table else {})
+    return cache[key][1]
+
+
+def _part(view: RunView, table: pd.DataFrame, column: str, value: object) -> pd.DataFrame:
+    part = _split(view, table, column).get(value)
+    return part if part is not None else table.iloc[0:0]
+
+
 def _rows_of(view: RunView, name: str, stepper: str) -> pd.DataFrame:
     s = view.summary(name)
     if s.empty or "stepper" not in s:
         return s
-    return s[s["stepper"] == stepper]
+    return _part(view, s, "stepper", stepper)
 
 
 def _problems_in(view: RunView, table: pd.DataFrame) -> list[str]:
@@ -93,7 +109,8 @@ def _evals_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bo
     rows = view.rowtable("convergence")
     if rows.empty or not {"kind", "stepper", "n_steps"} <= set(rows.columns):
         return [(f"{declared} / —", "")], False
-    g = rows[(rows["stepper"] == stepper) & (rows["kind"] == "global")]
+    g = _part(view, rows, "stepper", stepper)
+    g = g[g["kind"] == "global"]
     if "message" in g:  # a failed step counts no evaluations
         g = g[g["message"].fillna("").astype(str) == ""]
     if "error" in g:
@@ -126,18 +143,19 @@ def _evals_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bo
 def convergence(view: RunView, sec: Section) -> None:
     rows = view.rowtable("convergence")
     judged = _convergence_judged(view)
+    sec.note("Each figure: error against h, markers at the two ends of the range the order fit "
+             "used, the thin line alone beyond them where points were excluded (pre-asymptotic, "
+             "roundoff or reference floor; the CSV says which point is which); dashed, the fitted "
+             "slope over that range; dotted, the reference floor.")
     for problem in _problems_in(view, judged):
-        g = rows[rows["problem"] == problem] if "problem" in rows else pd.DataFrame()
-        ref = judged.loc[judged["problem"] == problem, "reference_error"].astype(float)
+        g = _part(view, rows, "problem", problem) if "problem" in rows else pd.DataFrame()
+        ref = _part(view, judged, "problem", problem)["reference_error"].astype(float)
         ref_err = float(ref.max()) if len(ref) and np.isfinite(ref).any() else None
         if len(g):
             glob = g[g["kind"] == "global"] if "kind" in g else g
             same = [" = ".join([k, *v]) for k, v in F.same_curves(glob).items() if v] if len(glob) else []
             sec.figure(F.convergence_figure(problem, g, view.palette, ref_err),
-                       f"Error against h on {problem}: markers at the two ends of the range the "
-                       "order fit used, the thin line alone beyond them where points were excluded "
-                       "(pre-asymptotic, roundoff or reference floor; the CSV says which point is "
-                       "which); dashed, the fitted slope over that range; dotted, the reference floor."
+                       f"Error against h on {problem}."
                        + (f" Identical curves drawn once: {'; '.join(same)}." if same else ""))
     cols = [("stepper", "stepper"), ("problem", "problem"), ("claimed_order", "claimed"),
             ("measured_order", "measured"), ("order_ci_low", "95% CI low"),
@@ -215,7 +233,7 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
     within = [] if s.empty else [
         (bool(np.isfinite(float(r["return_error_ulps"]))
               and float(r["return_error_ulps"]) <= float(r["rounding_bound_ulps"])),
-         anchor("reversibility", stepper, r["problem"], r["steps"])) for r in s.to_dict("records")]
+         anchor("reversibility", stepper, r["problem"])) for r in s.to_dict("records")]
     return _claimed_measured(view, "reversibility", stepper, bool(getattr(info, "symmetric", False)), within)
 
 
@@ -225,7 +243,7 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
            "of the rounding bound (what rounding alone explains), against N. A method claimed "
            "symmetric (solid) must stay under the dotted line at 1 on every problem; one not "
            "claimed symmetric (dashed) must stay above it."),
-    key=("stepper", "problem", "steps"),
+    key=("stepper", "problem", "steps"), row_key=("stepper", "problem"),
     measures=(Measure("return_error_ulps", "return error (ulps)", factor=tol.REPORT_CHANGE_ROUNDING),),
     score=(ScoreColumn("reversible claimed / measured", _reversible_score),),
 )
@@ -236,12 +254,61 @@ def reversibility(view: RunView, sec: Section) -> None:
                "Return error over the rounding bound against N, every problem in one figure: for "
                "each method the worst case against its claim (largest ratio over the problems if "
                "claimed symmetric, smallest if not). Each problem's values: the CSV and the table.")
-    cols = [("stepper", "stepper"), ("problem", "problem"), ("steps", "N"), ("h", "h"),
-            ("return_error_ulps", "return error (ulps)"), ("rounding_bound_ulps", "rounding bound (ulps)"),
-            ("claimed_symmetric", "claimed symmetric"), ("growth_exponent", "growth exponent"),
-            ("verdict", "verdict"), ("message", "why")]
-    sec.table(df_table(summ, cols, f"Per round trip: {len(summ)} rows", experiment="reversibility",
-                       key=("stepper", "problem", "steps")))
+    cols = [("stepper", "stepper"), ("problem", "problem"), ("h", "h"),
+            ("claimed_symmetric", "claimed symmetric"), ("steps", "N"),
+            ("return_error_ulps", "return error (ulps), per N"),
+            ("rounding_bound_ulps", "rounding bound (ulps), per N"),
+            ("growth_exponent", "growth exponent"), ("verdict", "verdict, per N"), ("message", "why")]
+    folded = fold_per_n(summ)
+    sec.table(df_table(folded, cols, f"Per stepper and problem: {len(summ)} round trips in "
+                       f"{len(folded)} rows, the values of each N in order",
+                       experiment="reversibility", key=("stepper", "problem")))
+
+
+def _steps_text(n: object) -> str:
+    """A step count as a reader takes it in: 10⁴ for a power of ten, else the integer."""
+    try:
+        k = int(n)  # type: ignore[call-overload]
+    except (TypeError, ValueError):
+        return fmt(n)
+    e = len(str(k)) - 1
+    if k >= 100 and k == 10 ** e:
+        return "10" + str(e).translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))
+    return str(k)
+
+
+def fold_per_n(summ: pd.DataFrame) -> pd.DataFrame:
+    """Reversibility rows folded to one per (stepper, problem): the per-N figures listed in the
+    order of N (`steps`), one verdict word when every N has the same, the reasons of the Ns
+    joined; `passed` False when any N failed, True when all that were judged passed. Every
+    value of every round trip stays (and each is in the figure's CSV at full precision)."""
+    if summ.empty or not {"stepper", "problem", "steps"} <= set(summ.columns):
+        return summ
+    groups: dict[tuple, list[dict]] = {}
+    for rec in summ.to_dict("records"):
+        groups.setdefault((rec["stepper"], rec["problem"]), []).append(rec)
+    out = []
+    for (stepper, problem), recs in groups.items():
+        recs.sort(key=lambda r: float(r["steps"]))
+        ns = [_steps_text(r["steps"]) for r in recs]
+        judged = [bool(r["passed"]) for r in recs if not is_missing(r.get("passed"))]
+        verdicts = [str(r.get("verdict", "")) for r in recs]
+        reasons = [(n, " ".join(str(r.get("message") or "").split())) for n, r in zip(ns, recs, strict=True)]
+        reasons = [(n, m) for n, m in reasons if m and m != "nan"]
+        if len({m for _, m in reasons}) == 1 and len(reasons) == len(recs):
+            why = reasons[0][1]
+        else:
+            why = "; ".join(f"N = {n}: {m}" for n, m in reasons)
+        first = recs[0]
+        out.append({
+            "stepper": stepper, "problem": problem, "h": first.get("h"),
+            "claimed_symmetric": first.get("claimed_symmetric"), "steps": ", ".join(ns),
+            "return_error_ulps": ", ".join(fmt(r.get("return_error_ulps")) for r in recs),
+            "rounding_bound_ulps": ", ".join(fmt(r.get("rounding_bound_ulps")) for r in recs),
+            "growth_exponent": first.get("growth_exponent"),
+            "verdict": verdicts[0] if len(set(verdicts)) == 1 else ", ".join(verdicts),
+            "passed": (all(judged) if judged else None), "message": why})
+    return pd.DataFrame(out)
 
 
 def _energy_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bool]:
@@ -271,16 +338,18 @@ def energy(view: RunView, sec: Section) -> None:
     summ = view.summary("energy")
     symplectic = view.flag("symplectic")
     for problem in _problems_in(view, summ):
-        g = rows[rows["problem"] == problem]
-        s = summ[summ["problem"] == problem]
+        g = _part(view, rows, "problem", problem)
+        s = _part(view, summ, "problem", problem)
         sec.figure(F.energy_figure(problem, g, view.palette, symplectic,
                                    classes=dict(zip(s["stepper"], s["drift_class"], strict=True))),
-                   f"Relative energy error on {problem}, by drift class.")
+                   f"Relative energy error on {problem}, by drift class; solid: symplectic "
+                   "steppers, dashed: the others.")
         if "quantity" in g and (g["quantity"] == "angular_momentum").any():
             sec.figure(F.angular_momentum_figure(
                 problem, g, view.palette, symplectic,
                 classes=dict(zip(s["stepper"], s["angular_momentum_class"], strict=True))),
-                f"Relative change of the angular momentum on {problem}, with the rounding bound of "
+                f"Relative change of the angular momentum on {problem} (solid: symplectic "
+                f"steppers, dashed: the others), with the rounding bound of "
                 f"a method that conserves it exactly ({tol.ANGULAR_MOMENTUM_ROUNDING_ULPS:g} ulp per step).")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("h", "h"), ("steps", "steps"),
             ("claimed_symplectic", "claimed symplectic"), ("drift_class", "drift class"),
@@ -323,34 +392,44 @@ def symplecticity(view: RunView, sec: Section) -> None:
 
 # -- work-precision -------------------------------------------------------------------------------
 def _work_table(summ: pd.DataFrame) -> pd.DataFrame:
-    out = []
-    for (stepper, problem), g in summ.groupby(["stepper", "problem"], sort=False):
-        err = g["error"].astype(float)
-        evals = g["rhs_evals"].astype(float) if "rhs_evals" in g else pd.Series(np.nan, index=g.index)
-        wall = g["wall_s"].astype(float) if "wall_s" in g else pd.Series(np.nan, index=g.index)
-        finite = np.isfinite(err)
-        rec = {"stepper": stepper, "problem": problem,
-               "kind": str(g["kind"].iloc[0]) if "kind" in g else "",
-               "points": int(len(g)), "lowest_error": math.nan, "evals_at_lowest": math.nan,
-               "evals_to_target": math.nan, "wall_to_target": math.nan,
-               "unit": str(g["evals_unit"].iloc[0]) if "evals_unit" in g else ""}
-        if finite.any():
-            k = err[finite].idxmin()
-            rec.update(lowest_error=float(err[k]), evals_at_lowest=float(evals[k]))
-            hit = g[finite & (err <= F.WORK_TARGET_ERROR)]
-            if len(hit):
-                j = evals[hit.index].idxmin()
-                rec.update(evals_to_target=float(evals[j]), wall_to_target=float(wall[j]))
-        out.append(rec)
-    return pd.DataFrame(out)
+    """One row per (stepper, problem) of the work-precision summary: its sweep kind, number of
+    points, lowest error and the evaluations there, and the evaluations and wall time of the
+    cheapest point at or below WORK_TARGET_ERROR (grouped operations: thousands of rows)."""
+    keys = ["stepper", "problem"]
+    cols = ["stepper", "problem", "kind", "points", "lowest_error", "evals_at_lowest",
+            "evals_to_target", "wall_to_target", "unit"]
+    if summ.empty:
+        return pd.DataFrame(columns=cols)
+    nan = pd.Series(np.nan, index=summ.index)
+    df = pd.DataFrame({
+        "stepper": summ["stepper"], "problem": summ["problem"],
+        "kind": summ["kind"].astype(str) if "kind" in summ else "",
+        "unit": summ["evals_unit"].astype(str) if "evals_unit" in summ else "",
+        "err": summ["error"].astype(float),
+        "evals": summ["rhs_evals"].astype(float) if "rhs_evals" in summ else nan,
+        "wall": summ["wall_s"].astype(float) if "wall_s" in summ else nan})
+    grouped = df.groupby(keys, sort=False)
+    out = grouped.agg(kind=("kind", "first"), points=("err", "size"), unit=("unit", "first"))
+    finite = df[np.isfinite(df["err"])]
+    lowest = finite.loc[finite.groupby(keys, sort=False)["err"].idxmin()].set_index(keys)
+    out["lowest_error"] = lowest["err"]
+    out["evals_at_lowest"] = lowest["evals"]
+    hit = finite[(finite["err"] <= F.WORK_TARGET_ERROR) & finite["evals"].notna()]
+    cheapest = hit.loc[hit.groupby(keys, sort=False)["evals"].idxmin()].set_index(keys)
+    out["evals_to_target"] = cheapest["evals"]
+    out["wall_to_target"] = cheapest["wall"]
+    out = out.reset_index()
+    out["points"] = out["points"].astype(int)
+    return out[cols]
 
 
 @register_section(
     "work-precision", title="Work–precision",
     intro=("Error at the final time against the work spent — right-hand-side (or force) "
-           "evaluations, and wall time — over a step-size sweep (fixed-step methods) or a "
-           "tolerance sweep (adaptive ones, dashed). Lower and further left is better; the best "
-           "method of each family (fewest evaluations to reach the target error) is drawn bold."),
+           "evaluations — over a step-size sweep (fixed-step methods) or a tolerance sweep "
+           "(adaptive ones, dashed); the wall time each needs is in the table and the CSVs. "
+           "Lower and further left is better; the best method of each family (fewest "
+           "evaluations to reach the target error) is drawn bold."),
     measures=(Measure("evals_to_target", "evaluations to reach the target error",
                       rtol=tol.REPORT_CHANGE_RTOL),),
 )
@@ -361,13 +440,14 @@ def work_precision(view: RunView, sec: Section) -> None:
     if "error" not in rows:
         sec.note("The work-precision rows have no `error` column; nothing to draw.", cls="warning")
         return
+    sec.note(f"Each figure: error against evaluations on one problem; bold, the best of each "
+             f"family (fewest evaluations to reach {F.WORK_TARGET_ERROR:g}), faint, the others. "
+             "Wall times (they depend on this machine and its load, see Provenance): the table "
+             "below to reach the target, every point's in the figure's CSV.")
     for problem in _problems_in(view, rows):
-        sec.figure(F.work_precision_figure(problem, rows[rows["problem"] == problem], view.palette,
+        sec.figure(F.work_precision_figure(problem, _part(view, rows, "problem", problem), view.palette,
                                            adaptive),
-                   f"Error against evaluations (left) and wall time (right) on {problem}; bold: the "
-                   f"best of each family (fewest evaluations to reach {F.WORK_TARGET_ERROR:g}), "
-                   "faint (left only): the others. Wall times depend on this machine and its load "
-                   "(see Provenance); every method's are in the CSV.")
+                   f"Error against evaluations on {problem}.")
     summ = view.summary(name)
     if len(summ) and {"stepper", "problem", "error"} <= set(summ.columns):
         table = _work_table(summ)

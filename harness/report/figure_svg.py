@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import hashlib
 import io
+import math
 import re
 import xml.etree.ElementTree as ET
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,7 +21,8 @@ import pandas as pd
 
 from harness.report.figure_style import RC_PARAMS
 
-__all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS"]
+__all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS", "page_css", "short_classes",
+           "short_ids"]
 
 # Coordinates in the SVG are rounded to this many decimals of a point (1/10 pt is far below
 # what a screen shows; the full-precision numbers are in each figure's CSV).
@@ -52,10 +54,12 @@ class Figure:
 
     def standalone(self) -> str:
         """The SVG with its style rules inside (for use outside the report page)."""
+        svg = self.svg if "xmlns=" in self.svg.split(">", 1)[0] else \
+            self.svg.replace("<svg", '<svg xmlns="http://www.w3.org/2000/svg"', 1)
         if not self.css:
-            return self.svg
-        head_end = self.svg.find(">") + 1
-        return f"{self.svg[:head_end]}<style>{self.css}</style>{self.svg[head_end:]}"
+            return svg
+        head_end = svg.find(">") + 1
+        return f"{svg[:head_end]}<style>{self.css}</style>{svg[head_end:]}"
 
 
 def page_css(figures: Iterable[Figure]) -> str:
@@ -70,6 +74,58 @@ def page_css(figures: Iterable[Figure]) -> str:
         raise UnsafeFigureError("figure style rules hold a '<'")
     return css
 
+
+
+_CLASS = re.compile(r'(?<=class=")k[0-9a-f]{7}(?=")|(?<=^\.)k[0-9a-f]{7}(?=\{)|(?<=\}\.)k[0-9a-f]{7}(?=\{)')
+# lower case only: class names are case-insensitive in a page without a doctype (quirks mode)
+_DIGITS = "0123456789abcdefghijklmnopqrstuvwxyz"
+
+
+def _short_name(i: int) -> str:
+    out = ""
+    while True:
+        i, r = divmod(i, len(_DIGITS))
+        out = _DIGITS[r] + out
+        if i == 0:
+            return "z" + out
+        i -= 1
+
+
+def short_classes(svgs: Sequence[str], css: str) -> tuple[list[str], str]:
+    """The page's figures and their style rules with each hashed class name (`k` + 7 hex
+    digits, thousands of uses) replaced by a short one, the most used shortest: `z` and one to
+    three letters or digits (no class of the page's own stylesheet starts with `z`)."""
+    counts: dict[str, int] = {}
+    for text in svgs:
+        for m in _CLASS.finditer(text):
+            counts[m.group(0)] = counts.get(m.group(0), 0) + 1
+    for m in _CLASS.finditer(css):
+        counts.setdefault(m.group(0), 0)
+    names = {c: _short_name(i) for i, c in enumerate(sorted(counts, key=lambda c: (-counts[c], c)))}
+
+    def sub(text: str) -> str:
+        return _CLASS.sub(lambda m: names[m.group(0)], text)
+
+    return [sub(t) for t in svgs], sub(css)
+
+
+_FIGURE_ID = re.compile(r'(id="|href="#|url\(#)(f[0-9a-f]{5}i\d+)(?=[")])')
+
+
+def short_ids(html: str) -> str:
+    """The page with every figure's ids (salted per figure so they are unique on the page:
+    `f` + 5 hex digits + `i` + a number, repeated by every marker and clip reference) replaced
+    by short page-wide ones (`y` + letters or digits), none taken by another id of the page."""
+    found = list(dict.fromkeys(m.group(2) for m in _FIGURE_ID.finditer(html) if m.group(1) == 'id="'))
+    taken = set(re.findall(r'\bid="([^"]+)"', html)) - set(found)
+    names: dict[str, str] = {}
+    i = 0
+    for old in found:
+        while (name := "y" + _short_name(i)[1:]) in taken:
+            i += 1
+        names[old] = name
+        i += 1
+    return _FIGURE_ID.sub(lambda m: m.group(1) + names.get(m.group(2), m.group(2)), html)
 
 
 # -- SVG output -----------------------------------------------------------------------------------
@@ -127,6 +183,9 @@ def to_svg(fig: Any, slug: str, alt: str, data: pd.DataFrame | None = None) -> F
                   text[:head_end], count=1)
     text = head + text[head_end:]
     text = text.replace("<svg", f'<svg role="img" class="figure" data-slug="{_attr(slug)}"', 1)
+    # inline in HTML, an <svg> needs neither its namespace nor a version (`standalone` output
+    # puts the namespace back)
+    text = text.replace(f' xmlns="{_NS}"', "", 1).replace(' version="1.1"', "", 1)
     return Figure(slug=slug, svg=text, alt=alt, data=data, css=css)
 
 
@@ -143,9 +202,10 @@ def _round_numbers(text: str) -> str:
     return _NUMBER.sub(one, text)
 
 
-def _compact_path(d: str) -> str:
+def _compact_path(d: str, min_points: int = 3) -> str:
     d = _round_numbers(" ".join(d.split()))
-    return _relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d))
+    return _relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d), tolerance=LINE_TOLERANCE,
+                          min_points=min_points)
 
 
 def _dedupe_style(style: str) -> str:
@@ -169,38 +229,132 @@ def _short_number(v: int, scale: int) -> str:
     return f"{sign}{whole if whole else ''}.{frac}"
 
 
-_MOVE_LINE = re.compile(r"([ML])(-?[\d.]+) (-?[\d.]+)")
 # Data lines (paths of three points or more) are drawn to whole points: a point is 1.3 CSS
 # pixels at the figure's own size and less where the page scales it down, so the line looks the
 # same; its numbers are in the figure's CSV.
 LINE_SCALE = 1
+# A data line's vertices closer than this (in points) to the straight line through their
+# neighbours are left out (Douglas-Peucker): a matplotlib line of a few dozen points is never
+# simplified by matplotlib itself, yet runs of nearly collinear points are most of its bytes.
+LINE_TOLERANCE = 0.4
 
 
-def _relative_path(d: str, scale: int = LINE_SCALE) -> str:
-    """A path of absolute moves and lines only (what matplotlib writes for data lines) in
-    relative steps of 1/`scale` point: the points rounded first, so no error accumulates; about
-    half the bytes. Any other path is returned unchanged."""
-    if not d.startswith("M"):
-        return d
-    pieces = _MOVE_LINE.findall(d)
-    if len(pieces) < 3 or sum(len(c) + len(x) + len(y) + 1 for c, x, y in pieces) != len(d):
-        return d
-    out, px, py, last = [], 0, 0, ""
-    for k, (cmd, x, y) in enumerate(pieces):
-        X, Y = round(float(x) * scale), round(float(y) * scale)
-        if k == 0:
-            out.append(f"M{_short_number(X, scale)} {_short_number(Y, scale)}")
+def _simplify(points: list[tuple[int, int]], tolerance: float) -> list[tuple[int, int]]:
+    """Douglas-Peucker: the points whose omission moves the line by more than `tolerance`."""
+    if len(points) < 3:
+        return points
+    keep = [False] * len(points)
+    keep[0] = keep[-1] = True
+    stack = [(0, len(points) - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j <= i + 1:
+            continue
+        (ax, ay), (bx, by) = points[i], points[j]
+        dx, dy = bx - ax, by - ay
+        norm = math.hypot(dx, dy)
+        worst, at = -1.0, i
+        for k in range(i + 1, j):
+            px, py = points[k]
+            dist = (abs(dx * (py - ay) - dy * (px - ax)) / norm if norm
+                    else math.hypot(px - ax, py - ay))
+            if dist > worst:
+                worst, at = dist, k
+        if worst > tolerance:
+            keep[at] = True
+            stack += [(i, at), (at, j)]
+    return [p for p, k in zip(points, keep, strict=True) if k]
+
+
+_COMMAND = re.compile(r"([MLZz])([^MLZz]*)")
+_PAIR = re.compile(r"(-?[\d.]+) (-?[\d.]+)")
+# Closed shapes (filled regions, bars) keep tenths of a point: their edges meet other shapes.
+CLOSED_SCALE = 10
+
+
+def _subpaths(d: str) -> list[tuple[list[tuple[float, float]], bool]] | None:
+    """`d` as (points, closed) sub-paths when it holds only absolute moves, lines (one point
+    each) and closes; None otherwise."""
+    out: list[tuple[list[tuple[float, float]], bool]] = []
+    covered = 0
+    for m in _COMMAND.finditer(d):
+        if m.start() != covered:
+            return None
+        covered = m.end()
+        cmd, args = m.group(1), m.group(2)
+        if cmd in "Zz":
+            if args or not out or out[-1][1]:
+                return None
+            out[-1] = (out[-1][0], True)
+            continue
+        pair = _PAIR.fullmatch(args)
+        if pair is None:
+            return None
+        point = (float(pair.group(1)), float(pair.group(2)))
+        if cmd == "M":
+            out.append(([point], False))
+        elif not out or out[-1][1]:
+            return None
         else:
-            c = cmd.lower()
-            if c == "l" and X == px and Y == py:
+            out[-1][0].append(point)
+    return out if covered == len(d) and out else None
+
+
+def _relative_path(d: str, scale: int = LINE_SCALE, tolerance: float = 0.0, min_points: int = 3) -> str:
+    """A path of absolute moves, lines and closes only (what matplotlib writes for data lines,
+    filled regions and bars) in relative steps of 1/`scale` point (closed sub-paths: of
+    1/CLOSED_SCALE point), horizontal and vertical steps as `h`/`v`: the points rounded first,
+    so no error accumulates; about half the bytes. With `tolerance` (points), each sub-path is
+    thinned by `_simplify`. Any other path, or one of fewer than `min_points` points, is
+    returned unchanged."""
+    subs = _subpaths(d) if d.startswith("M") else None
+    if subs is None or sum(len(p) for p, _ in subs) < min_points:
+        return d
+    if any(closed for _, closed in subs):
+        scale = max(scale, CLOSED_SCALE)
+    out: list[str] = []
+    px = py = 0
+    last = ""
+
+    def put(letter: str, *values: int) -> None:
+        nonlocal last
+        nums = [_short_number(v, scale) for v in values]
+        text = ""
+        # a repeated command (after a move, a line) needs no letter, only a separator
+        implicit = letter == last or (letter == "l" and last == "m")
+        for k, n in enumerate(nums):
+            if k == 0 and not implicit:
+                text += letter + n
+            else:
+                text += ("" if n.startswith("-") else " ") + n
+        out.append(text)
+        last = "l" if letter == "m" else letter
+
+    for points, closed in subs:
+        grid = [(round(x * scale), round(y * scale)) for x, y in points]
+        if tolerance > 0:
+            grid = _simplify(grid, tolerance * scale)
+        sx, sy = grid[0]
+        if not out:
+            out.append(f"M{_short_number(sx, scale)} {_short_number(sy, scale)}")
+            last = "M"  # pairs after an absolute move would be absolute lines: letters needed
+        else:
+            put("m", sx - px, sy - py)
+        px, py = sx, sy
+        for X, Y in grid[1:]:
+            if X == px and Y == py:
                 continue  # a step of zero length draws nothing
-            dx, dy = _short_number(X - px, scale), _short_number(Y - py, scale)
-            # after a move or a line, further pairs are lines: the letter can go
-            implicit = c == "l" and last in ("l", "m")
-            head = ("" if dx.startswith("-") else " ") if implicit else c
-            out.append(f"{head}{dx}{'' if dy.startswith('-') else ' '}{dy}")
-            last = c
-        px, py = X, Y
+            if Y == py:
+                put("h", X - px)
+            elif X == px:
+                put("v", Y - py)
+            else:
+                put("l", X - px, Y - py)
+            px, py = X, Y
+        if closed:
+            out.append("z")
+            last = "z"
+            px, py = sx, sy  # a close returns to the sub-path's start
     return "".join(out)
 
 
@@ -238,12 +392,21 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
     unwrap(root)
     _merge_marker_defs(root)
     _merge_siblings(root)
+    _group_runs(root, "clip-path", _clip_hoistable)
     styles: dict[str, int] = {}
     for el in root.iter():
+        whole = _local(el.tag) in ("text", "use")  # labels and markers: to whole points, as lines
         for name in ("d", "x", "y", "points"):
             if name in el.attrib:
                 value = el.attrib[name]
-                el.set(name, _compact_path(value) if name == "d" else _round_numbers(value))
+                if name == "d":
+                    # a two-point data line (a fitted slope, a floor) too; not a marker's
+                    # shape (defined once, with an id), whose tenths of a point matter
+                    el.set(name, _compact_path(value, 3 if "id" in el.attrib else 2))
+                elif whole and name in ("x", "y") and re.fullmatch(r"-?[\d.]+", value.strip()):
+                    el.set(name, str(round(float(value))))
+                else:
+                    el.set(name, _round_numbers(value))
         tr = el.attrib.get("transform", "")
         if re.fullmatch(r"rotate\(-?0(?:\s[^)]*)?\)", tr):
             del el.attrib["transform"]
@@ -259,6 +422,9 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
         if st in classes:
             del el.attrib["style"]
             el.set("class", classes[st])
+    inherited = {c for st, c in classes.items() if _only_inherited(st)}
+    _group_runs(root, "class", lambda el: _local(el.tag) == "text" and el.attrib.get("class") in inherited,
+                min_run=3)
     for g in root.iter(f"{{{_NS}}}g"):  # a run of markers of one style: the class once, on the group
         kids = list(g)
         first = kids[0].attrib.get("class") if kids else None
@@ -283,11 +449,57 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
     if "xlink:" not in text.split(">", 1)[1]:
         text = text.replace(f' xmlns:xlink="{_XLINK_NS}"', "", 1)
     # shorter ids (every marker use repeats one): salted, since ids are page-wide
-    ids = sorted(set(re.findall(r'\sid="([\w.-]+)"', text)), key=len, reverse=True)
+    ids = sorted(dict.fromkeys(re.findall(r'\sid="([\w.-]+)"', text)), key=len, reverse=True)
     for i, old in enumerate(ids):
         text = text.replace(f'id="{old}"', f'id="{salt}i{i}"').replace(f'"#{old}"', f'"#{salt}i{i}"') \
             .replace(f"url(#{old})", f"url(#{salt}i{i})")
     return text, css
+
+
+# Properties a child takes from its group when it does not set them (and that the one global
+# rule matplotlib writes, for stroke joins and caps, does not set on every element).
+_INHERITED = {"fill", "fill-opacity", "font", "font-family", "font-size", "font-style", "font-weight",
+              "text-anchor"}
+
+
+def _only_inherited(style: str) -> bool:
+    return all(d.partition(":")[0] in _INHERITED for d in style.split(";") if d)
+
+
+def _clip_hoistable(el: ET.Element) -> bool:
+    # a clip path is drawn in the user space of the element it is set on: a group's equals its
+    # children's only where the child has no transform of its own
+    return "clip-path" in el.attrib and "transform" not in el.attrib
+
+
+def _group_runs(root: ET.Element, attr: str, eligible: Any, min_run: int = 2) -> None:
+    """Runs of at least `min_run` consecutive siblings that are `eligible` and share one value
+    of `attr` become a `<g attr=value>` around them, the attribute written once (the drawing
+    order is unchanged)."""
+    for parent in list(root.iter()):
+        kids = list(parent)
+        if len(kids) < min_run:
+            continue
+        out: list[ET.Element] = []
+        k = 0
+        while k < len(kids):
+            el = kids[k]
+            value = el.attrib.get(attr) if eligible(el) else None
+            j = k + 1
+            while value is not None and j < len(kids) and eligible(kids[j]) \
+                    and kids[j].attrib.get(attr) == value:
+                j += 1
+            if value is not None and j - k >= min_run:
+                g = ET.Element(f"{{{_NS}}}g", {attr: value})
+                for child in kids[k:j]:
+                    del child.attrib[attr]
+                    g.append(child)
+                out.append(g)
+            else:
+                out.extend(kids[k:j])
+            k = j
+        if len(out) != len(kids):
+            parent[:] = out
 
 
 def _merge_siblings(root: ET.Element) -> None:

@@ -111,6 +111,10 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     if floor is not None:
         lo, hi = axes[0].get_ylim()
         axes[0].set_ylim(min(lo, floor / 3.0), hi)  # the floor line stays in view
+    ncols = min(3, len(axes))  # small_multiples' default width
+    for k, ax in enumerate(axes):
+        if k % ncols:  # one shared error axis: labelled in the first column only
+            ax.tick_params(labelleft=False)
     fig.supxlabel("step size h", fontsize=8)
     fig.supylabel("global error at the final time", fontsize=8)
     fig.suptitle(f"Convergence on {label_text(problem)}", fontsize=8.5)

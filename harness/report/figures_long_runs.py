@@ -97,8 +97,9 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
             x, y = thin_line(t - t0, s["error"].astype(float).to_numpy())
             data.append(pd.DataFrame({"stepper": stepper, "t": x, "error": y}))
             sym = symplectic.get(stepper, False)
+            # solid: symplectic, dashed: not (said in the caption and the section's intro)
             ax.plot(x, clip_log(y), "-" if sym else "--", color=palette.colour(stepper), lw=0.9,
-                    label=f"{label_text(stepper)}{' (symplectic)' if sym else ''}")
+                    label=label_text(stepper))
         if quantity != "energy":
             _rounding_bound(ax, g)
         loglog_axes(ax)

@@ -28,6 +28,9 @@ __all__ = ['WORK_TARGET_ERROR', 'best_per_family', 'work_precision_figure', 'per
 # The precision the "best of each family" is judged at: every method of the catalogue reaches it
 # on the work-precision problems, so the cheapest one to get there is well defined.
 WORK_TARGET_ERROR = 1e-6
+# Markers on a bold line: enough to tell the family (a marker shape each), not one per point
+# of a sweep of dozens (every point is in the CSV).
+MARKERS_PER_LINE = 8
 
 
 def best_per_family(rows: pd.DataFrame, families: Mapping[str, str], cost: str = "rhs_evals"
@@ -53,17 +56,19 @@ def best_per_family(rows: pd.DataFrame, families: Mapping[str, str], cost: str =
 @styled
 def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                           adaptive: Mapping[str, bool]) -> Figure | None:
-    """Error against evaluations (left) and wall time (right) on one problem, one line per
-    method; the best method of each family (`best_per_family`) drawn bold and named in the
-    legend, the others thin and faint on the left only (wall times of a shared machine are too
-    noisy to rank the rest). Adaptive peers dashed with hollow markers."""
+    """Error against evaluations on one problem, one line per method; the best method of each
+    family (`best_per_family`) drawn bold and named in the legend, the others thin and faint.
+    Adaptive peers dashed with hollow markers. Wall times are not drawn: on a shared machine
+    they rank nothing the evaluations do not (the section's table gives each method's wall
+    time to reach the target, the CSV every point's); a run without evaluation counts draws
+    wall time instead."""
     from matplotlib.lines import Line2D
 
     err = rows["error"].astype(float) if "error" in rows else pd.Series(dtype=float)
     frame = rows[np.isfinite(err) & (err > 0) & (err <= LOG_CEILING)]
     if frame.empty:
         return None
-    costs = [c for c in ("rhs_evals", "wall_s") if c in frame]
+    costs = [c for c in ("rhs_evals", "wall_s") if c in frame][:1]
     if not costs:
         return None
     best = best_per_family(frame, palette.families)
@@ -82,11 +87,10 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                 continue
             peer = adaptive.get(stepper, False)
             strong = stepper in bold
-            if cost == "wall_s" and not strong:
-                continue  # wall time: the best of each family only (all of them are in the CSV)
             c = palette.colour(stepper)
             ax.plot(s["_x"], s["error"].astype(float), "--" if peer else "-",
-                    marker=palette.marker(stepper) if strong else None, ms=3.2, lw=1.6 if strong else 0.6,
+                    marker=palette.marker(stepper) if strong else None, ms=3.2,
+                    lw=1.6 if strong else 0.6, markevery=max(1, math.ceil(len(s) / MARKERS_PER_LINE)),
                     alpha=1.0 if strong else 0.3, color=c,
                     markerfacecolor="none" if peer else c, zorder=3 if strong else 2)
         loglog_axes(ax)

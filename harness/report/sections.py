@@ -44,6 +44,7 @@ from harness.report.elements import (  # noqa: F401  (re-exported: the sections'
     anchor,
     csv_download,
     df_table,
+    drop_unlinked_row_ids,
     first_sentence,
     fmt,
     is_missing,
@@ -141,7 +142,9 @@ class SectionSpec:
     `intro` is two sentences (what is measured, how to read it); `key` the summary columns that
     identify one judged row; `measures` the figures the changed-since comparison follows;
     `verdicts(view)` overrides the judged rows (default: the summary's `passed` column);
-    `score` the scoreboard columns this experiment fills."""
+    `score` the scoreboard columns this experiment fills; `row_key` the columns that identify a
+    row of the section's table when it folds several judged rows into one (links to a judged
+    row go to the row holding it; default: `key`)."""
 
     experiment: str
     title: str
@@ -151,6 +154,11 @@ class SectionSpec:
     measures: tuple[Measure, ...] = ()
     verdicts: Callable[[RunView], pd.DataFrame] | None = None
     score: tuple[ScoreColumn, ...] = ()
+    row_key: tuple[str, ...] | None = None
+
+    @property
+    def anchor_key(self) -> tuple[str, ...]:
+        return self.row_key or self.key
 
 
 SECTION_BUILDERS: dict[str, SectionSpec] = {}
@@ -159,12 +167,14 @@ SECTION_BUILDERS: dict[str, SectionSpec] = {}
 def register_section(experiment: str, *, title: str, intro: str,
                      key: Sequence[str] = ("stepper", "problem"), measures: Sequence[Measure] = (),
                      verdicts: Callable[[RunView], pd.DataFrame] | None = None,
-                     score: Sequence[ScoreColumn] = ()) -> Callable:
+                     score: Sequence[ScoreColumn] = (),
+                     row_key: Sequence[str] | None = None) -> Callable:
     """Decorator: register `build(view, section)` as the section of `experiment`."""
 
     def deco(build: Callable[[RunView, Section], None]) -> Callable[[RunView, Section], None]:
         SECTION_BUILDERS[experiment] = SectionSpec(experiment, title, intro, build, tuple(key),
-                                                   tuple(measures), verdicts, tuple(score))
+                                                   tuple(measures), verdicts, tuple(score),
+                                                   tuple(row_key) if row_key else None)
         return build
 
     return deco
@@ -295,6 +305,7 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
     out += [prov, perf]
     for sec in out:
         sec.number = number.get(sec.id, sec.number)
+    drop_unlinked_row_ids(out)
     failing = verdicts[~verdicts["passed"].astype(bool)] if len(verdicts) else verdicts
     headline = {"checked": int(len(verdicts)), "failed": int(len(failing)),
                 "experiments": int(verdicts["experiment"].nunique()) if len(verdicts) else 0,

@@ -34,8 +34,9 @@ def _key_text(values: list[Any]) -> str:
 
 
 def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
-                     reason: str = "message") -> pd.DataFrame:
-    """The judged rows of one summary table (rows whose `passed` is missing are not judged)."""
+                     reason: str = "message", anchor_key: tuple[str, ...] | None = None) -> pd.DataFrame:
+    """The judged rows of one summary table (rows whose `passed` is missing are not judged);
+    each links to the table row identified by `anchor_key` (default `key`)."""
     out = []
     if table.empty or "passed" not in table:
         return pd.DataFrame(columns=VERDICT_COLUMNS)
@@ -57,7 +58,8 @@ def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
         out.append({"experiment": name, "stepper": str(rec.get("stepper", "")),
                     "problem": str(rec.get("problem", "")), "key": _key_text(values),
                     "passed": bool(passed), "verdict": verdict, "sentence": sentence,
-                    "anchor": anchor(name, *values)})
+                    "anchor": anchor(name, *(values if anchor_key is None
+                                             else [rec.get(c, "") for c in anchor_key]))})
     return pd.DataFrame(out, columns=VERDICT_COLUMNS)
 
 
@@ -88,7 +90,8 @@ def collect_verdicts(view: RunView) -> pd.DataFrame:
             frames.append(spec.verdicts(view))
         else:
             frames.append(summary_verdicts(name, view.summary(name),
-                                           experiment_key(name, view.summary(name))))
+                                           experiment_key(name, view.summary(name)),
+                                           anchor_key=spec.row_key))
     frames.append(claim_verdicts(view))
     frames = [f for f in frames if len(f)]
     if not frames:
