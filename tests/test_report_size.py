@@ -20,9 +20,10 @@ import pytest
 from matplotlib.figure import Figure as MplFigure
 
 from harness.report.figure_style import styled
-from harness.report.figure_svg import _relative_path, check_svg, page_css, to_svg
+from harness.report.figure_svg import check_svg, page_css, to_svg
 from harness.report.sections import csv_download
 from harness.report.sizes import report_sizes, section_totals
+from harness.report.svg_paths import relative_path
 
 
 def _absolute_points(d: str) -> list[tuple[float, float]]:
@@ -60,7 +61,7 @@ def _absolute_points(d: str) -> list[tuple[float, float]]:
 ])
 def test_relative_paths_draw_the_same_points(d):
     for scale in (1, 10):  # whole points, tenths
-        short = _relative_path(d, scale)
+        short = relative_path(d, scale)
         exact = [(round(x * scale) / scale, round(y * scale) / scale) for x, y in _absolute_points(d)]
         drawn = _absolute_points(short)
         # zero-length steps are dropped; every point drawn is the exact one, rounded
@@ -70,7 +71,7 @@ def test_relative_paths_draw_the_same_points(d):
 
 def test_closed_shapes_keep_tenths_and_return_to_their_start():
     d = "M54 230.4L291.6 230.4L291.6 36L54 36zM10 10L20 10L20 20z"
-    short = _relative_path(d, 1)
+    short = relative_path(d, 1)
     assert short == "M54 230.4h237.6v-194.4h-237.6zm-44-220.4h10v10z"
     assert _absolute_points(short) == _absolute_points(d)
 
@@ -90,7 +91,7 @@ def test_thinned_lines_stay_within_the_tolerance_of_every_point():
     x = np.cumsum(rng.uniform(0.5, 3, 200))
     y = 100 + np.cumsum(rng.normal(0, 0.3, 200))
     d = "M" + "L".join(f"{a:.2f} {b:.2f}" for a, b in zip(x, y, strict=True))
-    thin = _relative_path(d, 1, tolerance=0.4)
+    thin = relative_path(d, 1, tolerance=0.4)
     drawn = _absolute_points(thin)
     assert len(drawn) < 150
     assert drawn[0] == (round(x[0]), round(y[0])) and drawn[-1] == (round(x[-1]), round(y[-1]))
@@ -100,7 +101,7 @@ def test_thinned_lines_stay_within_the_tolerance_of_every_point():
 
 def test_other_paths_are_left_as_they_are():
     for d in ("M0 0L1 1C2 2 3 3 4 4", "M0 0L1 1z", "M1 1", "M0 0L1 1"):
-        assert _relative_path(d) == d
+        assert relative_path(d) == d
 
 
 @styled

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import math
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Sequence
@@ -20,13 +19,11 @@ from typing import Any
 import pandas as pd
 
 from harness.report.figure_style import RC_PARAMS
+from harness.report.svg_paths import SVG_DECIMALS, compact_path, dedupe_style, round_numbers
 
 __all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS", "page_css", "short_classes",
            "short_ids"]
 
-# Coordinates in the SVG are rounded to this many decimals of a point (1/10 pt is far below
-# what a screen shows; the full-precision numbers are in each figure's CSV).
-SVG_DECIMALS = 1
 
 _SVG_NS = "{http://www.w3.org/2000/svg}"
 _XLINK = "{http://www.w3.org/1999/xlink}href"
@@ -189,173 +186,8 @@ def to_svg(fig: Any, slug: str, alt: str, data: pd.DataFrame | None = None) -> F
     return Figure(slug=slug, svg=text, alt=alt, data=data, css=css)
 
 
-_NUMBER = re.compile(r"-?\d+\.\d+")
 _NS = "http://www.w3.org/2000/svg"
 _XLINK_NS = "http://www.w3.org/1999/xlink"
-
-
-def _round_numbers(text: str) -> str:
-    def one(m: re.Match) -> str:
-        s = f"{float(m.group(0)):.{SVG_DECIMALS}f}".rstrip("0").rstrip(".")
-        return "0" if s in ("-0", "") else s
-
-    return _NUMBER.sub(one, text)
-
-
-def _compact_path(d: str, min_points: int = 3) -> str:
-    d = _round_numbers(" ".join(d.split()))
-    return _relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d), tolerance=LINE_TOLERANCE,
-                          min_points=min_points)
-
-
-def _dedupe_style(style: str) -> str:
-    """Each property once, with the value that wins (the last)."""
-    last: dict[str, str] = {}
-    for decl in style.split(";"):
-        name, _, value = decl.partition(":")
-        last.pop(name, None)
-        last[name] = value
-    return ";".join(f"{k}:{v}" for k, v in last.items() if k)
-
-
-def _short_number(v: int, scale: int) -> str:
-    """`v / scale` (scale 1 or 10) as its shortest SVG number (15/10 -> 1.5, -5/10 -> -.5)."""
-    if scale == 1:
-        return str(v)
-    sign, a = ("-" if v < 0 else ""), abs(v)
-    whole, frac = divmod(a, 10)
-    if not frac:
-        return f"{sign}{whole}"
-    return f"{sign}{whole if whole else ''}.{frac}"
-
-
-# Data lines (paths of three points or more) are drawn to whole points: a point is 1.3 CSS
-# pixels at the figure's own size and less where the page scales it down, so the line looks the
-# same; its numbers are in the figure's CSV.
-LINE_SCALE = 1
-# A data line's vertices closer than this (in points) to the straight line through their
-# neighbours are left out (Douglas-Peucker): a matplotlib line of a few dozen points is never
-# simplified by matplotlib itself, yet runs of nearly collinear points are most of its bytes.
-LINE_TOLERANCE = 0.4
-
-
-def _simplify(points: list[tuple[int, int]], tolerance: float) -> list[tuple[int, int]]:
-    """Douglas-Peucker: the points whose omission moves the line by more than `tolerance`."""
-    if len(points) < 3:
-        return points
-    keep = [False] * len(points)
-    keep[0] = keep[-1] = True
-    stack = [(0, len(points) - 1)]
-    while stack:
-        i, j = stack.pop()
-        if j <= i + 1:
-            continue
-        (ax, ay), (bx, by) = points[i], points[j]
-        dx, dy = bx - ax, by - ay
-        norm = math.hypot(dx, dy)
-        worst, at = -1.0, i
-        for k in range(i + 1, j):
-            px, py = points[k]
-            dist = (abs(dx * (py - ay) - dy * (px - ax)) / norm if norm
-                    else math.hypot(px - ax, py - ay))
-            if dist > worst:
-                worst, at = dist, k
-        if worst > tolerance:
-            keep[at] = True
-            stack += [(i, at), (at, j)]
-    return [p for p, k in zip(points, keep, strict=True) if k]
-
-
-_COMMAND = re.compile(r"([MLZz])([^MLZz]*)")
-_PAIR = re.compile(r"(-?[\d.]+) (-?[\d.]+)")
-# Closed shapes (filled regions, bars) keep tenths of a point: their edges meet other shapes.
-CLOSED_SCALE = 10
-
-
-def _subpaths(d: str) -> list[tuple[list[tuple[float, float]], bool]] | None:
-    """`d` as (points, closed) sub-paths when it holds only absolute moves, lines (one point
-    each) and closes; None otherwise."""
-    out: list[tuple[list[tuple[float, float]], bool]] = []
-    covered = 0
-    for m in _COMMAND.finditer(d):
-        if m.start() != covered:
-            return None
-        covered = m.end()
-        cmd, args = m.group(1), m.group(2)
-        if cmd in "Zz":
-            if args or not out or out[-1][1]:
-                return None
-            out[-1] = (out[-1][0], True)
-            continue
-        pair = _PAIR.fullmatch(args)
-        if pair is None:
-            return None
-        point = (float(pair.group(1)), float(pair.group(2)))
-        if cmd == "M":
-            out.append(([point], False))
-        elif not out or out[-1][1]:
-            return None
-        else:
-            out[-1][0].append(point)
-    return out if covered == len(d) and out else None
-
-
-def _relative_path(d: str, scale: int = LINE_SCALE, tolerance: float = 0.0, min_points: int = 3) -> str:
-    """A path of absolute moves, lines and closes only (what matplotlib writes for data lines,
-    filled regions and bars) in relative steps of 1/`scale` point (closed sub-paths: of
-    1/CLOSED_SCALE point), horizontal and vertical steps as `h`/`v`: the points rounded first,
-    so no error accumulates; about half the bytes. With `tolerance` (points), each sub-path is
-    thinned by `_simplify`. Any other path, or one of fewer than `min_points` points, is
-    returned unchanged."""
-    subs = _subpaths(d) if d.startswith("M") else None
-    if subs is None or sum(len(p) for p, _ in subs) < min_points:
-        return d
-    if any(closed for _, closed in subs):
-        scale = max(scale, CLOSED_SCALE)
-    out: list[str] = []
-    px = py = 0
-    last = ""
-
-    def put(letter: str, *values: int) -> None:
-        nonlocal last
-        nums = [_short_number(v, scale) for v in values]
-        text = ""
-        # a repeated command (after a move, a line) needs no letter, only a separator
-        implicit = letter == last or (letter == "l" and last == "m")
-        for k, n in enumerate(nums):
-            if k == 0 and not implicit:
-                text += letter + n
-            else:
-                text += ("" if n.startswith("-") else " ") + n
-        out.append(text)
-        last = "l" if letter == "m" else letter
-
-    for points, closed in subs:
-        grid = [(round(x * scale), round(y * scale)) for x, y in points]
-        if tolerance > 0:
-            grid = _simplify(grid, tolerance * scale)
-        sx, sy = grid[0]
-        if not out:
-            out.append(f"M{_short_number(sx, scale)} {_short_number(sy, scale)}")
-            last = "M"  # pairs after an absolute move would be absolute lines: letters needed
-        else:
-            put("m", sx - px, sy - py)
-        px, py = sx, sy
-        for X, Y in grid[1:]:
-            if X == px and Y == py:
-                continue  # a step of zero length draws nothing
-            if Y == py:
-                put("h", X - px)
-            elif X == px:
-                put("v", Y - py)
-            else:
-                put("l", X - px, Y - py)
-            px, py = X, Y
-        if closed:
-            out.append("z")
-            last = "z"
-            px, py = sx, sy  # a close returns to the sub-path's start
-    return "".join(out)
 
 
 def _shrink(svg: str, salt: str) -> tuple[str, str]:
@@ -402,17 +234,17 @@ def _shrink(svg: str, salt: str) -> tuple[str, str]:
                 if name == "d":
                     # a two-point data line (a fitted slope, a floor) too; not a marker's
                     # shape (defined once, with an id), whose tenths of a point matter
-                    el.set(name, _compact_path(value, 3 if "id" in el.attrib else 2))
+                    el.set(name, compact_path(value, 3 if "id" in el.attrib else 2))
                 elif whole and name in ("x", "y") and re.fullmatch(r"-?[\d.]+", value.strip()):
                     el.set(name, str(round(float(value))))
                 else:
-                    el.set(name, _round_numbers(value))
+                    el.set(name, round_numbers(value))
         tr = el.attrib.get("transform", "")
         if re.fullmatch(r"rotate\(-?0(?:\s[^)]*)?\)", tr):
             del el.attrib["transform"]
         st = el.attrib.get("style")
         if st is not None:
-            st = _dedupe_style(re.sub(r"\s*([:;])\s*", r"\1", st).strip().rstrip(";"))
+            st = dedupe_style(re.sub(r"\s*([:;])\s*", r"\1", st).strip().rstrip(";"))
             el.set("style", st)
             styles[st] = styles.get(st, 0) + 1
     # every style becomes a class named by its rule's hash: the page holds each rule once
