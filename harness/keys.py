@@ -124,10 +124,14 @@ def _imports(name: str, nodes: list[ast.AST]) -> tuple[set[str], set[str]]:
     modules: set[str] = set()
     tol_names: set[str] = set()
     tol_aliases: set[str] = set()
+    attributes: set[tuple[str, str]] = set()
     package = name if _is_package(name) else name.rpartition(".")[0]
     for root in nodes:
         for node in ast.walk(root):
-            if isinstance(node, ast.Import):
+            if isinstance(node, ast.Attribute):
+                if isinstance(node.value, ast.Name):
+                    attributes.add((node.value.id, node.attr))
+            elif isinstance(node, ast.Import):
                 for a in node.names:
                     if _is_project(a.name):
                         modules.add(a.name)
@@ -151,12 +155,18 @@ def _imports(name: str, nodes: list[ast.AST]) -> tuple[set[str], set[str]]:
                         modules.add(base)
                         if base == TOLERANCES:
                             tol_names.add(a.name)
-    for root in nodes:
-        for node in ast.walk(root):
-            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
-                    and node.value.id in tol_aliases):
-                tol_names.add(node.attr)
+    tol_names |= {attr for base, attr in attributes if base in tol_aliases}
     return modules, tol_names
+
+
+@functools.lru_cache(maxsize=1024)
+def _module_imports(name: str, text: str | None) -> tuple[frozenset[str], frozenset[str]]:
+    """`_imports` over a whole module's source, once per version of its text."""
+    tree = _parse(text) if text is not None else None
+    if tree is None:
+        return frozenset(), frozenset()
+    modules, names = _imports(name, [tree])
+    return frozenset(modules), frozenset(names)
 
 
 def _measuring_nodes(tree: ast.Module, judging_roots: set[str]) -> list[ast.AST]:
@@ -231,10 +241,10 @@ def measuring_modules(experiment: Experiment) -> tuple[dict[str, str], set[str]]
         if is_own:
             nodes = _measuring_nodes(tree, {"summarize"})
             counted[name] = "\n".join(ast.unparse(n) for n in nodes)
+            modules, names = _imports(name, nodes)
         else:
-            nodes = [tree]
             counted[name] = text
-        modules, names = _imports(name, nodes)
+            modules, names = _module_imports(name, text)
         tol_names |= names
         for m in sorted(modules):
             if m == TOLERANCES:
@@ -250,7 +260,7 @@ def measuring_modules(experiment: Experiment) -> tuple[dict[str, str], set[str]]
             continue
         text = _source(m)
         counted[m] = text if text is not None else f"<no source: {m}>"
-        modules, names = _imports(m, [_parse(text)] if text and _parse(text) else [])
+        modules, names = _module_imports(m, text)
         tol_names |= names
         root = next(r for r in MEASURING_MODULES if m == r or m.startswith(r + "."))
         todo += [s for s in sorted(modules) if s.startswith(root + ".") and s not in counted]
@@ -297,8 +307,7 @@ def module_version(*names: str, judging: bool = False, extra: str = "") -> str:
         seen.add(m)
         text = _source(m)
         parts.append(m + "\n" + hashlib.sha256((text or f"<no source: {m}>").encode()).hexdigest())
-        tree = _parse(text) if text is not None else None
-        modules, names = _imports(m, [tree]) if tree is not None else (set(), set())
+        modules, names = _module_imports(m, text)
         tol_names |= names
         todo += [i for i in sorted(modules) if _is_project(i) and not skipped(i) and i not in seen]
     parts.append(_tolerance_values(tol_names))

@@ -5,10 +5,15 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pandas as pd
+
 from harness.errors import HarnessError
 
 SCHEMA = "harness-results/1"
-CELL_SCHEMA = "harness-cell/2"
+# A cell file's content checksum hashes its text columns with pandas' own hashing
+# (`pandas.util.hash_pandas_object`): pandas' version is part of the schema, so a cache written
+# under another pandas is never read (the cells' keys change and they are measured again).
+CELL_SCHEMA = f"harness-cell/3+pandas-{pd.__version__}"
 # meta.json nested deeper than this is not one the harness wrote (it nests about 6 deep)
 MAX_META_DEPTH = 64
 TABLES = ("rows", "summary")
