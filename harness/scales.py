@@ -317,7 +317,15 @@ def _ratio(rate: float, base: float) -> float:
 
 
 def derive_perturbation(problem) -> Perturbation:
-    """The ensemble perturbation of `problem` (see the module docstring for the rules)."""
+    """The ensemble perturbation of `problem` (see the module docstring for the rules); derived
+    once per problem definition and version of this code (`harness.derived`)."""
+    size, scale, source, reason = remembered(
+        "harness.scales", "derive_perturbation", (problem.fingerprint(),),
+        lambda: list(_derive_perturbation(problem).as_dict().values()))
+    return Perturbation(float(size), np.asarray(scale, dtype=float), str(source), str(reason))
+
+
+def _derive_perturbation(problem) -> Perturbation:
     orbit = sample_orbit(problem)
     scale = component_scales(problem, orbit)
     if problem.perturbation is not None:
