@@ -187,7 +187,9 @@ def loglog_axes(ax: Any, x: bool = True, y: bool = True) -> None:
         axis.set_major_formatter(FuncFormatter(_power_of_ten))
         lo, hi = lim()
         if lo > 0 and hi > 0 and abs(math.log10(hi) - math.log10(lo)) < 1.5:
-            # less than two powers of ten in view: label the minor ticks too
+            # less than two powers of ten in view: label 2 and 5 times each power of ten too (every
+            # minor tick labelled crowds a small panel's axis into unreadable text)
+            axis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0)))
             axis.set_minor_formatter(FuncFormatter(lambda v, _p: f"{v:.2g}"))
         else:
             # minor ticks cost a third of the drawing time and carry no label here
