@@ -49,6 +49,19 @@ _DISTRIBUTIONS = {
 }
 
 
+def default_directory(given: Any, env_var: str, name: str) -> Any:
+    """`given` when it is not None, else the environment variable `env_var` when set, else
+    `<project>/<name>` (the current directory's `<name>` when the package is installed outside
+    a checkout). The caller checks what it gets."""
+    if given is not None:
+        return given
+    env = os.environ.get(env_var)
+    if env:
+        return env
+    base = PROJECT_ROOT if (PROJECT_ROOT / "pyproject.toml").exists() else Path.cwd()
+    return base / name
+
+
 def _git(args: list[str], cwd: Path) -> str | None:
     try:
         proc = subprocess.run(

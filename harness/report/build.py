@@ -36,7 +36,7 @@ from harness.errors import InputError
 # harness/experiments/__init__.py.
 from harness.experiments import EXPERIMENT_NAMES as REPORT_EXPERIMENTS
 from harness.progress import Progress
-from harness.provenance import PROJECT_ROOT
+from harness.provenance import default_directory
 
 __all__ = ["build_report", "write_report", "rerender_report", "report_experiments", "reports_root",
            "render_html", "run_view"]
@@ -53,14 +53,7 @@ TEMPLATE = "report.html.j2"
 
 def reports_root(output: str | os.PathLike | None = None) -> Path:
     """Where reports are written: `output`, `HARNESS_REPORTS_DIR`, or `<project>/reports`."""
-    if output is None:
-        env = os.environ.get("HARNESS_REPORTS_DIR")
-        if env:
-            output = env
-        elif (PROJECT_ROOT / "pyproject.toml").exists():
-            output = PROJECT_ROOT / "reports"
-        else:
-            output = Path.cwd() / "reports"
+    output = default_directory(output, "HARNESS_REPORTS_DIR", "reports")
     if not isinstance(output, str | os.PathLike) or not os.fspath(output) or "\x00" in os.fspath(output):
         raise InputError(f"`output` must be a directory path, got {output!r}")
     path = Path(output)

@@ -14,7 +14,7 @@ from typing import Any
 import pandas as pd
 
 from harness.errors import InputError, OutputError, UnknownNameError, describe_os_error
-from harness.provenance import PROJECT_ROOT, collect, to_jsonable, utc_now
+from harness.provenance import collect, default_directory, to_jsonable, utc_now
 from harness.store.files import atomic_write_json, fsync_dir, write_parquet
 from harness.store.schema import SAFE_NAME, SCHEMA, TABLES, ResultsError
 
@@ -24,14 +24,7 @@ RUN_ID = re.compile(r"^(\d{8}T\d{6}Z)-([0-9a-z]+)(?:-(\d+))?$")
 def results_root(root: str | os.PathLike | None = None, *, create: bool = False) -> Path:
     """The directory holding saved runs: `root`, else `HARNESS_RESULTS_DIR`, else
     `<project>/results` (the current directory's `results/` when installed elsewhere)."""
-    if root is None:
-        env = os.environ.get("HARNESS_RESULTS_DIR")
-        if env:
-            root = env
-        elif (PROJECT_ROOT / "pyproject.toml").exists():
-            root = PROJECT_ROOT / "results"
-        else:
-            root = Path.cwd() / "results"
+    root = default_directory(root, "HARNESS_RESULTS_DIR", "results")
     if not isinstance(root, str | os.PathLike) or not str(root):
         raise InputError(f"`root` must be a directory path, got {root!r}")
     path = Path(root)
