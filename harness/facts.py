@@ -96,10 +96,18 @@ def method_facts(stepper: Stepper) -> MethodFacts:
 
 @lru_cache(maxsize=512)
 def _coefficient_facts(fingerprint: str, box: tuple) -> dict[str, Any]:
+    # order conditions and scanned stability intervals take seconds over a registry: kept on
+    # disk under the coefficients' fingerprint and this module's code (harness.derived)
+    from harness.derived import remembered
+
+    return remembered(__name__, "coefficient_facts", [fingerprint],
+                      lambda: _derive_coefficient_facts(box[0]))
+
+
+def _derive_coefficient_facts(coeffs: Any) -> dict[str, Any]:
     from harness.coefficients import ButcherTableau, SplittingScheme
     from harness.theory import analytic_stability
 
-    coeffs = box[0]
     stab = analytic_stability(coeffs) or {}
     embedded = getattr(coeffs, "embedded_order", None)
     return {

@@ -37,7 +37,7 @@ from harness.runner import (
     run_experiments,
     validate_rows,
 )
-from harness.store import CellCache, CorruptResultsError
+from harness.store import CellCache, CorruptResultsError, load_run, save_run
 
 
 @pytest.fixture(scope="module")
@@ -178,6 +178,7 @@ def test_each_failure_is_recorded_in_its_cell_and_the_others_complete(run, jobs)
             config={"n": 1}, cell_timeout=1.0)
     assert r.n_cells == 5 and r.n_failed == 4
     assert list(r.rows.stepper.unique()) == ["toy-ok"] and len(r.summary) == 1
+    assert not r.rows_stored  # a run with failures has no pack: its rows are read back when saved
     failures = r.failures.set_index("stepper")
     for stepper, (kind, message) in EXPECTED_FAILURES.items():
         assert failures.loc[stepper, "kind"] == kind
@@ -312,6 +313,10 @@ def test_a_run_of_cached_cells_reads_one_pack_and_equals_the_fresh_run(run, tmp_
     pd.testing.assert_frame_equal(first.rows, again.rows)
     pd.testing.assert_frame_equal(first.summary, again.summary)
     assert list(again.cells.wall_s) == list(first.cells.wall_s)
+    # a packed run's rows are in their stored form: the saved file decodes to an equal frame
+    assert first.rows_stored and again.rows_stored
+    saved = save_run([again], root=tmp_path / "runs")
+    pd.testing.assert_frame_equal(load_run(saved).rows[again.experiment], again.rows, check_exact=True)
     # one cell fewer is another pack: read cell by cell (and the cells are gone: recomputed)
     fewer = run(problems=("toy-decay",))
     assert fewer.computed_cells == len(fewer.cells) > 0

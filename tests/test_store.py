@@ -210,6 +210,28 @@ def test_save_and_load_round_trip_rows_summary_and_meta(tmp_path):
     assert list(run.skips.columns) == ["experiment", "stepper", "problem", "reason"]
 
 
+def test_a_run_loads_its_summaries_alone_or_with_rows_already_in_stored_form(tmp_path):
+    saved = [_result("convergence"), _result("energy", n=3, failed=False)]
+    path = save_run(saved, root=tmp_path)
+    light = load_run(path, tables=("summary",))
+    assert light.rows == {} and set(light.summaries) == {"convergence", "energy"}
+    full = load_run(path)
+    # rows decoded from Parquet are taken as they are; the others are read from their files
+    given = {"energy": full.rows["energy"]}
+    run = load_run(path, stored_rows=given)
+    assert run.rows["energy"] is given["energy"]
+    pd.testing.assert_frame_equal(run.rows["convergence"], full.rows["convergence"])
+    # a frame that is not the saved table is refused like a damaged file, with the file's path
+    with pytest.raises(CorruptResultsError, match="energy.rows.parquet.*has 2 rows"):
+        load_run(path, stored_rows={"energy": full.rows["energy"].iloc[:2]})
+    with pytest.raises(CorruptResultsError, match="columns .* differ"):
+        load_run(path, stored_rows={"energy": full.rows["energy"].drop(columns="h")})
+    with pytest.raises(InputError, match="`tables` must list tables among"):
+        load_run(path, tables=("rows", "plots"))
+    with pytest.raises(InputError, match="`tables` must list tables among"):
+        load_run(path, tables="rows")
+
+
 def test_results_load_returns_dataframes(tmp_path):
     saved = [_result("convergence"), _result("energy", n=3, failed=False)]
     save_run(saved, root=tmp_path)

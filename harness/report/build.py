@@ -221,7 +221,9 @@ def build_report(
         "plugins": plugin_paths, "jobs": jobs, "scheduler": scheduler, "fresh": fresh,
         "cell_timeout": cell_timeout, "experiments": experiments,
     })
-    stored = load_run(run_dir)
+    # the packed experiments' rows are already as their files read back: not decoded again
+    stored = load_run(run_dir, stored_rows={
+        name: res.rows for name, res in results.items() if getattr(res, "rows_stored", False)})
     t_save = time.perf_counter() - t0
     _say(bar, f"results saved in {run_dir}")
     path = write_report(stored, output=root, progress=bar, build_s={

@@ -62,7 +62,9 @@ def load_previous(run: str | os.PathLike | None, *, results_root: str | os.PathL
         if not ids:
             return None
         run = ids[-1]
-    stored = load_run(run, root=results_root)
+    # the summaries and meta.json are what a comparison reads; the rows only when the run's
+    # verdicts have to be judged again
+    stored = load_run(run, root=results_root, tables=("summary",))
     if stored.run_id == current:
         return None
     saved = Path(reports_root) / stored.run_id / VERDICTS_FILE if reports_root else None
@@ -74,6 +76,7 @@ def load_previous(run: str | os.PathLike | None, *, results_root: str | os.PathL
     else:
         from harness.report.verdicts import collect_verdicts
 
+        stored = load_run(stored.path)
         verdicts = collect_verdicts(view_factory(stored))
         source = "judged again from its saved summaries with this build's rules"
     return Previous(stored.run_id, stored.meta, dict(stored.summaries), verdicts, source)

@@ -160,6 +160,7 @@ def run_experiment(
     _client: Any = None,
     _counted: bool = False,
     _listed: tuple[list, list] | None = None,
+    _versions: dict[tuple[str, str], Any] | None = None,
 ) -> RunResult:
     """Run one experiment over `steppers` x `problems` (None: the whole registry).
 
@@ -232,7 +233,8 @@ def run_experiment(
         _client, own_client = dask_client(sched)
 
     exp_version = experiment_fingerprint(exp)
-    versions: dict[tuple[str, str], Any] = {}
+    # each (stepper, problem) pair's code version, shared by the experiments of one run
+    versions: dict[tuple[str, str], Any] = {} if _versions is None else _versions
     failures: dict[int, dict] = {}
     records: dict[int, dict] = {}
     frames: dict[int, pd.DataFrame] = {}
@@ -340,6 +342,7 @@ def run_experiment(
             bar.close()
 
     order = sorted(frames)
+    rows_stored = packed is not None
     if packed is not None:
         rows_df = packed[0]
     elif order:
@@ -347,6 +350,7 @@ def run_experiment(
         rows_df = pd.concat(with_rows, ignore_index=True) if with_rows else pd.DataFrame(columns=ID_COLUMNS)
         if pack_key is not None and not failures:  # continue with the rows as the pack reads back
             rows_df = write_pack(store, pack_key, exp.name, rows_df, [records[i] for i in sorted(records)])
+            rows_stored = True
     else:
         rows_df = pd.DataFrame(columns=ID_COLUMNS)
     summary = pd.DataFrame()
@@ -388,6 +392,7 @@ def run_experiment(
                  "fresh": bool(fresh), "cache": bool(cache), "quick": bool(quick),
                  "cell_timeout": timeout, "plugins": plugin_paths,
                  "steppers": stepper_names, "problems": problem_names},
+        rows_stored=rows_stored,
     )
 
 
@@ -436,6 +441,7 @@ def run_experiments(
     # Every experiment's cells are listed once, here: the whole run's size first, so the
     # display's total does not grow; each `run_experiment` takes its list.
     listed: dict[str, tuple[list, list]] = {}
+    versions: dict[tuple[str, str], Any] = {}
     for exp in exps:
         try:
             cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
@@ -457,7 +463,7 @@ def run_experiments(
             out[exp.name] = run_experiment(
                 exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
                 options=options, progress=bar, _client=client, _counted=counted, allow_empty=True,
-                _listed=listed.get(exp.name),
+                _listed=listed.get(exp.name), _versions=versions,
             )
             if sched is not None:
                 out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None

@@ -24,6 +24,9 @@ class RunResult:
     `failures`: one record per failed cell (FAILURE_COLUMNS; `kind` in FAILURE_KINDS).
     `skips`: pairs the experiment does not apply to, with the reason. `cells`: one record per
     cell (status 'ok' or 'failed', whether cached, compute wall time, row count, worker).
+    `rows_stored`: True when `rows` is in its stored form (decoded from the run's pack), so the
+    file a saved run writes from it decodes to an equal frame (`harness.store.load_run`'s
+    `stored_rows`).
     """
 
     experiment: str
@@ -38,6 +41,7 @@ class RunResult:
     cached_cells: int
     computed_cells: int
     options: dict = field(default_factory=dict)
+    rows_stored: bool = False
 
     @property
     def n_cells(self) -> int:

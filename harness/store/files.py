@@ -181,13 +181,20 @@ def read_parquet(
             p, "content differs from the checksum in meta.json (changed after the run was saved)"
         )
     df, extra = decode_parquet(data, p)
+    check_frame(p, df, columns=columns, n_rows=n_rows)
+    return df, extra
+
+
+def check_frame(path: str | os.PathLike, df: pd.DataFrame, *, columns: list[str] | None = None,
+                n_rows: int | None = None) -> None:
+    """`CorruptResultsError` naming `path` when `df`'s columns or row count differ from the
+    recorded ones (None: not checked)."""
     if columns is not None and list(df.columns) != list(columns):
         raise CorruptResultsError(
-            p, f"columns {list(map(str, df.columns))} differ from the recorded {list(columns)}"
+            path, f"columns {list(map(str, df.columns))} differ from the recorded {list(columns)}"
         )
     if n_rows is not None and len(df) != n_rows:
-        raise CorruptResultsError(p, f"has {len(df)} rows, meta.json records {n_rows}")
-    return df, extra
+        raise CorruptResultsError(path, f"has {len(df)} rows, meta.json records {n_rows}")
 
 
 def read_json(path: Path) -> Any:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -10,7 +11,7 @@ from typing import Any
 import pandas as pd
 
 from harness.errors import InputError, UnknownNameError
-from harness.store.files import read_json, read_parquet
+from harness.store.files import check_frame, read_json, read_parquet
 from harness.store.runs import resolve_run
 from harness.store.schema import (
     EXPERIMENT_KEYS,
@@ -188,23 +189,39 @@ def _check_meta(path: Path, meta: Any) -> dict:
     return meta
 
 
-def load_run(run: str | os.PathLike | None = None, *, root: str | os.PathLike | None = None) -> StoredRun:
+def load_run(run: str | os.PathLike | None = None, *, root: str | os.PathLike | None = None,
+             tables: Sequence[str] = TABLES,
+             stored_rows: Mapping[str, pd.DataFrame] | None = None) -> StoredRun:
     """Load and check a saved run: `run` is None or 'latest' (the newest), a run id under `root`
     (default: the results root), or a path to a run directory. Every table is read and checked
     against `meta.json` (columns, row count, checksum); any mismatch raises
-    `CorruptResultsError` naming the file."""
+    `CorruptResultsError` naming the file.
+
+    `tables` names the tables to read (default both; ('summary',) skips the rows).
+    `stored_rows` maps experiments to rows frames already in their stored form (decoded from
+    Parquet, as a run's packs are: the file just saved from them decodes to an equal frame);
+    they are taken instead of decoding their files again, after the same column and row-count
+    checks."""
+    unknown = [t for t in tables if t not in TABLES]
+    if isinstance(tables, str) or unknown:
+        raise InputError(f"`tables` must list tables among {list(TABLES)}, got {tables!r}")
     path = resolve_run(run, root)
     meta_path = path / "meta.json"
     meta = _check_meta(meta_path, read_json(meta_path))
     out = StoredRun(run_id=str(meta["run_id"]), path=path, meta=meta)
+    known = dict(stored_rows or {})
     for name, exp in meta["experiments"].items():
-        for table in TABLES:
+        for table in tables:
             spec = exp["tables"][table]
-            df, _ = read_parquet(
-                path / spec["file"],
-                columns=spec["columns"],
-                n_rows=spec["n_rows"],
-                sha256=spec.get("sha256"),
-            )
+            df = known.get(name) if table == "rows" else None
+            if df is not None:
+                check_frame(path / spec["file"], df, columns=spec["columns"], n_rows=spec["n_rows"])
+            else:
+                df, _ = read_parquet(
+                    path / spec["file"],
+                    columns=spec["columns"],
+                    n_rows=spec["n_rows"],
+                    sha256=spec.get("sha256"),
+                )
             (out.rows if table == "rows" else out.summaries)[name] = df
     return out
