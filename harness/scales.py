@@ -241,7 +241,14 @@ def orbit_rates(problem, orbit: Orbit, *, candidates: int | None = None) -> dict
 
 # -- time scale -------------------------------------------------------------------------------------
 def derive_time_scale(problem) -> TimeScale:
-    """The time scale of `problem` (see the module docstring for the rules)."""
+    """The time scale of `problem` (see the module docstring for the rules), derived once per
+    definition and code version (`harness.derived`): every process of a run asks for it."""
+    fields = remembered("harness.scales", "time_scale", [problem.fingerprint()],
+                        lambda: _derive_time_scale(problem).__dict__)
+    return TimeScale(**fields)
+
+
+def _derive_time_scale(problem) -> TimeScale:
     orbit = sample_orbit(problem)
     rates = orbit_rates(problem, orbit)
     rho = float(np.max(rates["spectral"]))

@@ -484,3 +484,21 @@ def test_one_registration_gives_an_experiment_its_own_section_and_scoreboard_col
         assert cells["euler"] == "120" and cells["rk4"] == "40"
     finally:
         SECTION_BUILDERS.pop(name, None)
+
+
+def test_methods_with_the_same_error_curve_are_drawn_once_whatever_their_row_order():
+    from harness.report.figures_convergence import same_curves
+
+    h = [0.1, 0.05, 0.025]
+    err = [1e-3, 1.25e-4, 1.5625e-5]
+    rows = pd.DataFrame({
+        "stepper": ["a"] * 3 + ["b"] * 3 + ["c"] * 3 + ["d"] * 3,
+        "h": h + h[::-1] + h + h,
+        "error": err + err[::-1] + [e * (1 + 1e-9) for e in err] + [e * 1.01 for e in err],
+        "in_fit": [True] * 12,
+    })
+    # b: the same points listed the other way round; c: equal to 6 digits; d: another curve
+    assert same_curves(rows) == {"a": ["b", "c"], "d": []}
+    rows.loc[rows.stepper == "c", "in_fit"] = [True, False, True]
+    assert same_curves(rows) == {"a": ["b"], "c": [], "d": []}
+    assert same_curves(rows.iloc[:0]) == {}

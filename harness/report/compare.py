@@ -121,16 +121,18 @@ def compare_runs(view: RunView, verdicts: pd.DataFrame, previous: Previous) -> C
     a = previous.verdicts.assign(_id=lambda d: _id(d)).drop_duplicates("_id").set_index("_id")
     b = verdicts.assign(_id=lambda d: _id(d)).drop_duplicates("_id").set_index("_id")
     common = a.index.intersection(b.index)
+    then, now = a.loc[common], b.loc[common]
+    differs = ((then["passed"].astype(bool) != now["passed"].astype(bool))
+               | (then["verdict"].astype(str) != now["verdict"].astype(str)))
     changed = []
-    for i in common:
+    for i in common[differs.to_numpy()]:
         before, after = a.loc[i], b.loc[i]
-        if bool(before["passed"]) != bool(after["passed"]) or str(before["verdict"]) != str(after["verdict"]):
-            changed.append({"experiment": after["experiment"], "stepper": after["stepper"],
-                            "problem": after["problem"], "where": _where(after["key"]),
-                            "before": f"{'pass' if bool(before['passed']) else 'FAIL'} ({before['verdict']})",
-                            "after": f"{'pass' if bool(after['passed']) else 'FAIL'} ({after['verdict']})",
-                            "passed_now": bool(after["passed"]), "sentence": after["sentence"],
-                            "href": "#" + str(after["anchor"])})
+        changed.append({"experiment": after["experiment"], "stepper": after["stepper"],
+                        "problem": after["problem"], "where": _where(after["key"]),
+                        "before": f"{'pass' if bool(before['passed']) else 'FAIL'} ({before['verdict']})",
+                        "after": f"{'pass' if bool(after['passed']) else 'FAIL'} ({after['verdict']})",
+                        "passed_now": bool(after["passed"]), "sentence": after["sentence"],
+                        "href": "#" + str(after["anchor"])})
     changed_df = pd.DataFrame(changed, columns=["experiment", "stepper", "problem", "where", "before",
                                                 "after", "passed_now", "sentence", "href"])
     if len(changed_df):

@@ -39,11 +39,15 @@ def same_curves(rows: pd.DataFrame) -> dict[str, list[str]]:
     the others, in the order given (a method drawn by another maps to nothing, is not a key)."""
     keys: dict[tuple, str] = {}
     out: dict[str, list[str]] = {}
-    for stepper, s in rows.groupby("stepper", sort=False):
-        s = s.sort_values("h")
-        key = tuple(zip(np.round(np.log10(s["h"].astype(float).abs() + 1e-300), SAME_CURVE_DIGITS),
-                        [float(f"{e:.{SAME_CURVE_DIGITS}g}") for e in s["error"].astype(float)],
-                        s["in_fit"].fillna(False).astype(bool), strict=True))
+    if rows.empty:
+        return out
+    # every point's rounded (log10 h, error, in the fit), computed once for the whole table
+    h = np.round(np.log10(rows["h"].astype(float).abs().to_numpy() + 1e-300), SAME_CURVE_DIGITS)
+    e = [float(f"{x:.{SAME_CURVE_DIGITS}g}") for x in rows["error"].astype(float)]
+    fit = rows["in_fit"].fillna(False).astype(bool).to_numpy()
+    points = list(zip(h.tolist(), e, fit.tolist(), strict=True))
+    for stepper, where in rows.groupby("stepper", sort=False).indices.items():
+        key = tuple(sorted(points[i] for i in where))
         if key in keys:
             out[keys[key]].append(stepper)
         else:
