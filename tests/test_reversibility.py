@@ -98,6 +98,42 @@ def test_rounding_bound_uses_the_flow_amplification():
     assert rounding_bound_ulps(1000, 0.5) == tol.REVERSIBILITY_ULPS_PER_STEP * 1000
 
 
+@pytest.mark.parametrize("name", ["forced-duffing", "kepler-elliptic", "planets-pair"])
+def test_batched_flow_amplification_is_the_orbit_by_orbit_central_difference(name):
+    """The perturbed orbits run through heyoka's batch integrator (a last batch with fewer
+    orbits than lanes is filled with repeats): the same central difference as one scalar orbit
+    after another, to the difference's own noise."""
+    from harness import scales
+
+    problem = get_problem(name)
+    span = 20 * problem.time_scale.h
+    base = np.asarray(problem.y0, dtype=float)
+    delta = tol.REVERSIBILITY_FLOW_DELTA * np.where(base != 0.0, np.abs(base), 1.0)
+    J = np.empty((problem.dim, problem.dim))
+    for j in range(problem.dim):
+        plus, minus = base.copy(), base.copy()
+        plus[j] += delta[j]
+        minus[j] -= delta[j]
+        end = [problem.t0 + span]
+        J[:, j] = (scales.states_at(problem, end, plus) - scales.states_at(problem, end, minus))[:, 0] / (
+            2.0 * delta[j])
+    expected = float(np.max(np.sum(np.abs(J), axis=1)))
+    assert scales.flow_amplification(problem, span) == pytest.approx(expected, rel=1e-6)
+
+
+def test_an_orbit_the_batch_integrator_cannot_follow_gives_no_amplification():
+    import heyoka as hy
+
+    from harness import scales
+    from harness.problem import Problem
+
+    y = hy.make_vars("y")
+    blow_up = Problem("riccati-flow", variables=[y], rhs=[y * y], y0=[1.0], t_span=(0.0, 0.5),
+                      reference="test")
+    assert np.isnan(scales.flow_amplification(blow_up, 2.0))
+    assert scales.flow_amplification(blow_up, 0.5) == pytest.approx(4.0, rel=1e-6)  # 1 / (1 - t)^2
+
+
 # -- mislabelled steppers must fail ---------------------------------------------------------------
 @pytest.mark.parametrize("problem", PROBLEMS)
 def test_explicit_euler_labelled_symmetric_fails(problem, registered):
