@@ -2,7 +2,7 @@
 
 Some facts are slow to derive and asked by many processes: where a long run leaves the
 dynamical regime of a problem's span (`harness.scales.regime_end`), how much the flow amplifies
-a perturbation over a span (`flow_amplification`), where an orbit meets its fastest rate
+a perturbation over a span (`harness.flow`), where an orbit meets its fastest rate
 (`fastest_approach`); a method's order and stability intervals from its coefficients
 (`harness.facts`). The parent lists cells with them, every worker measures with them, and
 the judging code reads them again; each process would follow the same float64 Taylor orbit.

@@ -24,7 +24,7 @@ nothing does not pass.
 
 Adaptive steppers (`tolerance_allowance`): local error control keeps each accepted step's error
 near tol x |y|, and the flow carries every step's error to the final time, amplified by at most
-A = ||d Phi(t_k -> T)||, taken as max(1, ||d Phi(t0 -> T)||) (`harness.scales.flow_amplification`).
+A = ||d Phi(t_k -> T)||, taken as max(1, ||d Phi(t0 -> T)||) (`harness.flow.flow_amplification`).
 Summed over the N accepted steps of a trajectory (Lady Windermere's fan, HNW I, II.3, Theorem
 3.4), the global error is at most ~N A tol |y|; TOLERANCE_ESTIMATE_FACTOR allows for the error
 estimate itself being only asymptotically correct. On y' = -y (A = 1, N ~ 2-50) that is tighter

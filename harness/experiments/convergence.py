@@ -327,8 +327,8 @@ def _reference_at_clocks(problem, times: np.ndarray, y0: np.ndarray, t0: float):
 
 
 def _flow_amplification(problem, span: float, y0: np.ndarray) -> float:
-    """max(1, ||d Phi_span||) (`harness.scales.flow_amplification`), 1 where it cannot be had."""
-    from harness.scales import flow_amplification
+    """max(1, ||d Phi_span||) (`harness.flow.flow_amplification`), 1 where it cannot be had."""
+    from harness.flow import flow_amplification
 
     try:
         value = flow_amplification(problem, span, y0)

@@ -63,7 +63,7 @@ from harness.experiments.common import (
     problem_cells,
     reversible_reason,
 )
-from harness.scales import flow_amplification
+from harness.flow import flow_amplification
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["ReversibilityExperiment", "flow_amplification", "rounding_bound_ulps", "ROW_COLUMNS",
