@@ -162,11 +162,62 @@ def _imports(name: str, nodes: list[ast.AST]) -> tuple[set[str], set[str]]:
 @functools.lru_cache(maxsize=1024)
 def _module_imports(name: str, text: str | None) -> tuple[frozenset[str], frozenset[str]]:
     """`_imports` over a whole module's source, once per version of its text."""
-    tree = _parse(text) if text is not None else None
-    if tree is None:
+    if text is None:
         return frozenset(), frozenset()
-    modules, names = _imports(name, [tree])
-    return frozenset(modules), frozenset(names)
+    found = _read_once("imports", name, text)
+    return frozenset(found["modules"]), frozenset(found["names"])
+
+
+@functools.lru_cache(maxsize=1024)
+def _read_once(kind: str, name: str, text: str) -> dict[str, Any]:
+    """What `kind` ('imports': the whole module's imports; 'measuring': the measuring part of an
+    experiment's module and its imports) reads from module `name`'s source `text`, parsed once
+    per version of the text and of the project's module list, then kept on disk (parsing is most
+    of a cached run's key computation, in every process)."""
+    from harness.cache import cache_dir
+
+    listing = "\n".join(_project_module_names())
+    key = hashlib.sha256("\n".join([kind, name, listing, text]).encode()).hexdigest()[:32]
+    try:
+        path = cache_dir() / "keys" / key[:2] / f"{key}.json"
+    except HarnessError:  # no cache directory: parsed every time
+        path = None
+    if path is not None:
+        try:
+            stored = json.loads(path.read_text())
+            if stored.get("key") == key:
+                return stored["value"]
+        except (OSError, ValueError, AttributeError):
+            pass
+    tree = _parse(text)
+    value: dict[str, Any] = {"counted": text, "modules": [], "names": []}
+    if tree is not None:
+        nodes = _measuring_nodes(tree, {"summarize"}) if kind == "measuring" else [tree]
+        modules, names = _imports(name, nodes)
+        value = {"counted": "\n".join(ast.unparse(n) for n in nodes) if kind == "measuring" else text,
+                 "modules": sorted(modules), "names": sorted(names)}
+    if path is not None:
+        from harness.store import atomic_write_bytes
+
+        try:
+            atomic_write_bytes(path, json.dumps({"key": key, "value": value}).encode())
+        except (HarnessError, OSError):  # a cache that cannot be written costs only time
+            pass
+    return value
+
+
+@functools.lru_cache(maxsize=1)
+def _project_module_names() -> tuple[str, ...]:
+    """The project's module files (relative paths): what `_imports` resolves names against."""
+    from harness.provenance import PROJECT_ROOT
+
+    out = []
+    for package in PROJECT_PACKAGES:
+        for root, dirs, files in os.walk(PROJECT_ROOT / package):
+            dirs[:] = sorted(d for d in dirs if not d.startswith((".", "__pycache__")))
+            out += sorted(os.path.relpath(os.path.join(root, f), PROJECT_ROOT) for f in files
+                          if f.endswith(".py"))
+    return tuple(out)
 
 
 def _measuring_nodes(tree: ast.Module, judging_roots: set[str]) -> list[ast.AST]:
@@ -234,14 +285,10 @@ def measuring_modules(experiment: Experiment) -> tuple[dict[str, str], set[str]]
         if text is None:
             counted[name] = f"<no source: {name}>"
             continue
-        tree = _parse(text)
-        if tree is None:
-            counted[name] = text
-            continue
         if is_own:
-            nodes = _measuring_nodes(tree, {"summarize"})
-            counted[name] = "\n".join(ast.unparse(n) for n in nodes)
-            modules, names = _imports(name, nodes)
+            found = _read_once("measuring", name, text)
+            counted[name] = found["counted"]
+            modules, names = set(found["modules"]), set(found["names"])
         else:
             counted[name] = text
             modules, names = _module_imports(name, text)

@@ -190,3 +190,23 @@ def test_a_packed_run_caches_its_summary_until_a_rule_or_threshold_changes(key_t
     path.write_text(path.read_text().replace('"good" if', '"fine" if'))
     changed = run()  # the judging code's source changed (the loaded module is the old one)
     assert len(calls) == 3 and changed.computed_cells == 0
+
+
+def test_parsed_imports_kept_on_disk_are_read_back_and_a_damaged_file_is_parsed_again(tmp_path,
+                                                                                        monkeypatch):
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
+    exp = EXPERIMENTS["energy"]
+    keys._read_once.cache_clear()
+    keys._module_imports.cache_clear()
+    first = keys.measuring_modules(exp)
+    stored = sorted((tmp_path / "keys").rglob("*.json"))
+    assert len(stored) > 10  # one file per module text read
+    keys._read_once.cache_clear()
+    keys._module_imports.cache_clear()
+    assert keys.measuring_modules(exp) == first  # read back from disk
+    for f in stored:
+        f.write_text("{not json")
+    keys._read_once.cache_clear()
+    keys._module_imports.cache_clear()
+    assert keys.measuring_modules(exp) == first  # parsed again and rewritten
+    assert all(f.read_text().startswith('{"key"') for f in stored)
