@@ -497,3 +497,22 @@ def test_one_options_object_equals_the_keywords(run, toy):
     assert by_object.options["cache"] is False and by_object.options["jobs"] == 1
     with pytest.raises(InputError, match=r"`options` must be a RunOptions, got dict"):
         run(options={"jobs": 1})
+
+
+def test_workers_take_the_problems_in_turn_and_results_keep_the_cell_order():
+    from harness.runner.orchestration import interleaved
+
+    cells = [Cell("toy", s, p) for p in ("p", "q", "r") for s in ("a", "b", "c")][:-1]
+    tasks = [runner.Task(i, c, f"{i:032x}", {}) for i, c in enumerate(cells)]
+    order = [(t.cell.stepper, t.cell.problem) for t in interleaved(tasks)]
+    assert order == [("a", "p"), ("a", "q"), ("a", "r"), ("b", "p"), ("b", "q"), ("b", "r"),
+                     ("c", "p"), ("c", "q")]
+    assert interleaved([]) == []
+
+
+def test_a_parallel_run_equals_the_serial_one_whatever_order_workers_took(run):
+    serial = run(jobs=1)
+    parallel = run(jobs=2, fresh=True)
+    pd.testing.assert_frame_equal(serial.rows.drop(columns="wall_s", errors="ignore"),
+                                  parallel.rows.drop(columns="wall_s", errors="ignore"))
+    assert list(parallel.cells.cell) == list(serial.cells.cell)

@@ -330,11 +330,11 @@ def run_experiment(
 
         if tasks:
             if _client is not None:
-                run_dask(tasks, _client, accept)
+                run_dask(interleaved(tasks), _client, accept)
             elif jobs_n == 1:
                 run_serial(tasks, accept)
             else:
-                run_loky(tasks, jobs_n, accept)
+                run_loky(interleaved(tasks), jobs_n, accept)
     finally:
         if own_client:
             _client.close()
@@ -394,6 +394,20 @@ def run_experiment(
                  "steppers": stepper_names, "problems": problem_names},
         rows_stored=rows_stored,
     )
+
+
+def interleaved(tasks: list[Task]) -> list[Task]:
+    """`tasks` in the order workers take them: the problems in turn (the first cell of each
+    problem, then the second of each, ...), so that workers starting together meet different
+    problems and each compiles its own problem's functions instead of waiting for the other's
+    compile of the same one. Results keep the cell order (they are placed by cell index)."""
+    rank: dict[str, int] = {}
+    keyed = []
+    for t in tasks:
+        n = rank.get(t.cell.problem, 0)
+        rank[t.cell.problem] = n + 1
+        keyed.append((n, t))
+    return [t for _, t in sorted(keyed, key=lambda item: item[0])]  # stable: problems in order
 
 
 def run_experiments(
