@@ -278,40 +278,48 @@ def accel_all(f_accel, t, Q, P, Out):
 RK = f'''
 {_JIT}
 def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
+    # One member at a time. W holds rows of w = dim rounded up to whole blocks of four (the
+    # padding stays zero): the state, the stage argument, then k_0 .. k_(s-1). The nonzero terms
+    # of each stage (start[i] .. start[i + 1]) and of the update are (coefficient, row offset);
+    # offsets are unsigned (no negative-index handling per access) and each block of four
+    # entries is formed in registers, the terms added in order.
     s = b.shape[0]
     dim = Y.shape[0]
     npar = P.shape[0]
+    w = (dim + 3) // 4 * 4
+    nb = w // 4
     hA = A * h
     hb = b * h
     hc = c * h
-    # the nonzero terms of each stage (start[i] .. start[i + 1]) and of the update, in order
     start = np.zeros(s + 1, dtype=np.int64)
-    term = np.empty(s * s, dtype=np.int64)
+    term = np.empty(s * s, dtype=np.uint64)
     coef = np.empty(s * s)
     nz = 0
     for i in range(s):
         start[i] = nz
         for m in range(i):
             if hA[i, m] != 0.0:
-                term[nz] = m
+                term[nz] = (m + 2) * w
                 coef[nz] = hA[i, m]
                 nz += 1
     start[s] = nz
-    wterm = np.empty(s, dtype=np.int64)
+    wterm = np.empty(s, dtype=np.uint64)
     wcoef = np.empty(s)
     nw = 0
     for m in range(s):
         if hb[m] != 0.0:
-            wterm[nw] = m
+            wterm[nw] = (m + 2) * w
             wcoef[nw] = hb[m]
             nw += 1
-    y = np.empty(dim)
-    stage = np.empty(dim)
-    K = np.empty(s * dim)
+    W = np.zeros((s + 2) * w)
     p = np.empty(npar)
+    uw = np.uint64(w)
+    U1 = np.uint64(1)
+    U2 = np.uint64(2)
+    U3 = np.uint64(3)
     for j in range(Y.shape[1]):
         for d in range(dim):
-            y[d] = Y[d, j]
+            W[d] = Y[d, j]
         for k in range(npar):
             p[k] = P[k, j]
         for n in range(nsteps):
@@ -320,21 +328,45 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
                 q0 = start[i]
                 q1 = start[i + 1]
                 if q0 == q1:  # a stage at y itself (the first): no copy
-                    call_state_into(f_rhs, t + hc[i], y, 0, p, K, i * dim)
+                    call_state_into(f_rhs, t + hc[i], W, 0, p, W, (i + 2) * w)
                     continue
-                for d in range(dim):
-                    acc = y[d]
+                for bb in range(nb):
+                    e = np.uint64(4) * np.uint64(bb)
+                    a0 = W[e]
+                    a1 = W[e + U1]
+                    a2 = W[e + U2]
+                    a3 = W[e + U3]
                     for q in range(q0, q1):
-                        acc += coef[q] * K[term[q] * dim + d]
-                    stage[d] = acc
-                call_state_into(f_rhs, t + hc[i], stage, 0, p, K, i * dim)
-            for d in range(dim):
-                acc = y[d]
+                        cq = coef[q]
+                        o = term[q] + e
+                        a0 += cq * W[o]
+                        a1 += cq * W[o + U1]
+                        a2 += cq * W[o + U2]
+                        a3 += cq * W[o + U3]
+                    W[uw + e] = a0
+                    W[uw + e + U1] = a1
+                    W[uw + e + U2] = a2
+                    W[uw + e + U3] = a3
+                call_state_into(f_rhs, t + hc[i], W, w, p, W, (i + 2) * w)
+            for bb in range(nb):
+                e = np.uint64(4) * np.uint64(bb)
+                a0 = W[e]
+                a1 = W[e + U1]
+                a2 = W[e + U2]
+                a3 = W[e + U3]
                 for q in range(nw):
-                    acc += wcoef[q] * K[wterm[q] * dim + d]
-                y[d] = acc
+                    cq = wcoef[q]
+                    o = wterm[q] + e
+                    a0 += cq * W[o]
+                    a1 += cq * W[o + U1]
+                    a2 += cq * W[o + U2]
+                    a3 += cq * W[o + U3]
+                W[e] = a0
+                W[e + U1] = a1
+                W[e + U2] = a2
+                W[e + U3] = a3
         for d in range(dim):
-            Y[d, j] = y[d]
+            Y[d, j] = W[d]
     return s * nsteps
 '''
 
@@ -705,15 +737,19 @@ def lmm_unroll(H, F, fvalid, head):
 LMM_EXPLICIT = f'''
 {_JIT_EXACT}
 def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
-    # one member: the history ring flat in W (states in slots 0..k-1, derivatives in k..2k-1),
-    # the formula's terms as (signed coefficient, offset into W) fixed per step
+    # One member. The history ring lies flat in W in rows of w = dim rounded up to whole blocks
+    # of four (the padding stays zero): states in rows 0..k-1, derivatives in rows k..2k-1. The
+    # formula's terms are (signed coefficient, row) in the NumPy loop's order, their rows
+    # tabulated once for each position of the ring; offsets are unsigned (no negative-index
+    # handling per access). Which derivatives are known is a bit mask over the ring (k <= 62).
     k, dim, N = H.shape
-    W = np.empty(2 * k * dim)
+    w = (dim + 3) // 4 * 4
+    nb = w // 4
+    W = np.zeros(2 * k * w)
     for sl in range(k):
         for d in range(dim):
-            W[sl * dim + d] = H[sl, d, 0]
-            W[(k + sl) * dim + d] = F[sl, d, 0]
-    valid = fvalid.copy()
+            W[sl * w + d] = H[sl, d, 0]
+            W[(k + sl) * w + d] = F[sl, d, 0]
     p = np.empty(P.shape[0])
     for q in range(P.shape[0]):
         p[q] = P[q, 0]
@@ -732,48 +768,79 @@ def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
             tindex[nt] = jj
             tcoef[nt] = h * beta[jj]
             nt += 1
-    off = np.empty(nt, dtype=np.int64)
+    off = np.empty(k * nt, dtype=np.uint64)
+    for ph in range(k):
+        for q in range(nt):
+            off[ph * nt + q] = (tkind[q] + (ph + tindex[q]) % k) * w
+    # per position of the ring: the slots whose derivative the formula needs
+    need = np.zeros(k, dtype=np.int64)
+    for ph in range(k):
+        for jj in range(k):
+            if beta[jj] != 0.0:
+                need[ph] |= 1 << ((ph + jj) % k)
+    have = 0
+    for sl in range(k):
+        if fvalid[sl]:
+            have |= 1 << sl
+    U1 = np.uint64(1)
+    U2 = np.uint64(2)
+    U3 = np.uint64(3)
     evals = 0
     head = 0
+    # whether the newest state is finite: tested here, then on each new state as it is formed
+    # (0 * x is 0 for finite x, NaN for inf or NaN)
+    finite = True
+    for d in range(dim):
+        finite &= is_finite(W[(k - 1) * w + d])
     for n in range(nsteps):
-        t = t0 + (n0 + n) * h
         oldest = head
         newest = oldest + k - 1 if oldest > 0 else k - 1
         head = head + 1 if head + 1 < k else 0
-        finite = True
-        for d in range(dim):
-            if not is_finite(W[newest * dim + d]):
-                finite = False
         if not finite:
             for d in range(dim):
-                W[oldest * dim + d] = np.nan
-            valid[oldest] = False
+                W[oldest * w + d] = np.nan
+            have &= ~(1 << oldest)
             continue
-        for jj in range(k):
-            sl = oldest + jj
-            if sl >= k:
-                sl -= k
-            if beta[jj] != 0.0 and not valid[sl]:
-                call_state_into(f_rhs, t - (k - 1 - jj) * h, W, sl * dim, p, W, (k + sl) * dim)
-                valid[sl] = True
-                evals += 1
-        for q in range(nt):
-            sl = oldest + tindex[q]
-            if sl >= k:
-                sl -= k
-            off[q] = (tkind[q] + sl) * dim
-        for d in range(dim):
-            acc = 0.0
+        t = t0 + (n0 + n) * h
+        missing = need[oldest] & ~have
+        if missing != 0:
+            for jj in range(k):
+                sl = oldest + jj
+                if sl >= k:
+                    sl -= k
+                if missing & (1 << sl):
+                    call_state_into(f_rhs, t - (k - 1 - jj) * h, W, sl * w, p, W, (k + sl) * w)
+                    evals += 1
+            have |= missing
+        dst = np.uint64(oldest * w)
+        row = np.uint64(oldest * nt)
+        zero = 0.0
+        for bb in range(nb):
+            e = np.uint64(4) * np.uint64(bb)
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            a3 = 0.0
             for q in range(nt):
-                acc += tcoef[q] * W[off[q] + d]
-            W[oldest * dim + d] = acc
-        valid[oldest] = False
+                cq = tcoef[q]
+                o = off[row + np.uint64(q)] + e
+                a0 += cq * W[o]
+                a1 += cq * W[o + U1]
+                a2 += cq * W[o + U2]
+                a3 += cq * W[o + U3]
+            zero += (a0 * 0.0 + a1 * 0.0) + (a2 * 0.0 + a3 * 0.0)
+            W[dst + e] = a0
+            W[dst + e + U1] = a1
+            W[dst + e + U2] = a2
+            W[dst + e + U3] = a3
+        have &= ~(1 << oldest)
+        finite = zero == 0.0
     for jj in range(k):
         sl = (head + jj) % k
         for d in range(dim):
-            H[jj, d, 0] = W[sl * dim + d]
-            F[jj, d, 0] = W[(k + sl) * dim + d]
-        fvalid[jj] = valid[sl]
+            H[jj, d, 0] = W[sl * w + d]
+            F[jj, d, 0] = W[(k + sl) * w + d]
+        fvalid[jj] = (have >> sl) & 1 != 0
     return evals
 
 
