@@ -1057,9 +1057,203 @@ def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, thet
 # failed iteration, increment, residual, contraction, status].
 IMPLICIT_RK = f'''
 {_JIT_EXACT}
+def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
+               full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
+    # irk_advance for one member, its arrays flat: the same operations in the same order
+    dim = Y.shape[0]
+    impl = c_impl.shape[0]
+    m = impl * dim
+    npar = P.shape[0]
+    hA = h * A_ii
+    y = np.empty(dim)
+    fstart = np.empty(dim)
+    for d in range(dim):
+        y[d] = Y[d, 0]
+        fstart[d] = Fstart[d, 0]
+    zprev = np.empty(m)
+    for i in range(impl):
+        for d in range(dim):
+            zprev[i * dim + d] = Zprev[i, d, 0]
+    p = np.empty(npar)
+    for q in range(npar):
+        p[q] = P[q, 0]
+    X = np.empty(m)
+    G = np.empty(m)
+    Fimp = np.empty(m)
+    Fexp = np.empty(dim)
+    inv_scale = np.empty(dim)
+    hexp = np.empty(impl)
+    for i in range(impl):
+        hexp[i] = h * aie_sum[i]
+    ys = np.empty(dim)
+    Jall = np.empty(impl * dim * dim)
+    M = np.empty((m, m))
+    piv = np.empty(m, dtype=np.int64)
+    rhs_w = np.empty(m)
+    sol = np.empty(m)
+    f0 = flags[0]
+    f1 = flags[1]
+    n_rhs = 0
+    n_jac = 0
+    n_iter = 0
+    failed = False
+    n = 0
+    for n in range(nsteps):
+        t = t0 + (n0 + n) * h
+        finite = True
+        for d in range(dim):
+            finite &= is_finite(y[d])
+        if not finite:
+            for d in range(dim):
+                y[d] = np.nan
+            f0 = 0
+            f1 = 0
+            continue
+        if has_expl:
+            if f0 != 0:
+                for d in range(dim):
+                    Fexp[d] = fstart[d]
+            else:
+                call_state(f_rhs, t, y, p, Fexp)
+                n_rhs += 1
+        for d in range(dim):
+            inv_scale[d] = 1.0 / (1.0 + abs(y[d]))
+        if f1 != 0 and has_pred:
+            for i in range(impl):
+                for d in range(dim):
+                    acc = 0.0
+                    for q in range(impl):
+                        acc += E[i, q] * zprev[q * dim + d]
+                    X[i * dim + d] = acc
+        else:
+            for r in range(m):
+                X[r] = 0.0
+        previous = np.inf
+        norm = np.inf
+        theta = np.nan
+        res_norm = np.nan
+        converged = False
+        status = 1
+        k = 0
+        for k in range(1, max_iter + 1):
+            # residual g = Z - h A_ii F(Z) - h A_ie F_e
+            for i in range(impl):
+                for d in range(dim):
+                    ys[d] = y[d] + X[i * dim + d]
+                call_state_into(f_rhs, t + c_impl[i] * h, ys, 0, p, Fimp, i * dim)
+                n_rhs += 1
+            res_norm = 0.0
+            for i in range(impl):
+                for d in range(dim):
+                    if impl == 1:
+                        g = X[d] - hA[0, 0] * Fimp[d]
+                    else:
+                        acc = 0.0
+                        for q in range(impl):
+                            acc += hA[i, q] * Fimp[q * dim + d]
+                        g = X[i * dim + d] - acc
+                    if has_expl:
+                        g -= hexp[i] * Fexp[d]
+                    G[i * dim + d] = g
+                    r = abs(g * inv_scale[d])
+                    if not (r <= res_norm):
+                        res_norm = r
+            if k == 1 or full:
+                if full:
+                    for i in range(impl):
+                        for d in range(dim):
+                            ys[d] = y[d] + X[i * dim + d]
+                        call_state_into(f_jac, t + c_impl[i] * h, ys, 0, p, Jall, i * dim * dim)
+                else:
+                    call_state_into(f_jac, t, y, 0, p, Jall, 0)
+                    for i in range(1, impl):
+                        for q in range(dim * dim):
+                            Jall[i * dim * dim + q] = Jall[q]
+                for i in range(impl):
+                    for a in range(dim):
+                        for q in range(impl):
+                            for bb in range(dim):
+                                v = -hA[i, q] * Jall[q * dim * dim + a * dim + bb]
+                                if i == q and a == bb:
+                                    v += 1.0
+                                M[i * dim + a, q * dim + bb] = v
+                n_jac += impl if full else 1
+                if not lu_factor(M, piv):
+                    n_iter += 1
+                    status = 2
+                    break
+            n_iter += 1
+            for r in range(m):
+                rhs_w[r] = -G[r]
+            lu_apply(M, piv, rhs_w, sol)
+            # X += DX; the increment's max-norm scaled by inv_scale, NaN when any entry is not finite
+            norm = 0.0
+            nan_seen = False
+            for i in range(impl):
+                for d in range(dim):
+                    r = i * dim + d
+                    X[r] += sol[r]
+                    e = abs(sol[r] * inv_scale[d])
+                    if e != e:
+                        nan_seen = True
+                    elif e > norm:
+                        norm = e
+            if nan_seen or not is_finite(norm):
+                norm = np.nan
+                break
+            converged, theta = newton_converged(norm, previous, tol, theta)
+            if converged:
+                break
+            previous = norm
+        if not converged:
+            newton_stats(stats, n, n_rhs, n_jac, n_iter, k, norm, res_norm, theta, status)
+            failed = True
+            break
+        for d in range(dim):
+            acc = 0.0
+            for i in range(impl):
+                acc += dvec[i] * X[i * dim + d]
+            ynew = y[d] + acc
+            if has_expl:
+                ynew += (h * wsum) * Fexp[d]
+            if fsal:
+                hf = 0.0
+                for i in range(impl):
+                    z = X[i * dim + d]
+                    if has_expl:
+                        z -= hexp[i] * Fexp[d]
+                    hf += last_inv[i] * z
+                fstart[d] = hf / h
+            y[d] = ynew
+        if fsal:
+            f0 = 1
+        for r in range(m):
+            zprev[r] = X[r]
+        f1 = 1
+    for d in range(dim):
+        Y[d, 0] = y[d]
+        Fstart[d, 0] = fstart[d]
+    for i in range(impl):
+        for d in range(dim):
+            Zprev[i, d, 0] = zprev[i * dim + d]
+    flags[0] = f0
+    flags[1] = f1
+    if not failed:
+        stats[0] = nsteps
+        stats[1] = n_rhs
+        stats[2] = n_jac
+        stats[3] = n_iter
+        stats[8] = 0
+
+
+{_JIT_EXACT}
 def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
                 full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
     dim, N = Y.shape
+    if N == 1:
+        irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
+                   full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats)
+        return
     impl = c_impl.shape[0]
     m = impl * dim
     npar = P.shape[0]

@@ -295,6 +295,29 @@ def test_a_blow_up_turns_non_finite_at_the_same_step_in_both(name, size):
         _assert_agree(a.y[before], b.y[before], f"{name} before the blow-up")
 
 
+@pytest.mark.parametrize("name", ["implicit-midpoint", "gauss-legendre-4", "trapezoid", "ab4", "bdf2"])
+@pytest.mark.parametrize("size", [1, 3])
+def test_a_non_finite_start_stays_non_finite_as_in_the_numpy_loop(name, size):
+    """A start with a NaN entry: the implicit and multistep loops (one member, or the ensemble)
+    turn and keep the state non-finite with the NumPy loop's evaluation counts (none for the
+    implicit Runge-Kutta steps)."""
+    problem = get_problem("kepler-elliptic")
+    runs = []
+    for stepper in (get_stepper(name), get_stepper(name + SUFFIX)):
+        y0 = problem.y0[:, None].copy() if size == 1 else problem.ensemble(size, seed=2)
+        y0[1, 0] = np.nan
+        dyn = problem.dynamics(None, size)
+        with np.errstate(all="ignore"):
+            c = stepper._start(dyn, problem.t0, y0, 1e-3)
+            stepper._advance(dyn, c, 6)
+        runs.append((stepper._observe(dyn, c), dict(dyn.counts)))
+    (a, counts_a), (b, counts_b) = runs
+    assert not np.isfinite(a).all()
+    assert np.array_equal(np.isfinite(a), np.isfinite(b))
+    _assert_agree(a, b, f"{name} from a non-finite start")
+    assert counts_a == counts_b
+
+
 def test_newton_failure_is_a_step_failure_in_both():
     base = get_stepper("gauss-legendre-4").with_newton(tol=0.0, max_iter=2)
     variant = compiled_variant(base)
