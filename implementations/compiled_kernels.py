@@ -1078,7 +1078,6 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
     for q in range(npar):
         p[q] = P[q, 0]
     X = np.empty(m)
-    G = np.empty(m)
     Fimp = np.empty(m)
     Fexp = np.empty(dim)
     inv_scale = np.empty(dim)
@@ -1154,15 +1153,16 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
                         g = X[i * dim + d] - acc
                     if has_expl:
                         g -= hexp[i] * Fexp[d]
-                    G[i * dim + d] = g
+                    rhs_w[i * dim + d] = -g
                     r = abs(g * inv_scale[d])
                     if not (r <= res_norm):
                         res_norm = r
             if k == 1 or full:
                 if full:
                     for i in range(impl):
-                        for d in range(dim):
-                            ys[d] = y[d] + X[i * dim + d]
+                        if impl > 1:  # one stage: ys still holds y + X from the residual
+                            for d in range(dim):
+                                ys[d] = y[d] + X[i * dim + d]
                         call_state_into(f_jac, t + c_impl[i] * h, ys, 0, p, Jall, i * dim * dim)
                 else:
                     call_state_into(f_jac, t, y, 0, p, Jall, 0)
@@ -1170,21 +1170,19 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
                         for q in range(dim * dim):
                             Jall[i * dim * dim + q] = Jall[q]
                 for i in range(impl):
-                    for a in range(dim):
-                        for q in range(impl):
+                    for q in range(impl):
+                        c_iq = -hA[i, q]
+                        for a in range(dim):
                             for bb in range(dim):
-                                v = -hA[i, q] * Jall[q * dim * dim + a * dim + bb]
-                                if i == q and a == bb:
-                                    v += 1.0
-                                M[i * dim + a, q * dim + bb] = v
+                                M[i * dim + a, q * dim + bb] = c_iq * Jall[q * dim * dim + a * dim + bb]
+                for r in range(m):
+                    M[r, r] += 1.0
                 n_jac += impl if full else 1
                 if not lu_factor(M, piv):
                     n_iter += 1
                     status = 2
                     break
             n_iter += 1
-            for r in range(m):
-                rhs_w[r] = -G[r]
             lu_apply(M, piv, rhs_w, sol)
             # X += DX; the increment's max-norm scaled by inv_scale, NaN when any entry is not finite
             norm = 0.0
