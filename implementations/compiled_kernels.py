@@ -242,10 +242,6 @@ _JIT_EXACT = '@njit(cache=True, error_model="numpy")'
 # Helpers called once per step or per member are inlined into the kernels (numba's IR inlining):
 # a call between compiled functions passes each array with its reference counts.
 _JIT_INLINE = '@njit(cache=True, error_model="numpy", inline="always")'
-# The Newton and multistep-history helpers are compiled once and called: inlined at numba's IR
-# level they were typed and optimised again inside every kernel using them (measured: ~1.5 s of
-# cold compile per kernel, no faster for it).
-_JIT_HELPER = '@njit(cache=True, error_model="numpy")'
 
 _HELPERS = f'''
 {_JIT_INLINE}
@@ -665,7 +661,7 @@ def stormer_advance(f_accel, alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur,
 # Linear multistep, shared part: f at the history points a beta needs (each evaluated once, when
 # first needed) and psi = -sum_j alpha_j y_{n+j} + h sum_j beta_j f_{n+j} over j < k.
 _LMM_PSI = f'''
-{_JIT_HELPER}
+{_JIT_INLINE}
 def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slots):
     # history index jj (0 = oldest) lives in ring slot (head + jj) % k
     k, dim, N = H.shape
@@ -700,7 +696,7 @@ def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slo
     return evals
 
 
-{_JIT_HELPER}
+{_JIT_INLINE}
 def lmm_finite(H, slot):
     k, dim, N = H.shape
     for d in range(dim):
@@ -710,7 +706,7 @@ def lmm_finite(H, slot):
     return True
 
 
-{_JIT_HELPER}
+{_JIT_INLINE}
 def lmm_blow_up(H, fvalid, slot):
     k, dim, N = H.shape
     for d in range(dim):
@@ -937,7 +933,7 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
 # contraction estimate theta / (1 - theta) |dx| at most `tol` (Hairer & Wanner II, IV.8, eq.
 # (8.10)); LU with partial pivoting per member. Status 1: no convergence; 2: singular matrix.
 _NEWTON = f'''
-{_JIT_HELPER}
+{_JIT_INLINE}
 def lu_factor(M, piv):
     # M = P L U in place (Gaussian elimination with partial pivoting, whole rows swapped, the
     # multipliers stored below the diagonal); False on an exactly zero pivot
@@ -967,7 +963,7 @@ def lu_factor(M, piv):
     return True
 
 
-{_JIT_HELPER}
+{_JIT_INLINE}
 def lu_apply(M, piv, b, x):
     # x = M^-1 b from `lu_factor`'s factors: every row swap first, then the two substitutions (each
     # entry sees the same operations in the same order as elimination interleaved with the swaps)
@@ -992,7 +988,7 @@ def lu_apply(M, piv, b, x):
         x[i] = acc / M[i, i]
 
 
-{_JIT_HELPER}
+{_JIT_INLINE}
 def newton_factor_members(Mats, Piv):
     # every member's Newton matrix factored in place (once per matrix, whatever the number of
     # iterations that solve with it); False on a singular matrix
@@ -1002,7 +998,7 @@ def newton_factor_members(Mats, Piv):
     return True
 
 
-{_JIT_HELPER}
+{_JIT_INLINE}
 def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
     # DX[:, j] = -Mats[j]^-1 G[:, j] for every member, from the factors of `newton_factor_members`
     m = rhs_w.shape[0]
@@ -1014,7 +1010,7 @@ def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
             DX[r, j] = sol[r]
 
 
-{_JIT_HELPER}
+{_JIT_INLINE}
 def newton_update(X, DX, inv_scale):
     # X += DX; the increment's max-norm scaled by inv_scale (rows i * dim + d use row d), NaN
     # when any scaled entry is not finite
@@ -1036,7 +1032,7 @@ def newton_update(X, DX, inv_scale):
     return norm
 
 
-{_JIT_HELPER}
+{_JIT_INLINE}
 def newton_converged(norm, previous, tol, theta):
     # (converged, contraction): the increment at most tol, or theta / (1 - theta) |dx| at most tol
     if norm <= tol:
@@ -1048,7 +1044,7 @@ def newton_converged(norm, previous, tol, theta):
     return False, theta
 
 
-{_JIT_HELPER}
+{_JIT_INLINE}
 def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, theta, status):
     stats[0] = n
     stats[1] = n_rhs
