@@ -1066,44 +1066,44 @@ IMPLICIT_RK = f'''
 {_JIT_EXACT}
 def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
                full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
-    # irk_advance for one member, its arrays flat: the same operations in the same order
+    # irk_advance for one member and one implicit stage (Z = h a f(t + c h, y + Z) - h a_e f(t, y)),
+    # the state in flat arrays: the same operations in the same order
     dim = Y.shape[0]
-    impl = c_impl.shape[0]
-    m = impl * dim
     npar = P.shape[0]
-    hA = h * A_ii
+    a00 = h * A_ii[0, 0]
+    c00 = -a00
+    hexp = h * aie_sum[0]
+    hw = h * wsum
+    e00 = E[0, 0]
+    d0 = dvec[0]
+    l0 = last_inv[0]
+    tc = c_impl[0] * h
     y = np.empty(dim)
     fstart = np.empty(dim)
+    zprev = np.empty(dim)
     for d in range(dim):
         y[d] = Y[d, 0]
         fstart[d] = Fstart[d, 0]
-    zprev = np.empty(m)
-    for i in range(impl):
-        for d in range(dim):
-            zprev[i * dim + d] = Zprev[i, d, 0]
+        zprev[d] = Zprev[0, d, 0]
     p = np.empty(npar)
     for q in range(npar):
         p[q] = P[q, 0]
-    X = np.empty(m)
-    Fimp = np.empty(m)
+    X = np.empty(dim)
+    F = np.empty(dim)
     Fexp = np.empty(dim)
     inv_scale = np.empty(dim)
-    hexp = np.empty(impl)
-    for i in range(impl):
-        hexp[i] = h * aie_sum[i]
     ys = np.empty(dim)
-    Jall = np.empty(impl * dim * dim)
-    M = np.empty((m, m))
-    piv = np.empty(m, dtype=np.int64)
-    rhs_w = np.empty(m)
-    sol = np.empty(m)
+    J = np.empty(dim * dim)
+    M = np.empty((dim, dim))
+    piv = np.empty(dim, dtype=np.int64)
+    rhs_w = np.empty(dim)
+    sol = np.empty(dim)
     f0 = flags[0]
     f1 = flags[1]
     n_rhs = 0
     n_jac = 0
     n_iter = 0
     failed = False
-    n = 0
     for n in range(nsteps):
         t = t0 + (n0 + n) * h
         finite = True
@@ -1125,15 +1125,13 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
         for d in range(dim):
             inv_scale[d] = 1.0 / (1.0 + abs(y[d]))
         if f1 != 0 and has_pred:
-            for i in range(impl):
-                for d in range(dim):
-                    acc = 0.0
-                    for q in range(impl):
-                        acc += E[i, q] * zprev[q * dim + d]
-                    X[i * dim + d] = acc
+            for d in range(dim):
+                acc = 0.0
+                acc += e00 * zprev[d]
+                X[d] = acc
         else:
-            for r in range(m):
-                X[r] = 0.0
+            for d in range(dim):
+                X[d] = 0.0
         previous = np.inf
         norm = np.inf
         theta = np.nan
@@ -1142,49 +1140,31 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
         status = 1
         k = 0
         for k in range(1, max_iter + 1):
-            # residual g = Z - h A_ii F(Z) - h A_ie F_e
-            for i in range(impl):
-                for d in range(dim):
-                    ys[d] = y[d] + X[i * dim + d]
-                call_state_into(f_rhs, t + c_impl[i] * h, ys, 0, p, Fimp, i * dim)
-                n_rhs += 1
+            # residual g = Z - h a F(Z) - h a_e F_e, kept negated for the solve
+            for d in range(dim):
+                ys[d] = y[d] + X[d]
+            call_state(f_rhs, t + tc, ys, p, F)
+            n_rhs += 1
             res_norm = 0.0
-            for i in range(impl):
-                for d in range(dim):
-                    if impl == 1:
-                        g = X[d] - hA[0, 0] * Fimp[d]
-                    else:
-                        acc = 0.0
-                        for q in range(impl):
-                            acc += hA[i, q] * Fimp[q * dim + d]
-                        g = X[i * dim + d] - acc
-                    if has_expl:
-                        g -= hexp[i] * Fexp[d]
-                    rhs_w[i * dim + d] = -g
-                    r = abs(g * inv_scale[d])
-                    if not (r <= res_norm):
-                        res_norm = r
+            for d in range(dim):
+                g = X[d] - a00 * F[d]
+                if has_expl:
+                    g -= hexp * Fexp[d]
+                rhs_w[d] = -g
+                r = abs(g * inv_scale[d])
+                if not (r <= res_norm):
+                    res_norm = r
             if k == 1 or full:
                 if full:
-                    for i in range(impl):
-                        if impl > 1:  # one stage: ys still holds y + X from the residual
-                            for d in range(dim):
-                                ys[d] = y[d] + X[i * dim + d]
-                        call_state_into(f_jac, t + c_impl[i] * h, ys, 0, p, Jall, i * dim * dim)
+                    call_state(f_jac, t + tc, ys, p, J)
                 else:
-                    call_state_into(f_jac, t, y, 0, p, Jall, 0)
-                    for i in range(1, impl):
-                        for q in range(dim * dim):
-                            Jall[i * dim * dim + q] = Jall[q]
-                for i in range(impl):
-                    for q in range(impl):
-                        c_iq = -hA[i, q]
-                        for a in range(dim):
-                            for bb in range(dim):
-                                M[i * dim + a, q * dim + bb] = c_iq * Jall[q * dim * dim + a * dim + bb]
-                for r in range(m):
-                    M[r, r] += 1.0
-                n_jac += impl if full else 1
+                    call_state(f_jac, t, y, p, J)
+                for a in range(dim):
+                    for bb in range(dim):
+                        M[a, bb] = c00 * J[a * dim + bb]
+                for a in range(dim):
+                    M[a, a] += 1.0
+                n_jac += 1
                 if not lu_factor(M, piv):
                     n_iter += 1
                     status = 2
@@ -1194,15 +1174,13 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
             # X += DX; the increment's max-norm scaled by inv_scale, NaN when any entry is not finite
             norm = 0.0
             nan_seen = False
-            for i in range(impl):
-                for d in range(dim):
-                    r = i * dim + d
-                    X[r] += sol[r]
-                    e = abs(sol[r] * inv_scale[d])
-                    if e != e:
-                        nan_seen = True
-                    elif e > norm:
-                        norm = e
+            for d in range(dim):
+                X[d] += sol[d]
+                e = abs(sol[d] * inv_scale[d])
+                if e != e:
+                    nan_seen = True
+                elif e > norm:
+                    norm = e
             if nan_seen or not is_finite(norm):
                 norm = np.nan
                 break
@@ -1216,31 +1194,27 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
             break
         for d in range(dim):
             acc = 0.0
-            for i in range(impl):
-                acc += dvec[i] * X[i * dim + d]
+            acc += d0 * X[d]
             ynew = y[d] + acc
             if has_expl:
-                ynew += (h * wsum) * Fexp[d]
+                ynew += hw * Fexp[d]
             if fsal:
+                z = X[d]
+                if has_expl:
+                    z -= hexp * Fexp[d]
                 hf = 0.0
-                for i in range(impl):
-                    z = X[i * dim + d]
-                    if has_expl:
-                        z -= hexp[i] * Fexp[d]
-                    hf += last_inv[i] * z
+                hf += l0 * z
                 fstart[d] = hf / h
             y[d] = ynew
         if fsal:
             f0 = 1
-        for r in range(m):
-            zprev[r] = X[r]
+        for d in range(dim):
+            zprev[d] = X[d]
         f1 = 1
     for d in range(dim):
         Y[d, 0] = y[d]
         Fstart[d, 0] = fstart[d]
-    for i in range(impl):
-        for d in range(dim):
-            Zprev[i, d, 0] = zprev[i * dim + d]
+        Zprev[0, d, 0] = zprev[d]
     flags[0] = f0
     flags[1] = f1
     if not failed:
@@ -1255,7 +1229,7 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
 def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
                 full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
     dim, N = Y.shape
-    if N == 1:
+    if N == 1 and c_impl.shape[0] == 1:
         irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
                    full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats)
         return
