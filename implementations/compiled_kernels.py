@@ -242,6 +242,9 @@ _JIT_EXACT = '@njit(cache=True, error_model="numpy")'
 # Helpers called once per step or per member are inlined into the kernels (numba's IR inlining):
 # a call between compiled functions passes each array with its reference counts.
 _JIT_INLINE = '@njit(cache=True, error_model="numpy", inline="always")'
+# The ensemble Newton steps (factor, solve, update over all members) are called once per
+# iteration whatever the ensemble size: compiled once and called, not inlined into each kernel.
+_JIT_CALLED = '@njit(cache=True, error_model="numpy")'
 
 _HELPERS = f'''
 {_JIT_INLINE}
@@ -988,7 +991,7 @@ def lu_apply(M, piv, b, x):
         x[i] = acc / M[i, i]
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_factor_members(Mats, Piv):
     # every member's Newton matrix factored in place (once per matrix, whatever the number of
     # iterations that solve with it); False on a singular matrix
@@ -998,7 +1001,7 @@ def newton_factor_members(Mats, Piv):
     return True
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
     # DX[:, j] = -Mats[j]^-1 G[:, j] for every member, from the factors of `newton_factor_members`
     m = rhs_w.shape[0]
@@ -1010,7 +1013,7 @@ def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
             DX[r, j] = sol[r]
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_update(X, DX, inv_scale):
     # X += DX; the increment's max-norm scaled by inv_scale (rows i * dim + d use row d), NaN
     # when any scaled entry is not finite
