@@ -30,6 +30,12 @@ hash of its text, and imported under a name derived from that hash; every functi
 each kernel once and the others load it. `COMPILE_LOG` records, per process, what was compiled or
 loaded and how long it took (wall and CPU seconds).
 
+One trajectory is the common case of the long runs, so the explicit Runge-Kutta and explicit
+multistep kernels keep it in flat rows padded to whole blocks of four values (each block formed
+in registers, unsigned offsets, no per-access negative-index handling), and a one-stage implicit
+Runge-Kutta method runs one member by `irk_single`: the same operations as the ensemble loops, in
+the same order, without their per-member views and member loops.
+
 Floating-point rules: operations in the NumPy loops' order; in the functions and the explicit
 one-step and Stormer kernels a*b + c may become one fused multiply-add (as in heyoka's compiled
 functions and the BLAS axpy updates of the NumPy loops); the multistep and implicit kernels,
