@@ -249,7 +249,8 @@ _JIT_EXACT = '@njit(cache=True, error_model="numpy")'
 # a call between compiled functions passes each array with its reference counts.
 _JIT_INLINE = '@njit(cache=True, error_model="numpy", inline="always")'
 # The ensemble Newton steps (factor, solve, update over all members) are called once per
-# iteration whatever the ensemble size: compiled once and called, not inlined into each kernel.
+# iteration whatever the ensemble size, the convergence test and the failure record take scalars
+# only: compiled once and called, not inlined into each kernel.
 _JIT_CALLED = '@njit(cache=True, error_model="numpy")'
 
 _HELPERS = f'''
@@ -1041,7 +1042,7 @@ def newton_update(X, DX, inv_scale):
     return norm
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_converged(norm, previous, tol, theta):
     # (converged, contraction): the increment at most tol, or theta / (1 - theta) |dx| at most tol
     if norm <= tol:
@@ -1053,7 +1054,7 @@ def newton_converged(norm, previous, tol, theta):
     return False, theta
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, theta, status):
     stats[0] = n
     stats[1] = n_rhs
