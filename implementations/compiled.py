@@ -77,12 +77,16 @@ __all__ = [
     "STEPPERS",
     "NOT_COMPILED",
     "COLUMN_MIN",
+    "MAX_MULTISTEP_STEPS",
 ]
 
 SUFFIX = "@compiled"
 #: Ensembles of at least this many members run the explicit one-step families by their column
 #: kernels (members advanced together in blocks, vectorisable); smaller ones member by member.
 COLUMN_MIN = 8
+#: Most steps of a multistep table the compiled loop takes: it keeps which derivatives of its
+#: history ring are known as the bits of one 64-bit integer.
+MAX_MULTISTEP_STEPS = 62
 
 
 def _pars(dyn: Dynamics) -> np.ndarray:
@@ -421,6 +425,11 @@ class CompiledMultistep(_Compiled):
         table = base.coefficients
         if not isinstance(table, LinearMultistep) or not isinstance(base, LinearMultistepStepper):
             raise InputError(f"`stepper` {base.info.name!r} needs a LinearMultistepStepper")
+        if table.steps > MAX_MULTISTEP_STEPS:
+            raise InputError(
+                f"`stepper` {base.info.name!r}: the compiled multistep loop takes at most "
+                f"{MAX_MULTISTEP_STEPS} steps, got {table.steps}"
+            )
         super().__init__(base)
         self.history_length = table.steps
         self.implicit = not bool(table.explicit)

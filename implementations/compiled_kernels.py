@@ -30,6 +30,12 @@ hash of its text, and imported under a name derived from that hash; every functi
 each kernel once and the others load it. `COMPILE_LOG` records, per process, what was compiled or
 loaded and how long it took (wall and CPU seconds).
 
+One trajectory is the common case of the long runs, so the explicit Runge-Kutta and explicit
+multistep kernels keep it in flat rows padded to whole blocks of four values (each block formed
+in registers, unsigned offsets, no per-access negative-index handling), and a one-stage implicit
+Runge-Kutta method runs one member by `irk_single`: the same operations as the ensemble loops, in
+the same order, without their per-member views and member loops.
+
 Floating-point rules: operations in the NumPy loops' order; in the functions and the explicit
 one-step and Stormer kernels a*b + c may become one fused multiply-add (as in heyoka's compiled
 functions and the BLAS axpy updates of the NumPy loops); the multistep and implicit kernels,
@@ -242,6 +248,10 @@ _JIT_EXACT = '@njit(cache=True, error_model="numpy")'
 # Helpers called once per step or per member are inlined into the kernels (numba's IR inlining):
 # a call between compiled functions passes each array with its reference counts.
 _JIT_INLINE = '@njit(cache=True, error_model="numpy", inline="always")'
+# The ensemble Newton steps (factor, solve, update over all members) are called once per
+# iteration whatever the ensemble size, the convergence test and the failure record take scalars
+# only: compiled once and called, not inlined into each kernel.
+_JIT_CALLED = '@njit(cache=True, error_model="numpy")'
 
 _HELPERS = f'''
 {_JIT_INLINE}
@@ -278,40 +288,48 @@ def accel_all(f_accel, t, Q, P, Out):
 RK = f'''
 {_JIT}
 def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
+    # One member at a time. W holds rows of w = dim rounded up to whole blocks of four (the
+    # padding stays zero): the state, the stage argument, then k_0 .. k_(s-1). The nonzero terms
+    # of each stage (start[i] .. start[i + 1]) and of the update are (coefficient, row offset);
+    # offsets are unsigned (no negative-index handling per access) and each block of four
+    # entries is formed in registers, the terms added in order.
     s = b.shape[0]
     dim = Y.shape[0]
     npar = P.shape[0]
+    w = (dim + 3) // 4 * 4
+    nb = w // 4
     hA = A * h
     hb = b * h
     hc = c * h
-    # the nonzero terms of each stage (start[i] .. start[i + 1]) and of the update, in order
     start = np.zeros(s + 1, dtype=np.int64)
-    term = np.empty(s * s, dtype=np.int64)
+    term = np.empty(s * s, dtype=np.uint64)
     coef = np.empty(s * s)
     nz = 0
     for i in range(s):
         start[i] = nz
         for m in range(i):
             if hA[i, m] != 0.0:
-                term[nz] = m
+                term[nz] = (m + 2) * w
                 coef[nz] = hA[i, m]
                 nz += 1
     start[s] = nz
-    wterm = np.empty(s, dtype=np.int64)
+    wterm = np.empty(s, dtype=np.uint64)
     wcoef = np.empty(s)
     nw = 0
     for m in range(s):
         if hb[m] != 0.0:
-            wterm[nw] = m
+            wterm[nw] = (m + 2) * w
             wcoef[nw] = hb[m]
             nw += 1
-    y = np.empty(dim)
-    stage = np.empty(dim)
-    K = np.empty(s * dim)
+    W = np.zeros((s + 2) * w)
     p = np.empty(npar)
+    uw = np.uint64(w)
+    U1 = np.uint64(1)
+    U2 = np.uint64(2)
+    U3 = np.uint64(3)
     for j in range(Y.shape[1]):
         for d in range(dim):
-            y[d] = Y[d, j]
+            W[d] = Y[d, j]
         for k in range(npar):
             p[k] = P[k, j]
         for n in range(nsteps):
@@ -320,21 +338,45 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
                 q0 = start[i]
                 q1 = start[i + 1]
                 if q0 == q1:  # a stage at y itself (the first): no copy
-                    call_state_into(f_rhs, t + hc[i], y, 0, p, K, i * dim)
+                    call_state_into(f_rhs, t + hc[i], W, 0, p, W, (i + 2) * w)
                     continue
-                for d in range(dim):
-                    acc = y[d]
+                for bb in range(nb):
+                    e = np.uint64(4) * np.uint64(bb)
+                    a0 = W[e]
+                    a1 = W[e + U1]
+                    a2 = W[e + U2]
+                    a3 = W[e + U3]
                     for q in range(q0, q1):
-                        acc += coef[q] * K[term[q] * dim + d]
-                    stage[d] = acc
-                call_state_into(f_rhs, t + hc[i], stage, 0, p, K, i * dim)
-            for d in range(dim):
-                acc = y[d]
+                        cq = coef[q]
+                        o = term[q] + e
+                        a0 += cq * W[o]
+                        a1 += cq * W[o + U1]
+                        a2 += cq * W[o + U2]
+                        a3 += cq * W[o + U3]
+                    W[uw + e] = a0
+                    W[uw + e + U1] = a1
+                    W[uw + e + U2] = a2
+                    W[uw + e + U3] = a3
+                call_state_into(f_rhs, t + hc[i], W, w, p, W, (i + 2) * w)
+            for bb in range(nb):
+                e = np.uint64(4) * np.uint64(bb)
+                a0 = W[e]
+                a1 = W[e + U1]
+                a2 = W[e + U2]
+                a3 = W[e + U3]
                 for q in range(nw):
-                    acc += wcoef[q] * K[wterm[q] * dim + d]
-                y[d] = acc
+                    cq = wcoef[q]
+                    o = wterm[q] + e
+                    a0 += cq * W[o]
+                    a1 += cq * W[o + U1]
+                    a2 += cq * W[o + U2]
+                    a3 += cq * W[o + U3]
+                W[e] = a0
+                W[e + U1] = a1
+                W[e + U2] = a2
+                W[e + U3] = a3
         for d in range(dim):
-            Y[d, j] = y[d]
+            Y[d, j] = W[d]
     return s * nsteps
 '''
 
@@ -686,7 +728,8 @@ def lmm_blow_up(H, fvalid, slot):
 {_JIT_EXACT}
 def lmm_unroll(H, F, fvalid, head):
     # the ring back in history order, oldest first
-    k = H.shape[0]
+    # (element loops: an array-slice assignment compiles to ~5 s of broadcasting code)
+    k, dim, N = H.shape
     if head == 0:
         return
     Hc = H.copy()
@@ -694,8 +737,10 @@ def lmm_unroll(H, F, fvalid, head):
     vc = fvalid.copy()
     for jj in range(k):
         slot = (head + jj) % k
-        H[jj] = Hc[slot]
-        F[jj] = Fc[slot]
+        for d in range(dim):
+            for m in range(N):
+                H[jj, d, m] = Hc[slot, d, m]
+                F[jj, d, m] = Fc[slot, d, m]
         fvalid[jj] = vc[slot]
 '''
 
@@ -705,15 +750,19 @@ def lmm_unroll(H, F, fvalid, head):
 LMM_EXPLICIT = f'''
 {_JIT_EXACT}
 def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
-    # one member: the history ring flat in W (states in slots 0..k-1, derivatives in k..2k-1),
-    # the formula's terms as (signed coefficient, offset into W) fixed per step
+    # One member. The history ring lies flat in W in rows of w = dim rounded up to whole blocks
+    # of four (the padding stays zero): states in rows 0..k-1, derivatives in rows k..2k-1. The
+    # formula's terms are (signed coefficient, row) in the NumPy loop's order, their rows
+    # tabulated once for each position of the ring; offsets are unsigned (no negative-index
+    # handling per access). Which derivatives are known is a bit mask over the ring (k <= 62).
     k, dim, N = H.shape
-    W = np.empty(2 * k * dim)
+    w = (dim + 3) // 4 * 4
+    nb = w // 4
+    W = np.zeros(2 * k * w)
     for sl in range(k):
         for d in range(dim):
-            W[sl * dim + d] = H[sl, d, 0]
-            W[(k + sl) * dim + d] = F[sl, d, 0]
-    valid = fvalid.copy()
+            W[sl * w + d] = H[sl, d, 0]
+            W[(k + sl) * w + d] = F[sl, d, 0]
     p = np.empty(P.shape[0])
     for q in range(P.shape[0]):
         p[q] = P[q, 0]
@@ -732,48 +781,83 @@ def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
             tindex[nt] = jj
             tcoef[nt] = h * beta[jj]
             nt += 1
-    off = np.empty(nt, dtype=np.int64)
+    off = np.empty(k * nt, dtype=np.uint64)
+    for ph in range(k):
+        for q in range(nt):
+            off[ph * nt + q] = (tkind[q] + (ph + tindex[q]) % k) * w
+    # per position of the ring: the slots whose derivative the formula needs
+    need = np.zeros(k, dtype=np.int64)
+    for ph in range(k):
+        for jj in range(k):
+            if beta[jj] != 0.0:
+                need[ph] |= 1 << ((ph + jj) % k)
+    have = 0
+    for sl in range(k):
+        if fvalid[sl]:
+            have |= 1 << sl
+    U1 = np.uint64(1)
+    U2 = np.uint64(2)
+    U3 = np.uint64(3)
     evals = 0
     head = 0
+    # whether the newest state is finite: tested here, then on each new state as it is formed
+    # (0 * x is 0 for finite x, NaN for inf or NaN)
+    finite = True
+    for d in range(dim):
+        finite &= is_finite(W[(k - 1) * w + d])
     for n in range(nsteps):
-        t = t0 + (n0 + n) * h
         oldest = head
         newest = oldest + k - 1 if oldest > 0 else k - 1
         head = head + 1 if head + 1 < k else 0
-        finite = True
-        for d in range(dim):
-            if not is_finite(W[newest * dim + d]):
-                finite = False
         if not finite:
             for d in range(dim):
-                W[oldest * dim + d] = np.nan
-            valid[oldest] = False
+                W[oldest * w + d] = np.nan
+            have &= ~(1 << oldest)
             continue
-        for jj in range(k):
-            sl = oldest + jj
-            if sl >= k:
-                sl -= k
-            if beta[jj] != 0.0 and not valid[sl]:
-                call_state_into(f_rhs, t - (k - 1 - jj) * h, W, sl * dim, p, W, (k + sl) * dim)
-                valid[sl] = True
-                evals += 1
-        for q in range(nt):
-            sl = oldest + tindex[q]
-            if sl >= k:
-                sl -= k
-            off[q] = (tkind[q] + sl) * dim
-        for d in range(dim):
-            acc = 0.0
+        t = t0 + (n0 + n) * h
+        missing = need[oldest] & ~have
+        if missing == 1 << newest:  # the usual step: only the newest state's derivative
+            call_state_into(f_rhs, t, W, newest * w, p, W, (k + newest) * w)
+            evals += 1
+            have |= missing
+        elif missing != 0:
+            for jj in range(k):
+                sl = oldest + jj
+                if sl >= k:
+                    sl -= k
+                if missing & (1 << sl):
+                    call_state_into(f_rhs, t - (k - 1 - jj) * h, W, sl * w, p, W, (k + sl) * w)
+                    evals += 1
+            have |= missing
+        dst = np.uint64(oldest * w)
+        row = np.uint64(oldest * nt)
+        zero = 0.0
+        for bb in range(nb):
+            e = np.uint64(4) * np.uint64(bb)
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            a3 = 0.0
             for q in range(nt):
-                acc += tcoef[q] * W[off[q] + d]
-            W[oldest * dim + d] = acc
-        valid[oldest] = False
+                cq = tcoef[q]
+                o = off[row + np.uint64(q)] + e
+                a0 += cq * W[o]
+                a1 += cq * W[o + U1]
+                a2 += cq * W[o + U2]
+                a3 += cq * W[o + U3]
+            zero += (a0 * 0.0 + a1 * 0.0) + (a2 * 0.0 + a3 * 0.0)
+            W[dst + e] = a0
+            W[dst + e + U1] = a1
+            W[dst + e + U2] = a2
+            W[dst + e + U3] = a3
+        have &= ~(1 << oldest)
+        finite = zero == 0.0
     for jj in range(k):
         sl = (head + jj) % k
         for d in range(dim):
-            H[jj, d, 0] = W[sl * dim + d]
-            F[jj, d, 0] = W[(k + sl) * dim + d]
-        fvalid[jj] = valid[sl]
+            H[jj, d, 0] = W[sl * w + d]
+            F[jj, d, 0] = W[(k + sl) * w + d]
+        fvalid[jj] = (have >> sl) & 1 != 0
     return evals
 
 
@@ -914,7 +998,7 @@ def lu_apply(M, piv, b, x):
         x[i] = acc / M[i, i]
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_factor_members(Mats, Piv):
     # every member's Newton matrix factored in place (once per matrix, whatever the number of
     # iterations that solve with it); False on a singular matrix
@@ -924,7 +1008,7 @@ def newton_factor_members(Mats, Piv):
     return True
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
     # DX[:, j] = -Mats[j]^-1 G[:, j] for every member, from the factors of `newton_factor_members`
     m = rhs_w.shape[0]
@@ -936,7 +1020,7 @@ def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
             DX[r, j] = sol[r]
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_update(X, DX, inv_scale):
     # X += DX; the increment's max-norm scaled by inv_scale (rows i * dim + d use row d), NaN
     # when any scaled entry is not finite
@@ -958,7 +1042,7 @@ def newton_update(X, DX, inv_scale):
     return norm
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_converged(norm, previous, tol, theta):
     # (converged, contraction): the increment at most tol, or theta / (1 - theta) |dx| at most tol
     if norm <= tol:
@@ -970,7 +1054,7 @@ def newton_converged(norm, previous, tol, theta):
     return False, theta
 
 
-{_JIT_INLINE}
+{_JIT_CALLED}
 def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, theta, status):
     stats[0] = n
     stats[1] = n_rhs
@@ -990,9 +1074,175 @@ def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, thet
 # failed iteration, increment, residual, contraction, status].
 IMPLICIT_RK = f'''
 {_JIT_EXACT}
+def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
+               full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
+    # irk_advance for one member and one implicit stage (Z = h a f(t + c h, y + Z) - h a_e f(t, y)),
+    # the state in flat arrays: the same operations in the same order
+    dim = Y.shape[0]
+    npar = P.shape[0]
+    a00 = h * A_ii[0, 0]
+    c00 = -a00
+    hexp = h * aie_sum[0]
+    hw = h * wsum
+    e00 = E[0, 0]
+    d0 = dvec[0]
+    l0 = last_inv[0]
+    tc = c_impl[0] * h
+    y = np.empty(dim)
+    fstart = np.empty(dim)
+    zprev = np.empty(dim)
+    for d in range(dim):
+        y[d] = Y[d, 0]
+        fstart[d] = Fstart[d, 0]
+        zprev[d] = Zprev[0, d, 0]
+    p = np.empty(npar)
+    for q in range(npar):
+        p[q] = P[q, 0]
+    X = np.empty(dim)
+    F = np.empty(dim)
+    Fexp = np.empty(dim)
+    inv_scale = np.empty(dim)
+    ys = np.empty(dim)
+    J = np.empty(dim * dim)
+    M = np.empty((dim, dim))
+    piv = np.empty(dim, dtype=np.int64)
+    rhs_w = np.empty(dim)
+    sol = np.empty(dim)
+    f0 = flags[0]
+    f1 = flags[1]
+    n_rhs = 0
+    n_jac = 0
+    n_iter = 0
+    failed = False
+    for n in range(nsteps):
+        t = t0 + (n0 + n) * h
+        finite = True
+        for d in range(dim):
+            finite &= is_finite(y[d])
+        if not finite:
+            for d in range(dim):
+                y[d] = np.nan
+            f0 = 0
+            f1 = 0
+            continue
+        if has_expl:
+            if f0 != 0:
+                for d in range(dim):
+                    Fexp[d] = fstart[d]
+            else:
+                call_state(f_rhs, t, y, p, Fexp)
+                n_rhs += 1
+        for d in range(dim):
+            inv_scale[d] = 1.0 / (1.0 + abs(y[d]))
+        if f1 != 0 and has_pred:
+            for d in range(dim):
+                acc = 0.0
+                acc += e00 * zprev[d]
+                X[d] = acc
+        else:
+            for d in range(dim):
+                X[d] = 0.0
+        previous = np.inf
+        norm = np.inf
+        theta = np.nan
+        res_norm = np.nan
+        converged = False
+        status = 1
+        k = 0
+        for k in range(1, max_iter + 1):
+            # residual g = Z - h a F(Z) - h a_e F_e, kept negated for the solve
+            for d in range(dim):
+                ys[d] = y[d] + X[d]
+            call_state(f_rhs, t + tc, ys, p, F)
+            n_rhs += 1
+            res_norm = 0.0
+            for d in range(dim):
+                g = X[d] - a00 * F[d]
+                if has_expl:
+                    g -= hexp * Fexp[d]
+                rhs_w[d] = -g
+                r = abs(g * inv_scale[d])
+                if not (r <= res_norm):
+                    res_norm = r
+            if k == 1 or full:
+                if full:
+                    call_state(f_jac, t + tc, ys, p, J)
+                else:
+                    call_state(f_jac, t, y, p, J)
+                for a in range(dim):
+                    for bb in range(dim):
+                        M[a, bb] = c00 * J[a * dim + bb]
+                for a in range(dim):
+                    M[a, a] += 1.0
+                n_jac += 1
+                if not lu_factor(M, piv):
+                    n_iter += 1
+                    status = 2
+                    break
+            n_iter += 1
+            lu_apply(M, piv, rhs_w, sol)
+            # X += DX; the increment's max-norm scaled by inv_scale, NaN when any entry is not finite
+            norm = 0.0
+            nan_seen = False
+            for d in range(dim):
+                X[d] += sol[d]
+                e = abs(sol[d] * inv_scale[d])
+                if e != e:
+                    nan_seen = True
+                elif e > norm:
+                    norm = e
+            if nan_seen or not is_finite(norm):
+                norm = np.nan
+                break
+            converged, theta = newton_converged(norm, previous, tol, theta)
+            if converged:
+                break
+            previous = norm
+        if not converged:
+            newton_stats(stats, n, n_rhs, n_jac, n_iter, k, norm, res_norm, theta, status)
+            failed = True
+            break
+        for d in range(dim):
+            acc = 0.0
+            acc += d0 * X[d]
+            ynew = y[d] + acc
+            if has_expl:
+                ynew += hw * Fexp[d]
+            if fsal:
+                z = X[d]
+                if has_expl:
+                    z -= hexp * Fexp[d]
+                hf = 0.0
+                hf += l0 * z
+                fstart[d] = hf / h
+            y[d] = ynew
+        if fsal:
+            f0 = 1
+        for d in range(dim):
+            zprev[d] = X[d]
+        f1 = 1
+    for d in range(dim):
+        Y[d, 0] = y[d]
+        Fstart[d, 0] = fstart[d]
+        Zprev[0, d, 0] = zprev[d]
+    flags[0] = f0
+    flags[1] = f1
+    if not failed:
+        stats[0] = nsteps
+        stats[1] = n_rhs
+        stats[2] = n_jac
+        stats[3] = n_iter
+        stats[8] = 0
+
+
+{_JIT_EXACT}
 def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
                 full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
     dim, N = Y.shape
+    if N == 1 and c_impl.shape[0] == 1:
+        irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
+                   full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats)
+        return
     impl = c_impl.shape[0]
     m = impl * dim
     npar = P.shape[0]

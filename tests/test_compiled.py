@@ -272,6 +272,52 @@ def test_a_copy_of_a_builtin_runs_exactly_as_the_builtin():
     assert np.array_equal(a.y, b.y) and a.evals == b.evals
 
 
+@pytest.mark.parametrize("name", ["ab2", "ab3", "ab4", "rk4", "bogacki-shampine"])
+@pytest.mark.parametrize("size", [1, 3])
+def test_a_blow_up_turns_non_finite_at_the_same_step_in_both(name, size):
+    """Far outside the stability region the state overflows: the compiled loop (one member, or
+    the ensemble) turns non-finite at the same step as the NumPy loop (states saved at every
+    step), and run on in one call past the blow-up it ends in the same state with the same
+    evaluation counts (a multistep method evaluates nothing once its newest state is not finite)."""
+    problem = get_problem("dahlquist")
+    stepper = get_stepper(name + SUFFIX)
+    steps = 300
+    y0 = problem.y0[:, None].copy() if size == 1 else problem.ensemble(size, seed=1)
+    for save in (list(range(steps + 1)), [0, steps]):
+        with np.errstate(all="ignore"):
+            a = stepper.base.integrate(problem, h=30.0, n_steps=steps, y0=y0, save_steps=save)
+            b = stepper.integrate(problem, h=30.0, n_steps=steps, y0=y0, save_steps=save)
+        finite_a = np.isfinite(a.y)
+        assert not finite_a[-1].any(), "the test needs a blow-up within the run"
+        assert np.array_equal(finite_a, np.isfinite(b.y))
+        assert a.evals == b.evals and a.finite == b.finite
+        before = finite_a.all(axis=(1, 2))
+        _assert_agree(a.y[before], b.y[before], f"{name} before the blow-up")
+
+
+@pytest.mark.parametrize("name", ["implicit-midpoint", "gauss-legendre-4", "trapezoid", "ab4", "bdf2"])
+@pytest.mark.parametrize("size", [1, 3])
+def test_a_non_finite_start_stays_non_finite_as_in_the_numpy_loop(name, size):
+    """A start with a NaN entry: the implicit and multistep loops (one member, or the ensemble)
+    turn and keep the state non-finite with the NumPy loop's evaluation counts (none for the
+    implicit Runge-Kutta steps)."""
+    problem = get_problem("kepler-elliptic")
+    runs = []
+    for stepper in (get_stepper(name), get_stepper(name + SUFFIX)):
+        y0 = problem.y0[:, None].copy() if size == 1 else problem.ensemble(size, seed=2)
+        y0[1, 0] = np.nan
+        dyn = problem.dynamics(None, size)
+        with np.errstate(all="ignore"):
+            c = stepper._start(dyn, problem.t0, y0, 1e-3)
+            stepper._advance(dyn, c, 6)
+        runs.append((stepper._observe(dyn, c), dict(dyn.counts)))
+    (a, counts_a), (b, counts_b) = runs
+    assert not np.isfinite(a).all()
+    assert np.array_equal(np.isfinite(a), np.isfinite(b))
+    _assert_agree(a, b, f"{name} from a non-finite start")
+    assert counts_a == counts_b
+
+
 def test_newton_failure_is_a_step_failure_in_both():
     base = get_stepper("gauss-legendre-4").with_newton(tol=0.0, max_iter=2)
     variant = compiled_variant(base)
