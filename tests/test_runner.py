@@ -502,11 +502,13 @@ def test_one_options_object_equals_the_keywords(run, toy):
 def test_workers_take_the_problems_in_turn_and_results_keep_the_cell_order():
     from harness.runner.orchestration import interleaved
 
-    cells = [Cell("toy", s, p) for p in ("p", "q", "r") for s in ("a", "b", "c")][:-1]
+    cells = [Cell("toy", s, p) for p in ("p", "q", "r") for s in ("a", "b", "c", "d")][:-1]
     tasks = [runner.Task(i, c, f"{i:032x}", {}) for i, c in enumerate(cells)]
     order = [(t.cell.stepper, t.cell.problem) for t in interleaved(tasks)]
-    assert order == [("a", "p"), ("a", "q"), ("a", "r"), ("b", "p"), ("b", "q"), ("b", "r"),
-                     ("c", "p"), ("c", "q")]
+    # the problems in turn, every other one's list started halfway: neighbours differ in both
+    assert order == [("a", "p"), ("c", "q"), ("a", "r"), ("b", "p"), ("d", "q"), ("b", "r"),
+                     ("c", "p"), ("a", "q"), ("c", "r"), ("d", "p"), ("b", "q")]
+    assert sorted(t.index for t in interleaved(tasks)) == list(range(len(tasks)))
     assert interleaved([]) == []
 
 

@@ -397,17 +397,20 @@ def run_experiment(
 
 
 def interleaved(tasks: list[Task]) -> list[Task]:
-    """`tasks` in the order workers take them: the problems in turn (the first cell of each
-    problem, then the second of each, ...), so that workers starting together meet different
-    problems and each compiles its own problem's functions instead of waiting for the other's
-    compile of the same one. Results keep the cell order (they are placed by cell index)."""
-    rank: dict[str, int] = {}
-    keyed = []
+    """`tasks` in the order workers take them: the problems in turn (a cell of each problem,
+    then the next of each, ...), every other problem's list started halfway through. Workers
+    starting together then meet different problems and steppers half a registry apart (other
+    families), so each compiles its own problem's functions and family kernel instead of
+    waiting on the other's lock for the same one. Results keep the cell order (they are placed
+    by cell index)."""
+    groups: dict[str, list[Task]] = {}
     for t in tasks:
-        n = rank.get(t.cell.problem, 0)
-        rank[t.cell.problem] = n + 1
-        keyed.append((n, t))
-    return [t for _, t in sorted(keyed, key=lambda item: item[0])]  # stable: problems in order
+        groups.setdefault(t.cell.problem, []).append(t)
+    keyed = []
+    for j, group in enumerate(groups.values()):
+        shift = (j % 2) * (len(group) // 2)
+        keyed += [(n, j, t) for n, t in enumerate(group[shift:] + group[:shift])]
+    return [t for _, _, t in sorted(keyed, key=lambda item: item[:2])]
 
 
 def run_experiments(
