@@ -134,7 +134,15 @@ def problem_facts(problem: Problem) -> ProblemFacts:
 
 @lru_cache(maxsize=256)
 def _problem_facts(fingerprint: str, box: tuple) -> ProblemFacts:
-    problem = box[0]
+    # the stiffness samples the Jacobian along the orbit (compiled functions, a Taylor orbit):
+    # kept on disk under the definition and this module's code (harness.derived)
+    from harness.derived import remembered
+
+    return ProblemFacts(**remembered(__name__, "problem_facts", [fingerprint],
+                                     lambda: asdict(_derive_problem_facts(box[0]))))
+
+
+def _derive_problem_facts(problem: Problem) -> ProblemFacts:
     J = _constant_jacobian(problem)
     linear = J is not None and not problem.time_dependent
     degree = _polynomial_degree(problem, J) if linear else None
