@@ -51,6 +51,15 @@ def compact_mode(problem) -> bool:
     return sum(len(str(e)) for e in problem.rhs) > COMPACT_MODE_SIZE
 
 
+def float64_taylor_settings(problem) -> dict[str, Any]:
+    """The settings of every float64 Taylor integrator of `problem` (orbits, time scales, flow
+    amplification, the float64 ground truth): tolerance eps, high accuracy, compact mode by
+    `compact_mode`; heyoka's disk cache then holds one compiled integrator per batch size."""
+    from harness import tolerances as tol
+
+    return {"tol": tol.EPS, "high_accuracy": True, "compact_mode": compact_mode(problem)}
+
+
 def configure_heyoka_cache() -> Path:
     """Point heyoka's on-disk JIT cache at the harness's cache directory (once per process)."""
     global _configured

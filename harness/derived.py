@@ -27,20 +27,19 @@ from typing import Any
 
 from harness.errors import OutputError
 
-__all__ = ["remembered"]
+__all__ = ["remembered", "kept"]
 
 
 def _project_files_signature() -> tuple:
     """(path, mtime, size) of every project source file: unchanged, no module version can be."""
-    from harness.keys import PROJECT_PACKAGES
+    from harness.keys import project_files
     from harness.provenance import PROJECT_ROOT
 
     out = []
-    for package in PROJECT_PACKAGES:
-        for path in sorted((PROJECT_ROOT / package).rglob("*.py")):
-            with contextlib.suppress(OSError):
-                st = path.stat()
-                out.append((str(path), st.st_mtime_ns, st.st_size))
+    for rel in project_files():
+        with contextlib.suppress(OSError):
+            st = (PROJECT_ROOT / rel).stat()
+            out.append((str(PROJECT_ROOT / rel), st.st_mtime_ns, st.st_size))
     return tuple(out)
 
 
@@ -66,13 +65,19 @@ def _version(module: str) -> str:
 def remembered(module: str, function: str, parts: Sequence[Any], compute: Callable[[], Any]) -> Any:
     """`compute()`, or the value it returned before for the same `parts` with the same code of
     `module` (see the module docstring)."""
+    text = json.dumps([module, function, _version(module), *map(repr, parts)])
+    return kept("derived", hashlib.sha256(text.encode()).hexdigest()[:32], compute, function)
+
+
+def kept(directory: str, key: str, compute: Callable[[], Any], label: str = "") -> Any:
+    """The JSON value stored under `key` in `<cache root>/<directory>`, else `compute()`, then
+    stored (atomically). A file that cannot be read or parsed is recomputed and replaced; a
+    cache that cannot be written costs only time."""
     from harness.cache import cache_dir
     from harness.store import atomic_write_bytes
 
-    text = json.dumps([module, function, _version(module), *map(repr, parts)])
-    key = hashlib.sha256(text.encode()).hexdigest()[:32]
     try:
-        path = cache_dir() / "derived" / key[:2] / f"{key}.json"
+        path = cache_dir() / directory / key[:2] / f"{key}.json"
     except OutputError:  # no cache directory: the value is computed every time
         return compute()
     with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
@@ -81,5 +86,5 @@ def remembered(module: str, function: str, parts: Sequence[Any], compute: Callab
             return stored["value"]
     value = compute()
     with contextlib.suppress(OutputError):
-        atomic_write_bytes(path, json.dumps({"key": key, "function": function, "value": value}).encode())
+        atomic_write_bytes(path, json.dumps({"key": key, "function": label, "value": value}).encode())
     return value

@@ -12,8 +12,6 @@ Reference: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (
 
 from __future__ import annotations
 
-from typing import Any
-
 import heyoka as hy
 import numpy as np
 
@@ -59,8 +57,7 @@ _batch_integrators = cache.IntegratorPool()  # by problem
 
 def _build_batch(problem):
     sys = list(zip(problem.variables, problem.rhs, strict=True))
-    kwargs: dict[str, Any] = {"tol": tol.EPS, "high_accuracy": True,
-                              "compact_mode": cache.compact_mode(problem)}
+    kwargs = cache.float64_taylor_settings(problem)
     if problem.parameters:
         kwargs["pars"] = np.repeat(np.asarray(problem.parameter_values, dtype=float)[:, None],
                                    FLOW_BATCH, axis=1)

@@ -38,7 +38,7 @@ from harness.experiments.base import Cell, Experiment
 from harness.provenance import to_jsonable
 
 __all__ = ["cell_key", "code_version", "experiment_fingerprint", "measuring_modules", "module_version",
-           "judging_version",
+           "judging_version", "project_files",
            "MEASURING_MODULES", "JUDGING_MODULES", "PROJECT_PACKAGES"]
 
 PROJECT_PACKAGES = ("harness", "problems", "implementations")
@@ -174,41 +174,27 @@ def _read_once(kind: str, name: str, text: str) -> dict[str, Any]:
     experiment's module and its imports) reads from module `name`'s source `text`, parsed once
     per version of the text and of the project's module list, then kept on disk (parsing is most
     of a cached run's key computation, in every process)."""
-    from harness.cache import cache_dir
+    from harness.derived import kept
 
-    listing = "\n".join(_project_module_names())
+    listing = "\n".join(project_files())
     key = hashlib.sha256("\n".join([kind, name, listing, text]).encode()).hexdigest()[:32]
-    try:
-        path = cache_dir() / "keys" / key[:2] / f"{key}.json"
-    except HarnessError:  # no cache directory: parsed every time
-        path = None
-    if path is not None:
-        try:
-            stored = json.loads(path.read_text())
-            if stored.get("key") == key:
-                return stored["value"]
-        except (OSError, ValueError, AttributeError):
-            pass
-    tree = _parse(text)
-    value: dict[str, Any] = {"counted": text, "modules": [], "names": []}
-    if tree is not None:
-        nodes = _measuring_nodes(tree, {"summarize"}) if kind == "measuring" else [tree]
-        modules, names = _imports(name, nodes)
-        value = {"counted": "\n".join(ast.unparse(n) for n in nodes) if kind == "measuring" else text,
-                 "modules": sorted(modules), "names": sorted(names)}
-    if path is not None:
-        from harness.store import atomic_write_bytes
+    return kept("keys", key, lambda: _parsed(kind, name, text), kind)
 
-        try:
-            atomic_write_bytes(path, json.dumps({"key": key, "value": value}).encode())
-        except (HarnessError, OSError):  # a cache that cannot be written costs only time
-            pass
-    return value
+
+def _parsed(kind: str, name: str, text: str) -> dict[str, Any]:
+    tree = _parse(text)
+    if tree is None:
+        return {"counted": text, "modules": [], "names": []}
+    nodes = _measuring_nodes(tree, {"summarize"}) if kind == "measuring" else [tree]
+    modules, names = _imports(name, nodes)
+    return {"counted": "\n".join(ast.unparse(n) for n in nodes) if kind == "measuring" else text,
+            "modules": sorted(modules), "names": sorted(names)}
 
 
 @functools.lru_cache(maxsize=1)
-def _project_module_names() -> tuple[str, ...]:
-    """The project's module files (relative paths): what `_imports` resolves names against."""
+def project_files() -> tuple[str, ...]:
+    """The project's module files, as paths relative to the project root, sorted (read once
+    per process): what import names resolve against, and what a module version depends on."""
     from harness.provenance import PROJECT_ROOT
 
     out = []

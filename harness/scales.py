@@ -121,8 +121,7 @@ def _build(problem):
     sys = list(zip(problem.variables, problem.rhs, strict=True))
     # The float64 ground truth's settings (harness.ground_truth): heyoka's disk cache then holds
     # one compiled integrator for both.
-    kwargs: dict[str, Any] = {"tol": tol.EPS, "high_accuracy": True,
-                              "compact_mode": cache.compact_mode(problem)}
+    kwargs = cache.float64_taylor_settings(problem)
     if problem.parameters:
         kwargs["pars"] = problem.parameter_values
     return hy.taylor_adaptive(sys, np.array(problem.y0, dtype=np.float64), **kwargs)
