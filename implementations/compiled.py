@@ -48,9 +48,7 @@ from implementations.compiled_kernels import (
     UnsupportedExpression,
     address,
     call_kernel,
-    module_source,
-    problem_module,
-    translate_decomposition,
+    problem_functions,
 )
 from implementations.implicit_rk import NewtonSettings, extrapolation_matrix
 from implementations.multistep import LinearMultistepStepper
@@ -68,9 +66,7 @@ __all__ = [
     "CompiledControlledSplitting",
     "compiled_variant",
     "fastest",
-    "problem_module",
-    "module_source",
-    "translate_decomposition",
+    "problem_functions",
     "UnsupportedExpression",
     "COMPILE_LOG",
     "SUFFIX",
@@ -139,7 +135,7 @@ class _Compiled(Stepper):
         parts = ("functions", "jacobian") if self.part == "jacobian" else ("functions",)
         try:
             for part in parts:
-                problem_module(problem, part)
+                problem_functions(problem, part)
         except UnsupportedExpression as exc:
             return f"no compiled right-hand side: {exc}"
         return None

@@ -12,19 +12,15 @@ LLVM-HPC 2015, for the compiler):
   through a function pointer). So a cold run
   compiles each family kernel once, whatever the problems and methods, and later processes load
   them from numba's disk cache.
-- per problem, its functions as C-callable numba `cfunc`s: `rhs(t, y, p, out)`, its column form
-  `rhs_cols(t, X, P, Out, N, j0, j1)`, for Newtonian problems whose acceleration ignores the
-  velocity `accel` and `accel_cols`, and (a separate module, built only for the Newton-solved
-  families) the row-major Jacobian `jac(t, y, p, out)`. Small, so quick to compile.
-heyoka's Python `cfunc` exposes no function address to call instead (checked: heyoka 7.13, the
-object has `dc`, `fn`, `llvm_states`, no pointer), so the functions are generated from heyoka's
-decomposition (`cfunc.dc`): a list of elementary assignments u_k = op(u_i, u_j), common
-subexpressions already shared, each printed as Python-like infix (`(u_0 * u_1)`, `div(u_3,
-u_7)`, `u_6**1.5000000000000000`, `sin(u_0)`, `p0` for a parameter, `t` for time), parsed with
-`ast` and emitted as numba source. An operation without a translation makes the problem
-incompatible (with the reason).
+- per problem, nothing is generated: its functions are heyoka's own compiled code, called through
+  the addresses `implementations.native_functions` gives (`rhs`, its strided form `rhs_cols`,
+  for Newtonian problems whose acceleration ignores the velocity `accel` and `accel_cols`, and
+  the row-major Jacobian `jac` for the Newton-solved families). heyoka has already compiled them
+  for the NumPy steppers (or loads them from its disk cache), so the compiled and NumPy
+  implementations evaluate every right-hand side with the same machine code, and a cold run
+  compiles no per-problem code of its own.
 
-Caching: every module text is written once to `harness.cache.cache_dir() / "numba"`, named by a
+Caching: the family module's text is written once to `harness.cache.cache_dir() / "numba"`, named by a
 hash of its text, and imported under a name derived from that hash; every function has
 `cache=True`. A compile holds a file lock (`_compile_lock`), so processes started together compile
 each kernel once and the others load it. `COMPILE_LOG` records, per process, what was compiled or
@@ -46,9 +42,7 @@ vectorisation).
 
 from __future__ import annotations
 
-import ast
 import contextlib
-import dataclasses
 import hashlib
 import importlib.util
 import os
@@ -56,8 +50,6 @@ import sys
 import tempfile
 import threading
 import time
-import weakref
-from collections.abc import Iterable
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -70,13 +62,18 @@ from numba.extending import intrinsic
 from harness import cache
 from harness.errors import InputError
 from harness.problem import Problem
+from implementations.native_functions import (
+    MAX_BATCH,
+    NativeFunction,
+    UnsupportedExpression,
+    function_address,
+    native_function,
+)
 
 __all__ = [
     "UnsupportedExpression",
-    "translate_decomposition",
-    "module_source",
     "family_source",
-    "problem_module",
+    "problem_functions",
     "family_module",
     "address",
     "call_kernel",
@@ -86,158 +83,12 @@ __all__ = [
     "KERNELS",
     "TEMPLATES",
     "COMPILE_LOG",
-    "MAX_SMALL_POWER",
     "COLUMN_BLOCK",
     "PARTS",
 ]
 
-# -- expression translation -----------------------------------------------------------------------
-# heyoka function name -> (numba expression template, number of arguments or None for any).
-_UNARY_MATH = (
-    "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh",
-    "atanh", "exp", "expm1", "log", "log1p", "sqrt", "erf", "erfc",
-)
-_CALLS: dict[str, tuple[str, int | None]] = {name: (f"math.{name}({{0}})", 1) for name in _UNARY_MATH}
-_CALLS.update({
-    "div": ("({0} / {1})", 2),
-    "sub": ("({0} - {1})", 2),
-    "square": ("({0} * {0})", 1),
-    "atan2": ("math.atan2({0}, {1})", 2),
-    "sigmoid": ("(1.0 / (1.0 + math.exp(-{0})))", 1),
-})
-_BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
-
-
-class UnsupportedExpression(InputError):
-    """A right-hand side uses an operation the compiled implementation cannot translate."""
-
-
-# Powers with a constant exponent e, 2e a whole number up to this size, are evaluated as heyoka
-# evaluates them (measured against its compiled functions, bit for bit for e = +-1/2, +-3/2, 2,
-# 3, 4, 5, ...): the base (sqrt(x) when 2e is odd) raised by binary exponentiation, inverted for
-# e < 0. Other exponents go to the library `pow` (agreement to rounding, not to the bit).
-MAX_SMALL_POWER = 16
-
-
-def _binary_power(base: str, m: int) -> str:
-    result, square = None, base
-    while m:
-        if m & 1:
-            result = square if result is None else f"({result} * {square})"
-        m >>= 1
-        if m:
-            square = f"({square} * {square})"
-    return result
-
-
-def _power(base: str, exponent: ast.AST, tr: _Translator) -> str:
-    value = None
-    if isinstance(exponent, ast.Constant) and isinstance(exponent.value, int | float):
-        value = float(exponent.value)
-    elif (
-        isinstance(exponent, ast.UnaryOp)
-        and isinstance(exponent.op, ast.USub)
-        and isinstance(exponent.operand, ast.Constant)
-        and isinstance(exponent.operand.value, int | float)
-    ):
-        value = -float(exponent.operand.value)
-    if value is not None and value != 0.0 and (2.0 * value).is_integer():
-        twice = abs(int(2.0 * value))
-        if twice <= MAX_SMALL_POWER:
-            if twice % 2:
-                expr = _binary_power(f"math.sqrt({base})", twice)
-            else:
-                expr = _binary_power(base, twice // 2)
-            return f"(1.0 / {expr})" if value < 0 else expr
-    return f"({base} ** {tr.emit(exponent)})"
-
-
-class _Translator:
-    """One decomposition entry (heyoka infix text) -> numba source text."""
-
-    def __init__(self, names: dict[str, str], param: str = "p[{0}]"):
-        self.names = names  # heyoka name -> generated name
-        self.param = param  # how a parameter p<k> is read
-
-    def __call__(self, text: str) -> str:
-        try:
-            tree = ast.parse(text.strip(), mode="eval")
-        except SyntaxError:
-            raise UnsupportedExpression(f"cannot parse decomposition entry {text!r}") from None
-        return self.emit(tree.body)
-
-    def emit(self, node: ast.AST) -> str:
-        if isinstance(node, ast.Constant) and isinstance(node.value, int | float):
-            return repr(float(node.value))
-        if isinstance(node, ast.Name):
-            if node.id in self.names:
-                return self.names[node.id]
-            if node.id == "t":
-                return "t"
-            if node.id[:1] == "p" and node.id[1:].isdigit():
-                return self.param.format(int(node.id[1:]))
-            raise UnsupportedExpression(f"unknown name {node.id!r} in the decomposition")
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd):
-            sign = "-" if isinstance(node.op, ast.USub) else "+"
-            return f"({sign}{self.emit(node.operand)})"
-        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
-            return _power(self.emit(node.left), node.right, self)
-        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-            return f"({self.emit(node.left)} {_BINOPS[type(node.op)]} {self.emit(node.right)})"
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and not node.keywords:
-            name = node.func.id
-            args = [self.emit(a) for a in node.args]
-            if name == "sum" and args:
-                return "(" + " + ".join(args) + ")"
-            if name == "prod" and args:
-                return "(" + " * ".join(args) + ")"
-            if name == "pow" and len(args) == 2:
-                return _power(args[0], node.args[1], self)
-            if name in _CALLS:
-                template, arity = _CALLS[name]
-                if arity is not None and arity != len(args):
-                    raise UnsupportedExpression(f"`{name}` with {len(args)} arguments")
-                return template.format(*args)
-            raise UnsupportedExpression(f"operation `{name}` has no compiled translation")
-        raise UnsupportedExpression(f"expression {ast.unparse(node)!r} has no compiled translation")
-
-
-def translate_decomposition(
-    fname: str, dc: Iterable[Any], variables: list[str], nouts: int, arg: str, *, columns: bool = False
-) -> str:
-    """Numba source of `fname(t, <arg>, p, out)` from a heyoka decomposition (one state), or with
-    `columns` of `fname(t, X, P, Out, N, j0, j1)` over the members j0 <= j < j1 of flat C-order
-    states shaped (variables, N) (a loop the compiler can vectorise: reads and writes go along j).
-
-    `dc` lists the variables (u_0 .. u_{n-1}, in `variables` order), then the elementary
-    assignments u_k = op(...), then the `nouts` output expressions.
-    """
-    entries = [str(e) for e in dc]
-    nvars = len(variables)
-    if len(entries) < nvars + nouts or entries[:nvars] != variables:
-        raise UnsupportedExpression(
-            f"decomposition does not start with the variables {variables}: {entries[:nvars]}"
-        )
-    names = {f"u_{i}": f"u_{i}" for i in range(len(entries))}
-    if columns:
-        tr = _Translator(names, "P[{0} * N + j]")
-        lines = [f"def {fname}(t, X, P, Out, N, j0, j1):", "    for j in range(j0, j1):"]
-        pad, read, write = "        ", "X[{0} * N + j]", "Out[{0} * N + j]"
-    else:
-        tr = _Translator(names)
-        lines = [f"def {fname}(t, {arg}, p, out):"]
-        pad, read, write = "    ", f"{arg}[{{0}}]", "out[{0}]"
-    for i in range(nvars):
-        lines.append(f"{pad}u_{i} = {read.format(i)}")
-    for k in range(nvars, len(entries) - nouts):
-        lines.append(f"{pad}u_{k} = {tr(entries[k])}")
-    for j, text in enumerate(entries[len(entries) - nouts :]):
-        lines.append(f"{pad}{write.format(j)} = {tr(text)}")
-    return "\n".join(lines) + "\n"
-
-
 # -- kernels: one per family, coefficients as arrays ----------------------------------------------
-# `rhs`, `accel` and `jac` are the problem's generated functions (same module). Kernels that
+# `f_rhs`, `f_accel` and `f_jac` are the addresses of the problem's functions. Kernels that
 # judge the whole ensemble at once (a non-finite state stops every member in the NumPy multistep
 # loop; Newton's convergence is a max over members) sweep all members per step ("lockstep");
 # the others run each member through all its steps with the state in registers.
@@ -1546,13 +1397,20 @@ PARTS = ("functions", "jacobian")
 
 # -- calling a problem's compiled function through its address ----------------------------------
 # The family kernels are compiled once for every problem: they receive each problem function as
-# the integer address of a numba `cfunc` and call it through these two intrinsics (an indirect
-# call, as a C loop calling through a function pointer).
-#   state form:   void f(double t, double *x, double *p, double *out)
-#   columns form: void f(double t, double *X, double *P, double *Out, int64 N, int64 j0, int64 j1)
-#                 (arrays shaped (rows, N), C order; members j0 <= j < j1)
+# the integer address of heyoka's compiled code (`implementations.native_functions`) and call it
+# through these intrinsics (an indirect call, as a C loop calling through a function pointer).
+#   state form:   void f(double *out, const double *x, const double *p, const double *time)
+#   strided form: void f(double *out, const double *x, const double *p, const double *time,
+#                        int64 stride)  (value i of the point at x[i * stride], time[0])
+# `call_columns` loops the strided form over members j0 <= j < j1 of arrays shaped (rows, N), C
+# order (stride N, each member's pointers offset by j).
 def _data_pointer(context, builder, array_type, value):
     return context.make_array(array_type)(context, builder, value).data
+
+
+def _state_type():
+    dptr = ir.DoubleType().as_pointer()
+    return ir.FunctionType(ir.VoidType(), [dptr, dptr, dptr, dptr])
 
 
 @intrinsic
@@ -1562,12 +1420,13 @@ def call_state(typingctx, address, t, x, p, out):
 
     def codegen(context, builder, signature, args):
         dptr = ir.DoubleType().as_pointer()
-        pointers = [
+        x_ptr, p_ptr, out_ptr = (
             builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
             for ty, value in zip(signature.args[2:], args[2:], strict=True)
-        ]
-        fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType(), dptr, dptr, dptr])
-        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], *pointers])
+        )
+        time = cgutils.alloca_once_value(builder, args[1])
+        fn = builder.inttoptr(args[0], _state_type().as_pointer())
+        builder.call(fn, [out_ptr, x_ptr, p_ptr, time])
         return context.get_dummy_value()
 
     return sig, codegen
@@ -1581,14 +1440,15 @@ def call_state_into(typingctx, address, t, x, x_offset, p, out, out_offset):
 
     def codegen(context, builder, signature, args):
         dptr = ir.DoubleType().as_pointer()
-        pointers = [
+        x_ptr, p_ptr, out_ptr = (
             builder.bitcast(_data_pointer(context, builder, signature.args[i], args[i]), dptr)
             for i in (2, 4, 5)
-        ]
-        pointers[0] = builder.gep(pointers[0], [args[3]])
-        pointers[2] = builder.gep(pointers[2], [args[6]])
-        fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType(), dptr, dptr, dptr])
-        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], *pointers])
+        )
+        x_ptr = builder.gep(x_ptr, [args[3]])
+        out_ptr = builder.gep(out_ptr, [args[6]])
+        time = cgutils.alloca_once_value(builder, args[1])
+        fn = builder.inttoptr(args[0], _state_type().as_pointer())
+        builder.call(fn, [out_ptr, x_ptr, p_ptr, time])
         return context.get_dummy_value()
 
     return sig, codegen
@@ -1596,35 +1456,42 @@ def call_state_into(typingctx, address, t, x, x_offset, p, out, out_offset):
 
 @intrinsic
 def call_columns(typingctx, address, t, X, P, Out, j0, j1):
-    """Call the columns-form function at `address` for members j0 <= j < j1 of `X`."""
+    """Call the columns-form function `address` = (batch, width, strided) for members
+    j0 <= j < j1 of `X`: the SIMD batch function on whole blocks of `width` members, the one-point
+    strided function on the rest."""
     sig = types.void(address, t, X, P, Out, j0, j1)
 
     def codegen(context, builder, signature, args):
         dptr = ir.DoubleType().as_pointer()
         i64 = ir.IntType(64)
-        pointers = [
+        x_ptr, p_ptr, out_ptr = (
             builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
             for ty, value in zip(signature.args[2:5], args[2:5], strict=True)
-        ]
+        )
         x_array = context.make_array(signature.args[2])(context, builder, args[2])
         n = cgutils.unpack_tuple(builder, x_array.shape, 2)[1]
-        fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType(), dptr, dptr, dptr, i64, i64, i64])
-        bounds = [builder.sext(v, i64) if v.type.width < 64 else v for v in (n, args[5], args[6])]
-        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], *pointers, *bounds])
+        stride, start, stop = (
+            builder.sext(v, i64) if v.type.width < 64 else v for v in (n, args[5], args[6])
+        )
+        batch, width, single = (builder.extract_value(args[0], i) for i in range(3))
+        times = cgutils.alloca_once(builder, ir.ArrayType(ir.DoubleType(), MAX_BATCH))
+        for k in range(MAX_BATCH):
+            builder.store(args[1], builder.gep(times, [ir.Constant(i64, 0), ir.Constant(i64, k)]))
+        time = builder.bitcast(times, dptr)
+        fnty = ir.FunctionType(ir.VoidType(), [dptr, dptr, dptr, dptr, i64]).as_pointer()
+        blocks = builder.sdiv(builder.sub(stop, start), width)
+        with cgutils.for_range(builder, blocks, intp=i64) as loop:
+            j = builder.add(start, builder.mul(loop.index, width))
+            member = [builder.gep(ptr, [j]) for ptr in (out_ptr, x_ptr, p_ptr)]
+            builder.call(builder.inttoptr(batch, fnty), [*member, time, stride])
+        rest = builder.add(start, builder.mul(blocks, width))
+        with cgutils.for_range_slice(builder, rest, stop, ir.Constant(i64, 1), intp=i64) as (j, _):
+            member = [builder.gep(ptr, [j]) for ptr in (out_ptr, x_ptr, p_ptr)]
+            builder.call(builder.inttoptr(single, fnty), [*member, time, stride])
         return context.get_dummy_value()
 
     return sig, codegen
 
-
-_STATE_SIG = (
-    "types.void(types.float64, types.CPointer(types.float64), types.CPointer(types.float64), "
-    "types.CPointer(types.float64))"
-)
-_COLUMNS_SIG = (
-    "types.void(types.float64, types.CPointer(types.float64), types.CPointer(types.float64), "
-    "types.CPointer(types.float64), types.int64, types.int64, types.int64)"
-)
-_CFUNC = '@cfunc({sig}, cache=True, error_model="numpy", fastmath={{"contract"}})'
 
 _FAMILY_HEADER = '''"""Generated by implementations.compiled_kernels: the family kernels, compiled once
 for every problem (problem functions are called through their addresses); do not edit.
@@ -1637,17 +1504,6 @@ from implementations.compiled_kernels import call_columns, call_state, call_stat
 
 '''
 
-_PROBLEM_HEADER = '''"""Generated by implementations.compiled_kernels for problem {name!r} ({part}); do
-not edit. Functions translated from heyoka's decomposition, compiled as C-callable numba cfuncs. numba
-{numba_version}, Python {python}.
-"""
-import math
-
-from numba import cfunc, types
-
-'''
-
-
 def _versions() -> dict[str, str]:
     import numba
 
@@ -1659,7 +1515,8 @@ def _intrinsics_digest() -> str:
     file, so the module's text names the intrinsics' version."""
     import inspect
 
-    code = "".join(inspect.getsource(f) for f in (_data_pointer, call_state, call_state_into, call_columns))
+    parts = (_data_pointer, _state_type, call_state, call_state_into, call_columns)
+    code = "".join(inspect.getsource(f) for f in parts) + f"MAX_BATCH={MAX_BATCH}"
     return hashlib.sha256(code.encode()).hexdigest()[:16]
 
 
@@ -1672,54 +1529,11 @@ def family_source() -> str:
     return header + "\n\n".join(p.strip("\n") + "\n" for p in parts)
 
 
-def _accel_positions_only(problem: Problem) -> bool:
-    return problem.newtonian is not None and not problem.velocity_dependent
-
-
-def _cfunc_source(fname: str, fn: Any, variables: list[str], nouts: int, arg: str, columns: bool) -> str:
-    sig = _COLUMNS_SIG if columns else _STATE_SIG
-    if columns:
-        body = translate_decomposition(fname, fn.dc, variables, nouts, arg, columns=True)
-    else:
-        body = translate_decomposition(fname, fn.dc, variables, nouts, arg)
-    return _CFUNC.format(sig=sig) + "\n" + body
-
-
-def module_source(problem: Problem, part: str = "functions") -> str:
-    """The text of `problem`'s generated module `part` ('functions' or 'jacobian'); raises
-    UnsupportedExpression when an operation has no translation."""
-    if part not in PARTS:
-        raise InputError(f"`part` must be one of {PARTS}, got {part!r}")
-    variables = [str(v) for v in problem.variables]
-    parts = []
-    if part == "functions":
-        rhs_fn = problem.compiled("rhs", None)
-        for fname, columns in (("rhs", False), ("rhs_cols", True)):
-            parts.append(_cfunc_source(fname, rhs_fn, variables, problem.dim, "y", columns))
-        if _accel_positions_only(problem):
-            positions = [str(v) for v in problem.newtonian.positions]
-            acc_fn = problem.compiled("accel_q", None)
-            for fname, columns in (("accel", False), ("accel_cols", True)):
-                parts.append(_cfunc_source(fname, acc_fn, positions, len(positions), "q", columns))
-    else:
-        jac_fn = problem.compiled("jac", None)
-        parts.append(_cfunc_source("jac", jac_fn, variables, problem.dim**2, "y", False))
-    header = _PROBLEM_HEADER.format(name=problem.name, part=part, **_versions())
-    return header + "\n\n".join(p.strip("\n") + "\n" for p in parts)
-
-
 # -- generated modules: written once, imported, numba-cached on disk ------------------------------
-@dataclasses.dataclass
-class _Entry:
-    module: ModuleType | None
-    reason: str | None
-
-
-#: One record per first use in this process: what ("family kernels" or the problem's module
-#: part, or a kernel), seconds, and whether numba compiled it or loaded it from its disk cache.
+#: One record per first use in this process: what ("family kernels" or a kernel), seconds, and
+#: whether numba compiled it or loaded it from its disk cache.
 COMPILE_LOG: list[dict[str, Any]] = []
 
-_modules: weakref.WeakKeyDictionary[Problem, dict[str, _Entry]] = weakref.WeakKeyDictionary()
 _family: list[ModuleType] = []
 _lock = threading.RLock()
 
@@ -1767,10 +1581,6 @@ def _compile_lock(stem: str):
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
-def _slug(name: str) -> str:
-    return "".join(ch if ch.isalnum() else "_" for ch in name)[:40]
-
-
 def _import_text(text: str, stem: str, what: str) -> ModuleType:
     digest = hashlib.sha256(text.encode()).hexdigest()[:20]
     path = cache.cache_dir() / "numba" / f"{stem}_{digest}.py"
@@ -1801,23 +1611,18 @@ def _import_text(text: str, stem: str, what: str) -> ModuleType:
     return module
 
 
-def problem_module(problem: Problem, part: str = "functions") -> ModuleType:
-    """`problem`'s generated, imported module `part` (raises UnsupportedExpression)."""
-    with _lock:
-        entries = _modules.setdefault(problem, {})
-        entry = entries.get(part)
-        if entry is None:
-            try:
-                text = module_source(problem, part)
-            except UnsupportedExpression as exc:
-                entry = _Entry(None, str(exc))
-            else:
-                module = _import_text(text, f"{_slug(problem.name)}_{part}", f"{problem.name} {part}")
-                entry = _Entry(module, None)
-            entries[part] = entry
-    if entry.module is None:
-        raise UnsupportedExpression(entry.reason)
-    return entry.module
+def problem_functions(problem: Problem, part: str = "functions") -> dict[str, NativeFunction]:
+    """`problem`'s loaded functions of `part`: 'functions' (rhs, rhs_cols, and accel, accel_cols
+    for an acceleration of the positions alone) or 'jacobian' (jac); raises UnsupportedExpression."""
+    if part not in PARTS:
+        raise InputError(f"`part` must be one of {PARTS}, got {part!r}")
+    if part == "jacobian":
+        names = ["jac"]
+    else:
+        names = ["rhs", "rhs_cols"]
+        if problem.newtonian is not None and not problem.velocity_dependent:
+            names += ["accel", "accel_cols"]
+    return {name: native_function(problem, name) for name in names}
 
 
 def family_module() -> ModuleType:
@@ -1829,13 +1634,9 @@ def family_module() -> ModuleType:
 
 
 def address(problem: Problem, name: str) -> int:
-    """The address of `problem`'s generated function `name` ('rhs', 'rhs_cols', 'accel',
-    'accel_cols' or 'jac'); raises UnsupportedExpression."""
-    part = "jacobian" if name == "jac" else "functions"
-    fn = getattr(problem_module(problem, part), name, None)
-    if fn is None:
-        raise InputError(f"problem {problem.name!r} has no compiled function {name!r}")
-    return int(fn.address)
+    """The address of `problem`'s function `name` ('rhs', 'rhs_cols', 'accel', 'accel_cols' or
+    'jac'); raises UnsupportedExpression."""
+    return function_address(problem, name)
 
 
 def call_kernel(name: str, *args: Any) -> Any:

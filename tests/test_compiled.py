@@ -38,12 +38,12 @@ from implementations.compiled import (
     UnsupportedExpression,
     compiled_variant,
     fastest,
-    problem_module,
-    translate_decomposition,
+    problem_functions,
 )
-from implementations.compiled_kernels import COLUMN_BLOCK, MAX_SMALL_POWER, family_module
+from implementations.compiled_kernels import COLUMN_BLOCK, family_module
 from implementations.implicit_rk import ImplicitRungeKutta
 from implementations.multistep import LinearMultistepStepper
+from implementations.native_functions import NAMES, native_function
 from implementations.runge_kutta import ExplicitRungeKutta
 from implementations.splitting import SplittingStepper
 
@@ -339,18 +339,17 @@ def _with_kepe() -> Problem:
         newtonian=NewtonianForm(positions=(x,), velocities=(v,), acceleration=(-hy.kepE(0.1, x),)),
         y0=[0.5, 0.0],
         t_span=(0.0, 1.0),
-        reference="test problem: Kepler's equation E(e, M) as a force, to exercise an operation "
-        "without a compiled translation",
+        reference="test problem: Kepler's equation E(e, M) as a force, an operation heyoka compiles "
+        "inline (an iterative solve), which no hand translation covered",
     )
 
 
-def test_an_untranslatable_operation_makes_the_problem_incompatible():
+def test_any_operation_heyoka_compiles_runs_compiled():
+    """The kernels call heyoka's own machine code, so an operation such as kepE (solved by an
+    iteration inside heyoka's code) runs compiled, and agrees with the NumPy loop."""
     problem = _with_kepe()
-    for stepper in COMPILED:
-        assert not stepper.compatible(problem)
-    with pytest.raises(IncompatibleError, match="kepE.*no compiled translation"):
-        check_compatible(get_stepper("velocity-verlet@compiled"), problem)
-    assert get_stepper("velocity-verlet").compatible(problem)
+    for name in ("velocity-verlet", "rk4", "gauss-legendre-4"):
+        _compare(get_stepper(name), get_stepper(name + SUFFIX), problem)
 
 
 def test_fastest_picks_the_compiled_loop_where_it_applies():
@@ -359,7 +358,7 @@ def test_fastest_picks_the_compiled_loop_where_it_applies():
         chosen = fastest(get_stepper(name), kepler)
         assert chosen.info.implementation == "compiled"
         assert chosen.info.name == name + SUFFIX
-    assert fastest(get_stepper("velocity-verlet"), _with_kepe()).info.name == "velocity-verlet"
+    assert fastest(get_stepper("velocity-verlet"), _with_kepe()).info.name == "velocity-verlet" + SUFFIX
     assert fastest(get_stepper("taylor"), kepler).info.name == "taylor"  # no coefficient object
     damped = get_problem("damped-cubic")
     assert fastest(get_stepper("verlet-damped"), damped).info.name == "verlet-damped"
@@ -372,24 +371,34 @@ def test_compiled_variant_refuses_steppers_without_coefficients(bad):
         compiled_variant(get_stepper(bad))
 
 
-# -- code generation ------------------------------------------------------------------------------------
-def test_generated_modules_are_cached_in_the_project_cache_dir():
-    """Per problem, its functions (and Jacobian); the family kernels once for all problems."""
+# -- the problems' functions: heyoka's machine code, loaded by address --------------------------------
+@pytest.mark.parametrize("problem", problems.all(), ids=lambda p: p.name)
+def test_every_problem_function_loads_and_is_heyokas_own(problem):
+    """Every part of every registered problem loads; each state-form function gives heyoka's own
+    values bit for bit at a state that is not the start (the loader checks the start)."""
+    rng = np.random.default_rng(3)
+    for part in ("functions", "jacobian"):
+        loaded = problem_functions(problem, part)
+        assert problem_functions(problem, part) == loaded  # loaded once per process
+        for name, fn in loaded.items():
+            kind, index, _ = NAMES[name]
+            assert fn.address and fn is native_function(problem, name)
+            if index:
+                continue
+            y = problem.y0 * (1 + 0.01 * rng.standard_normal(problem.dim))
+            if kind == "accel_q":
+                y = y[: len(problem.newtonian.positions)]
+            pars = problem.pars_for(1).reshape(-1)
+            out = np.empty(fn.nouts)
+            fn(0.7, y, pars, out)
+            heyoka = problem.compiled(kind, None)
+            expected = heyoka(y, pars=pars, time=0.7) if heyoka.nparams else heyoka(y, time=0.7)
+            assert np.array_equal(out, expected, equal_nan=True), (problem.name, name)
+
+
+def test_the_family_module_is_cached_in_the_project_cache_dir():
     from harness.cache import cache_dir
 
-    problem = get_problem("harmonic")
-    needles = {
-        "functions": ["def rhs(t, y, p, out):", "def accel(t, q, p, out):",
-                      "def rhs_cols(t, X, P, Out, N, j0, j1):"],
-        "jacobian": ["def jac(t, y, p, out):"],
-    }
-    for part, wanted in needles.items():
-        module = problem_module(problem, part)
-        assert problem_module(problem, part) is module
-        path = Path(module.__file__)
-        assert path.parent == cache_dir() / "numba"
-        text = path.read_text()
-        assert all(needle in text for needle in wanted)
     family = family_module()
     assert Path(family.__file__).parent == cache_dir() / "numba"
     assert family is family_module()
@@ -397,32 +406,47 @@ def test_generated_modules_are_cached_in_the_project_cache_dir():
     assert "kepler" not in Path(family.__file__).read_text()
 
 
-@pytest.mark.parametrize(
-    "entries,message",
-    [
-        (["x", "(u_0 +", "u_1"], "cannot parse"),
-        (["x", "frobnicate(u_0)", "u_1"], "`frobnicate` has no compiled translation"),
-        (["x", "(u_0 if u_0 else u_0)", "u_1"], "no compiled translation"),
-        (["x", "q", "u_1"], "unknown name 'q'"),
-        (["y", "u_0", "u_1"], "does not start with the variables"),
-    ],
-)
-def test_translation_errors_name_the_entry(entries, message):
-    with pytest.raises(UnsupportedExpression, match=message):
-        translate_decomposition("rhs", entries, ["x"], 1, "y")
+def test_loader_failures_are_reasons_not_crashes():
+    """Whatever keeps heyoka's code from being loaded safely is an UnsupportedExpression naming
+    the function and the rule: a symbol no loaded library provides (checked before loading, since
+    LLVM's linker would abort the process), a signature other than heyoka's, an object that is not
+    ELF64."""
+    from implementations import native_functions as nf
+
+    with pytest.raises(UnsupportedExpression, match="calls `no_such_symbol_x`, which no library"):
+        nf._resolve("no_such_symbol_x", "'p' rhs")
+    nf._resolve("cos", "'p' rhs")  # libm, found
+    with pytest.raises(UnsupportedExpression, match="unexpected signature"):
+        nf._check_signature("define void @cfunc(ptr noalias %in_ptr, ptr %out_ptr) {", 4, "'p' rhs")
+    with pytest.raises(UnsupportedExpression, match="defines no `cfunc`"):
+        nf._check_signature("define void @other() {", 4, "'p' rhs")
+    with pytest.raises(UnsupportedExpression, match="not ELF64"):
+        nf._undefined_symbols(b"MZ" + bytes(100), "'p' rhs")
+    with pytest.raises(InputError, match="`name` must be one of"):
+        native_function(get_problem("harmonic"), "hessian")
+    with pytest.raises(UnsupportedExpression, match="no acceleration of the positions alone"):
+        native_function(get_problem("damped-cubic"), "accel")
+    pendulum = get_problem("pendulum").compiled("rhs", None)
+    assert nf._undefined_symbols(pendulum.llvm_states[0].object_code, "x") == ["sin"]
 
 
-@pytest.mark.parametrize("exponent", [0.5, -0.5, 1.5, -1.5, 2.0, 3.0, 2.5, -2.5, 8.0, 1.25, 17.0])
-def test_powers_match_the_library_power_to_rounding(exponent):
-    source = translate_decomposition("f", ["x", f"u_0**{exponent!r}", "u_1"], ["x"], 1, "y")
-    namespace: dict = {}
-    exec("import math\n" + source, namespace)
-    out = np.empty(1)
-    for x in (0.3, 1.7, 12.5):
-        namespace["f"](0.0, np.array([x]), np.empty(0), out)
-        assert abs(out[0] - x**exponent) <= 4 * EPS * abs(x**exponent)
-    small = (2 * exponent).is_integer() and abs(2 * exponent) <= MAX_SMALL_POWER
-    assert ("**" not in source) == small
+def test_an_unresolvable_symbol_makes_the_problem_incompatible(monkeypatch):
+    from implementations import native_functions as nf
+
+    x, v = hy.make_vars("x", "v")
+    problem = Problem(
+        "test-unresolved",
+        variables=[x, v],
+        rhs=[v, -hy.sin(x)],
+        y0=[0.5, 0.0],
+        t_span=(0.0, 1.0),
+        reference="test problem",
+    )
+    real = nf._undefined_symbols
+    monkeypatch.setattr(nf, "_undefined_symbols", lambda obj, what: [*real(obj, what), "no_such_symbol_y"])
+    with pytest.raises(IncompatibleError, match="no_such_symbol_y"):
+        check_compatible(get_stepper("rk4@compiled"), problem)
+    assert get_stepper("rk4").compatible(problem)
 
 
 # -- compile and load times, recorded -----------------------------------------------------------------
@@ -463,8 +487,9 @@ def test_cold_compile_and_cached_load_are_recorded(tmp_path):
         )
         assert done.returncode == 0, done.stderr
         runs[label] = json.loads(done.stdout.strip().splitlines()[-1])
-    # the problem's functions and the splitting kernel: compiled cold, loaded when cached
-    assert {r["what"] for r in runs["cold"]["kernel"]} >= {"kepler-elliptic functions", "split_advance"}
+    # the splitting kernel: compiled cold, loaded when cached (the problem's functions are
+    # heyoka's, compiled by heyoka, not by numba)
+    assert {r["what"] for r in runs["cold"]["kernel"]} >= {"split_advance"}
     assert {r["source"] for r in runs["cold"]["kernel"]} == {"compiled"}
     assert {r["source"] for r in runs["cached"]["kernel"]} == {"cached"}
     assert runs["cold"]["final"] == runs["cached"]["final"]
