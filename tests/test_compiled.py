@@ -374,25 +374,28 @@ def test_compiled_variant_refuses_steppers_without_coefficients(bad):
 # -- the problems' functions: heyoka's machine code, loaded by address --------------------------------
 @pytest.mark.parametrize("problem", problems.all(), ids=lambda p: p.name)
 def test_every_problem_function_loads_and_is_heyokas_own(problem):
-    """Every part of every registered problem loads; each state-form function gives heyoka's own
-    values bit for bit at a state that is not the start (the loader checks the start)."""
+    """Every part of every registered problem loads; each function gives heyoka's own values bit
+    for bit at states that are not the start (the loader checks the start): the state form on
+    one point, the columns form on 11 members (whole SIMD batches and a remainder)."""
     rng = np.random.default_rng(3)
     for part in ("functions", "jacobian"):
         loaded = problem_functions(problem, part)
         assert problem_functions(problem, part) == loaded  # loaded once per process
         for name, fn in loaded.items():
-            kind, index, _ = NAMES[name]
+            kind, form = NAMES[name]
             assert fn.address and fn is native_function(problem, name)
-            if index:
-                continue
-            y = problem.y0 * (1 + 0.01 * rng.standard_normal(problem.dim))
+            size = 1 if form == "state" else 11
+            y = problem.y0[:, None] * (1 + 0.01 * rng.standard_normal((problem.dim, size)))
             if kind == "accel_q":
                 y = y[: len(problem.newtonian.positions)]
-            pars = problem.pars_for(1).reshape(-1)
-            out = np.empty(fn.nouts)
+            y = np.ascontiguousarray(y if size > 1 else y[:, 0])
+            pars = problem.pars_for(size)
+            pars = np.ascontiguousarray(pars if size > 1 else pars[:, 0])
+            out = np.empty((fn.nouts, size) if size > 1 else fn.nouts)
             fn(0.7, y, pars, out)
             heyoka = problem.compiled(kind, None)
-            expected = heyoka(y, pars=pars, time=0.7) if heyoka.nparams else heyoka(y, time=0.7)
+            time = np.full(size, 0.7) if size > 1 else 0.7
+            expected = heyoka(y, pars=pars, time=time) if heyoka.nparams else heyoka(y, time=time)
             assert np.array_equal(out, expected, equal_nan=True), (problem.name, name)
 
 
