@@ -54,16 +54,10 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from llvmlite import ir
-from numba import types
-from numba.core import cgutils
-from numba.extending import intrinsic
-
 from harness import cache
 from harness.errors import InputError
 from harness.problem import Problem
 from implementations.native_functions import (
-    MAX_BATCH,
     NativeFunction,
     UnsupportedExpression,
     function_address,
@@ -77,9 +71,6 @@ __all__ = [
     "family_module",
     "address",
     "call_kernel",
-    "call_state",
-    "call_state_into",
-    "call_columns",
     "KERNELS",
     "TEMPLATES",
     "COMPILE_LOG",
@@ -1395,104 +1386,6 @@ TEMPLATES = (
 PARTS = ("functions", "jacobian")
 
 
-# -- calling a problem's compiled function through its address ----------------------------------
-# The family kernels are compiled once for every problem: they receive each problem function as
-# the integer address of heyoka's compiled code (`implementations.native_functions`) and call it
-# through these intrinsics (an indirect call, as a C loop calling through a function pointer).
-#   state form:   void f(double *out, const double *x, const double *p, const double *time)
-#   strided form: void f(double *out, const double *x, const double *p, const double *time,
-#                        int64 stride)  (value i of the point at x[i * stride], time[0])
-# `call_columns` loops the strided form over members j0 <= j < j1 of arrays shaped (rows, N), C
-# order (stride N, each member's pointers offset by j).
-def _data_pointer(context, builder, array_type, value):
-    return context.make_array(array_type)(context, builder, value).data
-
-
-def _state_type():
-    dptr = ir.DoubleType().as_pointer()
-    return ir.FunctionType(ir.VoidType(), [dptr, dptr, dptr, dptr])
-
-
-@intrinsic
-def call_state(typingctx, address, t, x, p, out):
-    """Call the state-form function at `address` with the arrays' data."""
-    sig = types.void(address, t, x, p, out)
-
-    def codegen(context, builder, signature, args):
-        dptr = ir.DoubleType().as_pointer()
-        x_ptr, p_ptr, out_ptr = (
-            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
-            for ty, value in zip(signature.args[2:], args[2:], strict=True)
-        )
-        time = cgutils.alloca_once_value(builder, args[1])
-        fn = builder.inttoptr(args[0], _state_type().as_pointer())
-        builder.call(fn, [out_ptr, x_ptr, p_ptr, time])
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
-@intrinsic
-def call_state_into(typingctx, address, t, x, x_offset, p, out, out_offset):
-    """As `call_state`, reading `x`'s data from element `x_offset` on and writing `out`'s from
-    element `out_offset` on (rows of a flat array, without making views)."""
-    sig = types.void(address, t, x, x_offset, p, out, out_offset)
-
-    def codegen(context, builder, signature, args):
-        dptr = ir.DoubleType().as_pointer()
-        x_ptr, p_ptr, out_ptr = (
-            builder.bitcast(_data_pointer(context, builder, signature.args[i], args[i]), dptr)
-            for i in (2, 4, 5)
-        )
-        x_ptr = builder.gep(x_ptr, [args[3]])
-        out_ptr = builder.gep(out_ptr, [args[6]])
-        time = cgutils.alloca_once_value(builder, args[1])
-        fn = builder.inttoptr(args[0], _state_type().as_pointer())
-        builder.call(fn, [out_ptr, x_ptr, p_ptr, time])
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
-@intrinsic
-def call_columns(typingctx, address, t, X, P, Out, j0, j1):
-    """Call the columns-form function `address` = (batch, width, strided) for members
-    j0 <= j < j1 of `X`: the SIMD batch function on whole blocks of `width` members, the one-point
-    strided function on the rest."""
-    sig = types.void(address, t, X, P, Out, j0, j1)
-
-    def codegen(context, builder, signature, args):
-        dptr = ir.DoubleType().as_pointer()
-        i64 = ir.IntType(64)
-        x_ptr, p_ptr, out_ptr = (
-            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
-            for ty, value in zip(signature.args[2:5], args[2:5], strict=True)
-        )
-        x_array = context.make_array(signature.args[2])(context, builder, args[2])
-        n = cgutils.unpack_tuple(builder, x_array.shape, 2)[1]
-        stride, start, stop = (
-            builder.sext(v, i64) if v.type.width < 64 else v for v in (n, args[5], args[6])
-        )
-        batch, width, single = (builder.extract_value(args[0], i) for i in range(3))
-        times = cgutils.alloca_once(builder, ir.ArrayType(ir.DoubleType(), MAX_BATCH))
-        for k in range(MAX_BATCH):
-            builder.store(args[1], builder.gep(times, [ir.Constant(i64, 0), ir.Constant(i64, k)]))
-        time = builder.bitcast(times, dptr)
-        fnty = ir.FunctionType(ir.VoidType(), [dptr, dptr, dptr, dptr, i64]).as_pointer()
-        blocks = builder.sdiv(builder.sub(stop, start), width)
-        with cgutils.for_range(builder, blocks, intp=i64) as loop:
-            j = builder.add(start, builder.mul(loop.index, width))
-            member = [builder.gep(ptr, [j]) for ptr in (out_ptr, x_ptr, p_ptr)]
-            builder.call(builder.inttoptr(batch, fnty), [*member, time, stride])
-        rest = builder.add(start, builder.mul(blocks, width))
-        with cgutils.for_range_slice(builder, rest, stop, ir.Constant(i64, 1), intp=i64) as (j, _):
-            member = [builder.gep(ptr, [j]) for ptr in (out_ptr, x_ptr, p_ptr)]
-            builder.call(builder.inttoptr(single, fnty), [*member, time, stride])
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
 _FAMILY_HEADER = '''"""Generated by implementations.compiled_kernels: the family kernels, compiled once
 for every problem (problem functions are called through their addresses); do not edit.
 numba {numba_version}, Python {python}; call intrinsics {intrinsics}.
@@ -1500,7 +1393,7 @@ numba {numba_version}, Python {python}; call intrinsics {intrinsics}.
 import numpy as np
 from numba import njit
 
-from implementations.compiled_kernels import call_columns, call_state, call_state_into
+from implementations.kernel_calls import call_columns, call_state, call_state_into
 
 '''
 
@@ -1511,12 +1404,11 @@ def _versions() -> dict[str, str]:
 
 
 def _intrinsics_digest() -> str:
-    """A hash of the call intrinsics' code: numba's cache checks only the generated module's own
-    file, so the module's text names the intrinsics' version."""
-    import inspect
+    """A hash of the call intrinsics' module (`implementations.kernel_calls`): numba's cache checks
+    only the generated module's own file, so the module's text names the intrinsics' version."""
+    from implementations import kernel_calls
 
-    parts = (_data_pointer, _state_type, call_state, call_state_into, call_columns)
-    code = "".join(inspect.getsource(f) for f in parts) + f"MAX_BATCH={MAX_BATCH}"
+    code = Path(kernel_calls.__file__).read_text()
     return hashlib.sha256(code.encode()).hexdigest()[:16]
 
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
@@ -232,6 +231,8 @@ class ScipyStepper(MemberByMemberStepper):
 
     def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
                       y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
+        from scipy.integrate import solve_ivp  # imported on first use: listing steppers needs none
+
         options = {"jac": member.jac} if self.uses_jacobian else {}
         try:
             with warnings.catch_warnings():
