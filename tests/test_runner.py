@@ -480,44 +480,6 @@ def test_run_experiments_shares_one_progress_and_returns_each_result(toy, tmp_pa
         run_experiments(["toy"], configs={"other": {}}, progress=False)
 
 
-def test_several_experiments_share_one_pool_and_each_is_finished_when_its_cells_are_in(
-        toy, tmp_path, monkeypatch):
-    """run_experiments hands every experiment's cells to the workers as one list, experiment after
-    experiment; an experiment is finished (its pack written) as soon as its last cell is in,
-    while the next one's cells still run; the results equal each experiment run alone."""
-    from harness.experiments import EXPERIMENTS
-    from harness.runner import execute, orchestration
-
-    class ToyTwo(ToyExperiment):
-        name = "toy2"
-
-    packs = lambda: len(list((tmp_path / "one" / "packs").glob("*/*.parquet")))  # noqa: E731
-    calls, packs_seen = [], []
-
-    def one_pool(tasks, jobs, accept):  # in place of the loky workers, in this process
-        calls.append([t.cell.experiment for t in tasks])
-        for t in tasks:
-            packs_seen.append(packs())
-            accept(t, execute(t.payload))
-
-    monkeypatch.setattr(orchestration, "run_loky", one_pool)
-    EXPERIMENTS["toy2"] = ToyTwo()
-    grid = (["toy-ok", "toy-alt"], ["toy-decay", "toy-growth"])
-    try:
-        out = run_experiments(["toy", "toy2"], *grid, jobs=2, cache_dir=tmp_path / "one",
-                              plugins=[toy], progress=False)
-        assert calls == [["toy"] * 9 + ["toy2"] * 9]  # one pool, toy's cells first
-        assert packs_seen == [0] * 9 + [1] * 9 and packs() == 2  # toy packed before toy2 ran
-        for name in ("toy", "toy2"):
-            alone = run_experiment(name, *grid, jobs=1, cache_dir=tmp_path / name, plugins=[toy],
-                                   progress=False)
-            pd.testing.assert_frame_equal(out[name].rows, alone.rows)
-            pd.testing.assert_frame_equal(out[name].summary, alone.summary)
-            assert out[name].computed_cells == alone.computed_cells == 9
-    finally:
-        EXPERIMENTS.pop("toy2", None)
-
-
 def test_failed_record_has_the_documented_columns(run):
     r = run(steppers=["toy-raise"], problems=["toy-decay"], config={"n": 1})
     assert list(r.failures.columns) == runner.FAILURE_COLUMNS

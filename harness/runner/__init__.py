@@ -3,8 +3,7 @@
 Layout (one job per module; everything public is re-exported here):
 
     harness/runner/__init__.py    this overview; re-exports
-    harness/runner/orchestration.py  run_experiment (prepare, execute, finish), RunOptions
-    harness/runner/several.py     run_experiments: several experiments' cells on one pool
+    harness/runner/orchestration.py  run_experiment(s), RunOptions
     harness/runner/checks.py      argument checks (jobs, scheduler, names, plugins, config)
     harness/runner/limits.py      a cell's time limit (SIGALRM, or an abandoned helper thread)
     harness/runner/validation.py  checking a cell's rows (validate_rows)
@@ -18,8 +17,7 @@ Layout (one job per module; everything public is re-exported here):
 `run_experiment(name, steppers, problems, ...)` lists an experiment's cells, reuses every cell
 already in the cache, runs the others, and returns a `RunResult` (rows, summary, failures, skips,
 per-cell records, counts, wall time). `run_experiments(...)` does the same for several
-experiments with one progress display, one Dask connection and one pool of workers for all their
-cells (`harness.runner.several`).
+experiments with one progress display and one Dask connection.
 
 Cache. A cell's key (`cell_key`, harness/keys.py) hashes the cell, the experiment's resolved
 configuration and a code version: the fingerprints of its stepper and problem (coefficients and
@@ -136,6 +134,7 @@ from harness.runner.orchestration import (  # noqa: F401  (re-exported)
     RunOptions,
     no_cells_error,
     run_experiment,
+    run_experiments,
 )
 from harness.runner.result import (  # noqa: F401  (re-exported)
     CELL_COLUMNS,
@@ -144,7 +143,6 @@ from harness.runner.result import (  # noqa: F401  (re-exported)
     SKIP_COLUMNS,
     RunResult,
 )
-from harness.runner.several import run_experiments  # noqa: F401  (re-exported)
 from harness.runner.validation import SCALARS, CellOutputError, validate_rows  # noqa: F401
 from harness.runner.workers import (  # noqa: F401  (re-exported)
     ORPHAN_CHECK_S,

@@ -17,6 +17,7 @@ from harness.errors import (
     HarnessError,
     InputError,
     NoApplicableCellsError,
+    UnknownNameError,
 )
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
 from harness.keys import cell_key, code_version, experiment_fingerprint
@@ -68,43 +69,6 @@ FAILURE_KINDS = ("error", "invalid", "timeout", "crash", "lookup", "version", "s
 class ExperimentError(HarnessError):
     """An experiment could not list its cells (the message names the experiment)."""
 
-
-
-@dataclass
-class ExperimentJob:
-    """An experiment's cells listed, keyed and taken from the cache where they were: `tasks` are
-    the cells still to run, `accept(task, outcome)` takes each one's outcome, `finish()` returns
-    the RunResult once every task was accepted, `close()` releases what the job opened (its
-    progress display, its Dask connection). `jobs` and `client` say where its tasks run."""
-
-    experiment: str
-    tasks: list[Task]
-    accept: Any
-    finish: Any
-    close: Any
-    jobs: int
-    client: Any = None
-
-
-def execute_tasks(tasks: Sequence[Task], jobs: int, client: Any, accept: Any,
-                  groups: Sequence[Sequence[Task]] | None = None) -> None:
-    """Run `tasks` where the run was asked to: on the Dask `client`, in this process (`jobs` 1),
-    or on `jobs` local loky workers; each outcome goes to `accept`. Workers take them in the
-    interleaved order of each of `groups` (default: all of `tasks` as one group), group after
-    group."""
-    if not tasks:
-        return
-    groups = [tasks] if groups is None else groups
-    if client is None and jobs == 1:
-        run_serial([t for g in groups for t in g], accept)
-        return
-    ordered = [t for g in groups for t in interleaved(list(g))]
-    if len(ordered) != len(tasks):
-        raise InputError(f"`groups` hold {len(ordered)} tasks, `tasks` {len(tasks)}")
-    if client is not None:
-        run_dask(ordered, client, accept)
-    else:
-        run_loky(ordered, jobs, accept)
 
 
 # -- the runner -------------------------------------------------------------------------------------
@@ -218,43 +182,6 @@ def run_experiment(
     cells, `CorruptResultsError` for a damaged cache file. Failures of single cells never raise:
     they are in `RunResult.failures`.
     """
-    job = prepare_experiment(
-        experiment, steppers, problems, config=config, options=options, quick=quick, jobs=jobs,
-        scheduler=scheduler, fresh=fresh, cache=cache, cache_dir=cache_dir, plugins=plugins,
-        cell_timeout=cell_timeout, progress=progress, allow_empty=allow_empty, _client=_client,
-        _counted=_counted, _listed=_listed, _versions=_versions,
-    )
-    try:
-        execute_tasks(job.tasks, job.jobs, job.client, job.accept)
-    finally:
-        job.close()
-    return job.finish()
-
-
-def prepare_experiment(
-    experiment: str | Experiment,
-    steppers: Sequence[str] | None = None,
-    problems: Sequence[str] | None = None,
-    *,
-    config: Mapping[str, Any] | None = None,
-    options: RunOptions | None = None,
-    quick: bool = False,
-    jobs: int | None = None,
-    scheduler: str | Any | None = None,
-    fresh: bool = False,
-    cache: bool = True,
-    cache_dir: str | os.PathLike | None = None,
-    plugins: Sequence[str | os.PathLike] = (),
-    cell_timeout: float | None = None,
-    progress: Progress | bool | str | None = None,
-    allow_empty: bool = False,
-    _client: Any = None,
-    _counted: bool = False,
-    _listed: tuple[list, list] | None = None,
-    _versions: dict[tuple[str, str], Any] | None = None,
-) -> ExperimentJob:
-    """The first half of `run_experiment` (same arguments): list the cells, key them, take the
-    cached ones, and return the `ExperimentJob` whose `tasks` are still to run."""
     started = time.perf_counter()
     if options is not None:
         if not isinstance(options, RunOptions):
@@ -334,12 +261,6 @@ def prepare_experiment(
         failures[i] = failed_record(cell, message, kind=kind, traceback=tb, key=key)
         record(i, cell, key, "failed", False, wall, 0, worker)
 
-    def close() -> None:
-        if own_client:
-            _client.close()
-        if own_bar:
-            bar.close()
-
     try:
         keyed: list[tuple[int, Cell, str, str]] = []
         for i, cell in enumerate(cells):
@@ -407,68 +328,72 @@ def prepare_experiment(
                      out["wall_s"], out["worker"])
                 bar.update(1, failed=1)
 
-    except BaseException:
-        close()
-        raise
+        if tasks:
+            if _client is not None:
+                run_dask(interleaved(tasks), _client, accept)
+            elif jobs_n == 1:
+                run_serial(tasks, accept)
+            else:
+                run_loky(interleaved(tasks), jobs_n, accept)
+    finally:
+        if own_client:
+            _client.close()
+        if own_bar:
+            bar.close()
 
-    def finish() -> RunResult:
-        order = sorted(frames)
-        rows_stored = packed is not None
-        if packed is not None:
-            rows_df = packed[0]
-        elif order:
-            with_rows = [frames[i] for i in order if len(frames[i].columns)]
-            rows_df = (pd.concat(with_rows, ignore_index=True) if with_rows
-                       else pd.DataFrame(columns=ID_COLUMNS))
-            if pack_key is not None and not failures:  # continue with the rows as the pack reads back
-                listed = [records[i] for i in sorted(records)]
-                rows_df = write_pack(store, pack_key, exp.name, rows_df, listed)
-                rows_stored = True
-        else:
-            rows_df = pd.DataFrame(columns=ID_COLUMNS)
-        summary = pd.DataFrame()
-        if order or packed is not None:
-            try:
-                if pack_key is not None and not failures:  # a whole run: its summary may be cached
-                    summary = summarize_packed(store, pack_key, exp, rows_df,
-                                               lambda: exp.summarize(rows_df.copy(), cfg), fresh)
-                else:
-                    summary = exp.summarize(rows_df.copy(), cfg)
-                if not isinstance(summary, pd.DataFrame):
-                    raise CellOutputError(
-                        f"summarize returned {type(summary).__name__}, expected a pandas DataFrame"
-                    )
-                summary = summary.reset_index(drop=True)
-            except Exception as exc:
-                summary = pd.DataFrame()
-                rec = failed_record(Cell(exp.name, "", ""), one_line(f"{type(exc).__name__}: {exc}"),
-                                    kind="summarize", traceback=short_traceback(exc))
-                rec["cell"] = f"{exp.name}:summarize"
-                failures[len(cells)] = rec
-        fail_df = pd.DataFrame([failures[i] for i in sorted(failures)], columns=FAILURE_COLUMNS)
-        skip_df = pd.DataFrame(_skip_records(skips), columns=SKIP_COLUMNS)
-        cell_df = pd.DataFrame([records[i] for i in sorted(records)], columns=CELL_COLUMNS)
-        return RunResult(
-            experiment=exp.name,
-            description=str(getattr(exp, "description", "")),
-            config=cfg,
-            rows=rows_df,
-            summary=summary,
-            failures=fail_df,
-            skips=skip_df,
-            cells=cell_df,
-            wall_s=time.perf_counter() - started,
-            cached_cells=cached,
-            computed_cells=len(tasks),
-            options={"jobs": jobs_n if sched is None and _client is None else None,
-                     "scheduler": scheduler if isinstance(scheduler, str) else None,
-                     "fresh": bool(fresh), "cache": bool(cache), "quick": bool(quick),
-                     "cell_timeout": timeout, "plugins": plugin_paths,
-                     "steppers": stepper_names, "problems": problem_names},
-            rows_stored=rows_stored,
-        )
-
-    return ExperimentJob(exp.name, tasks, accept, finish, close, jobs_n, _client)
+    order = sorted(frames)
+    rows_stored = packed is not None
+    if packed is not None:
+        rows_df = packed[0]
+    elif order:
+        with_rows = [frames[i] for i in order if len(frames[i].columns)]
+        rows_df = pd.concat(with_rows, ignore_index=True) if with_rows else pd.DataFrame(columns=ID_COLUMNS)
+        if pack_key is not None and not failures:  # continue with the rows as the pack reads back
+            rows_df = write_pack(store, pack_key, exp.name, rows_df, [records[i] for i in sorted(records)])
+            rows_stored = True
+    else:
+        rows_df = pd.DataFrame(columns=ID_COLUMNS)
+    summary = pd.DataFrame()
+    if order or packed is not None:
+        try:
+            if pack_key is not None and not failures:  # a whole run: its summary may be cached
+                summary = summarize_packed(store, pack_key, exp, rows_df,
+                                           lambda: exp.summarize(rows_df.copy(), cfg), fresh)
+            else:
+                summary = exp.summarize(rows_df.copy(), cfg)
+            if not isinstance(summary, pd.DataFrame):
+                raise CellOutputError(
+                    f"summarize returned {type(summary).__name__}, expected a pandas DataFrame"
+                )
+            summary = summary.reset_index(drop=True)
+        except Exception as exc:
+            summary = pd.DataFrame()
+            rec = failed_record(Cell(exp.name, "", ""), one_line(f"{type(exc).__name__}: {exc}"),
+                                kind="summarize", traceback=short_traceback(exc))
+            rec["cell"] = f"{exp.name}:summarize"
+            failures[len(cells)] = rec
+    fail_df = pd.DataFrame([failures[i] for i in sorted(failures)], columns=FAILURE_COLUMNS)
+    skip_df = pd.DataFrame(_skip_records(skips), columns=SKIP_COLUMNS)
+    cell_df = pd.DataFrame([records[i] for i in sorted(records)], columns=CELL_COLUMNS)
+    return RunResult(
+        experiment=exp.name,
+        description=str(getattr(exp, "description", "")),
+        config=cfg,
+        rows=rows_df,
+        summary=summary,
+        failures=fail_df,
+        skips=skip_df,
+        cells=cell_df,
+        wall_s=time.perf_counter() - started,
+        cached_cells=cached,
+        computed_cells=len(tasks),
+        options={"jobs": jobs_n if sched is None and _client is None else None,
+                 "scheduler": scheduler if isinstance(scheduler, str) else None,
+                 "fresh": bool(fresh), "cache": bool(cache), "quick": bool(quick),
+                 "cell_timeout": timeout, "plugins": plugin_paths,
+                 "steppers": stepper_names, "problems": problem_names},
+        rows_stored=rows_stored,
+    )
 
 
 def interleaved(tasks: list[Task]) -> list[Task]:
@@ -486,3 +411,85 @@ def interleaved(tasks: list[Task]) -> list[Task]:
         shift = (j % 2) * (len(group) // 2)
         keyed += [(n, j, t) for n, t in enumerate(group[shift:] + group[:shift])]
     return [t for _, _, t in sorted(keyed, key=lambda item: item[:2])]
+
+
+def run_experiments(
+    experiments: Sequence[str | Experiment] | None = None,
+    steppers: Sequence[str] | None = None,
+    problems: Sequence[str] | None = None,
+    *,
+    configs: Mapping[str, Mapping[str, Any]] | None = None,
+    quick: bool = False,
+    jobs: int | None = None,
+    scheduler: str | Any | None = None,
+    fresh: bool = False,
+    cache: bool = True,
+    cache_dir: str | os.PathLike | None = None,
+    plugins: Sequence[str | os.PathLike] = (),
+    cell_timeout: float | None = None,
+    progress: Progress | bool | str | None = None,
+) -> dict[str, RunResult]:
+    """`run_experiment` for several experiments (None: every registered one), in order, with one
+    progress display and one Dask connection; `configs` maps experiment name -> overrides.
+    Returns {experiment name: RunResult}; pass it to `harness.store.save_run`."""
+    from harness.experiments import EXPERIMENTS
+
+    if experiments is None:
+        experiments = list(EXPERIMENTS)
+    if isinstance(experiments, str | Experiment):
+        experiments = [experiments]
+    exps = [resolve_experiment(e) for e in experiments]
+    if configs is not None and not isinstance(configs, Mapping):
+        raise InputError(f"`configs` must map experiment names to settings, got {type(configs).__name__}")
+    unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
+    if unknown:
+        raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
+    sched = check_scheduler(scheduler)
+    from harness.registry import load_plugin
+
+    plugin_paths = check_plugins(plugins)
+    for p in plugin_paths:
+        load_plugin(p)
+    options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
+                         cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
+    stepper_names = check_names("steppers", steppers)
+    problem_names = check_names("problems", problems)
+    bar, own_bar = progress_display(progress, "cells")
+    # Every experiment's cells are listed once, here: the whole run's size first, so the
+    # display's total does not grow; each `run_experiment` takes its list.
+    listed: dict[str, tuple[list, list]] = {}
+    versions: dict[tuple[str, str], Any] = {}
+    for exp in exps:
+        try:
+            cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
+            cells, skips = exp.cells(stepper_names, problem_names, cfg)
+            listed[exp.name] = (list(cells), list(skips))
+        except Exception:  # run_experiment lists it again and reports the failure properly
+            break
+    counted = len(listed) == len(exps)
+    if counted:
+        bar.add_total(sum(len(cells) for cells, _ in listed.values()))
+    client = None
+    own_client = False
+    out: dict[str, RunResult] = {}
+    try:
+        if sched is not None:
+            client, own_client = dask_client(sched)
+        for i, exp in enumerate(exps, 1):
+            bar.set_description(f"[{i}/{len(exps)}] {exp.name}")
+            out[exp.name] = run_experiment(
+                exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
+                options=options, progress=bar, _client=client, _counted=counted, allow_empty=True,
+                _listed=listed.get(exp.name), _versions=versions,
+            )
+            if sched is not None:
+                out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None
+    finally:
+        if own_client and client is not None:
+            client.close()
+        if own_bar:
+            bar.close()
+    if out and not any(r.n_cells for r in out.values()):
+        raise no_cells_error(list(out), pd.concat([r.skips for r in out.values()], ignore_index=True),
+                             stepper_names, problem_names)
+    return out
