@@ -502,3 +502,30 @@ def test_methods_with_the_same_error_curve_are_drawn_once_whatever_their_row_ord
     rows.loc[rows.stepper == "c", "in_fit"] = [True, False, True]
     assert same_curves(rows) == {"a": ["b"], "c": [], "d": []}
     assert same_curves(rows.iloc[:0]) == {}
+
+
+# -- experiment sections built in forked processes -----------------------------------------------------
+def _experiment_bodies(page: str) -> dict[str, str]:
+    return {name: page.split(f'<section id="{name}"')[1].split("</section>")[0]
+            for name in report_experiments()}
+
+
+def test_forked_sections_equal_the_ones_built_in_process_and_a_dead_worker_costs_nothing(
+        report, tmp_path, monkeypatch):
+    """The experiment sections come from forked workers; built in this process instead (no
+    fork), or with every worker dying (each section then built here), the sections are the
+    same."""
+    import os
+
+    from harness.report import sections
+
+    run = load_run(None, root=report["own"] / "results")
+    forked = _experiment_bodies(write_report(run, output=tmp_path / "forked").read_text("utf-8"))
+    assert forked == _experiment_bodies(report["html"])
+    monkeypatch.setattr(sections, "_start_experiment_sections", lambda *args: None)
+    here = _experiment_bodies(write_report(run, output=tmp_path / "here").read_text("utf-8"))
+    monkeypatch.undo()
+    monkeypatch.setattr(sections, "_section_in_worker", lambda *args: os._exit(3))
+    dead = _experiment_bodies(write_report(run, output=tmp_path / "dead").read_text("utf-8"))
+    assert forked == here == dead
+    assert all("could not be built" not in body for body in forked.values())
