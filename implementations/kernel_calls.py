@@ -34,20 +34,27 @@ def _state_type():
     return ir.FunctionType(ir.VoidType(), [dptr, dptr, dptr, dptr])
 
 
+def _pointers(context, builder, signature, args, indices):
+    """The data pointers (double *) of the array arguments at `indices`."""
+    dptr = ir.DoubleType().as_pointer()
+    return [builder.bitcast(_data_pointer(context, builder, signature.args[i], args[i]), dptr)
+            for i in indices]
+
+
+def _call_state_form(builder, address, t, out_ptr, x_ptr, p_ptr) -> None:
+    time = cgutils.alloca_once_value(builder, t)
+    fn = builder.inttoptr(address, _state_type().as_pointer())
+    builder.call(fn, [out_ptr, x_ptr, p_ptr, time])
+
+
 @intrinsic
 def call_state(typingctx, address, t, x, p, out):
     """Call the state-form function at `address` with the arrays' data."""
     sig = types.void(address, t, x, p, out)
 
     def codegen(context, builder, signature, args):
-        dptr = ir.DoubleType().as_pointer()
-        x_ptr, p_ptr, out_ptr = (
-            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
-            for ty, value in zip(signature.args[2:], args[2:], strict=True)
-        )
-        time = cgutils.alloca_once_value(builder, args[1])
-        fn = builder.inttoptr(args[0], _state_type().as_pointer())
-        builder.call(fn, [out_ptr, x_ptr, p_ptr, time])
+        x_ptr, p_ptr, out_ptr = _pointers(context, builder, signature, args, (2, 3, 4))
+        _call_state_form(builder, args[0], args[1], out_ptr, x_ptr, p_ptr)
         return context.get_dummy_value()
 
     return sig, codegen
@@ -60,16 +67,10 @@ def call_state_into(typingctx, address, t, x, x_offset, p, out, out_offset):
     sig = types.void(address, t, x, x_offset, p, out, out_offset)
 
     def codegen(context, builder, signature, args):
-        dptr = ir.DoubleType().as_pointer()
-        x_ptr, p_ptr, out_ptr = (
-            builder.bitcast(_data_pointer(context, builder, signature.args[i], args[i]), dptr)
-            for i in (2, 4, 5)
-        )
+        x_ptr, p_ptr, out_ptr = _pointers(context, builder, signature, args, (2, 4, 5))
         x_ptr = builder.gep(x_ptr, [args[3]])
         out_ptr = builder.gep(out_ptr, [args[6]])
-        time = cgutils.alloca_once_value(builder, args[1])
-        fn = builder.inttoptr(args[0], _state_type().as_pointer())
-        builder.call(fn, [out_ptr, x_ptr, p_ptr, time])
+        _call_state_form(builder, args[0], args[1], out_ptr, x_ptr, p_ptr)
         return context.get_dummy_value()
 
     return sig, codegen
@@ -85,10 +86,7 @@ def call_columns(typingctx, address, t, X, P, Out, j0, j1):
     def codegen(context, builder, signature, args):
         dptr = ir.DoubleType().as_pointer()
         i64 = ir.IntType(64)
-        x_ptr, p_ptr, out_ptr = (
-            builder.bitcast(_data_pointer(context, builder, ty, value), dptr)
-            for ty, value in zip(signature.args[2:5], args[2:5], strict=True)
-        )
+        x_ptr, p_ptr, out_ptr = _pointers(context, builder, signature, args, (2, 3, 4))
         x_array = context.make_array(signature.args[2])(context, builder, args[2])
         n = cgutils.unpack_tuple(builder, x_array.shape, 2)[1]
         stride, start, stop = (
