@@ -15,8 +15,12 @@ heyoka's calling conventions, checked on each state's IR before it is loaded:
   const double *time)`;
 - state 1, one point in strided arrays: the same with a last `int64 stride`; value i of a point is
   read from `in[i * stride]` and written to `out[i * stride]` (parameters alike), the time is
-  `time[0]`.
-The batch state (state 2, SIMD width) is not used.
+  `time[0]`;
+- state 2, a SIMD batch of `cfunc.batch_size` points in strided arrays: the same arguments; value
+  i of points k = 0 .. width-1 at `in[i * stride + k]`, times `time[0 .. width-1]`.
+A state-form name (`rhs`, `accel`, `jac`) is state 0; a columns-form name (`rhs_cols`,
+`accel_cols`) is states 2 and 1: the batch function on whole blocks of members, the one-point
+strided function on the rest.
 
 Contract:
 1. `function_address(problem, name)` gives the address of one of `NAMES`, loaded once per
@@ -25,8 +29,9 @@ Contract:
    code is loaded, from this process's libraries; one that cannot be resolved, a calling convention
    other than the above, or a platform whose objects are not ELF64 makes the function
    `UnsupportedExpression` with the reason (the NumPy implementation then runs), never a crash.
-3. A loaded function is checked once against heyoka's own call on the problem's start state,
-   bit for bit, before its address is handed out.
+3. A loaded function is checked once against heyoka's own call, bit for bit, before its address
+   is handed out: on the problem's start state (state form), on a batch and a half of perturbed
+   copies of it (columns form: the batch and the strided code both run).
 """
 
 from __future__ import annotations
@@ -130,8 +135,9 @@ def native_function(problem: Problem, name: str) -> NativeFunction:
     return entry
 
 
-def function_address(problem: Problem, name: str) -> int:
-    """The address of `problem`'s function `name`; raises UnsupportedExpression."""
+def function_address(problem: Problem, name: str) -> int | tuple[int, int, int]:
+    """The address of `problem`'s function `name` (a columns-form function: the triple `call_columns`
+    takes); raises UnsupportedExpression."""
     return native_function(problem, name).address
 
 
@@ -293,5 +299,5 @@ def _check_values(problem: Problem, fn: Any, loaded: NativeFunction) -> None:
     if not np.array_equal(out, np.asarray(expected), equal_nan=True):
         raise UnsupportedExpression(
             f"the loaded {loaded.name} of {problem.name!r} disagrees with heyoka's own call on "
-            "the start state"
+            + ("the start state" if form == "state" else "perturbed copies of the start state")
         )
