@@ -279,41 +279,43 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
     # the experiment sections (their figures: most of a cold report's section time) start in
     # forked processes now, while this one judges the verdicts
     pending = _start_experiment_sections(view, experiments, number, dict(titles))
-    say("verdicts")
-    verdicts = timer.run("verdicts", lambda: collect_verdicts(view))
-    head, statuses = timer.run("scoreboard", lambda: X.verdicts_section(view, verdicts, experiments))
-    head.number = number["verdicts"]
-    out: list[Section] = [head]
-    say("changes")
-    names = dict(titles)
-    changes = timer.run("changes", lambda: _guarded(
-        lambda v: X.changes_section(v, verdicts, previous), view, "changes", number, names))
-    out.append(changes)
-    since = next((b for b in changes.blocks if b.kind == "headline"), None)
-    if since is not None:  # the first screen says what changed, too
-        head.blocks.insert(1, Block("list", items=[(since.text, "#changes")], cls="since"))
-    for name in experiments:
-        say(name)
-        out.append(_finish_experiment_section(pending, view, name, number, names, timer))
-    _close(pending)
-    trust = lambda v: X.gate_trust(v, Path(results_path).parent)  # noqa: E731
-    for key, fn in (("ground-truth", X.ground_truth), ("claims", X.claims), ("gate-population", trust)):
-        say(key)
-        out.append(timer.run(key, lambda fn=fn, key=key: _guarded(fn, view, key, number, names)))
-    say("performance history")
-    perf = timer.run("performance-history", X.performance_history)
-    prov = X.provenance(view, run_id=run_id, results_path=results_path, timer=timer, build_s=build_s)
-    for sec in (prov, perf):
-        sec.number = number[sec.id]
-    out += [prov, perf]
-    for sec in out:
-        sec.number = number.get(sec.id, sec.number)
-    drop_unlinked_row_ids(out)
-    failing = verdicts[~verdicts["passed"].astype(bool)] if len(verdicts) else verdicts
-    headline = {"checked": int(len(verdicts)), "failed": int(len(failing)),
-                "experiments": int(verdicts["experiment"].nunique()) if len(verdicts) else 0,
-                "verdicts": verdicts}
-    return out, statuses, headline
+    try:
+        say("verdicts")
+        verdicts = timer.run("verdicts", lambda: collect_verdicts(view))
+        head, statuses = timer.run("scoreboard", lambda: X.verdicts_section(view, verdicts, experiments))
+        head.number = number["verdicts"]
+        out: list[Section] = [head]
+        say("changes")
+        names = dict(titles)
+        changes = timer.run("changes", lambda: _guarded(
+            lambda v: X.changes_section(v, verdicts, previous), view, "changes", number, names))
+        out.append(changes)
+        since = next((b for b in changes.blocks if b.kind == "headline"), None)
+        if since is not None:  # the first screen says what changed, too
+            head.blocks.insert(1, Block("list", items=[(since.text, "#changes")], cls="since"))
+        for name in experiments:
+            say(name)
+            out.append(_finish_experiment_section(pending, view, name, number, names, timer))
+        trust = lambda v: X.gate_trust(v, Path(results_path).parent)  # noqa: E731
+        for key, fn in (("ground-truth", X.ground_truth), ("claims", X.claims), ("gate-population", trust)):
+            say(key)
+            out.append(timer.run(key, lambda fn=fn, key=key: _guarded(fn, view, key, number, names)))
+        say("performance history")
+        perf = timer.run("performance-history", X.performance_history)
+        prov = X.provenance(view, run_id=run_id, results_path=results_path, timer=timer, build_s=build_s)
+        for sec in (prov, perf):
+            sec.number = number[sec.id]
+        out += [prov, perf]
+        for sec in out:
+            sec.number = number.get(sec.id, sec.number)
+        drop_unlinked_row_ids(out)
+        failing = verdicts[~verdicts["passed"].astype(bool)] if len(verdicts) else verdicts
+        headline = {"checked": int(len(verdicts)), "failed": int(len(failing)),
+                    "experiments": int(verdicts["experiment"].nunique()) if len(verdicts) else 0,
+                    "verdicts": verdicts}
+        return out, statuses, headline
+    finally:
+        _close(pending)
 
 
 def _in_registry_order(names: list[str]) -> list[str]:
@@ -349,9 +351,13 @@ def _section_in_worker(name: str, number: Mapping[str, int], titles: Mapping[str
     import time
 
     started = time.perf_counter()
-    sec = _guarded(lambda v: _experiment_section(v, name, number[name]), _FORKED_VIEW[0], name,
-                   number, titles)
+    sec = _built_section(_FORKED_VIEW[0], name, number, titles)
     return sec, time.perf_counter() - started
+
+
+def _built_section(view: RunView, name: str, number: Mapping[str, int],
+                   titles: Mapping[str, str]) -> Section:
+    return _guarded(lambda v: _experiment_section(v, name, number[name]), view, name, number, titles)
 
 
 @dataclass
@@ -393,8 +399,7 @@ def _finish_experiment_section(pending: _Pending | None, view: RunView, name: st
         else:
             timer.seconds[name] = seconds
             return sec
-    return timer.run(name, lambda: _guarded(
-        lambda v: _experiment_section(v, name, number[name]), view, name, number, titles))
+    return timer.run(name, lambda: _built_section(view, name, number, titles))
 
 
 def _close(pending: _Pending | None) -> None:
