@@ -24,8 +24,12 @@ from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
 # one uninterrupted call); between chunks Python runs, so Ctrl-C and a cell's time limit
 # (SIGALRM, also with --jobs 1) take effect, and the work so far is checked. Work is counted in
 # float64-step units: a Taylor step costs `REFERENCE_STEP_COST[level]` of them (measured on this
-# machine type for Kepler: long double ~10x, real128 ~300x a float64 step). After the first
-# chunk the work the whole span needs is projected from the rate so far; a run projected or found
+# machine type for Kepler: long double ~10x, real128 ~300x a float64 step). After each chunk the
+# work the whole span needs is projected from the rate of the recent steps (the latest checkpoint
+# with at most half the steps taken so far, to now: at least half the steps, so a short burst of
+# small steps does not decide it; from the start after the first chunk), so a run whose steps
+# shrink without end (a finite-time blow-up, where time stops advancing) stops a few chunks after
+# it begins to stall instead of after the whole budget; a run projected or found
 # to exceed `REFERENCE_MAX_WORK` units per member and precision, or running longer than
 # `REFERENCE_MAX_SECONDS`, stops with `WorkLimitError` naming the limit and the environment
 # variable that raises it. 1e8 units (~1e7 long double or ~3e5 real128 steps) is ~100x the
@@ -62,6 +66,7 @@ def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray
     rows: list[np.ndarray] = []
     remaining = grid
     steps = 0
+    checkpoints = [(0, t_start)]  # (steps taken, time reached) after each chunk
     while True:
         result = ta.propagate_grid(remaining, max_steps=chunk)
         outcome, states = result[0], result[-1]
@@ -69,10 +74,16 @@ def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray
         steps += int(result[3])
         if outcome != hy.taylor_outcome.step_limit:
             return outcome, np.array(rows)
-        done = float(ta.time) - t_start
-        projected = cost * steps * (t_end - t_start) / done if done > 0 else math.inf
+        now = float(ta.time)
+        projected = cost * _projected_steps(checkpoints, steps, now, t_end)
+        checkpoints.append((steps, now))
         where = (f"ground truth for problem {problem.name!r} failed in {level.name} at "
-                 f"t = {float(ta.time):.17g} (member {member}): reaching t = {t_end:.6g}")
+                 f"t = {now:.17g} (member {member}): reaching t = {t_end:.6g}")
+        if math.isinf(projected):
+            raise WorkLimitError(
+                f"{where}: time stopped advancing over the later half of its {steps} Taylor "
+                "steps (the step size fell below the time's resolution: a singularity or a "
+                "finite-time blow-up of the solution)")
         if projected > max_work:
             raise WorkLimitError(
                 f"{where} needs about {projected / cost:.3g} Taylor steps ({projected:.3g} work "
@@ -84,6 +95,18 @@ def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray
                 f"{where} took over {elapsed:.0f} s, more than the limit of {max_seconds:g} s "
                 "(`HARNESS_REFERENCE_MAX_SECONDS`; set it higher to allow this)")
         remaining = np.concatenate([np.array([ta.time], dtype=grid.dtype), grid[len(rows):]])
+
+
+def _projected_steps(checkpoints: list[tuple[int, float]], steps: int, now: float,
+                     t_end: float) -> float:
+    """Taylor steps the whole span needs: those taken, plus the rest of the span at the rate of
+    the recent steps (from the latest checkpoint with at most half of `steps`); inf when time
+    has not advanced over them."""
+    since_steps, since_t = max((c for c in checkpoints if c[0] <= steps // 2), key=lambda c: c[0])
+    covered = now - since_t
+    if not covered > 0:
+        return math.inf
+    return steps + (steps - since_steps) * max(0.0, t_end - now) / covered
 
 
 # -- integrators ---------------------------------------------------------------------------------
