@@ -3,7 +3,8 @@ problem, and the user-facing commands end to end (`WorkflowCold`: the report and
 whole-registry gate from nothing on disk; `ReportCached`: the report with everything cached).
 
 Cold means nothing on disk and nothing in the process: `setup` points HARNESS_CACHE_DIR at a
-fresh temporary directory (heyoka's JIT cache and the reference cache live there), drops the
+fresh temporary directory (heyoka's JIT cache and the reference cache live there; a
+HARNESS_CODE_CACHE_DIR of the caller's is dropped, so compiled code is cold too), drops the
 Taylor integrators this process built and clears heyoka's in-memory JIT cache, so the timed call
 compiles (long double and real128) and integrates. Cached means the reference file exists: the
 timed call only loads it.
@@ -17,6 +18,7 @@ import tempfile
 
 from ._common import skip
 
+_CACHE_VARIABLES = ("HARNESS_CACHE_DIR", "HARNESS_CODE_CACHE_DIR")
 GROUND_TRUTH_PROBLEMS = ["kepler-elliptic", "harmonic", "outer-solar-system"]
 ENSEMBLE = 16
 
@@ -57,19 +59,21 @@ class GroundTruthCold:
         self.reference, self.problem, self.t, self.y0 = _reference_inputs(problem)
         from harness import ground_truth
 
-        self._saved = os.environ.get("HARNESS_CACHE_DIR")
+        self._saved = {k: os.environ.get(k) for k in _CACHE_VARIABLES}
         self._tmp = tempfile.mkdtemp(prefix="harness-cold-")
         os.environ["HARNESS_CACHE_DIR"] = self._tmp
+        os.environ.pop("HARNESS_CODE_CACHE_DIR", None)  # compiled code cold as well
         ground_truth._integrators.clear()
         import heyoka as hy
 
         hy.llvm_state.clear_memcache()
 
     def teardown(self, problem):
-        if self._saved is None:
-            os.environ.pop("HARNESS_CACHE_DIR", None)
-        else:
-            os.environ["HARNESS_CACHE_DIR"] = self._saved
+        for key, value in self._saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
         shutil.rmtree(self._tmp, ignore_errors=True)
 
     def time_reference_cold(self, problem):
@@ -131,11 +135,10 @@ class _Workflow(_Once):
         shutil.rmtree(self._tmp, ignore_errors=True)
 
     def _env(self) -> dict[str, str]:
-        return dict(
-            os.environ,
-            HARNESS_CACHE_DIR=os.path.join(self._tmp, "cache"),
-            HARNESS_RESULTS_DIR=os.path.join(self._tmp, "results"),
-        )
+        env = {k: v for k, v in os.environ.items() if k != "HARNESS_CODE_CACHE_DIR"}
+        env.update(HARNESS_CACHE_DIR=os.path.join(self._tmp, "cache"),
+                   HARNESS_RESULTS_DIR=os.path.join(self._tmp, "results"))
+        return env  # compiled code in the same temporary cache: cold means that too
 
     def _report(self) -> None:
         _harness(["report", "--jobs", "1", "--output", os.path.join(self._tmp, "reports")], self._env())

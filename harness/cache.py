@@ -1,9 +1,14 @@
-"""Where the harness keeps compiled code: one directory it controls, and the heyoka integrators
-built in this process (`IntegratorPool`).
+"""Where the harness keeps what it caches: one directory it controls (`cache_dir`), the compiled
+code within it (`code_dir`), and the heyoka integrators built in this process (`IntegratorPool`).
 
 `HARNESS_CACHE_DIR` overrides the default `.cache/` at the project root (or the current
-directory when the package is installed elsewhere). heyoka's on-disk JIT cache lives in its
-`heyoka/` subfolder, so compiled right-hand sides and Taylor integrators survive across processes.
+directory when the package is installed elsewhere). Compiled code (numba's family kernels in
+`numba/`, heyoka's on-disk JIT cache in `heyoka/`, so compiled right-hand sides and Taylor
+integrators survive across processes) lives in the same directory unless `HARNESS_CODE_CACHE_DIR`
+names another: compiled code is keyed by its own text (the family module by a hash of its source,
+numba's index by that file's stamp, heyoka's by the IR it compiles), never by measured results,
+so one code directory can serve any number of result caches (the test suite's private caches
+share the project's compiled code this way).
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ from collections.abc import Callable, Hashable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["cache_dir", "configure_heyoka_cache", "IntegratorPool"]
+__all__ = ["cache_dir", "code_dir", "configure_heyoka_cache", "IntegratorPool"]
 
 _configured: Path | None = None
 
@@ -28,6 +33,18 @@ def cache_dir() -> Path:
     else:
         project = Path(__file__).resolve().parent.parent
         root = project / ".cache" if (project / "pyproject.toml").exists() else Path.cwd() / ".cache"
+    return _created(root)
+
+
+def code_dir() -> Path:
+    """The root of the compiled-code caches (`numba/`, `heyoka/`): `HARNESS_CODE_CACHE_DIR` when
+    set, else `cache_dir()`; created when missing (`OutputError` naming the path when it cannot
+    be)."""
+    env = os.environ.get("HARNESS_CODE_CACHE_DIR")
+    return _created(Path(env)) if env else cache_dir()
+
+
+def _created(root: Path) -> Path:
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # a file where the directory belongs, no permission, ...
@@ -61,9 +78,10 @@ def float64_taylor_settings(problem) -> dict[str, Any]:
 
 
 def configure_heyoka_cache() -> Path:
-    """Point heyoka's on-disk JIT cache at the harness's cache directory (once per process)."""
+    """Point heyoka's on-disk JIT cache at `code_dir() / "heyoka"` (again only when that
+    changed)."""
     global _configured
-    target = cache_dir() / "heyoka"
+    target = code_dir() / "heyoka"
     if _configured != target:
         import heyoka as hy
 

@@ -20,7 +20,7 @@ LLVM-HPC 2015, for the compiler):
   implementations evaluate every right-hand side with the same machine code, and a cold run
   compiles no per-problem code of its own.
 
-Caching: the family module's text is written once to `harness.cache.cache_dir() / "numba"`, named by a
+Caching: the family module's text is written once to `harness.cache.code_dir() / "numba"`, named by a
 hash of its text, and imported under a name derived from that hash; every function has
 `cache=True`. A compile holds a file lock (`_compile_lock`), so processes started together compile
 each kernel once and the others load it. `COMPILE_LOG` records, per process, what was compiled or
@@ -1463,7 +1463,7 @@ def _compile_lock(stem: str):
     except ImportError:  # pragma: no cover - not POSIX
         yield
         return
-    path = cache.cache_dir() / "numba" / f"{stem}.lock"
+    path = cache.code_dir() / "numba" / f"{stem}.lock"
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
@@ -1475,7 +1475,7 @@ def _compile_lock(stem: str):
 
 def _import_text(text: str, stem: str, what: str) -> ModuleType:
     digest = hashlib.sha256(text.encode()).hexdigest()[:20]
-    path = cache.cache_dir() / "numba" / f"{stem}_{digest}.py"
+    path = cache.code_dir() / "numba" / f"{stem}_{digest}.py"
     _write_once(path, text)
     mod_name = f"_harness_numba_{digest}"
     module = sys.modules.get(mod_name)

@@ -4,8 +4,9 @@ A table over every registered compiled stepper and every compatible problem: the
 rounding (COMPILED_AGREEMENT_ULPS of the state's scale) and the same evaluation counts (Newton
 iterations and starter steps included). Methods given only as coefficients (a user's tableau,
 scheme or multistep table) get a compiled implementation that agrees too. Kernels compile into
-the project's cache directory (`harness.cache.cache_dir()/numba`), so the first run on a machine
-pays the numba compiles (seconds per family and problem) and later runs load them. Compile and
+the compiled-code directory (`harness.cache.code_dir()/numba`: the project's cache directory
+unless HARNESS_CODE_CACHE_DIR names another), so the first run on a machine pays the numba
+compiles (seconds per family) and later runs load them. Compile and
 load times are recorded in test-artifacts/, never asserted.
 """
 
@@ -399,11 +400,11 @@ def test_every_problem_function_loads_and_is_heyokas_own(problem):
             assert np.array_equal(out, expected, equal_nan=True), (problem.name, name)
 
 
-def test_the_family_module_is_cached_in_the_project_cache_dir():
-    from harness.cache import cache_dir
+def test_the_family_module_is_cached_in_the_code_cache_dir():
+    from harness.cache import code_dir
 
     family = family_module()
-    assert Path(family.__file__).parent == cache_dir() / "numba"
+    assert Path(family.__file__).parent == code_dir() / "numba"
     assert family is family_module()
     # one family module for every problem: no problem's name or function is in it
     assert "kepler" not in Path(family.__file__).read_text()
@@ -481,7 +482,8 @@ def test_cold_compile_and_cached_load_are_recorded(tmp_path):
     """A fresh cache directory (cold: heyoka and numba compile) and the same directory again
     (cached: both load from disk), each in a new process. Times are recorded, not asserted;
     the two processes must compute the same 10^6 velocity-Verlet steps bit for bit."""
-    env = dict(os.environ, HARNESS_CACHE_DIR=str(tmp_path / "cache"))
+    env = dict(os.environ, HARNESS_CACHE_DIR=str(tmp_path / "cache"),
+               HARNESS_CODE_CACHE_DIR=str(tmp_path / "cache"))
     runs = {}
     for label in ("cold", "cached"):
         done = subprocess.run(
@@ -528,13 +530,30 @@ def test_fastest_runs_a_step_controller_compiled_with_the_numpy_bookkeeping(cont
     assert a.evals == b.evals
 
 
+def test_compiled_code_follows_the_code_cache_variable_and_the_cache_otherwise(tmp_path, monkeypatch):
+    """Without HARNESS_CODE_CACHE_DIR compiled code lives in the cache directory; with it, there
+    and not in the cache directory (cells and references stay where HARNESS_CACHE_DIR says)."""
+    from harness.cache import cache_dir, code_dir
+    from harness.errors import OutputError
+
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path / "results-cache"))
+    monkeypatch.delenv("HARNESS_CODE_CACHE_DIR", raising=False)
+    assert code_dir() == cache_dir() == tmp_path / "results-cache"
+    monkeypatch.setenv("HARNESS_CODE_CACHE_DIR", str(tmp_path / "code"))
+    assert code_dir() == tmp_path / "code" and cache_dir() == tmp_path / "results-cache"
+    (tmp_path / "blocked").write_text("a file")
+    monkeypatch.setenv("HARNESS_CODE_CACHE_DIR", str(tmp_path / "blocked"))
+    with pytest.raises(OutputError, match="blocked"):
+        code_dir()
+
+
 def test_a_compile_holds_a_lock_other_processes_wait_on(tmp_path, monkeypatch):
     """While one process compiles a kernel or module, another's attempt to take the same lock
     blocks (here: a non-blocking attempt fails), so workers started together compile once."""
     fcntl = pytest.importorskip("fcntl", reason="file locks are POSIX only; elsewhere each process compiles")
     from implementations.compiled_kernels import _compile_lock
 
-    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("HARNESS_CODE_CACHE_DIR", str(tmp_path))
     with _compile_lock("family_x"):
         path = tmp_path / "numba" / "family_x.lock"
         with open(path, "a") as other, pytest.raises(BlockingIOError):

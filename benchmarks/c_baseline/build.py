@@ -1,7 +1,7 @@
 """Compile the C reference loops (`kepler.c`) with the system compiler and load them with ctypes.
 
 `load()` compiles once per source/compiler/flags combination into
-`harness.cache.cache_dir() / "c_baseline"` (a later call or process reuses the library) and
+`harness.cache.code_dir() / "c_baseline"` (a later call or process reuses the library) and
 returns a `CBaseline`. Flags: `-O3` plus what a shared library needs (`-fPIC -shared`, `-lm`);
 no machine-specific flags (no `-march=native`), so the baseline is the code any distribution's
 compiler produces. `CompilerUnavailable` says why when no compiler works (asv setups turn it
@@ -159,9 +159,9 @@ def load(cache_root: Path | None = None) -> CBaseline:
     if key in _loaded:
         return _loaded[key]
     if cache_root is None:
-        from harness.cache import cache_dir
+        from harness.cache import code_dir
 
-        cache_root = cache_dir()
+        cache_root = code_dir()
     lib_path = Path(cache_root) / "c_baseline" / f"kepler_{key}.so"
     if not lib_path.exists():
         lib_path.parent.mkdir(parents=True, exist_ok=True)
