@@ -101,7 +101,26 @@ class _Stalled(Exception):
 
 
 class _WorkLimit(Exception):
-    """One output step needed more evaluations than ADAPTIVE_MAX_EVALS allows."""
+    """One output step needed more evaluations than ADAPTIVE_MAX_EVALS allows (args: the time
+    reached, and the projected evaluations when the projection stopped it early, else None)."""
+
+    def __str__(self) -> str:
+        reached, projected = self.args
+        if projected is None:
+            return f"more than {ADAPTIVE_MAX_EVALS} evaluations, stopped at t={reached!r}"
+        return (f"about {projected:.3g} evaluations needed (projected from the recent ones), more "
+                f"than {ADAPTIVE_MAX_EVALS}; stopped at t={reached!r}")
+
+
+# A hopeless span is recognised before the whole budget is spent: every PROJECTION_EVERY calls
+# the evaluations the span needs are projected from the rate of the recent ones (from the latest
+# checkpoint with at most half the calls so far: at least half of them, so a short stiff burst
+# does not decide it); once PROJECTION_START of ADAPTIVE_MAX_EVALS is spent, a projection over
+# PROJECTION_MARGIN times the limit stops the solve (a span of 1e300 is projected ~1e290 times
+# over; a span the limit allows would need a recent rate 10x slower than its average).
+PROJECTION_EVERY = 1_000
+PROJECTION_START = 0.1
+PROJECTION_MARGIN = 10.0
 
 
 class MemberDynamics:
@@ -116,15 +135,24 @@ class MemberDynamics:
         self._view = dyn.member(member)  # shares `counts` and the compiled functions
         self.reset()
 
-    def reset(self) -> None:
+    def reset(self, start: float | None = None, target: float | None = None) -> None:
+        """Start counting one solve from `start` to `target` (without them: no projection)."""
         self._last_t = None
         self._same_t = 0
         self._calls = 0
+        self._span = None if start is None or target is None or target == start else (start, target)
+        self._progress = 0.0  # the largest fraction of the span evaluated at so far
+        self._checkpoints = [(0, 0.0)]  # (calls, progress)
 
     def f(self, t: float, y: np.ndarray) -> np.ndarray:
         self._calls += 1
         if self._calls > ADAPTIVE_MAX_EVALS:
-            raise _WorkLimit(t)
+            raise _WorkLimit(t, None)
+        if self._span is not None:
+            start, target = self._span
+            self._progress = max(self._progress, (t - start) / (target - start))
+            if self._calls % PROJECTION_EVERY == 0:
+                self._project(t)
         if t == self._last_t:
             self._same_t += 1
             if self._same_t >= SCIPY_STALL_CALLS:
@@ -136,6 +164,19 @@ class MemberDynamics:
 
     def jac(self, t: float, y: np.ndarray) -> np.ndarray:
         return self._view.jac(t, np.ascontiguousarray(y).reshape(-1, 1))[:, :, 0]
+
+    def _project(self, t: float) -> None:
+        calls, progress = self._calls, self._progress
+        since_calls, since_progress = max((c for c in self._checkpoints if c[0] <= calls // 2),
+                                          key=lambda c: c[0])
+        self._checkpoints.append((calls, progress))
+        if calls < PROJECTION_START * ADAPTIVE_MAX_EVALS:
+            return
+        covered = progress - since_progress
+        projected = (calls + (calls - since_calls) * max(0.0, 1.0 - progress) / covered
+                     if covered > 0 else float("inf"))
+        if projected > PROJECTION_MARGIN * ADAPTIVE_MAX_EVALS:
+            raise _WorkLimit(t, projected)
 
 
 class MemberByMemberStepper(AdaptiveStepper):
@@ -178,7 +219,7 @@ class MemberByMemberStepper(AdaptiveStepper):
                 if not np.all(np.isfinite(y[:, m])):
                     continue
                 member = c.members[m]
-                member.reset()
+                member.reset(t, target)
                 y[:, m], added = self._solve_member(member, m, t, target, y[:, m].copy())
                 for key, value in added.items():
                     dyn.counts[key] += value
@@ -247,11 +288,14 @@ class ScipyStepper(MemberByMemberStepper):
                 "to zero)"
             ) from None
         except _WorkLimit as limit:
+            reached, projected = limit.args
+            need = (f"needed more than {ADAPTIVE_MAX_EVALS}" if projected is None else
+                    f"would need about {projected:.3g} (projected from the recent ones), more "
+                    f"than {ADAPTIVE_MAX_EVALS},")
             raise StepFailure(
-                f"stepper {self.info.name!r}: scipy {self.method} needed more than "
-                f"{ADAPTIVE_MAX_EVALS} evaluations for ensemble member {m} between "
-                f"t={t!r} and t={target!r} (stopped at t={limit.args[0]!r}); the span is "
-                f"too long for tol={self.tol:g}"
+                f"stepper {self.info.name!r}: scipy {self.method} {need} evaluations for "
+                f"ensemble member {m} between t={t!r} and t={target!r} (stopped at "
+                f"t={reached!r}); the span is too long for tol={self.tol:g}"
             ) from None
         if sol.status < 0:
             raise StepFailure(

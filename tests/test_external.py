@@ -144,3 +144,34 @@ def test_bad_tolerance(bad):
 def test_unknown_method():
     with pytest.raises(InputError, match=r"`method` must be one of .*'RK45'.*, got 'RK23'"):
         ScipyStepper("RK23")
+
+
+@pytest.mark.parametrize("stepper", PEERS, ids=ids(PEERS))
+def test_a_hopeless_span_is_stopped_by_the_projection_long_before_the_budget(stepper):
+    """A span of 1e300 is projected far over the evaluation budget once PROJECTION_START of it
+    is spent: the solve stops at a projection (its message says so), not at the budget."""
+    with pytest.raises(StepFailure, match=r"would need about .* evaluations .*too long for tol="):
+        stepper.with_tolerance(1e-6).integrate(get_problem("harmonic"), h=1e300, n_steps=1)
+
+
+@pytest.mark.parametrize("burst", [0.05, 0.3])
+def test_a_slow_start_then_a_fast_run_within_the_budget_is_not_stopped(burst):
+    """Synthetic calls: the first `burst` of a solve's calls crawl over 5 % of the span (a stiff
+    transient), the rest cover it quickly, and the whole needs 0.9x the budget: the projection
+    never stops it (with `burst` 0.3 the early projections reach about half the margin). A crawl
+    that would need 1e7 calls for the span is stopped at a projection, before the budget."""
+    problem = get_problem("harmonic")
+    member = external.MemberDynamics(external.Dynamics(problem, problem.pars_for(1, None)), 0)
+    total = int(0.9 * external.ADAPTIVE_MAX_EVALS)
+    slow = int(burst * total)
+    y = np.zeros(2)
+    member.reset(0.0, 1.0)
+    for k in range(total):
+        member.f(0.05 * k / slow if k < slow else 0.05 + 0.95 * (k - slow) / (total - slow), y)
+    member.reset(0.0, 1.0)
+    calls = 0
+    with pytest.raises(Exception, match=r"projected from the recent ones"):
+        for k in range(total):
+            calls += 1
+            member.f(1e-7 * (k + 1), y)
+    assert calls < external.ADAPTIVE_MAX_EVALS
