@@ -14,7 +14,10 @@ problem's fingerprint and the arguments) and `harness.keys.module_version` of `m
 reads) with heyoka's version: an edit to that code is a new key, so a value is never served
 after the code that made it changed. A file that cannot be read or parsed is recomputed and
 replaced; a cache that cannot be written costs only time. Values are JSON (floats, strings,
-lists; NaN and infinities kept).
+lists; NaN and infinities kept). A value not on disk is computed under an exclusive file lock of
+its key (`<k>.lock` beside it; POSIX `flock`, released when its process ends however it ends), so
+workers that ask for the same fact at once (both of a run's first cells on one problem) compute
+it once: the others wait and read it.
 """
 
 from __future__ import annotations
@@ -80,11 +83,46 @@ def kept(directory: str, key: str, compute: Callable[[], Any], label: str = "") 
         path = cache_dir() / directory / key[:2] / f"{key}.json"
     except OutputError:  # no cache directory: the value is computed every time
         return compute()
+    found = _read(path, key)
+    if found:
+        return found[0]
+    with _key_lock(path):
+        found = _read(path, key)  # computed by another process while this one waited
+        if found:
+            return found[0]
+        value = compute()
+        with contextlib.suppress(OutputError):
+            atomic_write_bytes(path, json.dumps({"key": key, "function": label, "value": value}).encode())
+    return value
+
+
+def _read(path, key: str) -> tuple[Any] | None:
+    """(value,) stored at `path` under `key`, or None when missing or unreadable."""
     with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
         stored = json.loads(path.read_text())
         if stored["key"] == key:
-            return stored["value"]
-    value = compute()
-    with contextlib.suppress(OutputError):
-        atomic_write_bytes(path, json.dumps({"key": key, "function": label, "value": value}).encode())
-    return value
+            return (stored["value"],)
+    return None
+
+
+@contextlib.contextmanager
+def _key_lock(path):
+    """An exclusive lock on `path`'s `.lock` file while the value is computed; no lock (each
+    process computes for itself) without `fcntl` or where the lock file cannot be made."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle = open(path.with_suffix(".lock"), "a")  # noqa: SIM115 - held across the yield
+    except OSError:
+        yield
+        return
+    with handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)

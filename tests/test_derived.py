@@ -70,3 +70,39 @@ def test_without_a_cache_directory_the_value_is_computed(tmp_path, monkeypatch):
     blocker.write_text("not a directory")
     monkeypatch.setenv("HARNESS_CACHE_DIR", str(blocker / "cache"))
     assert derived.remembered("harness.scales", "f", ("p",), lambda: 4) == 4
+
+
+def _ask_slowly(cache: str, log: str, start: float) -> None:
+    """One process's request for a slow fact, begun at wall-clock time `start`."""
+    import os
+    import time
+
+    os.environ["HARNESS_CACHE_DIR"] = cache
+    time.sleep(max(0.0, start - time.time()))
+
+    def compute():
+        with open(log, "a") as fh:
+            fh.write(f"{os.getpid()}\n")
+        time.sleep(0.5)
+        return 42
+
+    assert derived.remembered("harness.scales", "slow", ("p",), compute) == 42
+
+
+def test_processes_asking_at_once_compute_the_value_once(tmp_path):
+    """Two processes ask for the same missing fact at the same moment: one computes it while
+    the other waits on the key's lock, then reads it."""
+    import multiprocessing
+    import time
+
+    log = tmp_path / "computed.log"
+    start = time.time() + 0.5
+    context = multiprocessing.get_context("spawn")
+    procs = [context.Process(target=_ask_slowly, args=(str(tmp_path), str(log), start))
+             for _ in range(2)]
+    for proc in procs:
+        proc.start()
+    for proc in procs:
+        proc.join(60)
+    assert [proc.exitcode for proc in procs] == [0, 0]
+    assert len(log.read_text().split()) == 1
