@@ -23,8 +23,10 @@ it once: the others wait and read it.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
+import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -33,16 +35,27 @@ from harness.errors import OutputError
 __all__ = ["remembered", "kept"]
 
 
-def _project_files_signature() -> tuple:
-    """(path, mtime, size) of every project source file: unchanged, no module version can be."""
+@functools.lru_cache(maxsize=1)
+def _project_paths() -> tuple[str, ...]:
+    """Every project source file's absolute path (the listing is read once per process)."""
     from harness.keys import project_files
     from harness.provenance import PROJECT_ROOT
 
+    return tuple(os.path.join(str(PROJECT_ROOT), rel) for rel in project_files())
+
+
+def _project_files_signature() -> tuple:
+    """(mtime, size) of every project source file, in `_project_paths` order (a missing file
+    counts as (-1, -1)): unchanged, no module version can be. Asked on every `remembered` call,
+    so plain `os.stat` (about 0.4 ms for the project, against 2.5 ms through `pathlib`)."""
     out = []
-    for rel in project_files():
-        with contextlib.suppress(OSError):
-            st = (PROJECT_ROOT / rel).stat()
-            out.append((str(PROJECT_ROOT / rel), st.st_mtime_ns, st.st_size))
+    for path in _project_paths():
+        try:
+            st = os.stat(path)
+        except OSError:
+            out.append((-1, -1))
+            continue
+        out.append((st.st_mtime_ns, st.st_size))
     return tuple(out)
 
 
