@@ -518,25 +518,3 @@ def test_a_parallel_run_equals_the_serial_one_whatever_order_workers_took(run):
     pd.testing.assert_frame_equal(serial.rows.drop(columns="wall_s", errors="ignore"),
                                   parallel.rows.drop(columns="wall_s", errors="ignore"))
     assert list(parallel.cells.cell) == list(serial.cells.cell)
-
-
-def _leak_allowance() -> int:
-    from joblib.externals.loky import process_executor
-
-    return process_executor._MAX_MEMORY_LEAK_SIZE
-
-
-def test_loky_workers_allow_the_harness_caches_to_grow():
-    """Each loky worker raises loky's memory-growth allowance (300 MB, taken for a leak) to
-    WORKER_MEMORY_GROWTH_BYTES, so a worker is not replaced for its caches; the attribute it
-    sets must exist in the pinned loky (a renamed one fails here, not silently)."""
-    from joblib.externals.loky import get_reusable_executor, process_executor
-
-    from harness.runner import executors
-
-    assert isinstance(process_executor._MAX_MEMORY_LEAK_SIZE, int)
-    executor = get_reusable_executor(max_workers=1, timeout=5, initializer=executors.setup_worker)
-    try:
-        assert executor.submit(_leak_allowance).result(timeout=120) == executors.WORKER_MEMORY_GROWTH_BYTES
-    finally:
-        executor.shutdown(wait=True)

@@ -30,19 +30,6 @@ LOKY_IDLE_TIMEOUT_S = 30
 # A cell whose worker died in this many pool breakdowns is recorded as crashed, whatever the
 # claim files say (guarantees the run ends).
 MAX_CRASH_ROUNDS = 3
-# loky replaces a worker whose resident memory grew by more than 300 MB since its first task,
-# taking that for a leak; a harness worker grows by its caches (heyoka's compiled integrators,
-# the family kernels, the problems' loaded functions and references), and each replacement
-# imports and reloads them all again. The workers allow this much growth instead; loky's check
-# stays on above it.
-WORKER_MEMORY_GROWTH_BYTES = 4 * 2**30
-
-
-def setup_worker() -> None:
-    """Run once in each loky worker: its memory-growth allowance (WORKER_MEMORY_GROWTH_BYTES)."""
-    from joblib.externals.loky import process_executor
-
-    process_executor._MAX_MEMORY_LEAK_SIZE = WORKER_MEMORY_GROWTH_BYTES
 
 
 @dataclass
@@ -73,8 +60,7 @@ def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | N
     """Run `batch` on `n` loky workers. Returns (the pool's breakdown or None, unfinished tasks)."""
     from joblib.externals.loky import get_reusable_executor
 
-    executor = get_reusable_executor(max_workers=n, timeout=LOKY_IDLE_TIMEOUT_S,
-                                     initializer=setup_worker)
+    executor = get_reusable_executor(max_workers=n, timeout=LOKY_IDLE_TIMEOUT_S)
     futures = {}
     try:
         for t in batch:
