@@ -31,6 +31,7 @@ import numpy as np
 from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
 from harness.tolerances import ADAPTIVE_MAX_EVALS, SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
+from harness.work_projection import projected_work
 
 __all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS", "MemberDynamics", "MemberByMemberStepper"]
 
@@ -113,9 +114,8 @@ class _WorkLimit(Exception):
 
 
 # A hopeless span is recognised before the whole budget is spent: every PROJECTION_EVERY calls
-# the evaluations the span needs are projected from the rate of the recent ones (from the latest
-# checkpoint with at most half the calls so far: at least half of them, so a short stiff burst
-# does not decide it); once PROJECTION_START of ADAPTIVE_MAX_EVALS is spent, a projection over
+# the evaluations the span needs are projected from the rate of the recent ones
+# (`harness.work_projection`); once PROJECTION_START of ADAPTIVE_MAX_EVALS is spent, a projection over
 # PROJECTION_MARGIN times the limit stops the solve (a span of 1e300 is projected ~1e290 times
 # over; a span the limit allows would need a recent rate 10x slower than its average).
 PROJECTION_EVERY = 1_000
@@ -166,16 +166,10 @@ class MemberDynamics:
         return self._view.jac(t, np.ascontiguousarray(y).reshape(-1, 1))[:, :, 0]
 
     def _project(self, t: float) -> None:
-        calls, progress = self._calls, self._progress
-        since_calls, since_progress = max((c for c in self._checkpoints if c[0] <= calls // 2),
-                                          key=lambda c: c[0])
-        self._checkpoints.append((calls, progress))
-        if calls < PROJECTION_START * ADAPTIVE_MAX_EVALS:
-            return
-        covered = progress - since_progress
-        projected = (calls + (calls - since_calls) * max(0.0, 1.0 - progress) / covered
-                     if covered > 0 else float("inf"))
-        if projected > PROJECTION_MARGIN * ADAPTIVE_MAX_EVALS:
+        projected = projected_work(self._checkpoints, self._calls, self._progress, 1.0)
+        self._checkpoints.append((self._calls, self._progress))
+        if (self._calls >= PROJECTION_START * ADAPTIVE_MAX_EVALS
+                and projected > PROJECTION_MARGIN * ADAPTIVE_MAX_EVALS):
             raise _WorkLimit(t, projected)
 
 

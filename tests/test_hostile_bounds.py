@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import os
 import signal
 import subprocess
@@ -187,3 +188,16 @@ def test_workers_of_a_killed_run_exit_by_themselves(tmp_path):
             break
         time.sleep(0.1)
     assert not any(_alive(p) for p in workers)
+
+
+@pytest.mark.parametrize("checkpoints, work, position, end, expected", [
+    ([(0, 0.0), (100, 1.0)], 200, 2.0, 10.0, 1000.0),  # a steady rate: exact
+    ([(0, 0.0), (100, 1.0)], 200, 1.0, 10.0, math.inf),  # no progress over the later half
+    ([(0, 0.0), (100, 9.9)], 200, 9.99, 10.0, 200 + 100 * 0.01 / 0.09),  # slow lately: its rate
+    ([(0, 5.0), (100, 4.0)], 200, 3.0, -5.0, 1000.0),  # towards an end below the start
+    ([(0, 0.0)], 100, 10.0, 10.0, 100.0),  # done
+])
+def test_projected_work_uses_the_recent_half(checkpoints, work, position, end, expected):
+    from harness.work_projection import projected_work
+
+    assert projected_work(checkpoints, work, position, end) == pytest.approx(expected)

@@ -17,6 +17,7 @@ from harness.errors import InputError, ReferenceError_, WorkLimitError
 from harness.ground_truth.levels import SOFTWARE_LEVELS, Level
 from harness.problem import Problem
 from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
+from harness.work_projection import projected_work
 
 # -- work bounds ----------------------------------------------------------------------------------
 # Every reference integration is bounded and interruptible. heyoka runs in compiled code, so it is
@@ -25,11 +26,10 @@ from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
 # (SIGALRM, also with --jobs 1) take effect, and the work so far is checked. Work is counted in
 # float64-step units: a Taylor step costs `REFERENCE_STEP_COST[level]` of them (measured on this
 # machine type for Kepler: long double ~10x, real128 ~300x a float64 step). After each chunk the
-# work the whole span needs is projected from the rate of the recent steps (the latest checkpoint
-# with at most half the steps taken so far, to now: at least half the steps, so a short burst of
-# small steps does not decide it; from the start after the first chunk), so a run whose steps
-# shrink without end (a finite-time blow-up, where time stops advancing) stops a few chunks after
-# it begins to stall instead of after the whole budget; a run projected or found
+# work the whole span needs is projected from the rate of the recent steps
+# (`harness.work_projection`), so a run whose steps shrink without end (a finite-time blow-up,
+# where time stops advancing) stops a few chunks after it begins to stall instead of after the
+# whole budget; a run projected or found
 # to exceed `REFERENCE_MAX_WORK` units per member and precision, or running longer than
 # `REFERENCE_MAX_SECONDS`, stops with `WorkLimitError` naming the limit and the environment
 # variable that raises it. 1e8 units (~1e7 long double or ~3e5 real128 steps) is ~100x the
@@ -75,7 +75,7 @@ def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray
         if outcome != hy.taylor_outcome.step_limit:
             return outcome, np.array(rows)
         now = float(ta.time)
-        projected = cost * _projected_steps(checkpoints, steps, now, t_end)
+        projected = cost * projected_work(checkpoints, steps, now, t_end)
         checkpoints.append((steps, now))
         where = (f"ground truth for problem {problem.name!r} failed in {level.name} at "
                  f"t = {now:.17g} (member {member}): reaching t = {t_end:.6g}")
@@ -95,18 +95,6 @@ def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray
                 f"{where} took over {elapsed:.0f} s, more than the limit of {max_seconds:g} s "
                 "(`HARNESS_REFERENCE_MAX_SECONDS`; set it higher to allow this)")
         remaining = np.concatenate([np.array([ta.time], dtype=grid.dtype), grid[len(rows):]])
-
-
-def _projected_steps(checkpoints: list[tuple[int, float]], steps: int, now: float,
-                     t_end: float) -> float:
-    """Taylor steps the whole span needs: those taken, plus the rest of the span at the rate of
-    the recent steps (from the latest checkpoint with at most half of `steps`); inf when time
-    has not advanced over them."""
-    since_steps, since_t = max((c for c in checkpoints if c[0] <= steps // 2), key=lambda c: c[0])
-    covered = now - since_t
-    if not covered > 0:
-        return math.inf
-    return steps + (steps - since_steps) * max(0.0, t_end - now) / covered
 
 
 # -- integrators ---------------------------------------------------------------------------------
