@@ -133,18 +133,23 @@ def composition_defect(base: SplittingScheme, weights: list, order: int) -> floa
 # to real128 and the step size h as the runtime parameter par[0], so a step is one call into
 # compiled code (the same operations in the same order as stage-by-stage array arithmetic, bit
 # for bit, at 3-8x less time: rk4 on damped-cubic 6 us a step against 48 us).
-def _to_real128(values) -> np.ndarray:
+def _real128(value) -> Any:
+    """A float or an exact Fraction as real128 (a Fraction rounded once, by the division)."""
     import heyoka as hy
 
-    return np.array([hy.real128(v) if not isinstance(v, Fraction)
-                     else hy.real128(v.numerator) / hy.real128(v.denominator) for v in values])
+    if isinstance(value, Fraction):
+        return hy.real128(value.numerator) / hy.real128(value.denominator)
+    return hy.real128(value)
+
+
+def _to_real128(values) -> np.ndarray:
+    return np.array([_real128(v) for v in values])
 
 
 def _real128_constant(value) -> Any:
     import heyoka as hy
 
-    v = Fraction(value)
-    return hy.expression(hy.real128(v.numerator) / hy.real128(v.denominator))
+    return hy.expression(_real128(Fraction(value)))
 
 
 def _with_parameter_values(problem, exprs: list) -> list:

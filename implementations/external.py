@@ -107,10 +107,10 @@ class _WorkLimit(Exception):
 
     def __str__(self) -> str:
         reached, projected = self.args
-        if projected is None:
-            return f"more than {ADAPTIVE_MAX_EVALS} evaluations, stopped at t={reached!r}"
-        return (f"about {projected:.3g} evaluations needed (projected from the recent ones), more "
-                f"than {ADAPTIVE_MAX_EVALS}; stopped at t={reached!r}")
+        need = (f"needed more than {ADAPTIVE_MAX_EVALS} evaluations" if projected is None else
+                f"would need about {projected:.3g} evaluations (projected from the recent ones), "
+                f"more than {ADAPTIVE_MAX_EVALS}")
+        return f"{need} (stopped at t={reached!r})"
 
 
 # A hopeless span is recognised before the whole budget is spent: every PROJECTION_EVERY calls
@@ -141,18 +141,14 @@ class MemberDynamics:
         self._same_t = 0
         self._calls = 0
         self._span = None if start is None or target is None or target == start else (start, target)
-        self._progress = 0.0  # the largest fraction of the span evaluated at so far
-        self._checkpoints = [(0, 0.0)]  # (calls, progress)
+        self._checkpoints = [(0, 0.0)]  # (calls, fraction of the span reached), every PROJECTION_EVERY calls
 
     def f(self, t: float, y: np.ndarray) -> np.ndarray:
         self._calls += 1
         if self._calls > ADAPTIVE_MAX_EVALS:
             raise _WorkLimit(t, None)
-        if self._span is not None:
-            start, target = self._span
-            self._progress = max(self._progress, (t - start) / (target - start))
-            if self._calls % PROJECTION_EVERY == 0:
-                self._project(t)
+        if self._span is not None and self._calls % PROJECTION_EVERY == 0:
+            self._project(t)
         if t == self._last_t:
             self._same_t += 1
             if self._same_t >= SCIPY_STALL_CALLS:
@@ -166,8 +162,11 @@ class MemberDynamics:
         return self._view.jac(t, np.ascontiguousarray(y).reshape(-1, 1))[:, :, 0]
 
     def _project(self, t: float) -> None:
-        projected = projected_work(self._checkpoints, self._calls, self._progress, 1.0)
-        self._checkpoints.append((self._calls, self._progress))
+        # the fraction of the span at this call (a stage time may lie behind an earlier one)
+        start, target = self._span
+        progress = max(self._checkpoints[-1][1], (t - start) / (target - start))
+        projected = projected_work(self._checkpoints, self._calls, progress, 1.0)
+        self._checkpoints.append((self._calls, progress))
         if (self._calls >= PROJECTION_START * ADAPTIVE_MAX_EVALS
                 and projected > PROJECTION_MARGIN * ADAPTIVE_MAX_EVALS):
             raise _WorkLimit(t, projected)
@@ -282,14 +281,9 @@ class ScipyStepper(MemberByMemberStepper):
                 "to zero)"
             ) from None
         except _WorkLimit as limit:
-            reached, projected = limit.args
-            need = (f"needed more than {ADAPTIVE_MAX_EVALS}" if projected is None else
-                    f"would need about {projected:.3g} (projected from the recent ones), more "
-                    f"than {ADAPTIVE_MAX_EVALS},")
             raise StepFailure(
-                f"stepper {self.info.name!r}: scipy {self.method} {need} evaluations for "
-                f"ensemble member {m} between t={t!r} and t={target!r} (stopped at "
-                f"t={reached!r}); the span is too long for tol={self.tol:g}"
+                f"stepper {self.info.name!r}: scipy {self.method}, ensemble member {m} between "
+                f"t={t!r} and t={target!r}: {limit}; the span is too long for tol={self.tol:g}"
             ) from None
         if sol.status < 0:
             raise StepFailure(
