@@ -249,11 +249,20 @@ def test_adaptive_verdict_uses_the_derived_allowance(errors, steps, amplificatio
 # -- close encounters in the energy experiment ---------------------------------------------------------
 @pytest.fixture
 def pleiades():
-    from harness.registry import load_plugin, problems
+    """The Pleiades plugin problem, registered for one test and unregistered after it (a problem
+    left registered would change the registry that later tests in this process sweep)."""
+    import importlib.util
 
-    if "pleiades" not in problems.names():
-        load_plugin(Path(__file__).parent / "plugins" / "pleiades.py", probe=False)
-    return "pleiades"
+    from harness.registry import problems
+
+    path = Path(__file__).parent / "plugins" / "pleiades.py"
+    spec = importlib.util.spec_from_file_location("test_plugin_pleiades", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    problem = next(p for p in module.PROBLEMS if p.name == "pleiades")
+    problems.register(problem, origin="test")
+    yield problem.name
+    problems.unregister(problem.name)
 
 
 def _energy(stepper, problem, **overrides):
