@@ -13,7 +13,7 @@ gate: setup
 
 test: setup
 	@scripts/test-deps
-	.venv/bin/python -m pytest -q -n 2
+	.venv/bin/python -m pytest -q -n 2 --dist worksteal
 
 lint: setup
 	.venv/bin/ruff check harness problems implementations tests benchmarks

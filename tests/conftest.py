@@ -22,6 +22,13 @@ from harness.registry import steppers
 os.environ.setdefault("HARNESS_CODE_CACHE_DIR", str(code_dir()))
 
 
+def pytest_collection_modifyitems(config, items):
+    """Tests marked `slow` first (in collection order), then the rest: under pytest-xdist the
+    short tests fill the other worker while a long one runs, instead of one worker waiting at the
+    end for a long test that started late."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture(autouse=True)
 def _results_in_tmp(tmp_path_factory, monkeypatch):
     import os
