@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import dataclasses
+import importlib.util
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -27,6 +28,7 @@ __all__ = [
     "PlainEulerLabelledSymplectic",
     "cells_or_reasons",
     "loaded_plugin",
+    "plugin_problem",
     "relabelled",
     "run_direct",
     "run_through_runner",
@@ -76,6 +78,18 @@ def loaded_plugin(path: Path, source: str) -> Iterator[Path]:
             registry.steppers.unregister(n)
             registry.problems.unregister(n)
         registry._plugins.pop(str(path.resolve()), None)
+
+
+PLUGINS = Path(__file__).parent / "plugins"
+
+
+def plugin_problem(file: str, name: str) -> Problem:
+    """The problem `name` of the plugin file `tests/plugins/<file>`, imported as a user's file
+    would be, and not registered."""
+    spec = importlib.util.spec_from_file_location(f"test_plugin_{Path(file).stem}", PLUGINS / file)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return next(p for p in module.PROBLEMS if p.name == name)
 
 
 _y = hy.make_vars("y")

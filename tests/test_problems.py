@@ -204,13 +204,10 @@ def test_invalid_definitions_raise(overrides, match):
 
 
 # -- derived time scales and ensemble perturbations (harness.scales) ------------------------------
-import importlib.util  # noqa: E402
-from pathlib import Path  # noqa: E402
+from helpers import plugin_problem  # noqa: E402
 
 from harness import scales  # noqa: E402
 from harness import tolerances as tol  # noqa: E402
-
-PLUGINS = Path(__file__).parent / "plugins"
 
 # The step sizes of the hand-kept table the derived time scale replaced (period / steps per
 # period, chosen per problem for h omega ~ 0.1): the derivation must land near them unaided.
@@ -222,22 +219,14 @@ HAND_TUNED_H = {
 }  # (free-fall's entry, span / 64, was no dynamical scale: its Jacobian is nilpotent)
 
 
-def _plugin_problem(file: str, name: str):
-    """The problem `name` of a plugin file, imported as a user's file would be, unregistered."""
-    spec = importlib.util.spec_from_file_location(f"test_plugin_{Path(file).stem}", PLUGINS / file)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return next(p for p in module.PROBLEMS if p.name == name)
-
-
 @pytest.fixture(scope="module")
 def pleiades():
-    return _plugin_problem("pleiades.py", "pleiades")
+    return plugin_problem("pleiades.py", "pleiades")
 
 
 @pytest.fixture(scope="module")
 def quartic():
-    return _plugin_problem("quartic.py", "quartic-oscillator")
+    return plugin_problem("quartic.py", "quartic-oscillator")
 
 
 @pytest.fixture

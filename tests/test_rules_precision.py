@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import plugin_problem
 
 from harness import tolerances as tol
 from harness.coefficients import ButcherTableau, SplittingScheme, exact_value
@@ -251,15 +252,9 @@ def test_adaptive_verdict_uses_the_derived_allowance(errors, steps, amplificatio
 def pleiades():
     """The Pleiades plugin problem, registered for one test and unregistered after it (a problem
     left registered would change the registry that later tests in this process sweep)."""
-    import importlib.util
-
     from harness.registry import problems
 
-    path = Path(__file__).parent / "plugins" / "pleiades.py"
-    spec = importlib.util.spec_from_file_location("test_plugin_pleiades", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    problem = next(p for p in module.PROBLEMS if p.name == "pleiades")
+    problem = plugin_problem("pleiades.py", "pleiades")
     problems.register(problem, origin="test")
     yield problem.name
     problems.unregister(problem.name)
