@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 from harness.cache import code_dir
-from harness.registry import steppers
+from harness.problem import Problem
+from harness.registry import problems, steppers
 
 os.environ.setdefault("HARNESS_CODE_CACHE_DIR", str(code_dir()))
 
@@ -63,14 +64,19 @@ def plugin_file(tmp_path):
 
 @pytest.fixture
 def registered():
-    """Register steppers for one test: `registered(stepper) -> name`; unregistered afterwards."""
+    """Register steppers or problems for one test: `registered(stepper_or_problem) -> name`;
+    unregistered afterwards, so later tests in this process see the registry unchanged."""
     added = []
 
-    def add(stepper):
-        steppers.register(stepper, origin="test")
-        added.append(stepper.info.name)
-        return stepper.info.name
+    def add(obj):
+        if isinstance(obj, Problem):
+            reg, name = problems, obj.name
+        else:
+            reg, name = steppers, obj.info.name
+        reg.register(obj, origin="test")
+        added.append((reg, name))
+        return name
 
     yield add
-    for name in added:
-        steppers.unregister(name)
+    for reg, name in reversed(added):
+        reg.unregister(name)

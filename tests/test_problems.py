@@ -230,13 +230,9 @@ def quartic():
 
 
 @pytest.fixture
-def plugin_problems(pleiades, quartic):
+def plugin_problems(pleiades, quartic, registered):
     """The two plugin problems registered for one test, then removed again."""
-    for p in (pleiades, quartic):
-        problems.register(p, origin="test")
-    yield [pleiades.name, quartic.name]
-    for p in (pleiades, quartic):
-        problems.unregister(p.name)
+    return [registered(p) for p in (pleiades, quartic)]
 
 
 def _undeclared(problem: Problem, **changes) -> Problem:

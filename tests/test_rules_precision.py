@@ -249,15 +249,9 @@ def test_adaptive_verdict_uses_the_derived_allowance(errors, steps, amplificatio
 
 # -- close encounters in the energy experiment ---------------------------------------------------------
 @pytest.fixture
-def pleiades():
-    """The Pleiades plugin problem, registered for one test and unregistered after it (a problem
-    left registered would change the registry that later tests in this process sweep)."""
-    from harness.registry import problems
-
-    problem = plugin_problem("pleiades.py", "pleiades")
-    problems.register(problem, origin="test")
-    yield problem.name
-    problems.unregister(problem.name)
+def pleiades(registered):
+    """The Pleiades plugin problem, registered for one test only."""
+    return registered(plugin_problem("pleiades.py", "pleiades"))
 
 
 def _energy(stepper, problem, **overrides):
