@@ -9,6 +9,7 @@ __all__ = [
     "PluginError",
     "ReferenceError_",
     "NoApplicableCellsError",
+    "ProblemError",
     "StepperOutputError",
     "WorkLimitError",
     "OutputError",
@@ -55,6 +56,12 @@ class NoApplicableCellsError(HarnessError):
     def __init__(self, message: str, skips: list[dict] | None = None):
         super().__init__(message)
         self.skips = list(skips or [])
+
+
+class ProblemError(HarnessError):
+    """A problem's definition contradicts its own exact flow (a declared invariant the flow does
+    not conserve, a singularity within its span): the problem is at fault, not a method run on
+    it; its cells fail with this message instead of a verdict on the method."""
 
 
 class StepperOutputError(HarnessError):

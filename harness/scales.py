@@ -106,6 +106,9 @@ class Orbit:
     t: np.ndarray
     y: np.ndarray
     complete: bool
+    # set when the run stopped at a singularity (a non-finite state, or Taylor steps collapsing
+    # below SINGULAR_STEP_FRACTION of the span): what stopped it, in words
+    singular: str = ""
 
 
 # -- the reference orbit --------------------------------------------------------------------------
@@ -134,7 +137,7 @@ def sample_orbit(problem, y0: np.ndarray | None = None, t_end: float | None = No
     start = np.array(problem.y0 if y0 is None else y0, dtype=np.float64).reshape(problem.dim)
     end = float(problem.t_end if t_end is None else t_end)
     ts, ys = [problem.t0], [start.copy()]
-    complete = True
+    complete, singular, h = True, "", 0.0
     fractions = np.arange(1, tol.ORBIT_DENSE_POINTS + 1) / (tol.ORBIT_DENSE_POINTS + 1)
     with lock:
         ta.time = problem.t0
@@ -154,15 +157,20 @@ def sample_orbit(problem, y0: np.ndarray | None = None, t_end: float | None = No
                 hy.taylor_outcome.success, hy.taylor_outcome.time_limit
             ):
                 complete = False
+                singular = (f"the Taylor step failed ({outcome.name}) at t = {ta.time:.10g}"
+                            if np.all(np.isfinite(ta.state)) else
+                            f"the state became non-finite at t = {ta.time:.10g}")
                 break
             if ta.time >= end:
                 break
         else:
             complete = False
+            if abs(h) < tol.SINGULAR_STEP_FRACTION * abs(end - problem.t0):
+                singular = f"the Taylor steps collapsed to {abs(h):.3g} at t = {ta.time:.10g}"
     t = np.array(ts)
     y = np.stack(ys, axis=1)
     finite = np.all(np.isfinite(y), axis=0)
-    return Orbit(t[finite], y[:, finite], complete and bool(finite.all()))
+    return Orbit(t[finite], y[:, finite], complete and bool(finite.all()), singular)
 
 
 def _eigenvalues(problem, jac: np.ndarray) -> np.ndarray:
@@ -250,6 +258,13 @@ def derive_time_scale(problem) -> TimeScale:
 
 def _derive_time_scale(problem) -> TimeScale:
     orbit = sample_orbit(problem)
+    if orbit.singular:
+        from harness.errors import ProblemError
+
+        raise ProblemError(
+            f"problem {problem.name!r}: its solution is singular within its span "
+            f"[{problem.t0:g}, {problem.t_end:g}]: {orbit.singular} (heyoka's float64 Taylor "
+            "orbit from y0); shorten `t_span` to end before it")
     rates = orbit_rates(problem, orbit)
     rho = float(np.max(rates["spectral"]))
     omega = float(np.max(rates["oscillation"]))

@@ -345,3 +345,24 @@ ENCOUNTER_MIN_DECADES = 0.3
 # dominant term's exponent the slope to within GATE_ORDER_TOL (a 10 % second term moves a
 # two-point slope by at most log(1.1)/log(2) ~ 0.14 per unit of exponent difference, damped).
 SPLIT_TERM_DOMINANCE = 10.0
+
+# Names of steppers, problems and method records (`harness.names`): a name becomes a file name
+# in the cache and the results (255 bytes on most file systems, with a suffix and a hash added),
+# a table column and an HTML heading; 120 characters leave room for all three.
+MAX_NAME_LENGTH = 120
+# Largest order a method may claim: beyond it no float64 (or real128) sweep can resolve a slope
+# (Runge-Kutta order conditions are checked up to order 12); a larger claim is a typo.
+MAX_CLAIMED_ORDER = 50
+# A method record's coefficient arrays: at most this many entries per axis (stages, steps,
+# splitting substeps), so a record cannot ask for gigabytes or an hours-long order check.
+MAX_RECORD_ENTRIES = 256
+# A declared invariant I is conserved by the exact flow when dI/dt = grad I . f (+ dI/dt) stays
+# below this fraction of |grad I| |f| (+ |dI/dt|) at every sampled point of the orbit: rounding
+# of the compiled derivative is ~1e-16 per term, a wrong invariant gives O(1).
+INVARIANT_FLOW_RTOL = 1e-8
+# ... and when it also moves along the float64 Taylor orbit (tolerance eps, which keeps a true
+# invariant to ~1e-13 over the catalogue's spans) by more than this fraction of its size.
+INVARIANT_FLOW_DRIFT = 1e-6
+# A problem's float64 orbit that stops before the span's end with its last Taylor step below
+# this fraction of the span (or a non-finite state) is taken as a singularity within the span.
+SINGULAR_STEP_FRACTION = 1e-12

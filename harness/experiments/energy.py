@@ -73,6 +73,7 @@ from harness.experiments.common import (
     problem_cells,
     summary_per_cell,
 )
+from harness.problem.validation import check_invariants_along_flow
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = [
@@ -215,6 +216,7 @@ class EnergyExperiment(Experiment):
 
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
+        check_invariants_along_flow(problem)  # a wrong invariant is the problem's fault
         return _run(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:

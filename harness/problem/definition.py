@@ -18,6 +18,7 @@ from harness.errors import InputError
 from harness.problem.checks import check_ensemble_size, check_positive
 from harness.problem.dynamics import Dynamics
 from harness.problem.nbody import NBody, NewtonianForm, expression_names
+from harness.problem.validation import check_definition, check_start
 
 ExactSolution = Callable[[float, np.ndarray, float, np.ndarray], np.ndarray]
 
@@ -48,9 +49,8 @@ class Problem:
         tags: Sequence[str] = (),
         structure: NBody | None = None,
     ):
-        if not isinstance(name, str) or not name.strip():
-            raise InputError(f"problem `name` must be a non-empty string, got {name!r}")
         variables = tuple(variables)
+        name = check_definition(name, variables, newtonian)
         var_names = [str(v) for v in variables]
         if len(set(var_names)) != len(var_names):
             raise InputError(f"problem {name!r}: `variables` must be distinct, got {var_names}")
@@ -81,16 +81,7 @@ class Problem:
         unknown = expression_names(rhs) - set(var_names)
         if unknown:
             raise InputError(f"problem {name!r}: `rhs` uses undeclared variables {sorted(unknown)}")
-        try:
-            y0_arr = np.asarray(y0, dtype=np.float64)
-        except (TypeError, ValueError, OverflowError):
-            raise InputError(f"problem {name!r}: `y0` must be numbers, got {y0!r}") from None
-        if y0_arr.shape != (len(variables),):
-            raise InputError(
-                f"problem {name!r}: `y0` needs {len(variables)} values, got shape {y0_arr.shape}"
-            )
-        if not np.all(np.isfinite(y0_arr)):
-            raise InputError(f"problem {name!r}: `y0` must be finite, got {y0_arr.tolist()}")
+        y0_arr = check_start(name, y0, len(variables))
         try:
             t0, t_end = (float(t_span[0]), float(t_span[1]))
         except (TypeError, ValueError, OverflowError, IndexError, KeyError):
@@ -143,7 +134,8 @@ class Problem:
     @cached_property
     def time_dependent(self) -> bool:
         """True when the right-hand side reads `hy.time` (non-autonomous)."""
-        return bool(self.compiled("rhs", None).is_time_dependent)
+        clock = hy.expression(0.0)  # symbolic: listing a problem compiles nothing
+        return any(str(hy.subs(e, {hy.time: clock})) != str(e) for e in self.rhs)
 
     @property
     def convergence_t_end(self) -> float:
