@@ -45,8 +45,9 @@ def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
             [[float(v) for v in row] for row in values] if ndim == 2 else [float(v) for v in values],
             dtype=np.float64,
         )
-    except (TypeError, ValueError) as exc:
-        raise CoefficientError(f"`{name}` must hold real numbers: {exc}") from None
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise CoefficientError(f"`{name}` must hold real numbers within float64's range: "
+                               f"{exc}") from None
     if arr.ndim != ndim:
         raise CoefficientError(f"`{name}` must be {ndim}-dimensional, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):

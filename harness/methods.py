@@ -68,6 +68,11 @@ class Method:
         if not hasattr(self.coefficients, "fingerprint") or not hasattr(self.coefficients, "name"):
             kind = type(self.coefficients).__name__
             raise InputError(f"`coefficients` must be a coefficient object, got {kind}")
+        from harness.method_checks import check_claimed_order
+
+        check_claimed_order(self.claimed_order, f"method {self.name!r}: `claimed_order`")
+        check_claimed_order(self.claimed_embedded_order,
+                            f"method {self.name!r}: `claimed_embedded_order`", optional=True)
         object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
         if self.stability is not None:
             object.__setattr__(self, "stability", MappingProxyType(dict(self.stability)))
@@ -125,11 +130,9 @@ def method_from_record(record: Mapping[str, Any]) -> Method:
     """The `Method` a plain mapping declares (see the module docstring).
 
     Raises `InputError` (or `CoefficientError`) naming the record and the rule it breaks."""
-    if not isinstance(record, Mapping):
-        raise InputError(f"a method record must be a mapping, got {type(record).__name__}")
-    name = record.get("name")
-    if not isinstance(name, str) or not name.strip():
-        raise InputError(f"method record: `name` must be a non-empty string, got {name!r}")
+    from harness.method_checks import check_record
+
+    name = check_record(record)  # types, sizes and numbers first (`harness.method_checks`)
     for key in ("claimed_order", "reference"):
         if key not in record:
             raise InputError(f"method record {name!r}: `{key}` is required")

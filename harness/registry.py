@@ -115,6 +115,10 @@ class Registry(Generic[T]):
                 self.register(obj, origin="builtin")
             self._load_entry_points()
 
+    def load_builtins(self) -> None:
+        """Register the built-ins and entry points now (otherwise on first lookup)."""
+        self._ensure()
+
     def _load_entry_points(self) -> None:
         try:
             eps = metadata.entry_points(group=self.group)
@@ -256,8 +260,10 @@ def _build_records(records: Any, path: str | Path) -> list[Stepper]:
         try:
             method = record if isinstance(record, Method) else method_from_record(record)
             out.extend(method.steppers())
-        except (InputError, ValueError, TypeError) as exc:
-            _plugin_errors.append(f"plugin {str(path)!r}: method {label!r} not loaded: {exc}")
+        except Exception as exc:  # one bad record never loses the others
+            why = str(exc) if isinstance(exc, InputError | ValueError) else f"{type(exc).__name__}: {exc}"
+            _plugin_errors.append(f"plugin {str(path)!r}: method {str(label)[:80]!r} not loaded: "
+                                  f"{why}"[:600])
     return out
 
 
@@ -342,6 +348,8 @@ def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) ->
             sys.modules.pop(mod_name, None)
             if isinstance(exc, KeyboardInterrupt | SystemExit):
                 raise PluginError(f"plugin {str(path)!r} exited while importing") from None
+            if isinstance(exc, InputError):  # a definition refused by its own checks
+                raise PluginError(f"plugin {str(path)!r}: {exc}") from None
             raise PluginError(
                 f"plugin {str(path)!r} failed to import: {type(exc).__name__}: {exc}"
             ) from None
@@ -361,18 +369,30 @@ def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) ->
                     ) from None
         elif records is None:
             objs = [v for v in vars(module).values() if isinstance(v, Stepper | Problem)]
+        refused_before = len(_plugin_errors)
         objs += _build_records(records, path)
-        if not objs:
-            raise PluginError(f"plugin {str(path)!r} defines no Stepper or Problem objects")
         for obj in objs:
-            reg = steppers if isinstance(obj, Stepper) else problems
             if not isinstance(obj, Stepper | Problem):
                 raise PluginError(
                     f"plugin {str(path)!r}: STEPPERS/PROBLEMS may hold only Stepper or Problem "
                     f"objects, got {type(obj).__name__}"
                 )
-            reg.register(obj, origin=f"plugin {p.name}", replace=False)
+        steppers.load_builtins()  # built-ins first: a plugin entry named like one is the refused one
+        problems.load_builtins()
+        for obj in objs:  # one refused name (a built-in's, a duplicate) never loses the others
+            reg = steppers if isinstance(obj, Stepper) else problems
+            try:
+                reg.register(obj, origin=f"plugin {p.name}", replace=False)
+            except InputError as exc:
+                _plugin_errors.append(f"plugin {str(path)!r}: {exc}; that entry is not loaded")
+                continue
             names.append(_name_of(obj))
+        if not names:
+            refused = _plugin_errors[refused_before:]
+            del _plugin_errors[refused_before:]
+            if refused:  # every entry was refused: their reasons, not "defines nothing"
+                raise PluginError("; ".join(refused)[:2000])
+            raise PluginError(f"plugin {str(path)!r} defines no Stepper or Problem objects")
         _plugins[key] = names
         return names
     except PluginError as exc:

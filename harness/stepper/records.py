@@ -47,15 +47,14 @@ class StepperInfo:
     extra: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        from harness.method_checks import check_claimed_order
+        from harness.names import check_name
+
+        check_name(self.name, "stepper `name`")
         if self.form not in FORMS:
             raise InputError(f"stepper {self.name!r}: `form` must be one of {FORMS}, got {self.form!r}")
-        if self.claimed_order is not None and (
-            not isinstance(self.claimed_order, int) or self.claimed_order < 1
-        ):
-            raise InputError(
-                f"stepper {self.name!r}: `claimed_order` must be a positive integer or None, "
-                f"got {self.claimed_order!r}"
-            )
+        check_claimed_order(self.claimed_order, f"stepper {self.name!r}: `claimed_order`",
+                            optional=True)
         if not self.reference:
             raise InputError(f"stepper {self.name!r}: `reference` (literature source) is required")
 
