@@ -43,6 +43,7 @@ from harness.cli.output import (
     EXIT_OK,
     EXIT_USAGE,
     OUTPUT,
+    EscapingStream,
     explain_skips,
     os_error_status,
     report_error,
@@ -181,7 +182,8 @@ def _main(args: argparse.Namespace) -> int:
 
     OUTPUT.append(io.StringIO())
     try:
-        with contextlib.redirect_stdout(sys.stderr):
+        err = EscapingStream(sys.stderr)
+        with contextlib.redirect_stdout(err), contextlib.redirect_stderr(err):
             code = _dispatch(args)
     except NoApplicableCellsError as exc:
         explain_skips(exc.skips, getattr(args, "json", False))

@@ -53,7 +53,7 @@ def write_stdout(text: str) -> int:
     """Write the command's output and flush it; an OS error becomes one line on stderr."""
     try:
         if text:
-            sys.stdout.write(text)
+            sys.stdout.write(escape_controls(text))
         sys.stdout.flush()
     except OSError as exc:
         exc.filename = _stdout_name()
@@ -86,9 +86,54 @@ def explain_skips(skips: Sequence[dict], as_json: bool) -> None:
 
 
 def one_line(text: str) -> str:
-    """`text` on one line, whitespace collapsed, cut to 500 characters."""
-    line = " ".join(text.split())
+    """`text` on one line, whitespace collapsed, control characters escaped, cut to 500
+    characters."""
+    line = escape_controls(" ".join(text.split()))
     return line if len(line) <= 500 else line[:497] + "..."
+
+
+_KEPT = {"\n", "\t", "\r"}  # \r: a progress bar redraws its line
+
+
+def escape_controls(text: str) -> str:
+    """`text` with every control or format character but newline, tab and carriage return
+    written as its escape (`\x1b`, `\u202e`): a name or message from a plugin or a
+    saved run can never move the cursor, recolour, retitle or reorder the user's terminal."""
+    import unicodedata
+
+    if text.isprintable() or all(c in _KEPT or c.isprintable() or c == " " for c in text):
+        return text
+    out = []
+    for c in text:
+        if c in _KEPT or unicodedata.category(c) not in ("Cc", "Cf", "Cs", "Co", "Zl", "Zp"):
+            out.append(c)
+        else:
+            out.append(repr(c)[1:-1])
+    return "".join(out)
+
+
+class EscapingStream(io.TextIOBase):
+    """A text stream writing to `target` with control characters escaped (`escape_controls`):
+    the command's chatter (stdout redirected to stderr while it runs) and stderr pass through it."""
+
+    def __init__(self, target):
+        self._target = target
+
+    def write(self, text: str) -> int:
+        self._target.write(escape_controls(text))
+        return len(text)
+
+    def flush(self) -> None:
+        self._target.flush()
+
+    def isatty(self) -> bool:
+        return bool(getattr(self._target, "isatty", lambda: False)())
+
+    def fileno(self) -> int:
+        return self._target.fileno()
+
+    def writable(self) -> bool:
+        return True
 
 
 
