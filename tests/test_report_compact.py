@@ -48,17 +48,37 @@ def test_a_figure_is_drawn_once_per_distinct_input(tmp_path, monkeypatch):
     assert CALLS == [0.5, 0.25]  # the repeat came from the cache
     assert again.svg == first.svg and again.data.equals(first.data)
     assert other.svg != first.svg
-    assert len(list((tmp_path / "figures").glob("*.pkl"))) == 2
+    assert len(list((tmp_path / "figures").glob("*.json"))) == 2
+    assert not list((tmp_path / "figures").glob("*.pkl"))  # data formats, never a pickle
 
 
 def test_an_unreadable_cache_entry_is_drawn_again(tmp_path, monkeypatch):
     monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
     CALLS.clear()
     _line_figure(0.75)
-    for entry in (tmp_path / "figures").glob("*.pkl"):
-        entry.write_bytes(b"not a pickle")
+    for entry in (tmp_path / "figures").glob("*.*"):
+        entry.write_bytes(b"not json, not parquet")
     assert _line_figure(0.75) is not None
     assert CALLS == [0.75, 0.75]
+
+
+def test_a_pickle_planted_in_the_figure_cache_is_never_loaded(tmp_path, monkeypatch):
+    import pickle
+
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
+    CALLS.clear()
+    _line_figure(0.375)
+    marker = tmp_path / "ran"
+
+    class Payload:
+        def __reduce__(self):
+            return (marker.write_text, ("code from the cache ran",))
+
+    for entry in (tmp_path / "figures").glob("*.json"):
+        entry.with_suffix(".pkl").write_bytes(pickle.dumps(Payload()))
+        entry.write_bytes(pickle.dumps(Payload()))
+    assert _line_figure(0.375) is not None
+    assert not marker.exists() and CALLS == [0.375, 0.375]
 
 
 def test_the_cache_can_be_switched_off(tmp_path, monkeypatch):

@@ -87,6 +87,10 @@ def render_html(context: dict[str, Any]) -> str:
 def _write_report(root: Path, report_id: str, html: str, extra: dict[str, str] | None = None) -> Path:
     """Write `<root>/<report id>/index.html` (and the `extra` files) atomically (staging
     directory, then rename) and point `<root>/latest` at it. Returns the index.html path."""
+    from harness.store.schema import SAFE_NAME
+
+    if not SAFE_NAME.match(report_id) or report_id.strip(".") == "":  # a path only from a safe id
+        raise InputError(f"report id {report_id[:80]!r} must use letters, digits and _.+- only")
     root.mkdir(parents=True, exist_ok=True)
     final = root / report_id
     n = 2
@@ -251,18 +255,17 @@ def rerender_report(run: str | os.PathLike | None, *, output: str | os.PathLike 
     return write_report(stored, output=output, compare=compare, compare_default=True)
 
 
-def run_view(stored: Any, *, load_plugins: bool = True) -> Any:
+def run_view(stored: Any) -> Any:
     """The RunView of a saved run: its tables, and the steppers, problems and mode of its own
-    configuration (plugins the run used are loaded again so their steppers can be shown)."""
+    configuration. Plugin files its meta.json names are never imported (opening someone else's
+    results directory must not run their code): a plugin's steppers are shown when this process
+    loaded it (the run it just measured, or `harness report --from RUN --plugin FILE`)."""
     from harness import registry
     from harness.report import figures as F
     from harness.report.sections import RunView
 
     meta = stored.meta
     cfg = meta.get("config", {}).get("run", {})
-    if load_plugins:
-        for p in cfg.get("plugins", []) or []:
-            registry.load_plugin(p)
     stepper_names = list(cfg.get("steppers") or registry.steppers.names())
     problem_names = list(cfg.get("problems") or registry.problems.names())
     known = [n for n in stepper_names if n in registry.steppers]
@@ -304,7 +307,7 @@ def write_report(
     if compare is not None or compare_default:
         previous = load_previous(compare, results_root=stored.path.parent, reports_root=root,
                                  current=stored.run_id,
-                                 view_factory=lambda s: run_view(s, load_plugins=False))
+                                 view_factory=run_view)
         if previous is not None:
             _say(bar, f"comparing with run {previous.run_id}")
     t0 = time.perf_counter()

@@ -3,8 +3,10 @@
 A figure function's result (a `figure_svg.Figure`, or None) depends only on its arguments (data
 frames, the palette, flags), the report's drawing code and matplotlib. `cached_call` hashes all
 of them (the arguments pickled; the source of every module of the `harness` package, since a
-figure may use any of it; matplotlib's version) and keeps the result in
-`<harness cache>/figures/<hash>.pkl` (`harness.cache.cache_dir`, `HARNESS_CACHE_DIR`). Matplotlib
+figure may use any of it; matplotlib's version) and keeps the result as data, never as a
+pickle (a shared cache directory must not run anyone's code): `<harness cache>/figures/<hash>.json`
+holds the SVG, alt text and style rules, `<hash>.parquet` the figure's data table
+(`harness.cache.cache_dir`, `HARNESS_CACHE_DIR`). Matplotlib
 takes most of a report's build time, and a rerun whose cells all come from the cell cache hands
 every figure function the same data, so the figures come from here. Any change of data or
 drawing code changes the key; an unreadable entry is drawn again. Entries not read for
@@ -17,7 +19,7 @@ import contextlib
 import functools
 import hashlib
 import os
-import pickle
+import pickle  # only to hash the arguments; nothing is ever unpickled
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -73,26 +75,66 @@ def cached_call(fn: Callable, args: tuple, kwargs: dict) -> Any:
     key = _key(fn, args, kwargs) if directory is not None else None
     if key is None or directory is None:
         return fn(*args, **kwargs)
-    path = directory / f"{key}.pkl"
+    path = directory / f"{key}.json"
     try:
-        with open(path, "rb") as fh:
-            result = pickle.load(fh)
+        result = _read(path)
         with contextlib.suppress(OSError):
             os.utime(path)
         return result
     except Exception:  # noqa: BLE001  (missing or unreadable: draw it again)
         pass
     result = fn(*args, **kwargs)
-    tmp = directory / f".{key}.{os.getpid()}.tmp"
     try:
-        with open(tmp, "wb") as fh:
-            pickle.dump(result, fh, protocol=5)
-        os.replace(tmp, path)
+        _write(directory, key, result)
         _prune(directory)
-    except Exception:  # noqa: BLE001  (a full disk does not stop the report)
-        with contextlib.suppress(OSError):
-            tmp.unlink()
+    except Exception:  # noqa: BLE001  (a full disk, a table Parquet cannot hold: not cached)
+        pass
     return result
+
+
+def _read(path: Path) -> Any:
+    """The Figure (or None) kept at `path` (+ its `.parquet` table): JSON and Parquet only."""
+    import json
+
+    from harness.report.figure_svg import Figure
+
+    with open(path, encoding="utf-8") as fh:
+        entry = json.load(fh)
+    if entry is None:
+        return None
+    data = None
+    if entry["data"]:
+        import pandas as pd
+
+        data = pd.read_parquet(path.with_suffix(".parquet"))
+    return Figure(str(entry["slug"]), str(entry["svg"]), str(entry["alt"]), data=data,
+                  css=str(entry["css"]))
+
+
+def _write(directory: Path, key: str, result: Any) -> None:
+    import json
+
+    from harness.report.figure_svg import Figure
+
+    if result is not None and not isinstance(result, Figure):
+        return  # only figures are kept
+    tmp = [directory / f".{key}.{os.getpid()}.{ext}.tmp" for ext in ("parquet", "json")]
+    try:
+        entry = None
+        if result is not None:
+            entry = {"slug": result.slug, "svg": result.svg, "alt": result.alt, "css": result.css,
+                     "data": result.data is not None}
+            if result.data is not None:
+                result.data.to_parquet(tmp[0])
+        with open(tmp[1], "w", encoding="utf-8") as fh:
+            json.dump(entry, fh)
+        if entry is not None and entry["data"]:
+            os.replace(tmp[0], directory / f"{key}.parquet")
+        os.replace(tmp[1], directory / f"{key}.json")  # last: the entry exists once complete
+    finally:
+        for t in tmp:
+            with contextlib.suppress(OSError):
+                t.unlink()
 
 
 _pruned: set[Path] = set()
@@ -104,7 +146,7 @@ def _prune(directory: Path) -> None:
         return
     _pruned.add(directory)
     limit = time.time() - MAX_AGE_DAYS * 86400
-    for entry in directory.glob("*.pkl"):
+    for entry in [*directory.glob("*.json"), *directory.glob("*.parquet"), *directory.glob("*.pkl")]:
         with contextlib.suppress(OSError):
             if entry.stat().st_mtime < limit:
                 entry.unlink()

@@ -150,6 +150,9 @@ def _check_meta(path: Path, meta: Any) -> dict:
         if not isinstance(meta[key], kind):
             raise CorruptResultsError(path, f"`{key}` must be {_KIND_NAMES[kind]}, got "
                                             f"{type(meta[key]).__name__}")
+    if not SAFE_NAME.match(meta["run_id"]) or meta["run_id"].strip(".") == "":
+        raise CorruptResultsError(path, f"`run_id` {meta['run_id'][:80]!r} is not a run id "
+                                        "(letters, digits and _.+- only); it is never used as a path")
     for key, value in meta["totals"].items():
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise CorruptResultsError(path, f"`totals.{key}` must be a number, got {type(value).__name__}")
