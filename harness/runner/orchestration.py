@@ -198,6 +198,8 @@ def run_experiment(
         if not isinstance(flag, bool | np.bool_):
             raise InputError(f"`{name}` must be True or False, got {flag!r}")
     store = CellCache(cache_dir) if cache else None
+    if store is not None:
+        store.check_writable()  # one line and exit 77, not every cell failing
     from harness.registry import load_plugin
 
     for p in plugin_paths:
@@ -292,7 +294,7 @@ def run_experiment(
             cached = len(keyed)
             keyed = []
         for i, cell, key, v in keyed:
-            hit = store.get(key) if (store is not None and not fresh) else None
+            hit = store.get_or_discard(key) if (store is not None and not fresh) else None
             if hit is not None:
                 rows, info = hit
                 frames[i] = rows

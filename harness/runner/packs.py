@@ -17,24 +17,23 @@ import pandas as pd
 from harness.errors import InputError
 from harness.experiments.base import Experiment
 from harness.keys import judging_version
-from harness.store import CellCache, CorruptResultsError
+from harness.store import CellCache
 
 __all__ = ["read_pack", "write_pack", "summarize_packed"]
 
-HINT = "; delete it, or recompute with fresh=True (--fresh)"
-
-
 def read_pack(store: CellCache, key: str, keys: Sequence[str]) -> tuple[pd.DataFrame, list[dict]] | None:
     """(rows, per-cell records) of the pack `key` holding the cells `keys`, in order, or None
-    when there is no such pack; a pack that lists other cells is `CorruptResultsError`."""
-    hit = store.get_pack(key)
+    when there is no such pack; a damaged pack, or one that lists other cells, is discarded
+    with a one-line warning (`CellCache.get_or_discard`) and read as missing."""
+    hit = store.get_or_discard(key, "packs")
     if hit is None:
         return None
     rows, info = hit
     listed = info.get("cells")
     if (not isinstance(listed, list) or not all(isinstance(c, dict) for c in listed)
             or [c.get("key") for c in listed] != list(keys)):
-        raise CorruptResultsError(store.pack_path(key), "its cell list is not the run's" + HINT)
+        store.discard(store.pack_path(key), "its cell list is not the run's")
+        return None
     return rows, listed
 
 
@@ -53,7 +52,7 @@ def summarize_packed(store: CellCache, pack_key: str, experiment: Experiment, ro
     is returned as computed."""
     text = f"summary\n{pack_key}\n{judging_version(experiment)}"
     key = hashlib.sha256(text.encode()).hexdigest()[:32]
-    hit = None if fresh else store.get_pack(key, kind="summaries")
+    hit = None if fresh else store.get_or_discard(key, "summaries")
     if hit is not None:
         return hit[0]
     summary = summarize()

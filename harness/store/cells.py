@@ -96,7 +96,9 @@ class CellCache:
 
     `get` returns a cell's rows or None; a file that exists but is damaged, of another schema
     or of another key raises `CorruptResultsError` naming it (delete it, or run with
-    `fresh=True`, which overwrites). `put` writes atomically."""
+    `fresh=True`, which overwrites). A run reads through `get_or_discard`: a cache is only a
+    copy, so a damaged entry is removed with a one-line warning and its cell computed again
+    (damaged *results* stay an error: `harness.store.loading`). `put` writes atomically."""
 
     HINT = "; delete it, or recompute with fresh=True (--fresh), which overwrites it"
 
@@ -133,6 +135,51 @@ class CellCache:
             return decode_cell(data, p, key)
         except CorruptResultsError as exc:
             raise CorruptResultsError(p, exc.problem + self.HINT) from None
+
+    def get_or_discard(self, key: str, kind: str = "cells") -> tuple[pd.DataFrame, dict] | None:
+        """Like `get` (`kind='cells'`) or `get_pack` (`'packs'`, `'summaries'`), but a damaged
+        entry is removed, named in one warning line on stderr, and read as missing."""
+        path = self.path(key) if kind == "cells" else self.pack_path(key, kind)
+        try:
+            return self._read(path, key)
+        except CorruptResultsError as exc:
+            self.discard(path, exc.problem.removesuffix(self.HINT))
+            return None
+
+    def discard(self, path: Path, reason: str) -> None:
+        """Remove the damaged cache entry `path` with one warning line naming it; a directory
+        where an entry belongs is left (and named) for the user to move."""
+        import sys
+
+        if path.is_dir() and not path.is_symlink():
+            print(f"harness: warning: cache entry {str(path)!r} is a directory; not used, "
+                  "move it away", file=sys.stderr)
+            return
+        try:
+            path.unlink()
+            done = "discarded, recomputed"
+        except OSError as err:
+            done = f"could not be removed ({err.strerror or err}); recomputed"
+        why = " ".join(reason.split())
+        print(f"harness: warning: damaged cache entry {str(path)!r} {done} ({why})"[:600],
+              file=sys.stderr)
+
+    def check_writable(self) -> None:
+        """Raise `OutputError` (exit 77/73/74, one line naming the directory) when the cache
+        cannot be written: found before any cell runs, not as every cell's failure."""
+        import tempfile
+
+        from harness.errors import OutputError
+
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+            fd, probe = tempfile.mkstemp(prefix=".writable-", dir=self.root)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            message, status = describe_os_error(exc, self.root)
+            raise OutputError(f"cache directory: {message} (set HARNESS_CACHE_DIR, or run "
+                              "without the cache)", status) from None
 
     # -- packs: every cell of one experiment's run in one file --------------------------------------
     @staticmethod
