@@ -366,3 +366,7 @@ INVARIANT_FLOW_DRIFT = 1e-6
 # A problem's float64 orbit that stops before the span's end with its last Taylor step below
 # this fraction of the span (or a non-finite state) is taken as a singularity within the span.
 SINGULAR_STEP_FRACTION = 1e-12
+# The largest file the store reads (a run's table, a cell, meta.json, an earlier report's
+# verdicts): far above any run the harness writes (a full report's rows are ~10 MB), and a
+# bound so that a link to an endless device is refused, not read until memory runs out.
+MAX_STORED_FILE_BYTES = 2 * 1024**3

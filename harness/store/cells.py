@@ -17,7 +17,13 @@ import pandas as pd
 
 from harness.errors import InputError, describe_os_error
 from harness.provenance import to_jsonable
-from harness.store.files import arrow_table, atomic_write_bytes, decode_parquet, table_bytes
+from harness.store.files import (
+    arrow_table,
+    atomic_write_bytes,
+    decode_parquet,
+    read_bounded,
+    table_bytes,
+)
 from harness.store.schema import CELL_SCHEMA, CorruptResultsError
 
 _CELL_KEY = re.compile(r"^[0-9a-f]{32}$")
@@ -127,7 +133,7 @@ class CellCache:
                 if p.exists() or p.is_symlink():
                     raise CorruptResultsError(p, "is not a regular file" + self.HINT)
                 return None
-            data = p.read_bytes()
+            data = read_bounded(p)
         except OSError as exc:
             message, _ = describe_os_error(exc, p)
             raise CorruptResultsError(p, f"cannot be read: {message}{self.HINT}") from None

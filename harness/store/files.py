@@ -158,6 +158,31 @@ def write_parquet(path: str | os.PathLike, df: pd.DataFrame,
     return hashlib.sha256(data).hexdigest()
 
 
+def read_bounded(path: str | os.PathLike, limit: int | None = None) -> bytes:
+    """The bytes of the regular file `path` (links followed), read with a bound: a device, pipe
+    or directory (a link to /dev/zero), or a file over `limit` bytes (default
+    MAX_STORED_FILE_BYTES), raises `CorruptResultsError` naming it; a missing file raises
+    FileNotFoundError and another OS error OSError, for the caller to name."""
+    import stat
+
+    from harness.tolerances import MAX_STORED_FILE_BYTES
+
+    limit = MAX_STORED_FILE_BYTES if limit is None else int(limit)
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as fh:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise CorruptResultsError(path, "is not a regular file (a device, pipe, socket or "
+                                            "directory); a harness file is never one")
+        if info.st_size > limit:
+            raise CorruptResultsError(path, f"has {info.st_size} bytes, more than any harness "
+                                            f"file ({limit})")
+        data = fh.read(limit + 1)
+    if len(data) > limit:
+        raise CorruptResultsError(path, f"grew past {limit} bytes while read")
+    return data
+
+
 def read_parquet(
     path: str | os.PathLike,
     *,
@@ -171,7 +196,7 @@ def read_parquet(
     or a file that is not Parquet, raises `CorruptResultsError` naming the file."""
     p = Path(path)
     try:
-        data = p.read_bytes()
+        data = read_bounded(p)
     except FileNotFoundError:
         raise CorruptResultsError(p, "missing") from None
     except OSError as exc:
@@ -202,7 +227,7 @@ def read_json(path: Path) -> Any:
     not JSON, or nested too deeply to be a harness file.
     """
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_bounded(path).decode("utf-8")
     except FileNotFoundError:
         raise CorruptResultsError(path, "missing") from None
     except (OSError, UnicodeDecodeError) as exc:
