@@ -68,10 +68,9 @@ def load_previous(run: str | os.PathLike | None, *, results_root: str | os.PathL
     if stored.run_id == current:
         return None
     saved = Path(reports_root) / stored.run_id / VERDICTS_FILE if reports_root else None
-    if saved is not None and saved.is_file():
-        verdicts = pd.read_csv(saved, dtype={"key": str, "stepper": str, "problem": str},
-                               keep_default_na=False)
-        verdicts["passed"] = verdicts["passed"].astype(str).str.lower().isin(("true", "1"))
+    verdicts, damaged = (_read_verdicts(saved) if saved is not None and saved.exists()
+                         else (None, ""))
+    if verdicts is not None:
         source = f"recorded by its report ({saved})"
     else:
         from harness.report.verdicts import collect_verdicts
@@ -79,7 +78,33 @@ def load_previous(run: str | os.PathLike | None, *, results_root: str | os.PathL
         stored = load_run(stored.path)
         verdicts = collect_verdicts(view_factory(stored))
         source = "judged again from its saved summaries with this build's rules"
+        if damaged:
+            source += f" (its report's {saved} is damaged: {damaged})"
     return Previous(stored.run_id, stored.meta, dict(stored.summaries), verdicts, source)
+
+
+def _read_verdicts(path: Path) -> tuple[pd.DataFrame | None, str]:
+    """(the verdicts an earlier report recorded, "") or (None, why the file cannot be used): a
+    damaged file is judged again from the saved run, never a crash."""
+    import io
+
+    from harness.report.verdicts import VERDICT_COLUMNS
+    from harness.store.files import read_bounded
+
+    try:
+        text = read_bounded(path).decode("utf-8")
+        verdicts = pd.read_csv(io.StringIO(text), dtype={"key": str, "stepper": str, "problem": str},
+                               keep_default_na=False)
+    except Exception as exc:  # noqa: BLE001  (any damage: unreadable, not CSV, not UTF-8)
+        return None, " ".join(f"{type(exc).__name__}: {exc}".split())[:200]
+    missing = [c for c in VERDICT_COLUMNS if c not in verdicts.columns]
+    if missing:
+        return None, f"columns {missing} missing"
+    verdicts["passed"] = verdicts["passed"].astype(str).str.lower().isin(("true", "1"))
+    for c in VERDICT_COLUMNS:
+        if c != "passed":
+            verdicts[c] = verdicts[c].astype(str)
+    return verdicts, ""
 
 
 def _provenance(meta: dict) -> dict[str, str]:
