@@ -306,6 +306,7 @@ def check(
     'reversibility', 'energy') to setting overrides. Raises `ClaimError` (an AssertionError with
     the measured table) when a claim is false and `raise_on_failure`; `InputError` for bad input.
     """
+    from harness.errors import NoApplicableCellsError
     from harness.registry import problems as problem_registry
     from harness.registry import steppers as stepper_registry
     from harness.runner import run_experiment
@@ -343,7 +344,13 @@ def check(
             plan.append(("energy", "energy", energy))
         for experiment, claim, claimed in plan:
             config = dict(configs.get(experiment, {}))  # experiments apply by facts, to `names`
-            result = run_experiment(experiment, [name], names, config=config, **options)
+            try:
+                result = run_experiment(experiment, [name], names, config=config, **options)
+            except NoApplicableCellsError as exc:  # nothing measured: the claim fails, saying why
+                skips = pd.DataFrame(exc.skips, columns=["experiment", "stepper", "problem", "reason"])
+                summaries[experiment] = pd.DataFrame()
+                rows += _missing_rows(claim, claimed, names, pd.DataFrame(), skips)
+                continue
             summary = result.summary
             summaries[experiment] = summary
             failures.append(result.failures)
