@@ -130,7 +130,9 @@ def cmd_reference(args) -> int:
         "certified_by": ref.certified_by,
     }
     if problem.exact is not None:
-        exact = problem.exact(t, problem.y0[:, None], problem.t0, problem.pars_for(1))[:, 0]
+        from harness.problem.validation import exact_state
+
+        exact = exact_state(problem, t, problem.y0[:, None])[:, 0]
         record["exact_state"] = exact.tolist()
         record["exact_difference"] = float(np.max(np.abs(exact - ref.y[-1][:, 0])))
     if args.json:

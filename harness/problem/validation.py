@@ -27,7 +27,7 @@ import numpy as np
 from harness.errors import InputError, ProblemError
 from harness.names import check_name
 
-__all__ = ["check_definition", "check_start", "check_invariants_along_flow"]
+__all__ = ["check_definition", "check_start", "check_invariants_along_flow", "exact_state"]
 
 
 def check_definition(name: Any, variables: Sequence[Any], newtonian: Any) -> str:
@@ -148,3 +148,32 @@ def _invariant_defects(problem) -> list:
         if rel[j] > tol.INVARIANT_FLOW_RTOL:
             defects.append((k, float(rel[j]), float(t[j])))
     return defects
+
+
+def exact_state(problem, t: float, y0: np.ndarray) -> np.ndarray:
+    """The problem's declared exact solution at `t` from states `y0` (dim, N), checked: an
+    exception it raises, or a result that is not a real finite (dim, N) array, is the problem's
+    `ProblemError` (one line), never a traceback.
+
+    Parameters
+    ----------
+    problem : the Problem (its `exact` is not None); t : the time; y0 : start states (dim, N).
+
+    Returns
+    -------
+    numpy.ndarray
+        States shaped (dim, N).
+    """
+    try:
+        out = problem.exact(t, y0, problem.t0, problem.pars_for(y0.shape[1]))
+        arr = np.asarray(out)
+    except Exception as exc:  # noqa: BLE001  (a user's function: anything may be raised)
+        raise ProblemError(f"problem {problem.name!r}: its exact solution raised at t = {t:g}: "
+                           f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}") from None
+    if np.iscomplexobj(arr) or arr.dtype.kind not in "fiu" or arr.shape != y0.shape:
+        raise ProblemError(f"problem {problem.name!r}: its exact solution must return real "
+                           f"states shaped {y0.shape}, got {arr.dtype} shaped {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ProblemError(f"problem {problem.name!r}: its exact solution is not finite at "
+                           f"t = {t:g}")
+    return arr.astype(np.float64)
