@@ -58,6 +58,14 @@ def check_scheduler(value: Any) -> Any:
         raise InputError(
             f"`scheduler` must be a Dask scheduler address like tcp://HOST:PORT, got {str(value)[:80]!r}"
         )
+    if not value.startswith("tcp://"):
+        # tls:// needs certificates (a distributed.Security), ucx:// and ws:// extra libraries,
+        # inproc:// a scheduler in this very process: none can be given as a bare address
+        raise InputError(
+            f"`scheduler` {value[:80]!r}: only tcp://HOST:PORT addresses are taken here; for "
+            f"{value.split('://')[0]}:// pass a connected distributed.Client to the Python API "
+            "(`scheduler=client`)"
+        )
     return value
 
 

@@ -22,8 +22,11 @@ from harness.experiments.base import Cell
 from harness.runner import limits
 from harness.runner.workers import claim_verdict, clean_stale_claims, execute, one_line
 
-# Seconds to wait for a Dask scheduler to answer.
+# Seconds to wait for a Dask scheduler to answer (connection and handshake together).
 DASK_CONNECT_TIMEOUT_S = 10
+# A Dask scheduler's first message (its handshake: compression, Python version, pickle protocol)
+# is ~60 bytes; a first length above this is another kind of server.
+DASK_HANDSHAKE_MAX_BYTES = 65536
 # Seconds an idle loky worker waits for work before it exits (short: a worker is cheap to start,
 # and the workers of a run killed with SIGKILL should not linger).
 LOKY_IDLE_TIMEOUT_S = 30
@@ -148,13 +151,14 @@ def dask_client(scheduler: Any) -> tuple[Any, bool]:
 
     if isinstance(scheduler, Client):
         return scheduler, False
+    _handshake(scheduler)
     failure = None
     hook = sys.unraisablehook
     sys.unraisablehook = lambda unraisable: None  # a half-built Client's destructor complains
     try:
         try:
             client = Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s", set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001  (whatever the peer makes distributed raise)
             failure = f"{type(exc).__name__}: {one_line(str(exc), 200)}"
         if failure is not None:
             import gc
@@ -167,6 +171,50 @@ def dask_client(scheduler: Any) -> tuple[Any, bool]:
             f"`scheduler` {scheduler!r}: cannot connect within {DASK_CONNECT_TIMEOUT_S} s ({failure})"
         )
     return client, True
+
+
+def _handshake(address: str) -> None:
+    """Check, within DASK_CONNECT_TIMEOUT_S in all, that `address` (tcp://HOST:PORT) answers as
+    a Dask scheduler does on connection: its first message is a small length-prefixed msgpack
+    handshake naming its Python and pickle protocol. A port that accepts and never answers, or
+    answers with something else (an HTTP or SSH server), is one `InputError` line, before
+    distributed reads a garbage length and tries to allocate it."""
+    import socket
+    import struct
+    import time
+
+    host, _, port = address.removeprefix("tcp://").rpartition(":")
+    host = host.strip("[]")
+    deadline = time.monotonic() + DASK_CONNECT_TIMEOUT_S
+    where = f"`scheduler` {address!r}"
+    try:
+        port_number = int(port)
+        with socket.create_connection((host, port_number), timeout=DASK_CONNECT_TIMEOUT_S) as so:
+            data = b""
+            while len(data) < 8 or len(data) < 8 + struct.unpack("<Q", data[:8])[0]:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError
+                so.settimeout(left)
+                chunk = so.recv(4096)
+                if not chunk:
+                    raise InputError(f"{where}: closed the connection without a Dask handshake")
+                data += chunk
+                if len(data) >= 8 and struct.unpack("<Q", data[:8])[0] > DASK_HANDSHAKE_MAX_BYTES:
+                    break
+    except InputError:
+        raise
+    except TimeoutError:
+        raise InputError(f"{where}: no Dask handshake within {DASK_CONNECT_TIMEOUT_S} s (not a "
+                         "Dask scheduler, or not reachable)") from None
+    except (OSError, ValueError, OverflowError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise InputError(f"{where}: cannot connect "
+                         f"({type(exc).__name__}: {one_line(reason, 200)})") from None
+    size = struct.unpack("<Q", data[:8])[0]
+    if size > DASK_HANDSHAKE_MAX_BYTES or b"pickle-protocol" not in data[8:8 + size]:
+        raise InputError(f"{where}: answers, but not as a Dask scheduler (its first bytes: "
+                         f"{data[:16]!r})")
 
 
 def run_dask(tasks: Sequence[Task], client: Any, accept) -> None:
