@@ -150,6 +150,17 @@ def _on_sigterm(signum, frame):
     raise Terminated()
 
 
+def _ignore_further_signals() -> None:
+    """After the first Ctrl-C or SIGTERM the command is ending: a second one (an impatient
+    double Ctrl-C) must not turn the exit status 130/143 into a death by signal."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the `harness` command line on `argv` (default: `sys.argv[1:]`).
 
@@ -172,8 +183,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return _main(args)
-    finally:
-        if previous is not None:
+    except KeyboardInterrupt:  # a second Ctrl-C while the first was being handled
+        _ignore_further_signals()
+        print("harness: interrupted", file=sys.stderr)
+        return 130
+    finally:  # restored unless the command is ending on a signal (then ignored, see above)
+        if previous is not None and signal.getsignal(signal.SIGTERM) is _on_sigterm:
             signal.signal(signal.SIGTERM, previous)
 
 
@@ -193,9 +208,11 @@ def _main(args: argparse.Namespace) -> int:
     except OSError as exc:
         code = report_error(*os_error_status(exc))
     except KeyboardInterrupt:
+        _ignore_further_signals()
         print("harness: interrupted", file=sys.stderr)
         code = 130
     except Terminated:
+        _ignore_further_signals()
         print("harness: terminated", file=sys.stderr)
         code = 143
     finally:

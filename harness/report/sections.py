@@ -378,13 +378,23 @@ def _start_experiment_sections(view: RunView, experiments: Sequence[str], number
     size = {name: len(view.rows.get(name, ())) for name in experiments}
     _FORKED_VIEW[:] = [view]
     try:
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                   initializer=_quiet_signals)
         futures = {name: pool.submit(_section_in_worker, name, dict(number), dict(titles))
                    for name in sorted(experiments, key=lambda n: -size[n])}
     except (OSError, RuntimeError):  # no process could be started: build them here
         _FORKED_VIEW.clear()
         return None
     return _Pending(pool, futures)
+
+
+def _quiet_signals() -> None:
+    """In a forked section worker: Ctrl-C and SIGTERM (sent to the whole process group) end it
+    at once and silently; the parent, which got them too, reports the interruption once."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _finish_experiment_section(pending: _Pending | None, view: RunView, name: str,
@@ -403,8 +413,13 @@ def _finish_experiment_section(pending: _Pending | None, view: RunView, name: st
 
 
 def _close(pending: _Pending | None) -> None:
-    if pending is not None:
-        pending.pool.shutdown(cancel_futures=True)
+    import sys
+
+    from harness.errors import Terminated
+
+    if pending is not None:  # interrupted: the workers got the signal too; do not wait for them
+        interrupted = isinstance(sys.exc_info()[1], KeyboardInterrupt | SystemExit | Terminated)
+        pending.pool.shutdown(wait=not interrupted, cancel_futures=True)
     _FORKED_VIEW.clear()
 
 

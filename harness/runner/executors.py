@@ -8,7 +8,7 @@ import re
 import shutil
 import sys
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -83,8 +83,8 @@ def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | N
                                                 f"{type(exc).__name__}: {exc}", kind="error"))
                 else:
                     accept(t, fut.result())
-    except BaseException:  # Ctrl-C, SIGTERM (the CLI raises SystemExit), anything unexpected
-        executor.shutdown(wait=False, kill_workers=True)
+    except BaseException:  # Ctrl-C, SIGTERM (the CLI raises Terminated), anything unexpected
+        _stop_pool(executor, futures)
         raise
     if broken is None:
         return None, []
@@ -97,6 +97,32 @@ def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | N
         else:
             unfinished.append(t)
     return broken, unfinished
+
+
+def _stop_pool(executor: Any, futures: Mapping[Any, Task]) -> None:
+    """Stop a loky pool at once after Ctrl-C or SIGTERM: further Ctrl-C/SIGTERM are ignored
+    while it stops (the run is already ending), pending futures are cancelled, and the pool's
+    manager thread, which can trip over the killed workers' queue (a KeyError in loky), is
+    joined with its exception dropped: the user sees one line, `harness: interrupted`."""
+    import signal
+    import threading
+
+    main = threading.current_thread() is threading.main_thread()
+    saved = [(s, signal.signal(s, signal.SIG_IGN)) for s in (signal.SIGINT, signal.SIGTERM)] \
+        if main else []
+    hook = threading.excepthook
+    threading.excepthook = lambda args: None if args.thread is not None and \
+        args.thread.name.startswith("ExecutorManagerThread") else hook(args)
+    try:
+        for fut in futures:
+            fut.cancel()
+        executor.shutdown(wait=True, kill_workers=True)
+    except Exception:  # noqa: BLE001  (stopping is best effort; the interruption is re-raised)
+        pass
+    finally:
+        threading.excepthook = hook
+        for sig, handler in saved:
+            signal.signal(sig, handler)
 
 
 def run_loky(tasks: Sequence[Task], jobs: int, accept) -> None:
