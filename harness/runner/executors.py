@@ -59,10 +59,22 @@ def run_serial(tasks: Sequence[Task], accept: Callable[[Task, dict], None]) -> N
         accept(t, execute(t.payload))
 
 
+def _quiet_loky() -> None:
+    """Drop loky's "A worker stopped while some jobs were given to the executor" warning: it
+    comes when an idle worker times out (LOKY_IDLE_TIMEOUT_S) just as a batch arrives; loky
+    starts a replacement and loses nothing, and a worker that really dies is found by its
+    claim file and reported in its cell. Other warnings pass."""
+    import warnings
+
+    warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given",
+                            category=UserWarning)
+
+
 def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | None, list[Task]]:
     """Run `batch` on `n` loky workers. Returns (the pool's breakdown or None, unfinished tasks)."""
     from joblib.externals.loky import get_reusable_executor
 
+    _quiet_loky()
     executor = get_reusable_executor(max_workers=n, timeout=LOKY_IDLE_TIMEOUT_S)
     futures = {}
     try:
