@@ -45,7 +45,7 @@ from harness.errors import InputError
 from harness.problem import Dynamics, Problem
 from harness.problem.checks import check_positive
 from harness.sources import source_of
-from harness.stepper import FORMS, Carry, Stepper, StepperInfo
+from harness.stepper import FORMS, Carry, Stepper, StepperInfo, as_real_state
 
 __all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "CLAIM_COLUMNS", "ENERGY_CLAIMS"]
 
@@ -148,9 +148,10 @@ class FunctionStepper(Stepper):
         if self.info.form == "newtonian":
             nq = dyn.nq
             q, v = self.step_function(lambda t, q: dyn.accel(t, q), c.t, c.y[:nq], c.y[nq:], c.h)
-            c.y = np.concatenate([np.asarray(q, dtype=float), np.asarray(v, dtype=float)])
+            name = self.info.name
+            c.y = np.concatenate([as_real_state(q, name), as_real_state(v, name)])
         else:
-            c.y = np.asarray(self.step_function(dyn.f, c.t, c.y, c.h), dtype=float)
+            c.y = as_real_state(self.step_function(dyn.f, c.t, c.y, c.h), self.info.name)
         if c.y.shape != (dyn.dim, dyn.size):
             raise InputError(
                 f"stepper {self.info.name!r}: the step function returned a state shaped "
