@@ -17,7 +17,9 @@ import os
 import threading
 from collections.abc import Callable, Hashable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+T = TypeVar("T")
 
 __all__ = ["cache_dir", "code_dir", "configure_heyoka_cache", "IntegratorPool"]
 
@@ -75,6 +77,31 @@ def float64_taylor_settings(problem) -> dict[str, Any]:
     from harness import tolerances as tol
 
     return {"tol": tol.EPS, "high_accuracy": True, "compact_mode": compact_mode(problem)}
+
+
+def interruptible(build: Callable[[], T]) -> T:
+    """`build()` (a heyoka compile: `hy.cfunc`, `hy.taylor_adaptive`), run so that Ctrl-C and
+    SIGTERM still reach this process while it compiles: heyoka releases the GIL while LLVM
+    works, so in the main thread the compile runs in a daemon thread joined in short slices,
+    and a signal handler (KeyboardInterrupt, the CLI's Terminated) runs between them; the
+    abandoned compile ends with the process. Elsewhere it is called directly."""
+    if threading.current_thread() is not threading.main_thread():
+        return build()
+    box: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            box["value"] = build()
+        except BaseException as exc:  # handed to the waiting thread
+            box["error"] = exc
+
+    worker = threading.Thread(target=work, name="harness-compile", daemon=True)
+    worker.start()
+    while worker.is_alive():
+        worker.join(0.1)
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
 
 
 def configure_heyoka_cache() -> Path:

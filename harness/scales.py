@@ -127,7 +127,8 @@ def _build(problem):
     kwargs = cache.float64_taylor_settings(problem)
     if problem.parameters:
         kwargs["pars"] = problem.parameter_values
-    return hy.taylor_adaptive(sys, np.array(problem.y0, dtype=np.float64), **kwargs)
+    start = np.array(problem.y0, dtype=np.float64)
+    return cache.interruptible(lambda: hy.taylor_adaptive(sys, start, **kwargs))
 
 
 def sample_orbit(problem, y0: np.ndarray | None = None, t_end: float | None = None) -> Orbit:

@@ -117,7 +117,8 @@ def _build(problem: Problem, level: Level, tol: float):
         kwargs["fp_type"] = level.fp_type
     if problem.parameters:
         kwargs["pars"] = level.array(problem.parameter_values)
-    return hy.taylor_adaptive(sys, level.array(problem.y0), **kwargs)
+    start = level.array(problem.y0)
+    return cache.interruptible(lambda: hy.taylor_adaptive(sys, start, **kwargs))
 
 
 def reference_tol(level: Level) -> float:
