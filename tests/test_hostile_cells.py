@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from harness import registry
 from harness.cli import main
 from harness.errors import NoApplicableCellsError, StepperOutputError
-from harness.problem import Problem
+from harness.problem import NewtonianForm, Problem
 from harness.runner import run_experiment
 from harness.stepper import Carry, Stepper, StepperInfo
 
@@ -214,3 +214,83 @@ def test_nan_and_scalar_steppers_are_failed_cells_in_every_experiment(experiment
     # a scalar state either reaches an observation (named as such) or breaks the next step
     scalar = failed["plugin-scalar"]
     assert ("returned a state of float64" in scalar["message"]) or scalar["kind"] == "error"
+
+
+# -- problems at fault: a method is never blamed for the problem's own defect ---------------------------
+_q, _p, _s = hy.make_vars("q", "p", "s")
+FAULTY_PROBLEMS = {  # problem -> (experiment, stepper, what the failed cell says)
+    "pole-first-order": (Problem("hostile-pole", variables=[_s], rhs=[1.0 / (1.0 - hy.time)],
+                                 y0=[0.0], t_span=(0.0, 2.0)),
+                         "convergence", "rk4", r"singular within its span \[0, 2\]"),
+    "pole-newtonian": (Problem("hostile-collapse", variables=[_q, _p],
+                               newtonian=NewtonianForm(positions=(_q,), velocities=(_p,),
+                                                       acceleration=(-1.0 / _q,)),
+                               y0=[1.0, 0.0], t_span=(0.0, 3.0)),
+                       "convergence", "velocity-verlet", r"singular within its span"),
+    "wrong-energy": (Problem("hostile-wrong-energy", variables=[_q, _p], rhs=[_p, -_q],
+                             y0=[1.0, 0.0], t_span=(0.0, 20.0),
+                             invariants={"energy": _p * _p / 2 + _q * _q}, conservative=True),
+                     "energy", "rk4", r"'energy' .* not conserved by the problem's own exact flow"),
+    "wrong-second-invariant": (Problem("hostile-wrong-momentum", variables=[_q, _p],
+                                       rhs=[_p, -_q], y0=[1.0, 0.0], t_span=(0.0, 20.0),
+                                       invariants={"energy": (_p * _p + _q * _q) / 2,
+                                                   "momentum": _p}),
+                               "energy", "rk4", r"'momentum' .* not conserved"),
+    "time-dependent-wrong": (Problem("hostile-wrong-clock", variables=[_q, _p], rhs=[_p, -_q],
+                                     y0=[1.0, 0.0], t_span=(0.0, 5.0),
+                                     invariants={"energy": (_p * _p + _q * _q) / 2 + hy.time}),
+                             "energy", "rk4", r"'energy' .* not conserved"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(FAULTY_PROBLEMS))
+def test_a_problem_at_fault_fails_its_cells_naming_the_problem(case, registered, tmp_path):
+    problem, experiment, stepper, says = FAULTY_PROBLEMS[case]
+    registered(problem)
+    result = run_experiment(experiment, [stepper], [problem.name], quick=True, jobs=1,
+                            cache_dir=tmp_path, progress=False)
+    assert len(result.failures) == 1 and len(result.summary) == 0, result.summary
+    message = result.failures.iloc[0]["message"]
+    assert "ProblemError" in message or f"problem {problem.name!r}" in message
+    import re
+
+    assert re.search(says, message), message
+
+
+def test_true_invariants_of_the_catalogue_pass_the_flow_check():
+    """The check must not blame a correct problem (Lennard-Jones starts at an equilibrium,
+    where dI/dt cancels inside each term: the drift along the orbit clears it)."""
+    from harness.problem.validation import check_invariants_along_flow
+
+    for problem in registry.problems.all():
+        check_invariants_along_flow(problem)
+
+
+@pytest.mark.parametrize("form", ["first-order", "newtonian"])
+def test_a_step_function_returning_complex_values_is_a_failed_cell(form):
+    from harness.api import FunctionStepper, check
+
+    if form == "newtonian":
+        def step(a, t, q, v, h):
+            v = v + h * a(t, q)
+            return (q + h * v).astype(complex), v
+        problems = ["harmonic"]
+    else:
+        def step(f, t, y, h):
+            return (y + h * f(t, y)) + 0j
+        problems = ["dahlquist"]
+    stepper = FunctionStepper(step, name=f"complex-{form}", form=form)
+    report = check(stepper, problems, order=1, raise_on_failure=False)
+    assert not report.passed
+    assert "complex values are not cast" in " ".join(report.failures["message"])
+
+
+@pytest.mark.parametrize("problems", [["dahlquist"], ["dahlquist", "van-der-pol-stiff"]])
+def test_api_check_over_no_applicable_cell_fails_the_claim_as_not_measured(problems):
+    from harness.api import ClaimError, check
+
+    with pytest.raises(ClaimError) as info:
+        check("velocity-verlet", problems, order=2)
+    table = info.value.report.table
+    assert list(table["measured"]) == ["not measured"] * len(problems)
+    assert table["detail"].str.contains("needs a Newtonian problem").all()
