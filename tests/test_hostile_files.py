@@ -286,3 +286,186 @@ def test_numbers_survive_the_cell_file_exactly(tmp_path):
     cache.put(KEY, rows, {})
     back, _ = cache.get(KEY)
     assert back.reference_error.tolist() == rows.reference_error.tolist()
+
+
+# -- saved runs and reports: paths only from safe ids, no code from a results directory -------------------
+@pytest.fixture(scope="module")
+def stability_runs(tmp_path_factory):
+    """Two saved one-cell stability runs and the report of the first (module-wide: cheap reuse)."""
+    root = tmp_path_factory.mktemp("saved-runs")
+    env = {"HARNESS_CACHE_DIR": str(root / "cache"), "HARNESS_RESULTS_DIR": str(root / "results")}
+    old = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        for _ in range(2):
+            with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+                assert main(["run", "stability", "--stepper", "euler", "--problem", "dahlquist",
+                             "--jobs", "1", "--quick", "--fresh"]) == 0
+    finally:
+        for k, v in old.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    runs = sorted(p for p in (root / "results").iterdir() if p.is_dir() and p.name[0].isdigit())
+    return root, runs
+
+
+def _copy_run(run: Path, tmp_path: Path) -> Path:
+    import shutil
+
+    target = tmp_path / "results" / run.name
+    shutil.copytree(run, target)
+    return target
+
+
+def _cli(argv) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(argv)
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.mark.parametrize("run_id", ["../../../escaped", "/tmp/absolute-id", "..", "a/b", "",
+                                    ".hidden/../../x", "ok\x1b[2J", "x" * 300])
+def test_a_run_id_from_meta_json_is_never_used_as_a_path(run_id, stability_runs, tmp_path):
+    run = _copy_run(stability_runs[1][0], tmp_path)
+    meta = json.loads((run / "meta.json").read_text())
+    meta["run_id"] = run_id
+    (run / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(CorruptResultsError, match=r"meta\.json.*is not a run id"):
+        results.load(run, "stability")
+    before = {p for p in Path("/tmp").glob("absolute-id*")}
+    code, out, err = _cli(["report", "--from", str(run), "--output", str(tmp_path / "reports")])
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "is not a run id" in err, err
+    assert "\x1b" not in err
+    assert not (tmp_path / "reports").exists() and not (tmp_path / "escaped").exists()
+    assert {p for p in Path("/tmp").glob("absolute-id*")} == before
+
+
+def test_report_from_a_saved_run_never_imports_the_plugins_its_meta_names(stability_runs, tmp_path):
+    run = _copy_run(stability_runs[1][0], tmp_path)
+    marker = tmp_path / "plugin-ran"
+    plugin = tmp_path / "planted.py"
+    plugin.write_text(f"open({str(marker)!r}, 'w').write('ran')\n")
+    meta = json.loads((run / "meta.json").read_text())
+    meta["config"]["run"]["plugins"] = [str(plugin)]
+    (run / "meta.json").write_text(json.dumps(meta))
+    code, out, err = _cli(["report", "--from", str(run), "--output", str(tmp_path / "reports")])
+    assert code == 0, err
+    assert not marker.exists()
+    assert Path(out.strip().splitlines()[-1]).is_file()
+
+
+@pytest.mark.parametrize("device", ["/dev/zero", "/dev/urandom", "fifo"])
+def test_a_rows_file_linked_to_an_endless_device_is_named_not_read(device, stability_runs, tmp_path):
+    run = _copy_run(stability_runs[1][0], tmp_path)
+    rows = run / "stability.rows.parquet"
+    rows.unlink()
+    if device == "fifo":
+        os.mkfifo(rows)  # a writer that never comes: reading would block forever
+    else:
+        rows.symlink_to(device)
+    with pytest.raises(CorruptResultsError, match="not a regular file"):
+        results.load(run, "stability")
+
+
+VERDICT_DAMAGE = {
+    "empty": b"",
+    "binary": bytes(range(256)) * 4,
+    "missing columns": b"experiment,stepper\nstability,euler\n",
+    "unbalanced quotes": b'experiment,stepper,problem,key,passed,verdict,sentence,anchor\n"a,b\n',
+    "not utf-8": b"\xff\xfe\x00experiment\n",
+}
+
+
+@pytest.mark.parametrize("damage", sorted(VERDICT_DAMAGE))
+def test_a_damaged_verdicts_file_of_an_earlier_report_does_not_stop_compare(damage, stability_runs,
+                                                                          tmp_path):
+    first, second = (_copy_run(r, tmp_path) for r in stability_runs[1][:2])
+    reports = tmp_path / "reports"
+    code, out, err = _cli(["report", "--from", str(first), "--output", str(reports)])
+    assert code == 0, err
+    (reports / first.name / "verdicts.csv").write_bytes(VERDICT_DAMAGE[damage])
+    code, out, err = _cli(["report", "--from", str(second), "--output", str(reports),
+                           "--compare", str(first)])
+    assert code == 0 and "Traceback" not in err, err
+    html = Path(out.strip().splitlines()[-1]).read_text(encoding="utf-8")
+    assert "judged again from its saved summaries" in html
+
+
+def test_damaged_cache_entries_are_discarded_and_recomputed_with_one_warning_each(tmp_path,
+                                                                                  monkeypatch):
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("HARNESS_RESULTS_DIR", str(tmp_path / "results"))
+    argv = ["run", "stability", "--stepper", "euler", "--stepper", "heun", "--problem",
+            "dahlquist", "--jobs", "1", "--quick", "--json"]
+    code, first, _ = _cli(argv)
+    assert code == 0
+    entries = [p for kind in ("cells", "packs", "summaries")
+               for p in (tmp_path / "cache" / kind).rglob("*.parquet")]
+    assert len(entries) >= 3
+    for i, p in enumerate(entries):  # every kind of damage a cache file meets
+        if i % 3 == 0:
+            p.write_bytes(b"")
+        elif i % 3 == 1:
+            p.write_bytes(p.read_bytes()[: len(p.read_bytes()) // 2])
+        else:
+            p.unlink()
+            p.symlink_to("/dev/zero")
+    code, again, err = _cli(argv)
+    assert code == 0, err
+    warned = [ln for ln in err.splitlines() if ln.startswith("harness: warning: damaged cache entry")]
+    assert 1 <= len(warned) <= len(entries) and "Traceback" not in err
+    def strip(text):
+        return [{k: v for k, v in r.items() if k not in ("wall_s",)} for r in json.loads(text)]
+    assert strip(again) == strip(first)
+    code, third, err = _cli(argv)  # recomputed entries were written back: no warning now
+    assert code == 0 and "damaged cache entry" not in err
+
+
+@pytest.mark.parametrize("code,expected", [(errno.EROFS, 77), (errno.EACCES, 77), (errno.ENOSPC, 74)])
+def test_an_unwritable_cache_is_one_line_with_its_status_before_any_cell(code, expected, tmp_path,
+                                                                       monkeypatch):
+    """Root ignores permissions and read-only mounts need privileges: the OS error is injected
+    where the cache is first written."""
+    import tempfile
+
+    def refuse(*args, **kwargs):
+        raise OSError(code, os.strerror(code), kwargs.get("dir"))
+
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("HARNESS_RESULTS_DIR", str(tmp_path / "results"))
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    status, out, err = _cli(["run", "stability", "--stepper", "euler", "--problem", "dahlquist",
+                             "--jobs", "1", "--quick"])
+    assert status == expected, err
+    line = _one_error_line(err)
+    assert "cache directory" in line and str(tmp_path / "cache") in line
+    assert not (tmp_path / "results").exists()  # stopped before any cell ran
+
+
+EXACT_FAULTS = {
+    "raises": ("1 / 0", r"exact solution raised at t = 0.5: ZeroDivisionError"),
+    "type-error": ("None + 1", r"exact solution raised .*TypeError"),
+    "not-an-array": ("'abc'", r"must return real states shaped \(1, 1\)"),
+    "wrong-shape": ("np.zeros((3, 3))", r"must return real states shaped \(1, 1\)"),
+    "complex": ("y0 * 1j", r"must return real states"),
+    "nan": ("y0 * np.nan", r"not finite"),
+}
+
+
+@pytest.mark.parametrize("fault", sorted(EXACT_FAULTS))
+def test_reference_with_a_faulty_exact_solution_is_one_line(fault, plugin_file):
+    body, says = EXACT_FAULTS[fault]
+    name = f"exact-{fault}"
+    path = plugin_file(f"exact_{fault.replace('-', '_')}.py",
+                       "import heyoka as hy\nimport numpy as np\nfrom harness.problem import Problem\n"
+                       "y = hy.make_vars('y')\n"
+                       f"PROBLEMS = [Problem({name!r}, variables=[y], rhs=[-y], y0=[1.0], "
+                       f"t_span=(0.0, 1.0), exact=lambda t, y0, t0, p: {body})]\n")
+    code, out, err = _cli(["reference", name, "--t", "0.5", "--plugin", path])
+    assert code == 2 and out == "", err
+    import re
+
+    assert re.search(says, _one_error_line(err)), err
