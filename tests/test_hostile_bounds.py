@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -201,3 +203,159 @@ def test_projected_work_uses_the_recent_half(checkpoints, work, position, end, e
     from harness.work_projection import projected_work
 
     assert projected_work(checkpoints, work, position, end) == pytest.approx(expected)
+
+
+# -- a scheduler handshake with a deadline ----------------------------------------------------------------
+def _server(behaviour: str):
+    """A local TCP server that is not a Dask scheduler: returns (address, stop)."""
+    import socket
+    import threading
+
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(8)
+    sock.settimeout(0.2)
+    held, stop = [], threading.Event()
+
+    def serve():
+        while not stop.is_set():
+            try:
+                conn, _ = sock.accept()
+            except OSError:
+                continue
+            if behaviour == "silent":
+                held.append(conn)  # accepts, never answers
+                continue
+            with contextlib.suppress(OSError):
+                conn.sendall({"garbage": b"\xff" * 100,
+                              "http": b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n",
+                              "huge-length": (3 << 60).to_bytes(8, "little") + b"\x00" * 64,
+                              "ssh": b"SSH-2.0-OpenSSH_9.2p1 Debian-2\r\n",
+                              "closes": b""}[behaviour])
+            conn.close()
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+
+    def close():
+        stop.set()
+        thread.join(5)
+        for c in held:
+            c.close()
+        sock.close()
+
+    return f"tcp://127.0.0.1:{sock.getsockname()[1]}", close
+
+
+SCHEDULER_CASES = {
+    "silent": r"no Dask handshake within 1 s",
+    "garbage": r"answers, but not as a Dask scheduler",
+    "http": r"answers, but not as a Dask scheduler",
+    "huge-length": r"answers, but not as a Dask scheduler",
+    "ssh": r"answers, but not as a Dask scheduler",
+    "closes": r"closed the connection without a Dask handshake",
+}
+
+
+@pytest.mark.parametrize("behaviour", sorted(SCHEDULER_CASES))
+def test_a_scheduler_that_is_not_dask_is_one_line_within_the_deadline(behaviour, tmp_path,
+                                                                      monkeypatch):
+    monkeypatch.setattr(runner.executors, "DASK_CONNECT_TIMEOUT_S", 1)
+    address, close = _server(behaviour)
+    try:
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), pytest.raises(InputError) as info:
+            runner.run_experiment("stability", ["euler"], ["dahlquist"], quick=True, jobs=1,
+                                  cache_dir=tmp_path, progress=False, scheduler=address)
+    finally:
+        close()
+    assert re.search(SCHEDULER_CASES[behaviour], str(info.value)), str(info.value)
+    assert "\n" not in str(info.value) and "Traceback" not in err.getvalue()
+
+
+@pytest.mark.parametrize("address", ["tls://127.0.0.1:8786", "ucx://127.0.0.1:8786",
+                                     "ws://127.0.0.1:8786", "wss://host:1", "inproc://127.0.0.1"])
+def test_scheduler_protocols_that_need_more_than_an_address_are_one_line(address):
+    code, err = _cli_err(["gate", "--stepper", "euler", "--problem", "dahlquist", "--scheduler",
+                          address])
+    assert code == 2 and len(err) == 1 and "only tcp://HOST:PORT addresses" in err[0], err
+
+
+def _cli_err(argv):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(argv)
+    return code, [ln for ln in err.getvalue().splitlines() if ln.strip()]
+
+
+# -- signals with worker pools ------------------------------------------------------------------------------
+@pytest.mark.parametrize("sig,status,line", [(signal.SIGINT, 130, "harness: interrupted"),
+                                             (signal.SIGTERM, 143, "harness: terminated")])
+def test_a_double_signal_to_the_group_during_a_pool_run_is_one_line_and_its_status(sig, status,
+                                                                                  line, tmp_path):
+    plugin = tmp_path / "slow.py"
+    plugin.write_text(SLOW_PLUGIN)
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = dict(os.environ, TMPDIR=str(tmp), HARNESS_CACHE_DIR=str(tmp_path / "cache"),
+               HARNESS_RESULTS_DIR=str(tmp_path / "results"))
+    proc = subprocess.Popen([sys.executable, "-m", "harness", "gate", "--plugin", str(plugin),
+                             "--stepper", "slow-euler", "--problem", "dahlquist", "--problem",
+                             "gaussian", "--jobs", "2"], cwd=ROOT, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True,  # a terminal's Ctrl-C reaches the group
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    for _ in range(1200):
+        if list(tmp.glob("harness-claims-*/*")) or proc.poll() is not None:
+            break
+        time.sleep(0.1)
+    os.killpg(proc.pid, sig)
+    time.sleep(0.2)
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, sig)  # the impatient second Ctrl-C
+    _, err = proc.communicate(timeout=120)
+    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("convergence:")]
+    assert proc.returncode == status, err
+    assert lines == [line], err
+
+
+# -- listing compiles nothing; a compile is interruptible ---------------------------------------------------
+def test_listing_problems_compiles_nothing(plugin_file, monkeypatch):
+    import heyoka
+
+    path = plugin_file("timed.py", "import heyoka as hy\nfrom harness.problem import Problem\n"
+                                   "x, v = hy.make_vars('x', 'v')\n"
+                                   "PROBLEMS = [Problem('forced-listed', variables=[x, v], "
+                                   "rhs=[v, -x + hy.cos(hy.time)], y0=[1.0, 0.0], "
+                                   "t_span=(0.0, 1.0))]\n")
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("listing compiled a problem")
+
+    monkeypatch.setattr(heyoka, "cfunc", refuse)
+    monkeypatch.setattr(heyoka, "taylor_adaptive", refuse)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["list", "problems", "--json", "--plugin", path]) == 0
+    record = next(r for r in json.loads(out.getvalue()) if r["name"] == "forced-listed")
+    assert record["time_dependent"] is True and record["dim"] == 2
+
+
+def test_a_large_compile_is_interrupted_by_ctrl_c(tmp_path):
+    """heyoka compiles with the GIL released; run through `cache.interruptible` the main thread
+    still takes Ctrl-C. The compile alone takes minutes here, so the child ends long before."""
+    source = ("import heyoka as hy, sys\nfrom harness import cache\n"
+              "xs = hy.make_vars(*[f'x{i}' for i in range(5000)])\n"
+              "exprs = [xs[i] * xs[(i + 1) % 5000] + hy.sin(xs[i - 1]) for i in range(5000)]\n"
+              "print('compiling', flush=True)\n"
+              "try:\n    cache.interruptible(lambda: hy.cfunc(exprs, list(xs)))\n"
+              "except KeyboardInterrupt:\n    print('interrupted', flush=True)\n    sys.exit(130)\n")
+    env = dict(os.environ, HARNESS_CODE_CACHE_DIR=str(tmp_path / "code"))
+    proc = subprocess.Popen([sys.executable, "-c", source], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "compiling"
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=90)
+    assert proc.returncode == 130 and "interrupted" in out, err
