@@ -192,12 +192,15 @@ def test_not_converged_lists_every_cell_that_did_not_converge_with_its_reason():
          "expected_order": 8.0, "outcome": "not-measurable", "reason": "the float64 floor"},
         {"stepper": "c", "problem": "p", "verdict": "converged", "expected": "converged",
          "expected_order": 4.0, "outcome": "fail", "reason": "measured 3.1"},
+        {"stepper": "b", "problem": "(any)", "verdict": "", "expected": "a measured claim",
+         "expected_order": None, "outcome": "not-verified", "reason": "not verified: no cell"},
     ])
     rows = not_converged(gate)
-    assert list(rows.group) == ["fail", "not-measurable", "predicted"]
+    assert list(rows.group) == ["fail", "not-verified", "not-measurable", "predicted"]
     text = format_not_converged(rows, len(gate))
     assert "b x p: insufficient-range (expected converged at order 8): the float64 floor" in text
-    assert text.endswith("4 cells: 1 converged as expected, 1 predicted, 1 not-measurable, 1 fail")
+    assert text.endswith("5 cells: 1 converged as expected, 1 predicted, 1 not-measurable, "
+                         "1 not-verified, 1 fail")
 
 
 def test_not_converged_command_refuses_a_directory_without_a_summary(tmp_path, capsys):
