@@ -185,7 +185,17 @@ def energy_expectation(method: MethodFacts, declared_symplectic: bool = False) -
 
 def drift_prediction(method: MethodFacts) -> str:
     """The informational drift prediction for a fixed-step one-step method that is neither
-    symplectic nor symmetric (the module docstring), or '' for every other method."""
+    symplectic nor symmetric (the module docstring), or '' for every other method.
+
+    Parameters
+    ----------
+    method : MethodFacts
+
+    Returns
+    -------
+    str
+        The prediction's sentence, or ''.
+    """
     if (method.one_step and not method.adaptive and not method.symplectic
             and method.symmetric is False and method.order):
         return (f"neither symplectic nor symmetric, order {method.order}: first-order theory "
