@@ -9,7 +9,8 @@ A verdict never looks at a name. It follows from
 - `ProblemFacts`: what the symbolic (heyoka) definition says: linear (a constant Jacobian and no
   explicit time), the degree of a polynomial solution (a nilpotent affine system), whether the
   acceleration is velocity-free, and how stiff it is (the Jacobian's spectrum sampled along the
-  reference solution over the convergence horizon).
+  reference solution over the convergence horizon); `central_field`: whether every body's
+  acceleration is parallel to its own position (decided on the definition at sampled positions).
 
 Two steppers with the same coefficients have the same facts, whatever they are called.
 References: Hairer, Norsett & Wanner, *Solving ODEs I*, II.2 and III.2 (order), Hairer & Wanner,
