@@ -18,6 +18,7 @@ import math
 
 import helpers
 import heyoka as hy
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -97,6 +98,34 @@ _body_vars, _body_nf, _ = _body.derive()
 def test_central_field_is_derived_from_the_definition(problem, central):
     problem = get_problem(problem) if isinstance(problem, str) else problem
     assert central_field(problem) is central
+
+
+def _generated_field(seed: int, anisotropy: float) -> Problem:
+    """A random radial field -(c0 + c1 r^2 + c2 r^4) q in 2-D or 3-D, plus `anisotropy` times a
+    random traceless linear field (central exactly when `anisotropy` is 0)."""
+    rng = np.random.default_rng(seed)
+    d = 2 + seed % 2
+    q, v = list(hy.make_vars("x", "y", "z")[:d]), list(hy.make_vars("vx", "vy", "vz")[:d])
+    r2 = sum((c * c for c in q[1:]), q[0] * q[0])
+    c0, c1, c2 = rng.uniform(0.1, 2.0, 3)
+    M = rng.standard_normal((d, d))
+    M -= np.trace(M) / d * np.eye(d)
+    acc = tuple(-(c0 + c1 * r2 + c2 * r2 * r2) * q[i]
+                + anisotropy * sum((float(M[i, j]) * q[j] for j in range(d)), hy.expression(0.0))
+                for i in range(d))
+    return Problem(f"test-field-{seed}", variables=q + v,
+                   newtonian=NewtonianForm(positions=tuple(q), velocities=tuple(v), acceleration=acc),
+                   y0=list(rng.uniform(-1, 1, d)) + [0.0] * d, t_span=(0.0, 1.0),
+                   reference="generated test field")
+
+
+def test_central_field_has_no_false_alarm_or_miss_on_generated_fields():
+    """Judge the judge: 6 random central fields and 6 with a small anisotropy (1e-3 to 1e-8 of
+    the field), each known by construction."""
+    central = [central_field(_generated_field(seed, 0.0)) for seed in range(6)]
+    anisotropic = [central_field(_generated_field(seed, 10.0 ** -(3 + seed))) for seed in range(6)]
+    assert all(central), central
+    assert not any(anisotropic), anisotropic
 
 
 # -- course claims: what their words name -------------------------------------------------------------
