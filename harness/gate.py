@@ -8,9 +8,9 @@ tolerated verdict. Besides the cells, a stepper fails when
 - the order computed from its coefficients differs from its claimed order, or its claimed
   symmetry or symplecticity contradicts what its coefficients say (a mislabelled table fails even
   if a measurement happens to look right);
-- none of its cells measured the claim (a stepper judged on nothing does not pass): a row of its
-  own, problem `(any)`, outcome `not-verified` (not `fail`: nothing contradicted the claim; on
-  other problems it may well hold), which the CLI reports with its own exit status.
+- none of its cells measured the claim and none contradicted it (a stepper judged on nothing
+  does not pass): a row of its own, problem `(any)`, outcome `not-verified` (not `fail`: on
+  other problems the claim may well hold), which the CLI reports with its own exit status.
 A map that declares an error law in the perturbation (eps^a h^b terms) on an N-body problem is
 judged by `harness.perturbation_law` from that law and the problem's masses instead.
 No stepper is named here: the same coefficients get the same verdicts under any name.
@@ -75,8 +75,8 @@ def judge(record: Mapping, facts: MethodFacts | None = None,
 
 def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
     """Judge every convergence summary record; failing rows first. A stepper whose claims its
-    coefficients contradict fails on every row; one with no passing row gets a row of its own
-    (problem `(any)`, outcome `not-verified`, not passed).
+    coefficients contradict fails on every row; one with neither a passing nor a failing row
+    gets a row of its own (problem `(any)`, outcome `not-verified`, not passed).
 
     Parameters
     ----------
@@ -111,7 +111,7 @@ def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
     table = pd.DataFrame(rows, columns=GATE_COLUMNS)
     for name, (facts, _) in per_stepper.items():
         mine = table[table.stepper == name]
-        if not (mine.outcome == "pass").any():
+        if not mine.outcome.isin(["pass", "fail"]).any():  # nothing verified, nothing contradicted
             table.loc[len(table)] = {
                 "stepper": name, "problem": "(any)", "claimed_order": mine.claimed_order.iloc[0],
                 "coefficient_order": facts.order if facts.source == "coefficients" else None,
