@@ -4,7 +4,8 @@
   theory, HNW I, II.8), never a failure: backward Euler's energy error saturates on
   `lennard-jones`, forward Euler's grows faster than linearly;
 - energy: a run too short to tell a drift from a bounded error (free fall leaves its regime within
-  16 steps) is `not-measurable` and gets no drift class;
+  16 steps) is `not-measurable` and gets no drift class; so is a bounded-energy claim at a step
+  beyond the method's h-omega limit (the theorem holds for small steps);
 - course claims are judged on what their words name: RK4's drift is not refuted where RK4 is
   exact, Verlet's angular momentum is judged on the splittings it names, on central fields
   (derived from the definition) only — and both judges can still disagree;
@@ -64,6 +65,15 @@ def test_a_run_too_short_to_classify_gets_no_drift_class():
         assert r.steps < 100, r
         assert r.verdict == "not-measurable" and r.drift_class == "" and bool(r.passed), r
         assert "too short to tell a drift" in r.message, r.message
+
+
+@pytest.mark.parametrize("stepper", ["velocity-verlet", "forest-ruth"])
+def test_a_bounded_energy_claim_is_not_judged_beyond_the_methods_step_limit(stepper):
+    """h omega = 2.5 is past both methods' h-omega limits (2 and 1.57): the orbit blows up, and
+    the theorem behind the claim (small steps) says nothing there (it used to fail the claim)."""
+    r = helpers.run_direct(ENERGY, [stepper], ["harmonic"], h=2.5, steps=2_000, ensemble=1).iloc[0]
+    assert r.expected_class == "bounded" and r.verdict == "not-measurable" and bool(r.passed), r.message
+    assert r.drift_class == "" and "exceeds the method's limit" in r.message, r.message
 
 
 # -- central fields, from the definition ----------------------------------------------------------------

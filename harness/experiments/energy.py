@@ -30,18 +30,17 @@ For one (stepper, problem) cell:
    what rounding explains (Brouwer's law: rounding makes the energy error a random walk,
    ~ sqrt(n) eps; HLW VIII.5): `as-claimed`, else `claim-false`. Whether a method is symplectic
    comes from its coefficients (`harness.rules.energy_expectation`), never from its name. No
-   other energy claim has a theorem behind it: a fixed-step one-step method that is neither
-   symplectic nor symmetric gets the drift first-order theory predicts from its first period
-   beside what the run shows (`harness.rules.describe_drift`: `no-claim`, or `not-measurable`
-   when rounding hides the prediction); other methods are measured without a claim
-   (`no-claim`). A run too short to tell a drift from a bounded error (less than
-   ENCOUNTER_MIN_DECADES after the fit's start: free fall leaves its regime within 16 steps) is
-   `not-measurable` whatever the method, and no `not-measurable` cell is given a drift class.
+   other energy claim has a theorem behind it: other methods are measured without a claim
+   (`no-claim`), a one-step method neither symplectic nor symmetric with the drift predicted
+   from its first period beside (`harness.rules.describe_drift`). A run too short to tell a
+   drift from a bounded error (less than ENCOUNTER_MIN_DECADES after the fit's start: free fall
+   leaves its regime within 16 steps) is `not-measurable`, and such a cell gets no drift class.
    Close encounters: where the fastest rate along the run rises more than ENCOUNTER_RATE_RISE
    times over its start after the usual fit start, the envelope is read from where that rate is
    first reached (a bounded error ~(h rho)^p rises with each closer approach; the Pleiades'
-   energy error jumps to ~4e-3 at t ~ 1.7 and stays below it). The cell is not measurable when
-   h rho exceeds the method's h-omega stability limit there, or when less than
+   energy error jumps to ~4e-3 at t ~ 1.7 and stays below it). A bounded-energy claim is not
+   measurable where h rho exceeds the method's h-omega stability limit (there, or at the fastest
+   rate of an orbit without encounters: the theorem's small-step premise fails), nor when less than
    ENCOUNTER_MIN_DECADES of the run remains after it. In a central field (each body's
    acceleration parallel to its position, `harness.facts.central_field`), steppers whose
    structure conserves quadratic invariants (symplectic Runge-Kutta, splitting and Stormer
@@ -373,7 +372,8 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
     reasons: list[str] = []
     passed = True
     why_not = _not_measurable(expected_class, expected_reason or prediction, encounter, n_end,
-                              fit_start, facts.hw_limit)
+                              fit_start, facts.hw_limit,
+                              float(first["h"]) * _problem(problem).time_scale.fastest_rate)
     if why_not:
         verdict = "not-measurable"
         rec["message"] = _with_note(message, why_not)
@@ -434,9 +434,15 @@ def _encounter_note(encounter: dict) -> str:
 
 
 def _not_measurable(expected_class: str, expected_reason: str, encounter: dict | None, n_end: int,
-                    fit_start: float, hw_limit: float | None) -> str | None:
-    """Why this run cannot tell the energy error's class, or None: too short a run (any cell), or,
-    for a claim or a prediction, a close `encounter` (the module docstring, item 4)."""
+                    fit_start: float, hw_limit: float | None, h_rho: float) -> str | None:
+    """Why this run cannot tell the energy error's class, or None: too short a run (any cell); for
+    a bounded-energy claim, a step beyond the method's h-omega limit at the orbit's fastest rate
+    (`h_rho`: the theorem needs a small step); for a claim or a prediction, a close `encounter`
+    (the module docstring, item 4)."""
+    beyond = hw_limit is not None and math.isfinite(hw_limit) and h_rho > hw_limit
+    if expected_class == "bounded" and beyond and encounter is None:
+        return (f"not measurable at this step: h omega_max = {h_rho:.3g} exceeds the method's "
+                f"limit {hw_limit:.4g} (the near-conservation of energy holds for small steps only)")
     if encounter is None:
         span_decades = math.log10(n_end / max(fit_start, 1.0)) if n_end > 0 else -math.inf
         if span_decades >= tol.ENCOUNTER_MIN_DECADES:
