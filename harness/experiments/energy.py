@@ -34,7 +34,8 @@ For one (stepper, problem) cell:
    (`no-claim`), a one-step method neither symplectic nor symmetric with the drift predicted
    from its first period beside (`harness.rules.describe_drift`). A run too short to tell a
    drift from a bounded error (less than ENCOUNTER_MIN_DECADES after the fit's start: free fall
-   leaves its regime within 16 steps) is `not-measurable`, and such a cell gets no drift class.
+   leaves its regime within 16 steps) is `not-measurable`; no `not-measurable` cell gets a
+   drift class, unless an implicit solve broke down (that run is `unstable`).
    Close encounters: where the fastest rate along the run rises more than ENCOUNTER_RATE_RISE
    times over its start after the usual fit start, the envelope is read from where that rate is
    first reached (a bounded error ~(h rho)^p rises with each closer approach; the Pleiades'
@@ -400,7 +401,7 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
         rec["message"] = _with_note(message, why)
     else:
         verdict = "no-claim"
-    if verdict == "not-measurable":
+    if verdict == "not-measurable" and "step failure: " not in message:
         rec["drift_class"] = ""  # a class drawn from a run that cannot show one would mislead
     L = g[g.quantity == "angular_momentum"].sort_values("step")
     problem_obj = _problem(problem)
