@@ -40,9 +40,9 @@ For one (stepper, problem) cell:
    times over its start after the usual fit start, the envelope is read from where that rate is
    first reached (a bounded error ~(h rho)^p rises with each closer approach; the Pleiades'
    energy error jumps to ~4e-3 at t ~ 1.7 and stays below it). A bounded-energy claim is not
-   measurable where h rho exceeds the method's h-omega stability limit (there, or at the fastest
-   rate of an orbit without encounters: the theorem's small-step premise fails), nor when less than
-   ENCOUNTER_MIN_DECADES of the run remains after it. In a central field (each body's
+   measurable where h rho exceeds the method's h-omega limit (there, or at any orbit's fastest
+   rate: the theorem needs small steps), nor with less than ENCOUNTER_MIN_DECADES of the run
+   after the encounter. In a central field (each body's
    acceleration parallel to its position, `harness.facts.central_field`), steppers whose
    structure conserves quadratic invariants (symplectic Runge-Kutta, splitting and Stormer
    methods: HLW IV.2 and VI.4) must keep the angular momentum to rounding: a relative error of
@@ -436,10 +436,8 @@ def _encounter_note(encounter: dict) -> str:
 
 def _not_measurable(expected_class: str, expected_reason: str, encounter: dict | None, n_end: int,
                     fit_start: float, hw_limit: float | None, h_rho: float) -> str | None:
-    """Why this run cannot tell the energy error's class, or None: too short a run (any cell); for
-    a bounded-energy claim, a step beyond the method's h-omega limit at the orbit's fastest rate
-    (`h_rho`: the theorem needs a small step); for a claim or a prediction, a close `encounter`
-    (the module docstring, item 4)."""
+    """Why this run cannot tell the energy error's class, or None (the module docstring, item 4):
+    too short; a bounded claim's h rho beyond `hw_limit`; a close `encounter`."""
     beyond = hw_limit is not None and math.isfinite(hw_limit) and h_rho > hw_limit
     if expected_class == "bounded" and beyond and encounter is None:
         return (f"not measurable at this step: h omega_max = {h_rho:.3g} exceeds the method's "
