@@ -319,7 +319,7 @@ def _copy_run(run: Path, tmp_path: Path) -> Path:
     return target
 
 
-def _cli(argv) -> tuple[int, str, str]:
+def _main_cli(argv) -> tuple[int, str, str]:
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main(argv)
@@ -336,7 +336,7 @@ def test_a_run_id_from_meta_json_is_never_used_as_a_path(run_id, stability_runs,
     with pytest.raises(CorruptResultsError, match=r"meta\.json.*is not a run id"):
         results.load(run, "stability")
     before = {p for p in Path("/tmp").glob("absolute-id*")}
-    code, out, err = _cli(["report", "--from", str(run), "--output", str(tmp_path / "reports")])
+    code, out, err = _main_cli(["report", "--from", str(run), "--output", str(tmp_path / "reports")])
     assert code == 2 and len(err.strip().splitlines()) == 1 and "is not a run id" in err, err
     assert "\x1b" not in err
     assert not (tmp_path / "reports").exists() and not (tmp_path / "escaped").exists()
@@ -351,7 +351,7 @@ def test_report_from_a_saved_run_never_imports_the_plugins_its_meta_names(stabil
     meta = json.loads((run / "meta.json").read_text())
     meta["config"]["run"]["plugins"] = [str(plugin)]
     (run / "meta.json").write_text(json.dumps(meta))
-    code, out, err = _cli(["report", "--from", str(run), "--output", str(tmp_path / "reports")])
+    code, out, err = _main_cli(["report", "--from", str(run), "--output", str(tmp_path / "reports")])
     assert code == 0, err
     assert not marker.exists()
     assert Path(out.strip().splitlines()[-1]).is_file()
@@ -384,10 +384,10 @@ def test_a_damaged_verdicts_file_of_an_earlier_report_does_not_stop_compare(dama
                                                                           tmp_path):
     first, second = (_copy_run(r, tmp_path) for r in stability_runs[1][:2])
     reports = tmp_path / "reports"
-    code, out, err = _cli(["report", "--from", str(first), "--output", str(reports)])
+    code, out, err = _main_cli(["report", "--from", str(first), "--output", str(reports)])
     assert code == 0, err
     (reports / first.name / "verdicts.csv").write_bytes(VERDICT_DAMAGE[damage])
-    code, out, err = _cli(["report", "--from", str(second), "--output", str(reports),
+    code, out, err = _main_cli(["report", "--from", str(second), "--output", str(reports),
                            "--compare", str(first)])
     assert code == 0 and "Traceback" not in err, err
     html = Path(out.strip().splitlines()[-1]).read_text(encoding="utf-8")
@@ -400,7 +400,7 @@ def test_damaged_cache_entries_are_discarded_and_recomputed_with_one_warning_eac
     monkeypatch.setenv("HARNESS_RESULTS_DIR", str(tmp_path / "results"))
     argv = ["run", "stability", "--stepper", "euler", "--stepper", "heun", "--problem",
             "dahlquist", "--jobs", "1", "--quick", "--json"]
-    code, first, _ = _cli(argv)
+    code, first, _ = _main_cli(argv)
     assert code == 0
     entries = [p for kind in ("cells", "packs", "summaries")
                for p in (tmp_path / "cache" / kind).rglob("*.parquet")]
@@ -413,14 +413,14 @@ def test_damaged_cache_entries_are_discarded_and_recomputed_with_one_warning_eac
         else:
             p.unlink()
             p.symlink_to("/dev/zero")
-    code, again, err = _cli(argv)
+    code, again, err = _main_cli(argv)
     assert code == 0, err
     warned = [ln for ln in err.splitlines() if ln.startswith("harness: warning: damaged cache entry")]
     assert 1 <= len(warned) <= len(entries) and "Traceback" not in err
     def strip(text):
         return [{k: v for k, v in r.items() if k not in ("wall_s",)} for r in json.loads(text)]
     assert strip(again) == strip(first)
-    code, third, err = _cli(argv)  # recomputed entries were written back: no warning now
+    code, third, err = _main_cli(argv)  # recomputed entries were written back: no warning now
     assert code == 0 and "damaged cache entry" not in err
 
 
@@ -437,7 +437,7 @@ def test_an_unwritable_cache_is_one_line_with_its_status_before_any_cell(code, e
     monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setenv("HARNESS_RESULTS_DIR", str(tmp_path / "results"))
     monkeypatch.setattr(tempfile, "mkstemp", refuse)
-    status, out, err = _cli(["run", "stability", "--stepper", "euler", "--problem", "dahlquist",
+    status, out, err = _main_cli(["run", "stability", "--stepper", "euler", "--problem", "dahlquist",
                              "--jobs", "1", "--quick"])
     assert status == expected, err
     line = _one_error_line(err)
@@ -464,7 +464,7 @@ def test_reference_with_a_faulty_exact_solution_is_one_line(fault, plugin_file):
                        "y = hy.make_vars('y')\n"
                        f"PROBLEMS = [Problem({name!r}, variables=[y], rhs=[-y], y0=[1.0], "
                        f"t_span=(0.0, 1.0), exact=lambda t, y0, t0, p: {body})]\n")
-    code, out, err = _cli(["reference", name, "--t", "0.5", "--plugin", path])
+    code, out, err = _main_cli(["reference", name, "--t", "0.5", "--plugin", path])
     assert code == 2 and out == "", err
     import re
 

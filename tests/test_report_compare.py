@@ -103,16 +103,10 @@ def test_a_report_compared_with_itself_lists_no_change(two_runs, tmp_path):
     from harness.report import write_report
     from harness.store import load_run
 
-    results = two_runs["second"].parent.parent.parent / "results"
-    run = load_run(two_runs["second"].parent.name, root=results)
-    try:
+    base = two_runs["second"].parent.parent.parent
+    run = load_run(two_runs["second"].parent.name, root=base / "results")
+    with plugin(base, 0.5 + PERTURBATION, ", with a32 perturbed by 0.02"):  # loaded by the caller
         again = write_report(run, output=tmp_path / "reports", compare=str(run.path))
-    finally:  # write_report loaded the run's plugin again
-        for path in list(registry._plugins):
-            if "rk4_plugin" in path:
-                for n in [NAME] if NAME in registry.steppers else []:
-                    registry.steppers.unregister(n)
-                registry._plugins.pop(path, None)
     changes = again.read_text(encoding="utf-8").split('<section id="changes"')[1].split("</section>")[0]
     assert "No earlier run to compare with" in changes  # a run is not "earlier" than itself
 
@@ -139,8 +133,13 @@ def test_cli_from_rerenders_a_saved_run_without_measuring(two_runs, tmp_path, ca
     runs_before = sorted(p.name for p in results.iterdir())
     try:
         # the same reports directory: the earlier report's recorded verdicts are found there
-        code = main(["report", "--from", run_id, "--output", str(two_runs["second"].parent.parent)])
-    finally:  # the re-render loaded the run's plugin again
+        reports = str(two_runs["second"].parent.parent)
+        code = main(["report", "--from", run_id, "--output", reports])
+        refused = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(refused) == 1 and "never imported" in refused[0]  # opt in:
+        plugin = two_runs["second"].parent.parent.parent / "rk4_plugin_bad.py"
+        code = main(["report", "--from", run_id, "--output", reports, "--plugin", str(plugin)])
+    finally:  # the re-render loaded the plugin given to it
         for path in list(registry._plugins):
             if "rk4_plugin" in path:
                 for n in [NAME] if NAME in registry.steppers else []:

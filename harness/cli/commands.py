@@ -276,8 +276,10 @@ def cmd_report(args) -> int:
 
 
 def _grid_options_given(args) -> list[str]:
-    """The measuring options given on the command line (`report --from` takes none)."""
-    given = [f"--{k}" for k in ("stepper", "problem", "plugin") if getattr(args, k)]
+    """The measuring options given on the command line (`report --from` takes none; `--plugin`
+    is not one: it loads the steppers of a run measured with plugins, which `--from` never
+    imports from the run's own meta.json)."""
+    given = [f"--{k}" for k in ("stepper", "problem") if getattr(args, k)]
     given += [f"--{k}" for k in ("quick", "fresh") if getattr(args, k)]
     given += [f"--{k.replace('_', '-')}" for k in ("jobs", "scheduler", "cell_timeout")
               if getattr(args, k) is not None]

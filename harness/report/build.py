@@ -255,11 +255,12 @@ def rerender_report(run: str | os.PathLike | None, *, output: str | os.PathLike 
     return write_report(stored, output=output, compare=compare, compare_default=True)
 
 
-def run_view(stored: Any) -> Any:
+def run_view(stored: Any, *, need_steppers: bool = True) -> Any:
     """The RunView of a saved run: its tables, and the steppers, problems and mode of its own
     configuration. Plugin files its meta.json names are never imported (opening someone else's
     results directory must not run their code): a plugin's steppers are shown when this process
-    loaded it (the run it just measured, or `harness report --from RUN --plugin FILE`)."""
+    loaded it (the run it just measured, or `harness report --from RUN --plugin FILE`); with
+    `need_steppers`, a run whose plugin steppers are not loaded is an `InputError` saying so."""
     from harness import registry
     from harness.report import figures as F
     from harness.report.sections import RunView
@@ -269,6 +270,13 @@ def run_view(stored: Any) -> Any:
     stepper_names = list(cfg.get("steppers") or registry.steppers.names())
     problem_names = list(cfg.get("problems") or registry.problems.names())
     known = [n for n in stepper_names if n in registry.steppers]
+    plugins = [str(p) for p in cfg.get("plugins", []) or []]
+    if need_steppers and plugins and len(known) < len(stepper_names):
+        missing = [n for n in stepper_names if n not in registry.steppers]
+        raise InputError(
+            f"run {stored.run_id!r} was measured with plugin file(s) {plugins}, whose steppers "
+            f"{missing[:5]} are not loaded; files named by a results directory are never "
+            "imported: pass them with --plugin FILE to re-render it")
     infos = {n: registry.get_stepper(n).info for n in known}
     return RunView(
         rows=dict(stored.rows), summaries=dict(stored.summaries), meta=meta,
@@ -307,7 +315,7 @@ def write_report(
     if compare is not None or compare_default:
         previous = load_previous(compare, results_root=stored.path.parent, reports_root=root,
                                  current=stored.run_id,
-                                 view_factory=run_view)
+                                 view_factory=lambda s: run_view(s, need_steppers=False))
         if previous is not None:
             _say(bar, f"comparing with run {previous.run_id}")
     t0 = time.perf_counter()

@@ -97,13 +97,11 @@ def _read_verdicts(path: Path) -> tuple[pd.DataFrame | None, str]:
                                keep_default_na=False)
     except Exception as exc:  # noqa: BLE001  (any damage: unreadable, not CSV, not UTF-8)
         return None, " ".join(f"{type(exc).__name__}: {exc}".split())[:200]
-    missing = [c for c in VERDICT_COLUMNS if c not in verdicts.columns]
+    written = [c for c in VERDICT_COLUMNS if c != "anchor"]  # a report stores all but anchors
+    missing = [c for c in written if c not in verdicts.columns]
     if missing:
         return None, f"columns {missing} missing"
     verdicts["passed"] = verdicts["passed"].astype(str).str.lower().isin(("true", "1"))
-    for c in VERDICT_COLUMNS:
-        if c != "passed":
-            verdicts[c] = verdicts[c].astype(str)
     return verdicts, ""
 
 
