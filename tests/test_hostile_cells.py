@@ -294,3 +294,13 @@ def test_api_check_over_no_applicable_cell_fails_the_claim_as_not_measured(probl
     table = info.value.report.table
     assert list(table["measured"]) == ["not measured"] * len(problems)
     assert table["detail"].str.contains("needs a Newtonian problem").all()
+
+
+@pytest.mark.parametrize("y0", [np.array([1 + 1j, 0.0]), [1 + 0j, 0.0], [[1j], [0.0]],
+                                np.zeros((2, 3), dtype=np.complex64)])
+def test_a_complex_start_state_is_refused_not_cast(y0):
+    from harness.errors import InputError
+
+    stepper, problem = registry.get_stepper("rk4"), registry.get_problem("harmonic")
+    with pytest.raises(InputError, match=r"`y0` must be real numbers \(complex values are not cast"):
+        stepper.integrate(problem, y0=y0, h=0.1, n_steps=3)

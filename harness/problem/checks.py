@@ -57,7 +57,10 @@ def check_count(value: Any, label: str, maximum: int) -> int:
 
 
 def check_state(y: Any, dim: int, name: str = "y0") -> np.ndarray:
-    """A state shaped (dim,) or (dim, N) as a float64 (dim, N) array, finite."""
+    """A state shaped (dim,) or (dim, N) as a float64 (dim, N) array, real and finite (complex
+    values are refused, never cast)."""
+    if np.iscomplexobj(y) or (isinstance(y, list | tuple) and any(isinstance(v, complex) for v in y)):
+        raise InputError(f"`{name}` must be real numbers (complex values are not cast to real)")
     try:
         arr = np.array(y, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
