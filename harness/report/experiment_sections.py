@@ -457,6 +457,9 @@ def work_precision(view: RunView, sec: Section) -> None:
                 ("wall_to_target", f"wall s to reach {F.WORK_TARGET_ERROR:g}"), ("unit", "evaluation unit")]
         sec.table(df_table(table, cols, f"Per stepper and problem: cost of reaching "
                            f"{F.WORK_TARGET_ERROR:g}", experiment=name, status=None, sort_failing=False))
+    from harness.report.timing_section import add_time_sections
+
+    add_time_sections(view, sec)  # error against warm time, time to target, same-method groups
 
 
 # -- roundoff -------------------------------------------------------------------------------------

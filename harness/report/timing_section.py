@@ -1,0 +1,191 @@
+"""The work-precision section's timed part: error against warm time per problem, the time to reach
+target errors, and one method's implementations side by side.
+
+Drawn from the work-precision rows' timing columns (`harness.experiments.timed_runs`, protocol in
+`harness.timing`): one figure per problem (each family's best by time bold, the Pareto front of
+time and error marked), the time-to-target table (log-error against log-time interpolated between
+measured points; "not reached" said), the same-method groups (implementations grouped by their
+coefficients' identity, never by name: their errors at equal steps must agree to rounding, and
+their times are given as ratios), and the spread of the repeated timings per problem.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.report.figure_style import (
+    LEGEND_CHAR_W,
+    LOG_CEILING,
+    Palette,
+    label_text,
+    loglog_axes,
+    small_multiples,
+    small_ticks,
+    styled,
+)
+from harness.report.figure_svg import Figure, to_svg
+from harness.report.sections import RunView, Section, df_table
+
+__all__ = ["time_precision_figure", "add_time_sections", "twin_rows"]
+
+MARKERS_PER_LINE = 8
+
+
+@styled
+def time_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
+                          adaptive: Mapping[str, bool]) -> Figure | None:
+    """Error against warm time (`t_min_s`) on one problem, one line per stepper: each family's
+    fastest to the target error bold, the others faint, adaptive ones dashed; the Pareto front
+    (`pareto_time`) as a black step line with open circles."""
+    from matplotlib.lines import Line2D
+
+    from harness.report.figures_work import WORK_TARGET_ERROR, best_per_family
+
+    if "t_min_s" not in rows or "error" not in rows:
+        return None
+    err = rows["error"].astype(float)
+    cost = rows["t_min_s"].astype(float)
+    frame = rows[np.isfinite(err) & (err > 0) & (err <= LOG_CEILING) & np.isfinite(cost) & (cost > 0)]
+    if frame.empty:
+        return None
+    best = best_per_family(frame, palette.families, cost="t_min_s")
+    bold = set(best.values())
+    longest = max([len(label_text(s)) + len(f) + 8 for f, s in best.items()] + [22])
+    fig, axes = small_multiples(1, ncols=1, panel=(4.2, 3.0), right=longest * LEGEND_CHAR_W * 0.85 + 0.5)
+    ax = axes[0]
+    for stepper, s in frame.groupby("stepper", sort=False):
+        s = s.sort_values("t_min_s")
+        peer = adaptive.get(stepper, False)
+        strong = stepper in bold
+        c = palette.colour(stepper)
+        ax.plot(s["t_min_s"].astype(float), s["error"].astype(float), "--" if peer else "-",
+                marker=palette.marker(stepper) if strong else None, ms=3.2, lw=1.6 if strong else 0.6,
+                markevery=max(1, math.ceil(len(s) / MARKERS_PER_LINE)), alpha=1.0 if strong else 0.3,
+                color=c, markerfacecolor="none" if peer else c, zorder=3 if strong else 2)
+    if "pareto_time" in frame:
+        front = frame[frame["pareto_time"].astype(bool)].sort_values("t_min_s")
+        if len(front):
+            ax.step(front["t_min_s"].astype(float), front["error"].astype(float), where="post",
+                    color="black", lw=0.7, zorder=4)
+            ax.plot(front["t_min_s"].astype(float), front["error"].astype(float), "o", ms=4.0,
+                    markerfacecolor="none", markeredgecolor="black", mew=0.6, zorder=5)
+    loglog_axes(ax)
+    ax.set_xlabel("warm time, minimum of repeats (s)", fontsize=7.5)
+    ax.set_ylabel("error at the final time", fontsize=7.5)
+    small_ticks(ax)
+    handles = [Line2D([], [], color=palette.colour(s), marker=palette.marker(s), ms=3, lw=1.6,
+                      ls="--" if adaptive.get(s) else "-",
+                      label=f"{label_text(s)} (fastest {fam or 'method'})")
+               for fam, s in best.items()]
+    handles.append(Line2D([], [], color="black", lw=0.7, marker="o", markerfacecolor="none", ms=4,
+                          label="Pareto front (time, error)"))
+    handles.append(Line2D([], [], color="0.6", lw=0.6, alpha=0.5, label="other methods (faint)"))
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0,
+              frameon=False, fontsize=6.5)
+    fig.suptitle(f"Error against time on {label_text(problem)} (target {WORK_TARGET_ERROR:g} for 'fastest')",
+                 fontsize=8.5)
+    cols = [c for c in ("stepper", "implementation", "h", "tol", "n_steps", "error", "t_min_s",
+                        "t_median_s", "t_spread", "t_repeats", "t_stop", "baseline", "baseline_units",
+                        "pareto_time") if c in frame]
+    return to_svg(fig, f"time-{problem}", f"error against time on {problem}",
+                  frame[cols].reset_index(drop=True))
+
+
+def twin_rows(rows: pd.DataFrame) -> pd.DataFrame:
+    """The rows in long form for `harness.timing.same_method_groups`: every timed row as it is,
+    plus one row per NumPy twin measurement (its implementation, error and time at that point).
+
+    Parameters
+    ----------
+    rows : DataFrame
+        Work-precision rows with the timing columns.
+
+    Returns
+    -------
+    DataFrame
+        Columns stepper, implementation, method_id, problem, h, n_steps, error, t_min_s,
+        rounding_level.
+    """
+    cols = ["stepper", "implementation", "method_id", "problem", "h", "n_steps", "error", "t_min_s",
+            "rounding_level"]
+    if rows.empty or not {"method_id", "twin_error", "t_min_s"} <= set(rows.columns):
+        return pd.DataFrame(columns=cols)
+    base = rows.reindex(columns=cols)
+    twins = rows[rows["twin_error"].notna()]
+    twin = twins.reindex(columns=cols).assign(
+        implementation=twins["twin_implementation"].astype(str), error=twins["twin_error"],
+        t_min_s=twins["twin_min_s"])
+    return pd.concat([base, twin], ignore_index=True)
+
+
+def _machine_note(rows: pd.DataFrame) -> str:
+    def first(c: str) -> str:
+        return str(rows[c].dropna().iloc[0]) if c in rows and rows[c].notna().any() else "unknown"
+
+    load = rows["load_1min"].astype(float) if "load_1min" in rows else pd.Series(dtype=float)
+    span = f"{load.min():.2f}-{load.max():.2f}" if load.notna().any() else "unknown"
+    return (f"Machine: {first('cpu')}, {first('cores')} logical cores, BLAS {first('blas')} with "
+            f"{first('blas_threads')} thread(s); 1-minute load average {span} while the cells were timed.")
+
+
+def add_time_sections(view: RunView, sec: Section) -> None:
+    """Append the timed part to the work-precision section `sec` (module docstring)."""
+    from harness.timing import PROTOCOL, same_method_groups, time_to_target_table
+
+    name = "work-precision"
+    rows = view.rowtable(name)
+    if "t_min_s" not in rows or not np.isfinite(rows["t_min_s"].astype(float)).any():
+        sec.note("This run has no timed work-precision points (its rows predate the timing "
+                 "protocol); error against time is not drawn.", cls="warning")
+        return
+    cfg = view.meta.get("experiments", {}).get(name, {}).get("config", {}) or {}
+    sec.heading("Error against time")
+    sec.note(PROTOCOL.format(spread=tol.TIMING_TARGET_SPREAD, min_r=tol.TIMING_MIN_REPEATS,
+                             max_r=cfg.get("timing_max_repeats", tol.TIMING_MAX_REPEATS),
+                             budget=cfg.get("timing_budget_s", tol.TIMING_POINT_BUDGET_S))
+             + " " + _machine_note(rows))
+    adaptive = view.flag("adaptive")
+    for problem in [p for p in view.problems if p in set(rows["problem"])]:
+        part = rows[rows["problem"] == problem]
+        sec.figure(time_precision_figure(problem, part, view.palette, adaptive),
+                   f"Error against warm time on {problem}; the black line is the Pareto front.")
+    table = time_to_target_table(rows)
+    if len(table):
+        table["time_c"] = table["time_s"] / table.merge(
+            rows.groupby(["problem", "stepper"])["baseline_step_s"].median().rename("b").reset_index(),
+            on=["problem", "stepper"], how="left")["b"].to_numpy()
+        sec.table(df_table(table, [
+            ("problem", "problem"), ("target", "target error"), ("stepper", "stepper"),
+            ("time_s", "time to reach it (s)"), ("status", "how"), ("ratio_to_fastest", "x fastest"),
+            ("time_c", "in C-baseline steps")],
+            "Time to reach each target error (log-error against log-time interpolated between "
+            "measured points; 'not reached': no point of the sweep got there; 'first point': the "
+            "cheapest point already did, an upper bound)", experiment=name,
+            key=("problem", "target", "stepper"), status=None, sort_failing=False))
+    groups = same_method_groups(twin_rows(rows))
+    if len(groups):
+        groups = groups.assign(agree=groups["agree"].astype(bool))
+        sec.table(df_table(groups, [
+            ("problem", "problem"), ("h", "h"), ("n_steps", "steps"), ("implementations", "implementations"),
+            ("errors", "errors"), ("error_diff", "largest difference"), ("time_ratios", "time / fastest"),
+            ("times_s", "times (s)")],
+            "One method, several implementations (grouped by the identity of their coefficients): "
+            "their errors at the same step must agree to rounding; only their times differ",
+            experiment=name, key=("problem", "implementations", "h"), status="agree"))
+    else:
+        sec.note("No two implementations of one method (equal coefficients) were timed at the same "
+                 "points in this run.")
+    spread = rows[np.isfinite(rows["t_min_s"].astype(float))].groupby("problem").agg(
+        points=("t_min_s", "size"), median_spread=("t_spread", "median"), worst_spread=("t_spread", "max"),
+        repeats=("t_repeats", "median"), baseline_step_ns=("baseline_step_s", "median")).reset_index()
+    spread["baseline_step_ns"] *= 1e9
+    sec.table(df_table(spread, [("problem", "problem"), ("points", "timed points"),
+                                ("median_spread", "median spread"), ("worst_spread", "largest spread"),
+                                ("repeats", "median repeats"), ("baseline_step_ns", "C baseline step (ns)")],
+                       "Spread (median - min) / min of the repeated timings, per problem",
+                       experiment=name, key=("problem",), status=None, sort_failing=False))
