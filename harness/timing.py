@@ -398,10 +398,11 @@ def same_method_groups(rows: pd.DataFrame) -> pd.DataFrame:
         One row per (method_id, problem, h) with at least two implementations: the
         implementations, their errors' largest difference, whether it is within rounding
         (`tolerances.TIMING_SAME_ERROR_ULPS` / `TIMING_SAME_ERROR_RTOL`), and each
-        implementation's time as a ratio to the fastest one at that point.
+        implementation's time as a ratio to the fastest one at that point (`slowest_ratio`: the
+        slowest over the fastest).
     """
     cols = ["method_id", "problem", "h", "n_steps", "implementations", "errors", "error_diff",
-            "agree", "times_s", "time_ratios"]
+            "relative_diff", "agree", "times_s", "time_ratios", "slowest_ratio"]
     need = {"method_id", "implementation", "problem", "h", "error", "t_min_s"}
     if rows.empty or not need <= set(rows.columns):
         return pd.DataFrame(columns=cols)
@@ -425,7 +426,9 @@ def same_method_groups(rows: pd.DataFrame) -> pd.DataFrame:
                     "implementations": " / ".join(f"{s} ({i})" for s, i in
                                                   zip(g["stepper"], g["implementation"], strict=True)),
                     "errors": " / ".join(f"{x:.6e}" for x in err), "error_diff": diff,
+                    "relative_diff": diff / float(np.max(err)) if np.max(err) > 0 else 0.0,
                     "agree": bool(np.isfinite(diff) and diff <= bound),
                     "times_s": " / ".join(f"{t:.3g}" for t in times),
-                    "time_ratios": " / ".join(f"{t / fastest:.2f}" for t in times)})
+                    "time_ratios": " / ".join(f"{t / fastest:.2f}" for t in times),
+                    "slowest_ratio": float(np.nanmax(times) / fastest)})
     return pd.DataFrame(out, columns=cols)

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
+from harness.report.elements import Block, csv_download
 from harness.report.figure_style import (
     LEGEND_CHAR_W,
     LOG_CEILING,
@@ -31,7 +32,7 @@ from harness.report.figure_style import (
 from harness.report.figure_svg import Figure, to_svg
 from harness.report.sections import RunView, Section, df_table
 
-__all__ = ["time_precision_figure", "add_time_sections", "twin_rows"]
+__all__ = ["time_precision_figure", "add_time_sections", "twin_rows", "fastest_table", "group_summary"]
 
 MARKERS_PER_LINE = 8
 
@@ -123,6 +124,60 @@ def twin_rows(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.concat([base, twin], ignore_index=True)
 
 
+def fastest_table(table: pd.DataFrame, others: int = 3) -> pd.DataFrame:
+    """One row per (problem, target) of a `time_to_target_table` (with `time_c`, the time in
+    C-baseline steps): the fastest stepper, its time, the next `others` with their ratios, and
+    how many steppers reached the target.
+
+    Parameters
+    ----------
+    table : DataFrame
+        `harness.timing.time_to_target_table` output plus a `time_c` column.
+    others : int
+        How many runners-up to name.
+
+    Returns
+    -------
+    DataFrame
+        Columns problem, target, fastest, time_s, time_c, next, reached.
+    """
+    out = []
+    for (problem, target), g in table.groupby(["problem", "target"], sort=False):
+        hit = g[np.isfinite(g["time_s"].astype(float))].sort_values("time_s")
+        first = hit.iloc[0] if len(hit) else None
+        out.append({
+            "problem": problem, "target": target,
+            "fastest": first["stepper"] if first is not None else "none reached it",
+            "time_s": first["time_s"] if first is not None else np.nan,
+            "time_c": first["time_c"] if first is not None else np.nan,
+            "next": ", ".join(f"{r.stepper} {r.ratio_to_fastest:.2g}x"
+                              for r in hit.iloc[1:1 + others].itertuples()),
+            "reached": f"{len(hit)} of {len(g)}"})
+    return pd.DataFrame(out, columns=["problem", "target", "fastest", "time_s", "time_c", "next", "reached"])
+
+
+def group_summary(groups: pd.DataFrame) -> pd.DataFrame:
+    """One row per set of implementations of one method (`harness.timing.same_method_groups`
+    output): problems and points compared, whether every point agreed to rounding, the largest
+    relative error difference, and the median ratio of the slowest to the fastest time.
+
+    Parameters
+    ----------
+    groups : DataFrame
+        `same_method_groups` rows.
+
+    Returns
+    -------
+    DataFrame
+        Columns implementations, problems, points, agree, largest_relative_diff, time_ratio.
+    """
+    g = groups.groupby(["method_id", "implementations"], sort=False)
+    out = g.agg(problems=("problem", "nunique"), points=("h", "size"), agree=("agree", "all"),
+                largest_relative_diff=("relative_diff", "max"),
+                time_ratio=("slowest_ratio", "median")).reset_index()
+    return out.drop(columns="method_id")
+
+
 def _machine_note(rows: pd.DataFrame) -> str:
     def first(c: str) -> str:
         return str(rows[c].dropna().iloc[0]) if c in rows and rows[c].notna().any() else "unknown"
@@ -155,31 +210,33 @@ def add_time_sections(view: RunView, sec: Section) -> None:
         sec.figure(time_precision_figure(problem, part, view.palette, adaptive),
                    f"Error against warm time on {problem}; the black line is the Pareto front.")
     table = time_to_target_table(rows)
+    base = rows.groupby(["problem", "stepper"])["baseline_step_s"].median().rename("b").reset_index()
+    table = table.merge(base, on=["problem", "stepper"], how="left")
+    table["time_c"] = table["time_s"] / table.pop("b")
     if len(table):
-        table["time_c"] = table["time_s"] / table.merge(
-            rows.groupby(["problem", "stepper"])["baseline_step_s"].median().rename("b").reset_index(),
-            on=["problem", "stepper"], how="left")["b"].to_numpy()
-        sec.table(df_table(table, [
-            ("problem", "problem"), ("target", "target error"), ("stepper", "stepper"),
-            ("time_s", "time to reach it (s)"), ("status", "how"), ("ratio_to_fastest", "x fastest"),
-            ("time_c", "in C-baseline steps")],
-            "Time to reach each target error (log-error against log-time interpolated between "
-            "measured points; 'not reached': no point of the sweep got there; 'first point': the "
-            "cheapest point already did, an upper bound)", experiment=name,
-            key=("problem", "target", "stepper"), status=None, sort_failing=False))
+        sec.table(df_table(fastest_table(table), [
+            ("problem", "problem"), ("target", "target error"), ("fastest", "fastest"),
+            ("time_s", "its time (s)"), ("time_c", "in C-baseline steps"), ("next", "next (x fastest)"),
+            ("reached", "reached it")],
+            "Time to reach each target error: the fastest stepper and the next three (log-error "
+            "against log-time interpolated between measured points; every stepper's time and how "
+            "it was found in time-to-target.csv)", experiment=name, key=("problem", "target"),
+            status=None, sort_failing=False))
     groups = same_method_groups(twin_rows(rows))
     if len(groups):
-        groups = groups.assign(agree=groups["agree"].astype(bool))
-        sec.table(df_table(groups, [
-            ("problem", "problem"), ("h", "h"), ("n_steps", "steps"), ("implementations", "implementations"),
-            ("errors", "errors"), ("error_diff", "largest difference"), ("time_ratios", "time / fastest"),
-            ("times_s", "times (s)")],
-            "One method, several implementations (grouped by the identity of their coefficients): "
-            "their errors at the same step must agree to rounding; only their times differ",
-            experiment=name, key=("problem", "implementations", "h"), status="agree"))
+        sec.table(df_table(group_summary(groups), [
+            ("implementations", "implementations"), ("problems", "problems"), ("points", "points"),
+            ("largest_relative_diff", "largest relative error difference"),
+            ("time_ratio", "slowest / fastest time (median)")],
+            "One method, several implementations (grouped by the identity of their coefficients, "
+            "never by name): their errors at equal steps agree to rounding (the check) and only their "
+            "times differ; every point in same-method.csv", experiment=name,
+            key=("implementations",), status="agree"))
     else:
         sec.note("No two implementations of one method (equal coefficients) were timed at the same "
                  "points in this run.")
+    sec.blocks.append(Block("downloads", downloads=[d for d in (
+        csv_download(table, "time-to-target.csv"), csv_download(groups, "same-method.csv")) if d]))
     spread = rows[np.isfinite(rows["t_min_s"].astype(float))].groupby("problem").agg(
         points=("t_min_s", "size"), median_spread=("t_spread", "median"), worst_spread=("t_spread", "max"),
         repeats=("t_repeats", "median"), baseline_step_ns=("baseline_step_s", "median")).reset_index()
