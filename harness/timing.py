@@ -358,8 +358,9 @@ def time_to_target_table(rows: pd.DataFrame, targets: Sequence[float] = tol.TIMI
 # -- one method, several implementations ----------------------------------------------------------
 def method_identity(stepper: Any) -> str | None:
     """The identity of the method a stepper computes, from its coefficients: the coefficient
-    object's `fingerprint()` (exact data), or that of the object a black box declares in
-    `info.extra["coefficients"]`; None when neither exists (such a stepper is in no group).
+    object's `fingerprint()` (exact data), or that of the splitting a black box declares in
+    `info.extra["declared_splitting"]` ((kind, coefficient) pairs); None when neither exists
+    (such a stepper is in no group).
 
     Parameters
     ----------
@@ -372,8 +373,11 @@ def method_identity(stepper: Any) -> str | None:
         Equal for two steppers exactly when their coefficients are equal.
     """
     coefficients = getattr(stepper, "coefficients", None)
-    if coefficients is None:
-        coefficients = stepper.info.extra.get("coefficients")
+    declared = stepper.info.extra.get("declared_splitting")
+    if coefficients is None and declared:
+        from harness.coefficients import SplittingScheme
+
+        coefficients = SplittingScheme(f"{stepper.info.name} (declared)", [tuple(x) for x in declared])
     fp = getattr(coefficients, "fingerprint", None)
     if fp is None:
         return None
