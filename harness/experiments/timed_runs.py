@@ -26,7 +26,7 @@ TIMING_COLUMNS = [
     "t_min_s", "t_median_s", "t_spread", "t_repeats", "t_stop", "first_call_s", "method_id",
     "baseline", "baseline_step_s", "baseline_units", "per_step_ratio", "twin_implementation",
     "twin_error", "twin_min_s", "twin_spread", "twin_repeats", "cpu", "cores", "blas",
-    "blas_threads", "load_1min",
+    "blas_threads", "load_1min", "timing_cell_s",
 ]
 
 
@@ -80,13 +80,15 @@ def time_points(stepper, problem, frame: pd.DataFrame, config: Mapping[str, Any]
     -------
     DataFrame
         `frame` with the `TIMING_COLUMNS` added (a point that failed in the sweep is not timed:
-        NaN).
+        NaN); `timing_cell_s` is the wall time the timing took in this cell (the budget's
+        measure), the same on every row of the cell.
     """
     import time
 
     from harness.timing import baseline_step, machine_info, measure, method_identity
     from implementations.compiled import fastest
 
+    started = time.perf_counter()
     clock = clock or time.perf_counter
     settings = protocol_settings(config)
     out = frame.reset_index(drop=True).copy()
@@ -135,6 +137,7 @@ def time_points(stepper, problem, frame: pd.DataFrame, config: Mapping[str, Any]
     _time_twin(stepper, runner, problem, out, y0, call, settings, clock)
     for key, value in machine.items():
         out[key] = value
+    out["timing_cell_s"] = time.perf_counter() - started  # what the timing cost this cell
     return out
 
 

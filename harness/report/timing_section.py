@@ -212,6 +212,11 @@ def add_time_sections(view: RunView, sec: Section) -> None:
                              max_r=cfg.get("timing_max_repeats", tol.TIMING_MAX_REPEATS),
                              budget=cfg.get("timing_budget_s", tol.TIMING_POINT_BUDGET_S))
              + " " + _machine_note(rows))
+    cost = rows.groupby(["stepper", "problem"])["timing_cell_s"].first() if "timing_cell_s" in rows \
+        else pd.Series(dtype=float)
+    if cost.notna().any():
+        sec.note(f"The timing took {cost.sum():.1f} s over {int(cost.notna().sum())} cells in this run "
+                 f"(cells from the cache keep the timings of the run that measured them).")
     adaptive = view.flag("adaptive")
     for problem in [p for p in view.problems if p in set(rows["problem"])]:
         part = rows[rows["problem"] == problem]
