@@ -270,3 +270,35 @@ def test_work_precision_is_exclusive():
     from harness.experiments import get_experiment
 
     assert get_experiment("work-precision").exclusive is True
+
+
+# -- the report's tables ---------------------------------------------------------------------------
+def test_fastest_table_names_the_fastest_and_the_runners_up():
+    from harness.report.timing_section import fastest_table
+
+    rows = pd.DataFrame({
+        "problem": "p", "stepper": ["a"] * 2 + ["b"] * 2 + ["c"] * 2,
+        "t_min_s": [1.0, 10.0, 2.0, 20.0, 1.0, 2.0], "error": [1e-2, 1e-6, 1e-2, 1e-6, 1e-2, 1e-3]})
+    table = timing.time_to_target_table(rows, targets=[1e-4, 1e-9]).assign(time_c=1.0)
+    got = fastest_table(table).set_index("target")
+    assert got.loc[1e-4, "fastest"] == "a" and got.loc[1e-4, "next"] == "b 2x"
+    assert got.loc[1e-4, "reached"] == "2 of 3"
+    assert got.loc[1e-9, "fastest"] == "none reached it" and got.loc[1e-9, "reached"] == "0 of 3"
+
+
+def test_twin_rows_and_group_summary():
+    from harness.report.timing_section import group_summary, twin_rows
+
+    rows = pd.DataFrame({
+        "stepper": ["m", "m", "lib"], "implementation": ["compiled", "compiled", "scipy"],
+        "method_id": ["id", "id", "id"], "problem": "p", "h": [0.1, 0.05, 0.1], "n_steps": [10, 20, 10],
+        "error": [1e-4, 1e-5, 1e-4], "t_min_s": [1.0, 2.0, 4.0], "rounding_level": 1e-15,
+        "twin_implementation": ["numpy", "", ""], "twin_error": [1e-4, np.nan, np.nan],
+        "twin_min_s": [8.0, np.nan, np.nan]})
+    long = twin_rows(rows)
+    assert len(long) == 4 and sorted(long["implementation"]) == ["compiled", "compiled", "numpy", "scipy"]
+    groups = timing.same_method_groups(long)
+    assert len(groups) == 1 and groups.loc[0, "slowest_ratio"] == pytest.approx(8.0)
+    summary = group_summary(groups)
+    assert summary.loc[0, "implementations"] == "m (compiled) / lib (scipy) / m (numpy)"
+    assert bool(summary.loc[0, "agree"]) and summary.loc[0, "points"] == 1
