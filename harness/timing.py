@@ -7,7 +7,10 @@ Rules (what a timed figure of the harness means):
    after the experiments before it have finished, so no other cell shares the cores.
 2. Warm: compilation, cache loading and first-call costs are excluded. The cell's own sweep
    (which computes the errors) is the warm-up; its first run, compile time included, is kept
-   apart as `first_s`. `measure` can add its own warm-up runs (`warmup`), never counted.
+   apart as `first_call_s`, and every later run of the sweep (warm, alone, plus one error
+   evaluation of the final state) counts as the first sample of its point (`prior`), so a
+   point dearer than the budget is not run again. `measure` can add its own warm-up runs
+   (`warmup`), never counted.
 3. Repeated until the spread is small or a budget is spent: `measure` runs a point at least
    `min_repeats` times, stops once the relative spread (median - min) / min is at most
    `target_spread`, or at `max_repeats` runs, or when the point has spent `budget_s` seconds (a
@@ -55,7 +58,8 @@ __all__ = ["Timing", "measure", "relative_spread", "machine_info", "baseline_ste
 PROTOCOL = (
     "Timed runs execute alone (the work-precision cells run one at a time after the other "
     "experiments' parallel cells), warm (the sweep that measured the errors is the warm-up; its "
-    "first run, compile time included, is reported apart), repeated until the spread "
+    "first run, compile time included, is reported apart, its later runs count as each point's "
+    "first sample), repeated until the spread "
     "(median - min) / min is at most {spread:.0%} after at least {min_r} runs, or at {max_r} runs, "
     "or once a point has spent {budget:g} s; the minimum is the figure used. Each time is also "
     "given as a ratio to the C loop of the stepper's family (or the C RK4 loop) on Kepler, "
@@ -108,7 +112,7 @@ def relative_spread(samples: Sequence[float]) -> float:
 
 def measure(fn: Callable[[], Any], *, warmup: int = 0, min_repeats: int = tol.TIMING_MIN_REPEATS,
             max_repeats: int = tol.TIMING_MAX_REPEATS, target_spread: float = tol.TIMING_TARGET_SPREAD,
-            budget_s: float = tol.TIMING_POINT_BUDGET_S,
+            budget_s: float = tol.TIMING_POINT_BUDGET_S, prior: Sequence[float] = (),
             clock: Callable[[], float] = time.perf_counter) -> Timing:
     """Time `fn()` by the protocol (module docstring, rule 3).
 
@@ -125,6 +129,9 @@ def measure(fn: Callable[[], Any], *, warmup: int = 0, min_repeats: int = tol.TI
         Stop once (median - min) / min is at most this, after `min_repeats` runs.
     budget_s : float
         Stop once the counted runs have spent this many seconds (at least one run is made).
+    prior : sequence of float
+        Warm runs already made alone (the sweep's own run of the point): counted first, so a
+        point dearer than the budget costs nothing more.
     clock : callable
         The timer (seconds); injectable for tests.
 
@@ -144,20 +151,21 @@ def measure(fn: Callable[[], Any], *, warmup: int = 0, min_repeats: int = tol.TI
         start = clock()
         fn()
         warm.append(clock() - start)
-    samples: list[float] = []
+    samples: list[float] = [float(x) for x in prior]
     while True:
+        if samples:
+            if len(samples) >= max_repeats:
+                stop = "max-repeats"
+                break
+            if len(samples) >= min_repeats and relative_spread(samples) <= target_spread:
+                stop = "spread"
+                break
+            if sum(samples) >= budget_s:
+                stop = "budget"
+                break
         start = clock()
         fn()
         samples.append(max(clock() - start, 0.0))
-        if len(samples) >= max_repeats:
-            stop = "max-repeats"
-            break
-        if len(samples) >= min_repeats and relative_spread(samples) <= target_spread:
-            stop = "spread"
-            break
-        if sum(samples) >= budget_s:
-            stop = "budget"
-            break
     return Timing(tuple(samples), stop, tuple(warm))
 
 

@@ -83,7 +83,9 @@ def test_measure_refuses_bad_settings(bad):
 # -- ratio to the baseline timed in the same run --------------------------------------------------
 def test_time_points_ratio_uses_the_same_cells_baseline(monkeypatch):
     """Every timed run lasts 2 ms on the fake clock; the baseline step, timed in the same call,
-    lasts 4 ns: the ratio columns follow from these two numbers and from nothing else."""
+    lasts 4 ns: the ratio columns follow from these two numbers and from nothing else. The
+    sweep's first run (1.5 s, it compiled) is reported apart and not a sample; its second (2 ms,
+    warm) is the second point's first sample, so that point is run twice more, not three times."""
     from harness.experiments import timed_runs
     from harness.registry import get_problem, get_stepper
 
@@ -106,9 +108,14 @@ def test_time_points_ratio_uses_the_same_cells_baseline(monkeypatch):
     monkeypatch.setattr(timing, "baseline_step", fake_baseline)
     stepper, problem = get_stepper("rk4"), get_problem("harmonic")
     frame = pd.DataFrame({"n_steps": [8, 16], "h": [0.5, 0.25], "tol": [np.nan, np.nan],
-                          "t_end": [4.0, 4.0], "error": [1e-3, 1e-4], "wall_s": [1.5, 0.1]})
+                          "t_end": [4.0, 4.0], "error": [1e-3, 1e-4], "wall_s": [1.5, 2e-3]})
     clock = Tick(2e-3)
     out = timed_runs.time_points(stepper, problem, frame, {"ensemble": 1, "seed": 0}, clock=clock)
+    # two clock reads per timed run: 3 + 2 runs of the compiled loop, and 3 of the NumPy loop at
+    # the larger point (its warm-up run is not timed)
+    assert clock.reads == 2 * (3 + 2 + 3)
+    assert out["twin_implementation"].tolist() == ["", "numpy"]
+    assert np.isfinite(out.loc[1, "twin_error"]) and out.loc[1, "twin_min_s"] == pytest.approx(2e-3)
     assert seen["clock"] is clock
     assert out["t_min_s"].tolist() == pytest.approx([2e-3, 2e-3])
     assert (out["t_repeats"] == tol.TIMING_MIN_REPEATS).all() and (out["t_stop"] == "spread").all()
@@ -302,3 +309,14 @@ def test_twin_rows_and_group_summary():
     summary = group_summary(groups)
     assert summary.loc[0, "implementations"] == "m (compiled) / lib (scipy) / m (numpy)"
     assert bool(summary.loc[0, "agree"]) and summary.loc[0, "points"] == 1
+
+
+@pytest.mark.parametrize(("prior", "durations", "samples", "stop"), [
+    ((5.0,), [], [5.0], "budget"),                           # a dear point: not run again
+    ((0.01,), [0.01, 0.01], [0.01, 0.01, 0.01], "spread"),   # a cheap one: repeated after it
+])
+def test_prior_warm_samples_count_first(prior, durations, samples, stop):
+    clock = ScriptedClock(durations)
+    t = timing.measure(clock.run, clock=clock, prior=prior, min_repeats=3, max_repeats=7, budget_s=1.0)
+    assert list(t.samples) == pytest.approx(samples) and t.stop == stop
+    assert clock.calls == len(durations)

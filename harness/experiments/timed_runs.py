@@ -113,16 +113,19 @@ def time_points(stepper, problem, frame: pd.DataFrame, config: Mapping[str, Any]
     stats = {c: np.full(len(out), np.nan) for c in ("t_min_s", "t_median_s", "t_spread", "t_repeats")}
     stops = [""] * len(out)
     ran = out["error"].notna().to_numpy() & (out.get("n_steps", pd.Series(1, index=out.index)) > 0).to_numpy()
+    first = np.flatnonzero(ran)
+    sweep_s = out["wall_s"].to_numpy(float)
     with np.errstate(all="ignore"):
-        for i in np.flatnonzero(ran):
-            t = measure(call(runner, int(i)), clock=clock, **settings)
+        for i in first:
+            # the sweep's run of a point is a warm sample, except the cell's first (it compiled)
+            prior = (sweep_s[i],) if i != first[0] and np.isfinite(sweep_s[i]) else ()
+            t = measure(call(runner, int(i)), clock=clock, prior=prior, **settings)
             stats["t_min_s"][i], stats["t_median_s"][i] = t.min_s, t.median_s
             stats["t_spread"][i], stats["t_repeats"][i] = t.spread, t.repeats
             stops[i] = t.stop
     for c, v in stats.items():
         out[c] = v
     out["t_stop"] = stops
-    first = np.flatnonzero(ran)
     # the sweep's first run paid for compiling and loading; its warm repeats did not
     out["first_call_s"] = (float(out.at[first[0], "wall_s"]) if len(first) else np.nan)
     out["method_id"] = method_identity(stepper) or ""
@@ -145,7 +148,8 @@ def _time_twin(stepper, runner, problem, out: pd.DataFrame, y0: np.ndarray, call
                clock) -> None:
     """Where the sweep ran a compiled loop in place of `stepper`'s NumPy loop: time the NumPy
     loop at the TIMING_TWIN_POINTS largest points of at most TIMING_TWIN_MAX_STEPS steps and
-    measure its error there (the same reference as the sweep's)."""
+    measure its error there (the same reference as the sweep's); its first run there is its
+    warm-up and its final state."""
     from harness.timing import measure
 
     for c in ("twin_error", "twin_min_s", "twin_spread", "twin_repeats"):
