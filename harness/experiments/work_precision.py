@@ -108,8 +108,8 @@ class WorkPrecisionExperiment(Experiment):
     }
 
     def cells(self, steppers, problems, config):
-        check_config(config, counts=("ensemble", "work_budget", "n_start"),
-                     optional_positives=("t_end", "perturbation"))
+        check_config(config, counts=("ensemble", "work_budget", "n_start", "timing_max_repeats"),
+                     positives=("timing_budget_s",), optional_positives=("t_end", "perturbation"))
         tolerances = config.get("tolerances")
         listed = not isinstance(tolerances, str | bytes) and isinstance(tolerances, Sequence)
         if not listed or not tolerances or not all(
