@@ -374,8 +374,8 @@ TIMING_SAME_ERROR_ULPS = 64.0
 TIMING_SAME_ERROR_RTOL = 1e-6
 # The target errors of the time-to-target table.
 TIMING_TARGET_ERRORS = (1e-4, 1e-8, 1e-12)
-# A NumPy loop of a method whose compiled loop ran the sweep is timed beside it at the
-# TIMING_TWIN_POINTS largest points of at most TIMING_TWIN_MAX_STEPS steps (a NumPy step on one
-# trajectory costs ~5-40 us: ~3-20 ms a run, a few runs a cell; one point shows the agreement).
-TIMING_TWIN_MAX_STEPS = 512
-TIMING_TWIN_POINTS = 1
+# A NumPy loop of a method whose compiled loop ran the sweep is timed beside it at the largest
+# point whose work (steps x evaluations per step, x IMPLICIT_STEP_COST for implicit steps) is at
+# most TIMING_TWIN_WORK: a NumPy step on one trajectory costs ~5-40 us explicit, ~0.2-1 ms
+# implicit (Newton in NumPy), so a run costs ~3-50 ms; one point shows the agreement.
+TIMING_TWIN_WORK = 512

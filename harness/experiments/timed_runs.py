@@ -147,9 +147,9 @@ def time_points(stepper, problem, frame: pd.DataFrame, config: Mapping[str, Any]
 def _time_twin(stepper, runner, problem, out: pd.DataFrame, y0: np.ndarray, call, settings,
                clock) -> None:
     """Where the sweep ran a compiled loop in place of `stepper`'s NumPy loop: time the NumPy
-    loop at the TIMING_TWIN_POINTS largest points of at most TIMING_TWIN_MAX_STEPS steps and
-    measure its error there (the same reference as the sweep's); its first run there is its
-    warm-up and its final state."""
+    loop at the largest point of at most TIMING_TWIN_WORK work (steps x evaluations per step,
+    implicit steps weighted by IMPLICIT_STEP_COST) and measure its error there (the same
+    reference as the sweep's); it is warmed up by one run of the cell's first point."""
     from harness.timing import measure
 
     for c in ("twin_error", "twin_min_s", "twin_spread", "twin_repeats"):
@@ -157,18 +157,22 @@ def _time_twin(stepper, runner, problem, out: pd.DataFrame, y0: np.ndarray, call
     out["twin_implementation"] = ""
     if runner is stepper or out.empty:
         return
-    ok = out["error"].notna() & np.isfinite(out["t_min_s"]) & (out["n_steps"] <= tol.TIMING_TWIN_MAX_STEPS)
-    chosen = out[ok].sort_values("n_steps").index[-tol.TIMING_TWIN_POINTS:]
+    per_step = max(1.0, float(stepper.info.evals_per_step))
+    if not stepper.info.explicit:
+        per_step *= tol.IMPLICIT_STEP_COST
+    ok = (out["error"].notna() & np.isfinite(out["t_min_s"])
+          & (out["n_steps"] * per_step <= tol.TIMING_TWIN_WORK))
+    chosen = out[ok].sort_values("n_steps").index[-1:]
     if not len(chosen):
         return
     T = float(out.at[chosen[0], "t_end"])
     target = _reference_state(problem, T, y0)
     with np.errstate(all="ignore"):
+        call(stepper, int(out[ok].sort_values("n_steps").index[0]))()  # the NumPy loop's warm-up
         for i in chosen:
-            run = call(stepper, int(i))
-            tr = run()  # the twin's own warm-up, and its final state
-            d = np.abs(tr.final - target)
-            t = measure(run, clock=clock, **settings)
+            run, last = call(stepper, int(i)), {}
+            t = measure(lambda run=run, last=last: last.update(tr=run()), clock=clock, **settings)
+            d = np.abs(last["tr"].final - target)
             out.at[i, "twin_error"] = float(np.max(d)) if np.all(np.isfinite(d)) else np.inf
             out.at[i, "twin_min_s"], out.at[i, "twin_spread"] = t.min_s, t.spread
             out.at[i, "twin_repeats"] = t.repeats
