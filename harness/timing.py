@@ -56,14 +56,14 @@ __all__ = ["Timing", "measure", "relative_spread", "machine_info", "baseline_ste
            "same_method_groups", "PROTOCOL"]
 
 PROTOCOL = (
-    "Timed runs execute alone (the work-precision cells run one at a time after the other "
-    "experiments' parallel cells), warm (the sweep that measured the errors is the warm-up; its "
-    "first run, compile time included, is reported apart, its later runs count as each point's "
-    "first sample), repeated until the spread "
-    "(median - min) / min is at most {spread:.0%} after at least {min_r} runs, or at {max_r} runs, "
-    "or once a point has spent {budget:g} s; the minimum is the figure used. Each time is also "
-    "given as a ratio to the C loop of the stepper's family (or the C RK4 loop) on Kepler, "
-    "timed in the same cell the same way."
+    "Timed runs execute alone (the work-precision cells run one at a time on one worker, with no "
+    "other cell beside them: the experiments before have finished, the ones after wait), warm "
+    "(the sweep that measured the errors is the warm-up; its first run, compile time included, "
+    "is reported apart, its later runs count as each point's first sample), repeated until the "
+    "spread (median - min) / min is at most {spread:.0%} after at least {min_r} runs, or at "
+    "{max_r} runs, or once a point has spent {budget:g} s; the minimum is the figure used. Each "
+    "time is also given as a ratio to the C loop of the stepper's family (or the C RK4 loop) on "
+    "Kepler, timed in the same cell the same way."
 )
 
 

@@ -16,7 +16,7 @@ Every stepper runs on the same problem to the same final time (the problem's
   `wall_s` is the sweep's own run (plus one error evaluation; the first point's includes
   compiling and loading); the timed columns (`t_min_s`, ...) come from warm repeats by the
   protocol of `harness.timing` (`harness.experiments.timed_runs`): the experiment is
-  `exclusive`, so its cells run one at a time, alone, after the other experiments' cells.
+  `exclusive`, so its cells run one at a time on one worker, with no other cell beside them.
 A sweep runs down to the rounding floor or until it has spent `work_budget` right-hand-side
 evaluations (the convergence sweep's own rule, `convergence.step_budget`: implicit steps also pay
 for their Newton solves), so cheap and dear methods get comparable ranges. `pareto_front` marks

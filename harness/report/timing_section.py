@@ -94,8 +94,8 @@ def time_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     fig.suptitle(f"Error against time on {label_text(problem)} (target {WORK_TARGET_ERROR:g} for 'fastest')",
                  fontsize=8.5)
     cols = [c for c in ("stepper", "implementation", "h", "tol", "n_steps", "error", "t_min_s",
-                        "t_median_s", "t_spread", "t_repeats", "t_stop", "baseline", "baseline_units",
-                        "pareto_time") if c in frame]
+                        "t_median_s", "t_spread", "t_repeats", "t_stop", "first_call_s", "baseline",
+                        "baseline_units", "pareto_time", "load_1min") if c in frame]
     return to_svg(fig, f"time-{problem}", f"error against time on {problem}",
                   frame[cols].reset_index(drop=True))
 
