@@ -60,6 +60,10 @@ GATE_ORDER_TOL = 0.2
 # a fourth-order method's error on an O(1) problem is then ~1e-12, within a few halvings of the
 # float64 floor, so `unstable` above the floor is not evidence against its order.
 STIFF_STEP_COUNT = 1000.0
+# A problem is stiff over its horizon when its fastest decaying mode decays by e^-this over the
+# horizon (-Re(lambda) x horizon): the transient it leaves is then far below any error measured,
+# and an implicit method's stages see h|lambda| >> 1 at the sweep's coarse steps.
+STIFF_HORIZON_DECAYS = 100.0
 
 # Ensemble: members and the relative size of the perturbation of the initial state.
 ENSEMBLE_SIZE = 16
@@ -345,3 +349,14 @@ ENCOUNTER_MIN_DECADES = 0.3
 # dominant term's exponent the slope to within GATE_ORDER_TOL (a 10 % second term moves a
 # two-point slope by at most log(1.1)/log(2) ~ 0.14 per unit of exponent difference, damped).
 SPLIT_TERM_DOMINANCE = 10.0
+
+# Predicted leading error (harness.prediction): symbolic elementary differentials grow like
+# dim^m for an m-fold derivative, so they are built for problems of at most this many variables
+# and trees of at most this many vertices (a few seconds per problem and order).
+PREDICTION_MAX_DIM = 12
+PREDICTION_MAX_ORDER = 8
+# The variational integration needs only a few digits of E_t(T): the prediction is asymptotic.
+PREDICTION_TAYLOR_TOL = 1e-10
+# A slope above the order is explained when the predicted leading term C h^p is below this
+# fraction of the measured error over the fit: the fitted points are then set by later terms.
+SLOPE_EXPLAINED_RATIO = 0.3
