@@ -194,7 +194,8 @@ def explain_slope(measured: float, expected: float, prediction: dict[str, Any],
     """
     C = float(prediction.get("coefficient", math.nan))
     if not math.isfinite(C):
-        return False, f"slope {measured:.3f} above the order {expected:g}: {prediction.get('why') or 'no prediction'}"
+        why = prediction.get("why") or "no prediction"
+        return False, f"slope {measured:.3f} above the order {expected:g}: {why}"
     h_lo, h_hi = h_range
     e_lo, e_hi = error_range
     p = float(expected)

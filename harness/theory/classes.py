@@ -39,7 +39,13 @@ import numpy as np
 from harness import tolerances as tol
 from harness.coefficients import ButcherTableau
 from harness.theory.checks import check_int, check_type
-from harness.theory.orders import MAX_TREE_ORDER, RootedTree, _condition_tol, _elementary_weights, rooted_trees
+from harness.theory.orders import (
+    MAX_TREE_ORDER,
+    RootedTree,
+    condition_tolerance,
+    elementary_weights,
+    rooted_trees,
+)
 
 __all__ = ["tree_symmetry", "tree_survives", "rk_class_order", "rk_error_defects", "rk_stage_order",
            "rk_stiffly_accurate"]
@@ -113,10 +119,10 @@ def rk_class_order(tableau: ButcherTableau, *, nystrom: bool = False, degree: in
     if max_order is None:
         max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
-    phi, size = _elementary_weights(tableau, max_order)
+    phi, size = elementary_weights(tableau, max_order)
     failed = [t.order for t in rooted_trees(max_order)
               if tree_survives(t, nystrom=nystrom, degree=degree)
-              and abs(phi[t.index] - 1.0 / t.gamma) > _condition_tol(t, size[t.index])]
+              and abs(phi[t.index] - 1.0 / t.gamma) > condition_tolerance(t, size[t.index])]
     return min(failed) - 1 if failed else max_order
 
 
@@ -139,7 +145,7 @@ def rk_error_defects(tableau: ButcherTableau, order: int) -> tuple[list[RootedTr
 
         defects = [(phi[t.index] - Fraction(1, t.gamma)) / tree_symmetry(t) for t in trees]
         return trees, np.array([float(x) for x in defects])
-    phi, _ = _elementary_weights(tableau, order)
+    phi, _ = elementary_weights(tableau, order)
     return trees, np.array([(phi[t.index] - 1.0 / t.gamma) / tree_symmetry(t) for t in trees])
 
 
