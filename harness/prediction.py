@@ -182,9 +182,11 @@ def predicted_error(tableau: Any, problem: Problem, order: int) -> dict[str, Any
 def explain_slope(measured: float, expected: float, prediction: dict[str, Any],
                   h_range: tuple[float, float], error_range: tuple[float, float]) -> tuple[bool, str]:
     """(explained, reason) for a measured slope above the expected order: explained when the
-    predicted leading term C h^p is below SLOPE_EXPLAINED_RATIO of the measured error over the
-    fitted steps (a tiny or cancelling leading term: higher terms set the slope there), or when
-    the fitted steps lie above the predicted crossover C / C_next.
+    predicted leading term C h^p is below SLOPE_EXPLAINED_RATIO of the measured error somewhere
+    in the fitted steps (a tiny or cancelling leading term: later terms set at least part of the
+    fitted slope, which then lies between p and their orders), or when the coarsest fitted step
+    lies above the predicted crossover C / C_next. Not explained: the leading term accounts for
+    the measured error over the whole fit, so the slope should have been p.
 
     Parameters
     ----------
@@ -199,13 +201,13 @@ def explain_slope(measured: float, expected: float, prediction: dict[str, Any],
     h_lo, h_hi = h_range
     e_lo, e_hi = error_range
     p = float(expected)
-    ratio = max(C * h_lo**p / e_lo, C * h_hi**p / e_hi) if min(e_lo, e_hi) > 0 else math.nan
+    ratio = min(C * h_lo**p / e_lo, C * h_hi**p / e_hi) if min(e_lo, e_hi) > 0 else math.nan
     cross = float(prediction.get("crossover_h", math.nan))
-    numbers = (f"predicted C = {C:.3g} (err ~ C h^{p:g}); C h^p / measured error <= {ratio:.3g} over "
+    numbers = (f"predicted C = {C:.3g} (err ~ C h^{p:g}); C h^p / measured error down to {ratio:.3g} over "
                f"h = {h_lo:.3g}..{h_hi:.3g}" + (f"; leading term dominates below h ~ {cross:.3g}"
                                                  if math.isfinite(cross) else ""))
     if math.isfinite(ratio) and ratio < tol.SLOPE_EXPLAINED_RATIO:
         return True, f"slope {measured:.3f} > {p:g} explained: the leading term is small here: {numbers}"
-    if math.isfinite(cross) and h_lo > cross:
+    if math.isfinite(cross) and h_hi > cross:
         return True, f"slope {measured:.3f} > {p:g} explained: steps above the crossover: {numbers}"
     return False, f"slope {measured:.3f} > {p:g} not explained by the predicted leading term: {numbers}"
