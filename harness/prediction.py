@@ -23,8 +23,7 @@ order p+2 (the next trees' local terms carried to T; the h^(p+1) global term als
 from e itself, which this leaves out) estimates the next term's size, and C_next / C the step
 below which the leading term must show.
 Symbolic elementary differentials grow like dim^m for m-fold derivatives: the prediction is
-made for problems of at most PREDICTION_MAX_DIM variables and orders up to
-PREDICTION_MAX_ORDER, and otherwise says why not.
+made where dim^(order-1) stays within PREDICTION_MAX_WORK, and otherwise says why not.
 """
 
 from __future__ import annotations
@@ -113,10 +112,11 @@ def propagated_tree_terms(problem: Problem, order: int) -> dict[str, Any]:
 def _propagate(problem: Problem, order: int) -> dict[str, Any]:
     import heyoka as hy
 
-    if problem.dim > tol.PREDICTION_MAX_DIM or order > tol.PREDICTION_MAX_ORDER:
+    if problem.dim ** (order - 1) > tol.PREDICTION_MAX_WORK:
         return {"why": (f"not predicted: {problem.dim} variables and trees of order {order} (the "
-                        f"symbolic elementary differentials are made up to {tol.PREDICTION_MAX_DIM} "
-                        f"variables and order {tol.PREDICTION_MAX_ORDER})")}
+                        f"symbolic elementary differentials grow like dim^(order-1) = "
+                        f"{problem.dim ** (order - 1)}, above PREDICTION_MAX_WORK = "
+                        f"{tol.PREDICTION_MAX_WORK})")}
     variables, f = _autonomous(problem)
     n = len(variables)
     trees, F = elementary_differentials(problem, order)

@@ -350,11 +350,10 @@ ENCOUNTER_MIN_DECADES = 0.3
 # two-point slope by at most log(1.1)/log(2) ~ 0.14 per unit of exponent difference, damped).
 SPLIT_TERM_DOMINANCE = 10.0
 
-# Predicted leading error (harness.prediction): symbolic elementary differentials grow like
-# dim^m for an m-fold derivative, so they are built for problems of at most this many variables
-# and trees of at most this many vertices (a few seconds per problem and order).
-PREDICTION_MAX_DIM = 12
-PREDICTION_MAX_ORDER = 8
+# Predicted leading error (harness.prediction): symbolic elementary differentials of trees with
+# m vertices grow like dim^(m-1), so they are built only up to this size (12 variables at order
+# 5: ~30 s once, cached; order 6 took ~100 s under load; 4 variables at order 8: ~6 s).
+PREDICTION_MAX_WORK = 12**4
 # The variational integration needs only a few digits of E_t(T): the prediction is asymptotic.
 PREDICTION_TAYLOR_TOL = 1e-10
 # A slope above the order is explained when the predicted leading term C h^p is below this
