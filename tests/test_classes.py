@@ -81,6 +81,16 @@ TRBDF2 = ButcherTableau("tr-bdf2", [[0, 0, 0], [_D, _D, 0],
                                     [1 / (2 * (2 - _G)), 1 / (2 * (2 - _G)), _D]],
                         [1 / (2 * (2 - _G)), 1 / (2 * (2 - _G)), _D])
 
+# The implicit part of Kennedy & Carpenter's ARK3(2)4L[2]SA (Appl. Numer. Math. 44 (2003)
+# 139-181), an ESDIRK of order 3, stage order 2, stiffly accurate (as tabulated in the
+# fishac/IMEXMRISRPaper repository, src/methods/DIRK/instances/ARK32ESDIRKCoefficients.hpp).
+_KC_G = F(1767732205903, 4055673282236)
+_KC_LAST = [F(1471266399579, 7840856788654), F(-4482444167858, 7529755066697),
+            F(11266239266428, 11593286722821), _KC_G]
+ESDIRK3 = ButcherTableau("esdirk-3-2-4l-2-sa", [
+    [0, 0, 0, 0], [_KC_G, _KC_G, 0, 0],
+    [F(2746238789719, 10658868560708), F(-640167445237, 6845629431997), _KC_G, 0], _KC_LAST], _KC_LAST)
+
 
 def _mixed_dp(eps: float) -> ButcherTableau:
     """(1 - eps) b5 + eps b4 on Dormand-Prince's stages: order 4 with order-5 defects eps times
@@ -98,7 +108,7 @@ def _registry_tableaux() -> list[ButcherTableau]:
     return list(out.values())
 
 
-PUBLISHED = [WILLIAMSON3, CARPENTER_KENNEDY4, SSP43, RADAU5, TRBDF2, _mixed_dp(1e-4),
+PUBLISHED = [WILLIAMSON3, CARPENTER_KENNEDY4, SSP43, RADAU5, TRBDF2, ESDIRK3, _mixed_dp(1e-4),
              ButcherTableau("dp5", _DP_A, _DP_B5)]
 
 
@@ -165,7 +175,7 @@ def test_first_trees_that_vanish_on_each_class():
 
 
 @pytest.mark.parametrize("tableau, order", [(WILLIAMSON3, 3), (CARPENTER_KENNEDY4, 4), (SSP43, 3),
-                                            (RADAU5, 5), (TRBDF2, 2), (_mixed_dp(1e-4), 4)],
+                                            (ESDIRK3, 3), (RADAU5, 5), (TRBDF2, 2), (_mixed_dp(1e-4), 4)],
                          ids=lambda x: getattr(x, "name", str(x)))
 def test_published_orders(tableau, order):
     assert rk_order(tableau) == order
@@ -232,7 +242,7 @@ def _error(stepper, problem, T, n):
     (get_stepper("trapezoid").coefficients, 2, True),
     (get_stepper("implicit-midpoint").coefficients, 1, False),
     (get_stepper("gauss-legendre-4").coefficients, 2, False),
-    (RADAU5, 3, True), (TRBDF2, 2, True), (get_stepper("rk4").coefficients, 1, False),
+    (RADAU5, 3, True), (TRBDF2, 2, True), (ESDIRK3, 2, True), (get_stepper("rk4").coefficients, 1, False),
 ], ids=lambda x: getattr(x, "name", str(x)))
 def test_stage_order_and_stiff_accuracy(tableau, stage_order, stiffly_accurate):
     assert rk_stage_order(tableau) == stage_order
