@@ -99,7 +99,10 @@ def _explain_slope(record: Mapping, stepper, problem, expectation, reason: str
     coeffs = getattr(stepper, "coefficients", None)
     if not isinstance(coeffs, ButcherTableau):
         return "fail", reason, np.nan
-    prediction = predicted_error(coeffs, problem, int(expectation.order))
+    try:
+        prediction = predicted_error(coeffs, problem, int(expectation.order))
+    except Exception as exc:  # a definition heyoka cannot differentiate or integrate: no verdict change
+        return "fail", f"{reason}; no predicted error ({type(exc).__name__}: {exc})"[:2000], np.nan
     explained, why = explain_slope(
         float(record["measured_order"]), expectation.order, prediction,
         (float(record["fit_h_min"]), float(record["fit_h_max"])),
