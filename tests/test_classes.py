@@ -308,3 +308,24 @@ def test_slope_above_the_order_is_explained_by_a_tiny_leading_term():
     # the same errors beside the embedded method's own (not tiny) leading term: not explained
     plain = predicted_error(ButcherTableau("dp5-b4", _DP_A, _DP_B4), prob, 4)
     assert not explain_slope(slope, 4.0, plain, (T / 400, T / 200), (errors[1], errors[0]))[0]
+
+
+def test_gate_turns_an_explained_slope_above_the_order_into_not_measurable(registered):
+    from harness.gate import judge
+
+    tableau = _mixed_dp(1e-4)
+    stepper = ExplicitRungeKutta(tableau, claimed_order=4, reference="published")
+    name = registered(stepper)
+    prob = get_problem("pendulum")
+    T = prob.convergence_t_end - prob.t0
+    errors = [_error(stepper, prob, T, n) for n in (200, 400)]
+    record = {"stepper": name, "problem": "pendulum", "verdict": "converged",
+              "measured_order": math.log2(errors[0] / errors[1]), "fit_h_min": T / 400,
+              "fit_h_max": T / 200, "fit_error_min": errors[1], "fit_error_max": errors[0]}
+    outcome, expected, reason, order = judge(record)
+    assert (outcome, expected, order) == ("not-measurable", "converged", 4.0)
+    assert "explained" in reason and "predicted C" in reason
+    # a slope above the order with errors the h^4 term accounts for is still a failure
+    C = float(reason.split("predicted C = ")[1].split(" ")[0])
+    loud = dict(record, fit_error_min=C * (T / 400) ** 4, fit_error_max=C * (T / 200) ** 4)
+    assert judge(loud)[0] == "fail"
