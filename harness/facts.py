@@ -198,30 +198,34 @@ _POLYNOMIAL_SCREEN = re.compile(r"\*\*(?!\d+\.0+\b)|/ (?!p\d|\d)")
 
 
 def _rhs_degree(problem: Problem) -> int | None:
-    """The right-hand side's total degree in the state when it is a polynomial of degree at most
-    CLASS_MAX_DEGREE in the state and does not read the time, else None. Decided exactly: the
-    (d+1)-th derivative along a fixed direction folds to the constant 0 in heyoka's algebra for
-    a polynomial of degree d, never for a transcendental or rational term. A text screen (only
-    variables, parameters, sums, products, non-negative integer powers and division by a
-    parameter or number) skips the derivatives where they could not vanish."""
+    """The right-hand side's total degree in the state (and the time, which joins the state as
+    t' = 1: every Runge-Kutta tableau here has c = A e) when it is a polynomial of degree at most
+    CLASS_MAX_DEGREE, else None. Decided exactly: the (d+1)-th derivative along a fixed
+    direction folds to the constant 0 in heyoka's algebra for a polynomial of degree d, never
+    for a transcendental or rational term. A text screen (only variables, parameters, sums,
+    products, non-negative integer powers and division by a parameter or number) skips the
+    derivatives where they could not vanish."""
     import heyoka as hy
 
+    variables, rhs = list(problem.variables), list(problem.rhs)
     if problem.time_dependent:
-        return None
-    names = [str(v) for v in problem.variables]
+        clock = hy.make_vars("clock_time_")
+        variables.append(clock)
+        rhs = [hy.subs(e, {hy.time: clock}) for e in rhs]
+    names = [str(v) for v in variables]
     allowed = set(names)
-    for e in problem.rhs:
+    for e in rhs:
         text = str(e)
         words = {w for w in re.findall(r"[A-Za-z_][A-Za-z_0-9]*", text) if not re.fullmatch(r"p\d+", w)}
         if words - allowed or _POLYNOMIAL_SCREEN.search(text):
             return None
     direction = np.linspace(0.75, 1.25, len(names))  # fixed, so the fact is reproducible
     zero = hy.expression(0.0)
-    exprs = list(problem.rhs)
+    exprs = rhs
     for k in range(CLASS_MAX_DEGREE + 2):
         if all(e == zero for e in exprs):
             return max(k - 1, 1)
-        grads = [hy.diff_tensors([e], diff_args=list(problem.variables), diff_order=1).get_derivatives(1)
+        grads = [hy.diff_tensors([e], diff_args=variables, diff_order=1).get_derivatives(1)
                  for e in exprs]
         exprs = [hy.sum([float(w) * d for w, (_, d) in zip(direction, g, strict=True)]) for g in grads]
     return None

@@ -329,3 +329,15 @@ def test_gate_turns_an_explained_slope_above_the_order_into_not_measurable(regis
     C = float(reason.split("predicted C = ")[1].split(" ")[0])
     loud = dict(record, fit_error_min=C * (T / 400) ** 4, fit_error_max=C * (T / 200) ** 4)
     assert judge(loud)[0] == "fail"
+
+
+@pytest.mark.parametrize("problem, velocity_free, degree", [
+    ("henon-heiles", True, 2), ("gaussian", False, 2), ("van-der-pol-stiff", False, 3),
+    ("damped-cubic", False, 3), ("dahlquist", False, 1), ("pendulum", True, None),
+    ("kepler-elliptic", True, None), ("forced-duffing", True, None), ("lennard-jones", True, None),
+])
+def test_problem_class_facts_from_the_symbolic_definition(problem, velocity_free, degree):
+    from harness.facts import problem_facts
+
+    facts = problem_facts(get_problem(problem))
+    assert (facts.velocity_free, facts.rhs_degree) == (velocity_free, degree)
