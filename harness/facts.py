@@ -149,14 +149,11 @@ def _derive_coefficient_facts(coeffs: Any) -> dict[str, Any]:
 
 
 def _rk_class_facts(tableau: Any) -> dict[str, Any]:
-    from harness.theory.classes import rk_class_order, rk_stage_order, rk_stiffly_accurate
+    from harness.theory.classes import rk_class_orders, rk_stage_order, rk_stiffly_accurate
 
-    orders = {}
-    for nystrom in (False, True):
-        for degree in (None, *range(2, CLASS_MAX_DEGREE + 1)):
-            key = class_key(nystrom, degree)
-            if key is not None:
-                orders[key] = rk_class_order(tableau, nystrom=nystrom, degree=degree)
+    classes = [(nystrom, degree) for nystrom in (False, True)
+               for degree in (None, *range(2, CLASS_MAX_DEGREE + 1)) if class_key(nystrom, degree)]
+    orders = {class_key(*c): k for c, k in zip(classes, rk_class_orders(tableau, classes), strict=True)}
     return {"class_orders": orders, "stage_order": rk_stage_order(tableau),
             "stiffly_accurate": rk_stiffly_accurate(tableau)}
 

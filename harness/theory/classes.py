@@ -47,8 +47,8 @@ from harness.theory.orders import (
     rooted_trees,
 )
 
-__all__ = ["tree_symmetry", "tree_survives", "rk_class_order", "rk_error_defects", "rk_stage_order",
-           "rk_stiffly_accurate"]
+__all__ = ["tree_symmetry", "tree_survives", "rk_class_order", "rk_class_orders", "rk_error_defects",
+           "rk_stage_order", "rk_stiffly_accurate"]
 
 
 @cache
@@ -119,11 +119,25 @@ def rk_class_order(tableau: ButcherTableau, *, nystrom: bool = False, degree: in
     if max_order is None:
         max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
+    return rk_class_orders(tableau, [(nystrom, degree)], max_order)[0]
+
+
+def rk_class_orders(tableau: ButcherTableau, classes: list[tuple[bool, int | None]],
+                    max_order: int | None = None) -> list[int]:
+    """`rk_class_order` for several (nystrom, degree) classes at once: the elementary weights
+    are computed once and each violated condition is checked against every class."""
+    check_type(tableau, ButcherTableau, "tableau")
+    if max_order is None:
+        max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
+    max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
     phi, size = elementary_weights(tableau, max_order)
-    failed = [t.order for t in rooted_trees(max_order)
-              if tree_survives(t, nystrom=nystrom, degree=degree)
-              and abs(phi[t.index] - 1.0 / t.gamma) > condition_tolerance(t, size[t.index])]
-    return min(failed) - 1 if failed else max_order
+    violated = [t for t in rooted_trees(max_order)
+                if abs(phi[t.index] - 1.0 / t.gamma) > condition_tolerance(t, size[t.index])]
+    out = []
+    for nystrom, degree in classes:
+        failed = [t.order for t in violated if tree_survives(t, nystrom=nystrom, degree=degree)]
+        out.append(min(failed) - 1 if failed else max_order)
+    return out
 
 
 def rk_error_defects(tableau: ButcherTableau, order: int) -> tuple[list[RootedTree], np.ndarray]:
