@@ -60,6 +60,10 @@ GATE_ORDER_TOL = 0.2
 # a fourth-order method's error on an O(1) problem is then ~1e-12, within a few halvings of the
 # float64 floor, so `unstable` above the floor is not evidence against its order.
 STIFF_STEP_COUNT = 1000.0
+# A problem is stiff over its horizon when its fastest decaying mode decays by e^-this over the
+# horizon (-Re(lambda) x horizon): the transient it leaves is then far below any error measured,
+# and an implicit method's stages see h|lambda| >> 1 at the sweep's coarse steps.
+STIFF_HORIZON_DECAYS = 100.0
 
 # Ensemble: members and the relative size of the perturbation of the initial state.
 ENSEMBLE_SIZE = 16
@@ -384,3 +388,13 @@ TIMING_TARGET_ERRORS = (1e-4, 1e-8, 1e-12)
 # most TIMING_TWIN_WORK: a NumPy step on one trajectory costs ~5-40 us explicit, ~0.2-1 ms
 # implicit (Newton in NumPy), so a run costs ~3-50 ms; one point shows the agreement.
 TIMING_TWIN_WORK = 512
+
+# Predicted leading error (harness.prediction): symbolic elementary differentials of trees with
+# m vertices grow like dim^(m-1), so they are built only up to this size (12 variables at order
+# 5: ~30 s once, cached; order 6 took ~100 s under load; 4 variables at order 8: ~6 s).
+PREDICTION_MAX_WORK = 12**4
+# The variational integration needs only a few digits of E_t(T): the prediction is asymptotic.
+PREDICTION_TAYLOR_TOL = 1e-10
+# A slope above the order is explained when the predicted leading term C h^p is below this
+# fraction of the measured error over the fit: the fitted points are then set by later terms.
+SLOPE_EXPLAINED_RATIO = 0.3
