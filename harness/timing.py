@@ -38,6 +38,7 @@ import math
 import os
 import platform
 import statistics
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -52,7 +53,7 @@ from harness import tolerances as tol
 from harness.errors import InputError
 
 __all__ = ["Timing", "measure", "relative_spread", "machine_info", "baseline_step",
-           "BASELINE_LOOPS", "time_to_target", "time_to_target_table", "method_identity",
+           "time_to_target", "time_to_target_table", "method_identity",
            "same_method_groups", "PROTOCOL"]
 
 PROTOCOL = (
@@ -211,10 +212,6 @@ def machine_info() -> dict[str, Any]:
 
 
 # -- the C baseline -------------------------------------------------------------------------------
-#: Family -> the C loop of its representative method (`benchmarks/c_baseline/kepler.c`); a family
-#: not listed is compared with the classical RK4 loop.
-BASELINE_LOOPS = {"explicit-rk": "rk4", "splitting": "vv", "stormer": "stormer", "multistep": "ab4",
-                  "implicit-rk": "midpoint"}
 _KEPLER_H = 1e-3
 
 
@@ -226,28 +223,12 @@ def _c_library() -> Any:
         return "the C baseline's source (benchmarks/c_baseline) is not in this installation"
     spec = importlib.util.spec_from_file_location("_harness_c_baseline", build)
     module = importlib.util.module_from_spec(spec)
-    import sys
-
     sys.modules[spec.name] = module  # dataclasses look their module up while it executes
     spec.loader.exec_module(module)  # type: ignore[union-attr]
     try:
         return module.load()
     except module.CompilerUnavailable as exc:
         return str(exc)
-
-
-def _c_state(loop: str) -> np.ndarray:
-    """The C loop's input for one Kepler trajectory (e = 0.6, GM = 1) from pericentre."""
-    e = 0.6
-    x, v = 1.0 - e, math.sqrt((1.0 + e) / (1.0 - e))
-    y0 = np.array([x, 0.0, 0.0, v])
-    if loop == "leapfrog":
-        return np.concatenate([y0[:2], y0[2:] - 0.5 * _KEPLER_H * y0[:2] / x**3])
-    if loop == "stormer":
-        return np.concatenate([y0[:2], y0[:2] + _KEPLER_H * y0[2:] - 0.5 * _KEPLER_H**2 * y0[:2] / x**3])
-    if loop == "ab4":
-        return np.concatenate([y0] * 4)
-    return y0
 
 
 def baseline_step(family: str, *, clock: Callable[[], float] = time.perf_counter,
@@ -257,7 +238,7 @@ def baseline_step(family: str, *, clock: Callable[[], float] = time.perf_counter
     Parameters
     ----------
     family : str
-        The stepper's family (`StepperInfo.family`); `BASELINE_LOOPS` names its loop.
+        The stepper's family (`StepperInfo.family`); the C baseline's `family_loop` names its loop.
     clock : callable
         The timer.
     **protocol
@@ -269,12 +250,13 @@ def baseline_step(family: str, *, clock: Callable[[], float] = time.perf_counter
         The loop's name ("C rk4 loop on Kepler"), its `Timing` per step (samples divided by the
         step count) or None, and why it is None ("" otherwise).
     """
-    loop = BASELINE_LOOPS.get(family, "rk4")
-    name = f"C {loop} loop on Kepler"
     lib = _c_library()
     if isinstance(lib, str):
-        return name, None, lib
-    state = _c_state(loop)
+        return f"C loop of the {family} family on Kepler", None, lib
+    build = sys.modules["_harness_c_baseline"]
+    loop = build.family_loop(family)
+    name = f"C {loop} loop on Kepler"
+    state = build.kepler_start(loop, _KEPLER_H)
     n = 1000
     while True:  # a run long enough for the timer (tolerances.TIMING_BASELINE_RUN_S)
         start = clock()
