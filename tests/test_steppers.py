@@ -119,8 +119,10 @@ def test_declared_properties_are_complete(stepper):
 
 @pytest.mark.parametrize("bad, pattern", [
     ({"form": "hamiltonian"}, r"`form` must be one of"),
-    ({"claimed_order": 0}, r"`claimed_order` must be a positive integer or None, got 0"),
-    ({"claimed_order": 2.0}, r"`claimed_order` must be a positive integer or None, got 2.0"),
+    ({"claimed_order": 0}, r"`claimed_order` must be between 1 and 50, got 0"),
+    ({"claimed_order": 2.0}, r"`claimed_order` must be a whole number, got 2.0"),
+    ({"claimed_order": True}, r"`claimed_order` must be a whole number, got True"),
+    ({"claimed_order": 10**30}, r"`claimed_order` must be between 1 and 50, got a 31-digit number"),
     ({"reference": ""}, r"`reference` \(literature source\) is required"),
 ])
 def test_declared_properties_the_constructor_refuses(bad, pattern):
