@@ -59,6 +59,16 @@ def run_serial(tasks: Sequence[Task], accept: Callable[[Task, dict], None]) -> N
         accept(t, execute(t.payload))
 
 
+def quiet_worker_signals() -> None:
+    """A loky worker's signal dispositions: Ctrl-C at a terminal reaches the whole process
+    group, but only the parent decides (it stops the pool and prints one line), so workers
+    ignore SIGINT; SIGTERM ends a worker at once and silently. Never a worker's traceback."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _quiet_loky() -> None:
     """Drop loky's "A worker stopped while some jobs were given to the executor" warning: it
     comes when an idle worker times out (LOKY_IDLE_TIMEOUT_S) just as a batch arrives; loky
@@ -75,7 +85,8 @@ def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | N
     from joblib.externals.loky import get_reusable_executor
 
     _quiet_loky()
-    executor = get_reusable_executor(max_workers=n, timeout=LOKY_IDLE_TIMEOUT_S)
+    executor = get_reusable_executor(max_workers=n, timeout=LOKY_IDLE_TIMEOUT_S,
+                                     initializer=quiet_worker_signals)
     futures = {}
     try:
         for t in batch:
