@@ -46,8 +46,9 @@ from harness.problem import Dynamics, Problem
 from harness.problem.checks import check_positive
 from harness.sources import source_of
 from harness.stepper import FORMS, Carry, Stepper, StepperInfo
+from harness.stepper.contracts import Field, StateStepper
 
-__all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "CLAIM_COLUMNS", "ENERGY_CLAIMS"]
+__all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "StateStepper", "Field", "CLAIM_COLUMNS", "ENERGY_CLAIMS"]
 
 CLAIM_COLUMNS = ["claim", "problem", "claimed", "measured", "passed", "detail"]
 ENERGY_CLAIMS = ("bounded", "sqrt", "linear")

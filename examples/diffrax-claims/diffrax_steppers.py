@@ -1,0 +1,114 @@
+"""diffrax's solvers as harness steppers: each solver's own `init`/`step` runs, compiled by JAX.
+
+A solver's state here is a dict {"t", "h", "y", "s"}: the time, the step, the state (dim, N)
+and the solver's own state (FSAL derivative, reversible Heun's second state, ...). `step` calls
+the solver's `step(terms, t, t + h, y, None, s, made_jump=False)` exactly as `diffeqsolve` does
+with a constant step size; `reverse` negates h and keeps the solver's state, which is what makes
+a reversible solver reversible.
+
+The claims (orders, reversibility, symplecticity) are diffrax's documentation's: its solver
+docstrings and `order()` methods (diffrax 0.7.2, `diffrax/_solver/*.py`), stated here as data.
+"""
+
+from __future__ import annotations
+
+import diffrax
+import jax
+import optimistix
+
+from harness.api import StateStepper
+
+jax.config.update("jax_enable_x64", True)
+
+# Newton's iteration in the implicit solvers: stopped at rounding level, so the iteration error
+# stays far below the smallest error the convergence sweep measures (~1e-12).
+ROOT_TOL = 1e-13
+
+
+def _terms(field, newtonian: bool):
+    if newtonian:  # y = (q, v): q' = v (first term, of v), v' = a(q) (second term, of q)
+        return (diffrax.ODETerm(lambda t, v, args: v),
+                diffrax.ODETerm(lambda t, q, args: field.accel(t, q)))
+    return diffrax.ODETerm(lambda t, y, args: field(t, y))
+
+
+def stepper(solver, *, order: int, name: str, newtonian: bool = False, **claims) -> StateStepper:
+    """`solver` (a diffrax solver object) as a JAX `StateStepper` claiming `order`."""
+
+    def init(field, t0, y0, h):
+        terms = _terms(field, newtonian)
+        y = (y0[: y0.shape[0] // 2], y0[y0.shape[0] // 2:]) if newtonian else y0
+        return {"t": t0, "h": h, "y": y, "s": solver.init(terms, t0, t0 + h, y, None)}
+
+    def step(field, state):
+        terms = _terms(field, newtonian)
+        t, h = state["t"], state["h"]
+        y, _, _, s, _ = solver.step(terms, t, t + h, state["y"], None, state["s"], False)
+        return {"t": t + h, "h": h, "y": y, "s": s}
+
+    def read_y(state):
+        import jax.numpy as jnp
+
+        return jnp.concatenate(state["y"]) if newtonian else state["y"]
+
+    def reverse(state):
+        return {**state, "h": -state["h"]}
+
+    return StateStepper(init, step, y=read_y, reverse=reverse, name=name, order=order,
+                        backend="jax", form="newtonian" if newtonian else "first-order",
+                        reference=f"diffrax {diffrax.__version__}: diffrax.{type(solver).__name__}",
+                        **claims)
+
+
+def leapfrog_midpoint() -> StateStepper:
+    """diffrax's two-step leapfrog/midpoint method, started from exact values (history=2)."""
+    solver = diffrax.LeapfrogMidpoint()
+
+    def init(field, t0, ys, h):  # ys = [y(t0), y(t0 + h)]: the state stands at t0 + h
+        return {"t": t0 + h, "h": h, "y": ys[1], "s": (t0, ys[0])}
+
+    def step(field, state):
+        terms = diffrax.ODETerm(lambda t, y, args: field(t, y))
+        t, h = state["t"], state["h"]
+        y, _, _, s, _ = solver.step(terms, t, t + h, state["y"], None, state["s"], False)
+        return {"t": t + h, "h": h, "y": y, "s": s}
+
+    return StateStepper(init, step, name="diffrax-leapfrog-midpoint", order=2, history=2,
+                        backend="jax", reference="diffrax: diffrax.LeapfrogMidpoint")
+
+
+def _implicit(cls):
+    return cls(root_finder=diffrax.VeryChord(rtol=ROOT_TOL, atol=ROOT_TOL, norm=optimistix.max_norm),
+               root_find_max_steps=20)
+
+
+# (solver, documented order, claims): diffrax's `order()` of each solver
+EXPLICIT = {
+    "euler": (diffrax.Euler(), 1),
+    "heun": (diffrax.Heun(), 2),
+    "midpoint": (diffrax.Midpoint(), 2),
+    "ralston": (diffrax.Ralston(), 2),
+    "bosh3": (diffrax.Bosh3(), 3),
+    "tsit5": (diffrax.Tsit5(), 5),
+    "dopri5": (diffrax.Dopri5(), 5),
+    "dopri8": (diffrax.Dopri8(), 8),
+}
+IMPLICIT = {
+    "implicit-euler": (diffrax.ImplicitEuler, 1),
+    "kvaerno3": (diffrax.Kvaerno3, 3),
+    "kvaerno4": (diffrax.Kvaerno4, 4),
+    "kvaerno5": (diffrax.Kvaerno5, 5),
+}
+
+
+def all_steppers() -> dict[str, StateStepper]:
+    out = {f"diffrax-{k}": stepper(s, order=p, name=f"diffrax-{k}") for k, (s, p) in EXPLICIT.items()}
+    out.update({f"diffrax-{k}": stepper(_implicit(c), order=p, name=f"diffrax-{k}", implicit=True)
+                for k, (c, p) in IMPLICIT.items()})
+    out["diffrax-reversible-heun"] = stepper(diffrax.ReversibleHeun(), order=2,
+                                             name="diffrax-reversible-heun", symmetric=True)
+    out["diffrax-semi-implicit-euler"] = stepper(diffrax.SemiImplicitEuler(), order=1,
+                                                 name="diffrax-semi-implicit-euler",
+                                                 newtonian=True, symplectic=True)
+    out["diffrax-leapfrog-midpoint"] = leapfrog_midpoint()
+    return out
