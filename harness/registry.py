@@ -58,6 +58,7 @@ PLUGIN_PROBE_TIMEOUT_S = 120.0
 _PROBE = r"""
 import contextlib, importlib.util, os, sys, threading
 path, result = sys.argv[1], sys.argv[2]
+sys.path.insert(0, os.path.dirname(os.path.abspath(path)))
 outcome = "ok"
 try:
     with contextlib.redirect_stdout(sys.stderr):
@@ -77,6 +78,7 @@ with open(result, "w") as fh:
 os._exit(0)
 """
 _probed: dict[str, str | None] = {}
+_refused: dict[str, str] = {}  # a method record's name -> why its plugin's record was refused
 
 
 def _is_variant(obj: Any) -> bool:
@@ -159,6 +161,8 @@ class Registry(Generic[T]):
             close = difflib.get_close_matches(name, self._items, n=3, cutoff=0.5)
             hint = f"; closest: {', '.join(close)}" if close else ""
             shown = name if len(name) <= 60 else name[:57] + "..."
+            if self.kind == "stepper" and name in _refused:
+                raise UnknownNameError(f"stepper {shown!r} is not registered: {_refused[name]}") from None
             raise UnknownNameError(
                 f"unknown {self.kind} {shown!r}{hint} (see `harness list {self.kind}s`)"
             ) from None
@@ -258,6 +262,7 @@ def _build_records(records: Any, path: str | Path) -> list[Stepper]:
             out.extend(method.steppers())
         except (InputError, ValueError, TypeError) as exc:
             _plugin_errors.append(f"plugin {str(path)!r}: method {label!r} not loaded: {exc}")
+            _refused[str(label)] = f"plugin {str(path)!r} refused its record: {exc}"
     return out
 
 
@@ -335,6 +340,10 @@ def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) ->
             raise PluginError(f"plugin {str(path)!r}: cannot be imported as a Python module")
         module = importlib.util.module_from_spec(spec)
         sys.modules[mod_name] = module
+        folder = str(p.resolve().parent)  # the plugin imports its own folder's modules
+        added = folder not in sys.path
+        if added:
+            sys.path.insert(0, folder)
         try:
             with contextlib.redirect_stdout(sys.stderr):
                 spec.loader.exec_module(module)
@@ -345,6 +354,9 @@ def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) ->
             raise PluginError(
                 f"plugin {str(path)!r} failed to import: {type(exc).__name__}: {exc}"
             ) from None
+        finally:
+            if added and folder in sys.path:
+                sys.path.remove(folder)
         names: list[str] = []
         listed_s = getattr(module, "STEPPERS", None)
         listed_p = getattr(module, "PROBLEMS", None)
