@@ -88,7 +88,7 @@ class ClaimReport:
         shown = self.table.assign(passed=self.table["passed"].map({True: "yes", False: "NO"}))
         lines = [head, shown.drop(columns="detail").to_string(index=False, max_colwidth=None)]
         for rec in self.table.to_dict("records"):  # details wrapped at spaces, never cut
-            lines += textwrap.wrap(f"{rec['claim']} on {rec['problem']}: {rec['detail']}", width=100,
+            lines += textwrap.wrap(f"- {rec['claim']} on {rec['problem']}: {rec['detail']}", width=100,
                                    subsequent_indent="    ", break_long_words=False,
                                    break_on_hyphens=False)
         for rec in self.failures.to_dict("records"):

@@ -10,8 +10,9 @@ the signature of `harness.api.check`:
 
 A false claim fails the test with the measured table as its message (no traceback into the
 harness). The fixture returns the `ClaimReport` (`report.table`: one row per claim and problem,
-measured beside claimed); `fail=False` returns it without failing, for a test that inspects it. `--integrator-claims-full` runs the experiments' full settings instead of their quick
-ones (slower, tighter).
+measured beside claimed); `fail=False` returns it without failing, for a test that inspects it.
+`--integrator-claims-full` runs the experiments' full settings instead of their quick ones
+(slower, tighter).
 """
 
 from __future__ import annotations

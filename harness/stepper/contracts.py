@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import weakref
 from collections.abc import Callable
 from typing import Any
 
@@ -161,6 +162,7 @@ class StateStepper(Stepper):
         self.backend = backend
         self.history_length = history
         self._loops: dict[Any, Callable] = {}
+        self._fields: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # one per Dynamics
         where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
         self.info = StepperInfo(
             name=name or getattr(step, "__name__", "user-state-step"),
@@ -191,16 +193,16 @@ class StateStepper(Stepper):
 
     def __getstate__(self):
         state = dict(self.__dict__)
-        state["_loops"] = {}  # compiled loops are rebuilt where the stepper runs
+        state["_loops"] = {}  # compiled loops and fields are rebuilt where the stepper runs
+        state["_fields"] = weakref.WeakKeyDictionary()
         return state
 
     # -- the contract's private math ----------------------------------------------------------------
     def _field(self, dyn: Dynamics) -> Field:
-        field = getattr(dyn, "_library_field", None)
-        if field is None or field[0] != self.backend:
-            field = (self.backend, Field.jax(dyn) if self.backend == "jax" else Field.numpy(dyn))
-            dyn._library_field = field
-        return field[1]
+        field = self._fields.get(dyn)
+        if field is None:
+            field = self._fields[dyn] = Field.jax(dyn) if self.backend == "jax" else Field.numpy(dyn)
+        return field
 
     def _array(self, y: np.ndarray) -> Any:
         if self.backend == "jax":

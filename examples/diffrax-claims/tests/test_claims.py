@@ -8,10 +8,9 @@ symplecticity of SemiImplicitEuler), stated in `diffrax_steppers.py`.
 import dataclasses
 
 import diffrax
+import diffrax_steppers as ds
 import numpy as np
 import pytest
-
-import diffrax_steppers as ds
 
 STEPPERS = ds.all_steppers()
 
