@@ -32,19 +32,28 @@ def _terms(field, newtonian: bool):
     return diffrax.ODETerm(lambda t, y, args: field(t, y))
 
 
-def stepper(solver, *, order: int, name: str, newtonian: bool = False, **claims) -> StateStepper:
-    """`solver` (a diffrax solver object) as a JAX `StateStepper` claiming `order`."""
+def stepper(solver, *, order: int, name: str, newtonian: bool = False,
+            embedded_order: int | None = None, **claims) -> StateStepper:
+    """`solver` (a diffrax solver object) as a JAX `StateStepper` claiming `order`; with
+    `embedded_order`, the step's error estimate y - y_hat is kept in the state ("err")."""
+    import jax.numpy as jnp
 
     def init(field, t0, y0, h):
         terms = _terms(field, newtonian)
         y = (y0[: y0.shape[0] // 2], y0[y0.shape[0] // 2:]) if newtonian else y0
-        return {"t": t0, "h": h, "y": y, "s": solver.init(terms, t0, t0 + h, y, None)}
+        state = {"t": t0, "h": h, "y": y, "s": solver.init(terms, t0, t0 + h, y, None)}
+        if embedded_order is not None:
+            state["err"] = jnp.zeros_like(y0)
+        return state
 
     def step(field, state):
         terms = _terms(field, newtonian)
         t, h = state["t"], state["h"]
-        y, _, _, s, _ = solver.step(terms, t, t + h, state["y"], None, state["s"], False)
-        return {"t": t + h, "h": h, "y": y, "s": s}
+        y, err, _, s, _ = solver.step(terms, t, t + h, state["y"], None, state["s"], False)
+        out = {"t": t + h, "h": h, "y": y, "s": s}
+        if embedded_order is not None:
+            out["err"] = err
+        return out
 
     def read_y(state):
         import jax.numpy as jnp
@@ -54,7 +63,9 @@ def stepper(solver, *, order: int, name: str, newtonian: bool = False, **claims)
     def reverse(state):
         return {**state, "h": -state["h"]}
 
+    error = (lambda state: state["err"]) if embedded_order is not None else None
     return StateStepper(init, step, y=read_y, reverse=reverse, name=name, order=order,
+                        error=error, embedded_order=embedded_order,
                         backend="jax", form="newtonian" if newtonian else "first-order",
                         reference=f"diffrax {diffrax.__version__}: diffrax.{type(solver).__name__}",
                         **claims)
@@ -82,7 +93,7 @@ def _implicit(cls):
                root_find_max_steps=20)
 
 
-# (solver, documented order, claims): diffrax's `order()` of each solver
+# (solver, documented order): diffrax's `order()` of each solver
 EXPLICIT = {
     "euler": (diffrax.Euler(), 1),
     "heun": (diffrax.Heun(), 2),
@@ -93,6 +104,8 @@ EXPLICIT = {
     "dopri5": (diffrax.Dopri5(), 5),
     "dopri8": (diffrax.Dopri8(), 8),
 }
+# embedded orders of the pairs, from their docstrings: Heun 2(1), Bosh3 3(2), Tsit5 5(4), Dopri5 5(4)
+EMBEDDED = {"heun": 1, "bosh3": 2, "tsit5": 4, "dopri5": 4}
 IMPLICIT = {
     "implicit-euler": (diffrax.ImplicitEuler, 1),
     "kvaerno3": (diffrax.Kvaerno3, 3),
@@ -102,7 +115,10 @@ IMPLICIT = {
 
 
 def all_steppers() -> dict[str, StateStepper]:
-    out = {f"diffrax-{k}": stepper(s, order=p, name=f"diffrax-{k}") for k, (s, p) in EXPLICIT.items()}
+    out = {f"diffrax-{k}": stepper(s, order=p, name=f"diffrax-{k}", embedded_order=EMBEDDED.get(k))
+           for k, (s, p) in EXPLICIT.items()}
+    out.update({f"{out[f'diffrax-{k}'].info.name}@embedded": out[f"diffrax-{k}"].embedded()
+                for k in EMBEDDED})
     out.update({f"diffrax-{k}": stepper(_implicit(c), order=p, name=f"diffrax-{k}", implicit=True)
                 for k, (c, p) in IMPLICIT.items()})
     out["diffrax-reversible-heun"] = stepper(diffrax.ReversibleHeun(), order=2,

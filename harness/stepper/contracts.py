@@ -25,7 +25,11 @@ offered the problem's Jacobian and linear solve, multistep starters, and JAX-com
    JAX arrays, and `step` a pure JAX function: n steps run as one jit-compiled loop
    (`jax.lax.fori_loop`), so a check runs at JAX speed. Calls inside compiled code cannot be
    counted; each step books `evals_per_step` right-hand-side evaluations.
-7. The state's y must be float64 (a float32 state is refused: its rounding would be measured as
+7. An embedded pair states its error estimate: `error(state)` returns the last step's
+   y - y_hat (y_hat from the second weights), `embedded_order` the order claimed for y_hat.
+   `embedded()` is then the stepper of the embedded method itself: each step advances the
+   state and restarts `init` from y_hat, so y_hat is what is propagated and measured.
+8. The state's y must be float64 (a float32 state is refused: its rounding would be measured as
    the method's error).
 Claims (order, symmetric, symplectic, implicit) are stated, never inferred from a name.
 Reference: diffrax's `AbstractSolver.init`/`step` (Kidger, *On Neural Differential Equations*,
@@ -119,6 +123,7 @@ class StateStepper(Stepper):
         the claims and the record (as `FunctionStepper`); `velocity_dependent`: the step reads
         `field.accel(t, q, v)` with v, so it can run problems whose force depends on velocity.
     history : k for a k-step method (rule 1); 1 for a one-step method.
+    error, embedded_order : an embedded pair's error estimate and the embedded order (rule 7).
     backend : 'numpy' (NumPy arrays, counted calls) or 'jax' (rule 6).
     """
 
@@ -138,11 +143,15 @@ class StateStepper(Stepper):
         evals_per_step: float = 1.0,
         velocity_dependent: bool = False,
         history: int = 1,
+        error: Callable[[Any], Any] | None = None,
+        embedded_order: int | None = None,
         backend: str = "numpy",
         reference: str = "",
         description: str = "",
     ):
-        for arg, fn in (("init", init), ("step", step), ("y", y), ("reverse", reverse)):
+        if (error is None) != (embedded_order is None):
+            raise InputError("an embedded pair needs both `error` (its estimate) and `embedded_order`")
+        for arg, fn in (("init", init), ("step", step), ("y", y), ("reverse", reverse), ("error", error)):
             if fn is not None and not callable(fn):
                 raise InputError(f"`{arg}` must be a function, got {type(fn).__name__}")
         if form not in FORMS:
@@ -161,6 +170,10 @@ class StateStepper(Stepper):
         self.reverse_function = reverse
         self.backend = backend
         self.history_length = history
+        self.error_function, self.embedded_order = error, embedded_order
+        self._claims = {"symmetric": symmetric, "symplectic": symplectic, "implicit": implicit,
+                        "form": form, "evals_per_step": evals_per_step,
+                        "velocity_dependent": velocity_dependent, "backend": backend}
         self._loops: dict[Any, Callable] = {}
         self._fields: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # one per Dynamics
         where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
@@ -179,15 +192,46 @@ class StateStepper(Stepper):
             implementation=f"user init/step ({backend})",
         )
 
+    def embedded(self) -> StateStepper:
+        """The embedded method of a pair as a stepper of its own (rule 7), claiming
+        `embedded_order`, named `<name>@embedded`."""
+        if self.error_function is None:
+            raise InputError(f"stepper {self.info.name!r} declares no embedded pair (`error`)")
+        init, step, read_y, error = self.init_function, self.step_function, self.y_function, \
+            self.error_function
+        reverse = self.reverse_function
+
+        def init_hat(f, t0, y0, h):
+            return {"t": t0, "h": h, "inner": init(f, t0, y0, h)}
+
+        def step_hat(f, s):
+            inner = step(f, s["inner"])
+            t1 = s["t"] + s["h"]
+            return {"t": t1, "h": s["h"], "inner": init(f, t1, read_y(inner) - error(inner), s["h"])}
+
+        def reverse_hat(s):
+            inner = reverse(s["inner"]) if reverse is not None else s["inner"]
+            return {"t": s["t"], "h": -s["h"], "inner": inner}
+
+        claims = {**self._claims, "symmetric": False, "symplectic": False}
+        hat = StateStepper(init_hat, step_hat, y=lambda s: read_y(s["inner"]), reverse=reverse_hat,
+                           name=f"{self.info.name}@embedded", order=self.embedded_order,
+                           reference=self.info.reference, description=f"embedded method of "
+                           f"{self.info.name}", **claims)
+        hat.parent_fingerprint = self.fingerprint()  # the wrappers' source is the same for every pair
+        return hat
+
     def fingerprint(self) -> str:
         parts = []
-        for fn in (self.init_function, self.step_function, self.y_function, self.reverse_function):
+        for fn in (self.init_function, self.step_function, self.y_function, self.reverse_function,
+                   self.error_function):
             if fn is None:
                 continue
             try:
                 parts.append(source_of(fn))
             except (OSError, TypeError):
                 parts.append(getattr(fn, "__qualname__", type(fn).__qualname__))
+        parts.append(getattr(self, "parent_fingerprint", ""))
         digest = hashlib.sha256("\n".join(parts).encode()).hexdigest()
         return super().fingerprint() + "\n" + f"history={self.history_length}\n{digest}"
 

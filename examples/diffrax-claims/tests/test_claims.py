@@ -17,6 +17,7 @@ STEPPERS = ds.all_steppers()
 # (stepper, problems): every solver on two problems where its claim is measurable in float64
 ORDER_CASES = [
     *[(f"diffrax-{k}", ["harmonic", "kepler-circular"]) for k in ds.EXPLICIT],
+    *[(f"diffrax-{k}@embedded", ["harmonic", "kepler-circular"]) for k in ds.EMBEDDED],
     *[(f"diffrax-{k}", ["harmonic", "pendulum"]) for k in ds.IMPLICIT],
     ("diffrax-reversible-heun", ["harmonic", "kepler-circular"]),
     ("diffrax-semi-implicit-euler", ["harmonic", "kepler-circular"]),
