@@ -10,6 +10,10 @@ COEFFICIENT_TOL = 1e-14
 # ... or, for coefficients of large magnitude (extrapolation methods: sum |b| up to ~3000), this
 # many units of rounding of the sum of their magnitudes, per term summed.
 COEFFICIENT_ULPS = 16.0
+# A coefficient whose shortest float text has this many significant digits (and at most 15) was
+# typed as a cut decimal: published tableaux print 10-15 digits; exact short decimals (0.5,
+# 0.1875) print fewer, a float computed from a fraction 16-17.
+PUBLISHED_MIN_DIGITS = 10
 
 # Order conditions from coefficients: sums of products of up to 8 float64 factors; 1e-11 is far
 # above their rounding and far below any genuine defect (the smallest condition value is 1/8!).
