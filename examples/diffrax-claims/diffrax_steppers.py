@@ -25,21 +25,24 @@ jax.config.update("jax_enable_x64", True)
 ROOT_TOL = 1e-13
 
 
-def _terms(field, newtonian: bool):
+def _terms(field, newtonian: bool, imex: bool = False):
+    if imex:  # an IMEX solver's (explicit, implicit) pair: the whole field implicit
+        return diffrax.MultiTerm(diffrax.ODETerm(lambda t, y, args: jax.numpy.zeros_like(y)),
+                                 diffrax.ODETerm(lambda t, y, args: field(t, y)))
     if newtonian:  # y = (q, v): q' = v (first term, of v), v' = a(q) (second term, of q)
         return (diffrax.ODETerm(lambda t, v, args: v),
                 diffrax.ODETerm(lambda t, q, args: field.accel(t, q)))
     return diffrax.ODETerm(lambda t, y, args: field(t, y))
 
 
-def stepper(solver, *, order: int, name: str, newtonian: bool = False,
+def stepper(solver, *, order: int, name: str, newtonian: bool = False, imex: bool = False,
             embedded_order: int | None = None, **claims) -> StateStepper:
     """`solver` (a diffrax solver object) as a JAX `StateStepper` claiming `order`; with
     `embedded_order`, the step's error estimate y - y_hat is kept in the state ("err")."""
     import jax.numpy as jnp
 
     def init(field, t0, y0, h):
-        terms = _terms(field, newtonian)
+        terms = _terms(field, newtonian, imex)
         y = (y0[: y0.shape[0] // 2], y0[y0.shape[0] // 2:]) if newtonian else y0
         state = {"t": t0, "h": h, "y": y, "s": solver.init(terms, t0, t0 + h, y, None)}
         if embedded_order is not None:
@@ -47,7 +50,7 @@ def stepper(solver, *, order: int, name: str, newtonian: bool = False,
         return state
 
     def step(field, state):
-        terms = _terms(field, newtonian)
+        terms = _terms(field, newtonian, imex)
         t, h = state["t"], state["h"]
         y, err, _, s, _ = solver.step(terms, t, t + h, state["y"], None, state["s"], False)
         out = {"t": t + h, "h": h, "y": y, "s": s}
@@ -112,6 +115,9 @@ IMPLICIT = {
     "kvaerno4": (diffrax.Kvaerno4, 4),
     "kvaerno5": (diffrax.Kvaerno5, 5),
 }
+# IMEX additive Runge-Kutta methods, run with the whole field as the implicit part
+IMEX = {"kencarp3": (diffrax.KenCarp3, 3), "kencarp4": (diffrax.KenCarp4, 4),
+        "kencarp5": (diffrax.KenCarp5, 5)}
 
 
 def all_steppers() -> dict[str, StateStepper]:
@@ -121,6 +127,8 @@ def all_steppers() -> dict[str, StateStepper]:
                 for k in EMBEDDED})
     out.update({f"diffrax-{k}": stepper(_implicit(c), order=p, name=f"diffrax-{k}", implicit=True)
                 for k, (c, p) in IMPLICIT.items()})
+    out.update({f"diffrax-{k}": stepper(_implicit(c), order=p, name=f"diffrax-{k}", implicit=True,
+                                        imex=True) for k, (c, p) in IMEX.items()})
     out["diffrax-reversible-heun"] = stepper(diffrax.ReversibleHeun(), order=2,
                                              name="diffrax-reversible-heun", symmetric=True)
     out["diffrax-semi-implicit-euler"] = stepper(diffrax.SemiImplicitEuler(), order=1,

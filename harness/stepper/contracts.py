@@ -327,6 +327,11 @@ class StateStepper(Stepper):
             loop = self._loops[key] = jax.jit(run)
         return loop
 
+    def _overflows(self, fresh, k: int) -> bool:
+        """A JAX loop traps no overflow (the replay cannot tell), so like a compiled loop it gets
+        the benefit of the doubt; a NumPy step is replayed with overflow trapped."""
+        return True if self.backend == "jax" else super()._overflows(fresh, k)
+
     def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
         if c.state is None:
             return np.array(c.y, dtype=np.float64)
