@@ -64,22 +64,13 @@ def _close(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
 
 
 def published_precision(*arrays: np.ndarray) -> float:
-    """Half a unit in the last digit of the coarsest coefficient typed as a cut decimal: one whose
-    shortest float text has PUBLISHED_MIN_DIGITS to 15 significant digits (a float computed from
-    a fraction prints 16-17; an exact short decimal such as 0.5 fewer). 0.0 when there is none.
-    A tableau published with 12-digit decimals has row sums off their nodes by ~1e-12, a
-    defect of its printing, not of the method."""
+    """Half a unit in the last digit of the coarsest coefficient typed as a cut decimal (shortest
+    float text of PUBLISHED_MIN_DIGITS to 15 significant digits), else 0.0."""
     from decimal import Decimal
 
-    worst = 0.0
-    for arr in arrays:
-        for x in np.asarray(arr, dtype=np.float64).ravel():
-            if x == 0.0 or not np.isfinite(x):
-                continue
-            sign, digits, exponent = Decimal(repr(float(x))).as_tuple()
-            if PUBLISHED_MIN_DIGITS <= len(digits) <= 15:
-                worst = max(worst, 0.5 * 10.0 ** int(exponent))
-    return worst
+    cut = [Decimal(repr(float(x))).as_tuple() for a in arrays for x in np.ravel(a) if x != 0.0]
+    return max([0.5 * 10.0 ** int(e) for _, d, e in cut if PUBLISHED_MIN_DIGITS <= len(d) <= 15],
+               default=0.0)
 
 
 def exact_value(x) -> Fraction | None:
@@ -123,11 +114,9 @@ class ButcherTableau:
     """A Runge-Kutta method: stage matrix `A`, weights `b`, nodes `c`.
 
     Checks on creation: `A` square with as many rows as `b` and `c`; row sums of `A` equal `c`
-    (the stages are consistent in time); weights sum to one (the method is consistent). For
-    coefficients published as cut decimals (`published_precision`), a sum may miss by as much as
-    its terms' printing allows; the largest such miss is kept as `consistency_defect` (0.0 for
-    a tableau consistent to rounding) and stated by `defect_note`; the order conditions allow for
-    the same printing.
+    (the stages are consistent in time); weights sum to one (the method is consistent); with
+    coefficients cut to `published_precision`, up to their printing: that miss is stated
+    (`consistency_defect`, `defect_note`) and the order conditions allow for it.
     Derived: `stages`, `explicit` (A strictly lower triangular), `diagonally_implicit`.
     """
 
@@ -152,19 +141,15 @@ class ButcherTableau:
                 f"`{name}.A` must be {s}x{s} to match {s} weights in `b`, got {A_arr.shape}"
             )
         row_sums = A_arr.sum(axis=1)
-        precision = published_precision(A_arr, b_arr, *(() if c is None else (c,)),
-                                        *(() if b_hat is None else (b_hat,)))
+        precision = published_precision(A_arr, b_arr, *[v for v in (c, b_hat) if v is not None])
         defect = 0.0
 
-        def near(total: float, want: float, size: float, terms: int) -> bool:
-            """Equal to rounding, or within the printing of `terms` + 1 published numbers."""
+        def near(total: float, want: float, size: float, terms: int) -> bool:  # rounding, or printing
             nonlocal defect
             if _close(total, want, size, terms):
                 return True
-            if abs(total - want) <= (terms + 1) * precision:
-                defect = max(defect, abs(total - want))
-                return True
-            return False
+            defect = max(defect, abs(total - want))  # refused (raises) unless within the printing
+            return abs(total - want) <= (terms + 1) * precision
 
         if c is None:
             c_arr = row_sums.copy()
@@ -208,10 +193,8 @@ class ButcherTableau:
     @property
     def defect_note(self) -> str:
         """The consistency defect in words ('' when there is none)."""
-        if not self.consistency_defect:
-            return ""
-        return (f"coefficients published as cut decimals (to {self.published_precision:.0e}): sums "
-                f"miss their nodes or 1 by up to {self.consistency_defect:.1e}")
+        return (f"published as cut decimals (to {self.published_precision:.0e}): sums miss their "
+                f"nodes or 1 by up to {self.consistency_defect:.1e}") if self.consistency_defect else ""
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         """R(z) = 1 + z b^T (I - zA)^{-1} e, evaluated for an array of complex z."""

@@ -164,6 +164,9 @@ class StateStepper(Stepper):
             from harness.jax_problem import require_x64
 
             require_x64()
+            # a JAX loop traps no overflow, so a replay cannot tell a blow-up's NaN from the
+            # step's own: like a compiled loop, it gets the benefit of the doubt
+            self._overflows = lambda fresh, k: True
         evals = check_positive(evals_per_step, "`evals_per_step`")
         self.init_function, self.step_function = init, step
         self.y_function = y or _default_y
@@ -326,11 +329,6 @@ class StateStepper(Stepper):
 
             loop = self._loops[key] = jax.jit(run)
         return loop
-
-    def _overflows(self, fresh, k: int) -> bool:
-        """A JAX loop traps no overflow (the replay cannot tell), so like a compiled loop it gets
-        the benefit of the doubt; a NumPy step is replayed with overflow trapped."""
-        return True if self.backend == "jax" else super()._overflows(fresh, k)
 
     def _observe(self, dyn: Dynamics, c: Carry) -> np.ndarray:
         if c.state is None:
