@@ -244,3 +244,16 @@ def test_naming_a_refused_record_says_why(tmp_path):
             get_stepper("test-refused-rk")
     finally:
         steppers.unregister("test-good-rk")
+
+
+def test_jobs_2_with_an_unpicklable_stepper_is_one_clear_input_error():
+    import threading
+
+    lock = threading.Lock()
+
+    def euler(f, t, y, h):
+        with lock:
+            return y + h * f(t, y)
+
+    with pytest.raises(InputError, match="`jobs` > 1 ships.*cannot pickle"):
+        check(FunctionStepper(euler, name="test-euler-lock"), ["harmonic", "pendulum"], order=1, jobs=2)

@@ -93,7 +93,13 @@ def shipped_objects(stepper_names: Sequence[str], problem_names: Sequence[str]) 
         return None
     import cloudpickle
 
-    return cloudpickle.dumps(objs)
+    try:
+        return cloudpickle.dumps(objs)
+    except Exception as exc:  # a closure over a lock, an open file, ...
+        from harness.errors import InputError
+
+        raise InputError(f"`jobs` > 1 ships {', '.join(map(repr, objs))} to worker processes, but "
+                         f"cloudpickle cannot pickle it: {type(exc).__name__}: {exc}; use jobs=1") from None
 
 
 def _ensure_objects(data: bytes | None, submitter: int | None) -> None:

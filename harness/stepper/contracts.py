@@ -241,8 +241,16 @@ class StateStepper(Stepper):
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_loops"] = {}  # compiled loops and fields are rebuilt where the stepper runs
-        state["_fields"] = weakref.WeakKeyDictionary()
+        state.pop("_fields", None)
         return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._fields = weakref.WeakKeyDictionary()
+        if self.backend == "jax":  # built in 64-bit mode (checked); a worker process starts in 32
+            import jax
+
+            jax.config.update("jax_enable_x64", True)
 
     # -- the contract's private math ----------------------------------------------------------------
     def _field(self, dyn: Dynamics) -> Field:

@@ -15,8 +15,12 @@ import pytest
 STEPPERS = ds.all_steppers()
 
 # (stepper, problems): every solver on two problems where its claim is measurable in float64
+# Dopri8's error on harmonic, kepler-circular and pendulum-small is still pre-asymptotic over the
+# sweep's float64 range (fitted slopes 8.82-8.83, drifting down to 8); on the Henon-Heiles
+# problems the asymptotic range is reached (7.88, 7.94).
+PROBLEMS = {"dopri8": ["henon-heiles", "henon-heiles-chaotic"]}
 ORDER_CASES = [
-    *[(f"diffrax-{k}", ["harmonic", "kepler-circular"]) for k in ds.EXPLICIT],
+    *[(f"diffrax-{k}", PROBLEMS.get(k, ["harmonic", "kepler-circular"])) for k in ds.EXPLICIT],
     *[(f"diffrax-{k}@embedded", ["harmonic", "kepler-circular"]) for k in ds.EMBEDDED],
     *[(f"diffrax-{k}", ["harmonic", "pendulum"]) for k in ds.IMPLICIT],
     *[(f"diffrax-{k}", ["harmonic", "pendulum"]) for k in ("kencarp3", "kencarp4")],
