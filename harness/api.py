@@ -112,8 +112,8 @@ class FunctionStepper(Stepper):
     claims (order, symmetric, symplectic) are stated here, never inferred from the name.
     `evals_per_step` sizes the convergence sweep's budget (work budget / evaluations per step).
     `implicit=True`: the step is called as `step(f, t, y, h, jac=jac, solve=solve)`, `jac(t, y)`
-    the problem's Jacobian (dim, dim, N), `solve(A, b)` the solve of A x = b per member (both
-    counted). A solver object with its own init/step is refused: use `StateStepper`. A float32
+    the problem's Jacobian (dim, dim, N), `solve(A, b)` the solve of A x = b per member (Jacobian
+    calls are counted). A solver object with its own init/step is refused: use `StateStepper`. A float32
     state is refused (`checked_float64`). The fingerprint includes the function's source, so an
     edited function is a new method.
     """

@@ -20,7 +20,8 @@ offered the problem's Jacobian and linear solve, multistep starters, and JAX-com
 5. `field` is what the step may call: `field(t, y)` the right-hand side, `field.accel(t, q, v)`
    the acceleration of a Newtonian problem, `field.jac(t, y)` the Jacobian (dim, dim, N), and
    `field.solve(A, b)` the linear solve of A x = b for each member (A (dim, dim, N), b (dim, N)).
-   An implicit method (`implicit=True`) uses the last two; the harness counts every call.
+   An implicit method (`implicit=True`) uses the last two; the harness counts every call of
+   f, accel and jac (NumPy backend).
 6. `backend="jax"`: the field is the problem's JAX functions (`harness.jax_problem`), the state
    JAX arrays, and `step` a pure JAX function: n steps run as one jit-compiled loop
    (`jax.lax.fori_loop`), so a check runs at JAX speed. Calls inside compiled code cannot be
