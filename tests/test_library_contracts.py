@@ -257,3 +257,21 @@ def test_jobs_2_with_an_unpicklable_stepper_is_one_clear_input_error():
 
     with pytest.raises(InputError, match="`jobs` > 1 ships.*cannot pickle"):
         check(FunctionStepper(euler, name="test-euler-lock"), ["harmonic", "pendulum"], order=1, jobs=2)
+
+
+def test_the_readme_examples_of_each_contract_keep_their_claims():
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", text, flags=re.S)
+              if "stepper = StateStepper(" in b or "implicit=True)" in b]
+    assert len(blocks) == 3, "the README shows the stateful, implicit and JAX contracts"
+    for block in blocks:
+        namespace = {"np": np, "StateStepper": StateStepper, "FunctionStepper": FunctionStepper}
+        exec(block, namespace)
+        stepper = namespace["stepper"]
+        claims = {"order": stepper.info.claimed_order}
+        if stepper.info.symmetric:
+            claims["symmetric"] = True
+        assert check(stepper, ["gaussian" if "implicit" in block else "harmonic"], **claims).passed
