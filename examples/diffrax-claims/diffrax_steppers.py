@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import diffrax
 import jax
+import numpy as np
 import optimistix
 
 from harness.api import StateStepper
+from harness.coefficients import ButcherTableau
 
 jax.config.update("jax_enable_x64", True)
 
@@ -91,6 +93,20 @@ def leapfrog_midpoint() -> StateStepper:
                         backend="jax", reference="diffrax: diffrax.LeapfrogMidpoint")
 
 
+def published_tableau(solver) -> ButcherTableau:
+    """diffrax's own tableau of `solver` as the harness's `ButcherTableau` (A from its lower
+    part and diagonal, c with c1 first, b_hat = b_sol - b_error), so the rules derive the stage
+    order, and with it the order reduction on stiff problems, from the library's coefficients."""
+    t = type(solver).tableau
+    s = len(t.b_sol)
+    A = np.zeros((s, s))
+    for i, row in enumerate(t.a_lower, start=1):
+        A[i, :i] = row
+    A[np.arange(s), np.arange(s)] = t.a_diagonal if t.a_diagonal is not None else 0.0
+    return ButcherTableau(f"diffrax-{type(solver).__name__}", A, t.b_sol, [t.c1, *t.c],
+                          b_hat=np.asarray(t.b_sol) - np.asarray(t.b_error))
+
+
 def _implicit(cls):
     return cls(root_finder=diffrax.VeryChord(rtol=ROOT_TOL, atol=ROOT_TOL, norm=optimistix.max_norm),
                root_find_max_steps=20)
@@ -125,8 +141,11 @@ def all_steppers() -> dict[str, StateStepper]:
            for k, (s, p) in EXPLICIT.items()}
     out.update({f"{out[f'diffrax-{k}'].info.name}@embedded": out[f"diffrax-{k}"].embedded()
                 for k in EMBEDDED})
-    out.update({f"diffrax-{k}": stepper(_implicit(c), order=p, name=f"diffrax-{k}", implicit=True)
-                for k, (c, p) in IMPLICIT.items()})
+    for k, (c, p) in IMPLICIT.items():
+        solver = _implicit(c)
+        out[f"diffrax-{k}"] = stepper(solver, order=p, name=f"diffrax-{k}", implicit=True,
+                                      coefficients=published_tableau(solver)
+                                      if hasattr(type(solver), "tableau") else None)
     out.update({f"diffrax-{k}": stepper(_implicit(c), order=p, name=f"diffrax-{k}", implicit=True,
                                         imex=True) for k, (c, p) in IMEX.items()})
     out["diffrax-reversible-heun"] = stepper(diffrax.ReversibleHeun(), order=2,

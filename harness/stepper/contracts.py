@@ -125,6 +125,10 @@ class StateStepper(Stepper):
         `field.accel(t, q, v)` with v, so it can run problems whose force depends on velocity.
     history : k for a k-step method (rule 1); 1 for a one-step method.
     error, embedded_order : an embedded pair's error estimate and the embedded order (rule 7).
+    coefficients : the method's published coefficients (a `ButcherTableau`) when the library
+        publishes them: the rules then derive what to expect (order, stage order and its
+        reduction on stiff problems, stability) from them, as for a built-in method, while the
+        library's own step is what is measured.
     backend : 'numpy' (NumPy arrays, counted calls) or 'jax' (rule 6).
     """
 
@@ -146,6 +150,7 @@ class StateStepper(Stepper):
         history: int = 1,
         error: Callable[[Any], Any] | None = None,
         embedded_order: int | None = None,
+        coefficients: Any = None,
         backend: str = "numpy",
         reference: str = "",
         description: str = "",
@@ -175,6 +180,7 @@ class StateStepper(Stepper):
         self.backend = backend
         self.history_length = history
         self.error_function, self.embedded_order = error, embedded_order
+        self.coefficients = coefficients
         self._claims = {"symmetric": symmetric, "symplectic": symplectic, "implicit": implicit,
                         "form": form, "evals_per_step": evals_per_step,
                         "velocity_dependent": velocity_dependent, "backend": backend}
