@@ -52,9 +52,16 @@ from harness.problem import Dynamics, Problem
 from harness.problem.checks import check_positive
 from harness.sources import source_of
 from harness.stepper import FORMS, Carry, Stepper, StepperInfo
-from harness.stepper.contracts import Field, StateStepper, batched_solve, checked_float64
+from harness.stepper.contracts import (
+    AdaptiveStateStepper,
+    Field,
+    StateStepper,
+    batched_solve,
+    checked_float64,
+)
 
 __all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "StateStepper", "Field",
+           "AdaptiveStateStepper",
            "CLAIM_COLUMNS", "ENERGY_CLAIMS"]
 
 CLAIM_COLUMNS = ["claim", "problem", "claimed", "measured", "passed", "detail"]

@@ -275,3 +275,25 @@ def test_the_readme_examples_of_each_contract_keep_their_claims():
         if stepper.info.symmetric:
             claims["symmetric"] = True
         assert check(stepper, ["gaussian" if "implicit" in block else "harmonic"], **claims).passed
+
+
+def test_an_adaptive_solver_gets_its_tolerance_and_books_its_internal_steps():
+    from harness.api import AdaptiveStateStepper
+
+    def init(f, t0, y0, h, *, tol):
+        return {"t": t0, "h": h, "y": y0, "tol": tol, "steps": 0}
+
+    def step(f, s):  # Euler with as many substeps as the tolerance asks (error ~ h^2 / n)
+        n = int(np.ceil(abs(s["h"]) / s["tol"] ** 0.5))
+        y, t, dt = s["y"], s["t"], s["h"] / n
+        for _ in range(n):
+            y, t = y + dt * f(t, y), t + dt
+        return {**s, "t": s["t"] + s["h"], "y": y, "steps": s["steps"] + n * y.shape[1]}
+
+    stepper = AdaptiveStateStepper(init, step, internal_steps=lambda s: s["steps"], tol=1e-4,
+                                   name="test-adaptive-euler", reference="substepped Euler")
+    assert stepper.info.adaptive and stepper.info.extra == {"tol": 1e-4}
+    finer = stepper.with_tolerance(1e-6)
+    assert finer.tol == 1e-6 and finer.info.extra == {"tol": 1e-6}
+    traj = finer.integrate(get_problem("harmonic"), h=0.5, n_steps=2)
+    assert traj.evals["internal_steps"] == 2 * 500  # ceil(0.5 / 1e-3) substeps per step

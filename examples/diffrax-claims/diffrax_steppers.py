@@ -17,7 +17,7 @@ import jax
 import numpy as np
 import optimistix
 
-from harness.api import StateStepper
+from harness.api import AdaptiveStateStepper, StateStepper
 from harness.coefficients import ButcherTableau
 
 jax.config.update("jax_enable_x64", True)
@@ -74,6 +74,30 @@ def stepper(solver, *, order: int, name: str, newtonian: bool = False, imex: boo
                         backend="jax", form="newtonian" if newtonian else "first-order",
                         reference=f"diffrax {diffrax.__version__}: diffrax.{type(solver).__name__}",
                         **claims)
+
+
+def adaptive(solver, *, name: str, order: int | None = None) -> AdaptiveStateStepper:
+    """`solver` under diffrax's own PID step-size controller (rtol = atol = tol): each harness
+    step is one `diffeqsolve` from t to t + h, as a user integrating to output times would."""
+    import jax.numpy as jnp
+
+    def init(field, t0, y0, h, *, tol):
+        return {"t": t0, "h": h, "y": y0, "tol": tol, "steps": jnp.zeros((), dtype=jnp.int64)}
+
+    def step(field, state):
+        t, h = state["t"], state["h"]
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(lambda t, y, args: field(t, y)), solver, t0=t, t1=t + h, dt0=None,
+            y0=state["y"], stepsize_controller=diffrax.PIDController(rtol=state["tol"],
+                                                                     atol=state["tol"]),
+            saveat=diffrax.SaveAt(t1=True), max_steps=100_000)
+        return {**state, "t": t + h, "y": sol.ys[-1],
+                "steps": state["steps"] + sol.stats["num_accepted_steps"]}
+
+    return AdaptiveStateStepper(init, step, internal_steps=lambda s: s["steps"], name=name,
+                                order=order, reverse=lambda s: {**s, "h": -s["h"]}, backend="jax",
+                                reference=f"diffrax {diffrax.__version__}: diffrax.{type(solver).__name__}"
+                                " with diffrax.PIDController")
 
 
 def leapfrog_midpoint() -> StateStepper:
@@ -154,4 +178,5 @@ def all_steppers() -> dict[str, StateStepper]:
                                                  name="diffrax-semi-implicit-euler",
                                                  newtonian=True, symplectic=True)
     out["diffrax-leapfrog-midpoint"] = leapfrog_midpoint()
+    out["diffrax-tsit5-pid"] = adaptive(diffrax.Tsit5(), name="diffrax-tsit5-pid", order=5)
     return out

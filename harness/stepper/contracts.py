@@ -40,6 +40,7 @@ Reference: diffrax's `AbstractSolver.init`/`step` (Kidger, *On Neural Differenti
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import inspect
 import weakref
@@ -52,9 +53,9 @@ from harness.errors import InputError, StepperOutputError
 from harness.problem import Dynamics
 from harness.problem.checks import check_positive
 from harness.sources import source_of
-from harness.stepper import FORMS, Carry, Stepper, StepperInfo
+from harness.stepper import FORMS, AdaptiveStepper, Carry, Stepper, StepperInfo
 
-__all__ = ["Field", "StateStepper", "BACKENDS", "checked_float64", "batched_solve"]
+__all__ = ["Field", "StateStepper", "AdaptiveStateStepper", "BACKENDS", "checked_float64", "batched_solve"]
 
 BACKENDS = ("numpy", "jax")
 
@@ -298,7 +299,8 @@ class StateStepper(Stepper):
         ys = [self._array(y) for y in c.known]
         t_first = c.t - (len(ys) - 1) * c.h  # the oldest known state's time
         arg = ys[0] if self.history_length == 1 else ys
-        c.state = self.init_function(self._field(dyn), t_first, arg, c.h)
+        c.state = self.init_function(self._field(dyn), t_first, arg, c.h, **self._init_options())
+        self._book_internal(dyn, c, fresh=True)
         c.known = []
 
     def _step(self, dyn: Dynamics, c: Carry) -> None:
@@ -314,6 +316,7 @@ class StateStepper(Stepper):
             dyn.counts["rhs"] += self.info.evals_per_step
         else:
             c.state = self.step_function(self._field(dyn), c.state)
+        self._book_internal(dyn, c)
 
     def _advance(self, dyn: Dynamics, c: Carry, n: int) -> None:
         while n > 0 and c.state is None:
@@ -329,6 +332,14 @@ class StateStepper(Stepper):
         c.state = loop(c.state, n)
         c.n += n
         dyn.counts["rhs"] += n * self.info.evals_per_step
+        self._book_internal(dyn, c)
+
+    # -- hooks of the adaptive contract (AdaptiveStateStepper) ---------------------------------------
+    def _init_options(self) -> dict:
+        return {}
+
+    def _book_internal(self, dyn: Dynamics, c: Carry, fresh: bool = False) -> None:
+        return None
 
     def _loop(self, dyn: Dynamics) -> Callable:
         """n steps as one compiled loop, built once per problem definition and parameters."""
@@ -362,4 +373,37 @@ class StateStepper(Stepper):
                 f"stepper {self.info.name!r} is a {self.history_length}-step method without "
                 "`reverse`: its history cannot be turned around by restarting from y"
             )
-        c.state = self.init_function(self._field(dyn), c.t, self._array(y), c.h)
+        c.state = self.init_function(self._field(dyn), c.t, self._array(y), c.h, **self._init_options())
+        self._book_internal(dyn, c, fresh=True)
+
+
+class AdaptiveStateStepper(StateStepper, AdaptiveStepper):
+    """A library's adaptive solver under the adaptive contract (rules 7-8 of `AdaptiveStepper`):
+    `init(field, t0, y0, h, tol=tol)` gets the controller's tolerance, `step(field, state)`
+    advances exactly to t + h with the solver's own internal steps, and `internal_steps(state)`
+    returns how many it has taken since `init` (summed over the ensemble's members), booked as
+    `counts["internal_steps"]`. Experiments sweep `tol` (`with_tolerance`), not h. Other
+    parameters as `StateStepper`; `order` may be None.
+    """
+
+    def __init__(self, init, step, *, internal_steps, tol: float = AdaptiveStepper.tol, **options):
+        if not callable(internal_steps):
+            raise InputError(f"`internal_steps` must be a function, got {type(internal_steps).__name__}")
+        super().__init__(init, step, **options)
+        self.internal_steps_function = internal_steps
+        self.tol = check_positive(tol, "`tol`")
+        self.info = dataclasses.replace(self.info, adaptive=True, extra=self.extra_info())
+
+    def extra_info(self) -> dict:
+        return {"tol": self.tol}
+
+    def _init_options(self) -> dict:
+        return {"tol": self.tol}
+
+    def _book_internal(self, dyn: Dynamics, c: Carry, fresh: bool = False) -> None:
+        if fresh:
+            c.internal_seen = 0
+            return
+        taken = int(np.sum(np.asarray(self.internal_steps_function(c.state))))
+        dyn.counts["internal_steps"] = dyn.counts.get("internal_steps", 0) + taken - c.internal_seen
+        c.internal_seen = taken

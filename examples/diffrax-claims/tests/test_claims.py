@@ -71,3 +71,8 @@ def test_a_mutant_tsit5_tableau_fails(integrator_claims):
     assert not report.passed
     order_rows = report.table[report.table["claim"] == "order"]
     assert (~order_rows["passed"]).any(), report
+
+
+def test_adaptive_tsit5_meets_its_tolerance(integrator_claims):
+    """Tsit5 under diffrax's PID controller, judged by the tolerance sweep (error against tol)."""
+    integrator_claims(STEPPERS["diffrax-tsit5-pid"], ["harmonic"], order=5)
