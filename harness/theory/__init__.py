@@ -3,7 +3,8 @@
 The package re-exports the public names of its modules: `orders` (rooted trees, Runge-Kutta
 order conditions, multistep error constants), `series` (order from an exact local-error series),
 `amplification` (stability functions, scanned intervals), `intervals` (intervals decided on
-polynomials and root loci), `checks` (argument checks).
+polynomials and root loci), `roots` (exact polynomial arithmetic and root isolation),
+`newtonian` (every unstable h omega band of Newtonian methods), `checks` (argument checks).
 
 Everything here is a pure function of a coefficient object of `harness.coefficients`; nothing
 integrates a registered problem. The experiments measure the same properties from the outside
@@ -48,6 +49,7 @@ from harness.theory.amplification import (
 )
 from harness.theory.intervals import (
     analytic_stability,
+    exact_hw_bands,
     lmm_real_interval,
     rk_stability_intervals,
     splitting_hw_limit,
@@ -108,4 +110,5 @@ __all__ = [
     "splitting_hw_limit",
     "MAX_TREE_ORDER",
     "splitting_trace_polynomial",
+    "exact_hw_bands",
 ]
