@@ -16,6 +16,7 @@ FAMILY_MODULES = (
     "runge_kutta",
     "splitting",
     "verlet",
+    "second_order_multistep",
     "taylor",
     "implicit_rk",
     "multistep",
@@ -107,7 +108,8 @@ def coefficient_info(coefficients, *, family: str, form: str = "first-order", **
 def build_stepper(method):
     """The stepper that runs a `harness.methods.Method` record: the one step loop of its
     coefficients' family (explicit or implicit Runge-Kutta, splitting or its staggered leapfrog
-    form, linear multistep, Stormer's two-step form)."""
+    form, linear multistep, second-order multistep (Stormer-Cowell and symmetric methods; the
+    course's two-step Verlet loop when `implicit_velocity` is given))."""
     from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
     from harness.errors import InputError
 
@@ -137,11 +139,15 @@ def build_stepper(method):
         from implementations.multistep import LinearMultistepStepper
 
         return LinearMultistepStepper(c, name=c.name, **claims, stability=stability, **opts)
-    elif isinstance(c, SecondOrderMultistep):
-        from implementations.verlet import TwoStepVerlet
+    elif isinstance(c, SecondOrderMultistep) and "implicit_velocity" in opts:
+        from implementations.verlet import TwoStepVerlet  # the course's two-step Verlet form
 
         stepper = TwoStepVerlet(opts.pop("name", c.name), c, reference=method.reference,
                                 description=method.description, **opts)
+    elif isinstance(c, SecondOrderMultistep):
+        from implementations.second_order_multistep import SecondOrderMultistepStepper
+
+        stepper = SecondOrderMultistepStepper(c, **claims, **opts)
     else:
         raise InputError(f"method {method.name!r}: no step loop for coefficients of type {type(c).__name__}")
     if stability is not None:
