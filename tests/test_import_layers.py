@@ -33,7 +33,7 @@ EXCEPTIONS: dict[tuple[str, str], str] = {
         "the registry lists the built-in steppers by importing their package; fix: built-ins "
         "register through the `harness.steppers` entry-point group, as plugins do",
     ("harness.registry", "problems"): "as above, through `harness.problems`",
-    ("harness.methods", "implementations"):
+    ("harness.methods", "implementations.builder"):
         "a method record is built into a stepper by the family step loops of `implementations` "
         "(`build_stepper`); fix: families register their step loop with the registry",
     # -- the on-disk memo keyed on the code ------------------------------------------------------------
@@ -82,14 +82,6 @@ EXCEPTIONS: dict[tuple[str, str], str] = {
         "method populations are run by the family step loops; fix: as for `harness.methods`",
     ("harness.populations", "implementations.runge_kutta"): "as above",
     ("harness.populations", "implementations.splitting"): "as above",
-    # -- the catalogue's own package --------------------------------------------------------------
-    ("implementations", "implementations.runge_kutta"):
-        "`build_stepper` (in the package's `__init__`) picks a family's step loop, and the family "
-        "modules import the package's shared helpers; fix: the builder gets its own module",
-    ("implementations", "implementations.implicit_rk"): "as above",
-    ("implementations", "implementations.splitting"): "as above",
-    ("implementations", "implementations.multistep"): "as above",
-    ("implementations", "implementations.verlet"): "as above",
 }
 
 
