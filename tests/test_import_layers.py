@@ -29,10 +29,6 @@ PACKAGES = ("harness", "implementations", "problems")
 # of this project.
 EXCEPTIONS: dict[tuple[str, str], str] = {
     # -- the catalogue named by the framework ---------------------------------------------------------
-    ("harness.registry", "implementations"):
-        "the registry lists the built-in steppers by importing their package; fix: built-ins "
-        "register through the `harness.steppers` entry-point group, as plugins do",
-    ("harness.registry", "problems"): "as above, through `harness.problems`",
     ("harness.methods", "implementations.builder"):
         "a method record is built into a stepper by the family step loops of `implementations` "
         "(`build_stepper`); fix: families register their step loop with the registry",
