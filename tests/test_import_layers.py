@@ -48,15 +48,9 @@ EXCEPTIONS: dict[tuple[str, str], str] = {
     ("harness.experiments.base", "harness.experiments"):
         "looking an experiment up by name imports the package that registers the built-ins; "
         "fix: an experiment registry filled from an entry-point group, as steppers are",
-    ("harness.experiments.common", "harness.experiments.convergence"):
-        "the shared sweep helpers use the convergence experiment's step sizes; fix: move them to "
-        "`common`",
-    ("harness.experiments.convergence", "harness.experiments.convergence_verdicts"):
-        "the experiment re-exports its verdicts after the module was split to stay under 500 "
-        "lines; fix: `judge` imports them from one direction only",
-    ("harness.extended", "harness.experiments.convergence"):
-        "extended precision reuses the convergence experiment's error measure; fix: that measure "
-        "moves below both",
+    ("harness.extended", "harness.experiments.convergence_fit"):
+        "extended precision fits its real128 sweep with the convergence experiment's order fit; "
+        "fix: the fit (it needs only the thresholds) moves below both",
     ("harness.experiments.convergence", "implementations.compiled"):
         "runs the fastest correct implementation of a method by asking the compiled family module; "
         "fix: 'the fastest implementation' becomes a registry question",
