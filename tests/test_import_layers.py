@@ -32,10 +32,6 @@ EXCEPTIONS: dict[tuple[str, str], str] = {
     ("harness.methods", "implementations.builder"):
         "a method record is built into a stepper by the family step loops of `implementations` "
         "(`build_stepper`); fix: families register their step loop with the registry",
-    # -- the on-disk memo keyed on the code ------------------------------------------------------------
-    ("harness.derived", "harness.keys"):
-        "a remembered value is keyed on the version of the code that made it, computed by the "
-        "cell keys' import-graph walk; fix: that walk moves below both",
     # -- a problem's derived scales -------------------------------------------------------------------
     ("harness.problem.definition", "harness.scales"):
         "`Problem` offers its time scales and perturbations, derived by `harness.scales` from the "
