@@ -52,6 +52,8 @@ __all__ = [
     "get_problem",
     "load_plugin",
     "plugin_errors",
+    "expand",
+    "group_entry_points",
 ]
 
 T = TypeVar("T")
@@ -120,24 +122,19 @@ class Registry(Generic[T]):
         """Register every entry point of `self.group`: this project's own (the built-ins) first,
         and an error there raises; then the others', each failure recorded in `errors`."""
         try:
-            eps = list(metadata.entry_points(group=self.group))
+            own, others = group_entry_points(self.group)
         except Exception as exc:  # a broken distribution must not take the registry down
             self.errors.append(f"entry points {self.group}: {exc}")
             return
-        own = [ep for ep in eps if _is_own(ep)]
         if not own:
-            self.errors.append(
-                f"no built-in {self.kind}s: the {self.group!r} entry points of {DISTRIBUTION} are "
-                "not installed; install the project (`make setup`, or `pip install -e .`)")
-        for ep in sorted(own, key=lambda ep: ep.name):
-            for obj in _expand(ep.load(), self.cls):
+            self.errors.append(missing_builtins(self.kind, self.group))
+        for ep in own:
+            for obj in expand(ep.load(), self.cls):
                 self.register(obj, origin="builtin")
-        others = sorted((ep for ep in eps if not _is_own(ep)),
-                        key=lambda ep: (_dist_name(ep), ep.name))
         for ep in others:
             try:
                 loaded = ep.load()
-                for obj in _expand(loaded, self.cls):
+                for obj in expand(loaded, self.cls):
                     self.register(obj, origin=f"entry point {ep.name} ({ep.value})")
             except Exception as exc:
                 self.errors.append(f"entry point {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}")
@@ -204,17 +201,19 @@ def _name_of(obj: Any) -> str:
     return obj.info.name if isinstance(obj, Stepper) else obj.name
 
 
-def _expand(loaded: Any, cls: type) -> list:
+def expand(loaded: Any, cls: type) -> list:
+    """The `cls` objects an entry point or plugin names: an instance, a subclass (instantiated),
+    a callable returning either or a list of them, or a list; else `PluginError`."""
     if isinstance(loaded, cls):
         return [loaded]
     if isinstance(loaded, type) and issubclass(loaded, cls):
         return [loaded()]
     if callable(loaded):
-        return _expand(loaded(), cls)
+        return expand(loaded(), cls)
     if isinstance(loaded, Iterable) and not isinstance(loaded, str | bytes):
         out = []
         for item in loaded:
-            out.extend(_expand(item, cls))
+            out.extend(expand(item, cls))
         return out
     raise PluginError(
         f"expected a {cls.__name__}, a list of them, or a callable; got {type(loaded).__name__}"
@@ -230,6 +229,26 @@ def _dist_name(ep: metadata.EntryPoint) -> str:
 def _is_own(ep: metadata.EntryPoint) -> bool:
     """Declared by this project's own distribution: a built-in."""
     return _dist_name(ep) == DISTRIBUTION
+
+
+def group_entry_points(group: str) -> tuple[list, list]:
+    """The installed entry points of `group`.
+
+    Returns
+    -------
+    (this project's own, sorted by name; every other distribution's, sorted by distribution
+    and name)
+    """
+    eps = list(metadata.entry_points(group=group))
+    own = sorted((ep for ep in eps if _is_own(ep)), key=lambda ep: ep.name)
+    others = sorted((ep for ep in eps if not _is_own(ep)), key=lambda ep: (_dist_name(ep), ep.name))
+    return own, others
+
+
+def missing_builtins(kind: str, group: str) -> str:
+    """The error of a registry whose built-in entry points are not installed."""
+    return (f"no built-in {kind}s: the {group!r} entry points of {DISTRIBUTION} are not "
+            "installed; install the project (`make setup`, or `pip install -e .`)")
 
 
 steppers: Registry[Stepper] = Registry("stepper", Stepper, "harness.steppers")

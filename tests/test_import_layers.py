@@ -41,9 +41,6 @@ EXCEPTIONS: dict[tuple[str, str], str] = {
         "a coefficient object answers order and stability questions (NodePy style) through the "
         "theory functions, which take coefficient objects; fix: theory works on arrays only",
     # -- experiments reaching their neighbours ------------------------------------------------------
-    ("harness.experiments.base", "harness.experiments"):
-        "looking an experiment up by name imports the package that registers the built-ins; "
-        "fix: an experiment registry filled from an entry-point group, as steppers are",
     ("harness.extended", "harness.experiments.convergence_fit"):
         "extended precision fits its real128 sweep with the convergence experiment's order fit; "
         "fix: the fit (it needs only the thresholds) moves below both",

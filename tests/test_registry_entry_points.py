@@ -115,3 +115,57 @@ def test_a_failing_builtin_entry_point_raises(monkeypatch):
     fresh = Registry("problem", Problem, "harness.problems")
     with pytest.raises(ModuleNotFoundError, match="renamed_family"):
         fresh.names()
+
+
+# -- experiments through the same door ----------------------------------------------------------------
+EXPERIMENT_SCRIPT = '''
+import json
+from harness.experiments import EXPERIMENT_NAMES, EXPERIMENTS
+from harness.experiments.base import EXPERIMENT_ERRORS
+from harness.report import report_experiments
+from harness.report.sections import section_titles
+print(json.dumps({"listed": list(EXPERIMENTS), "builtin": list(EXPERIMENT_NAMES),
+                  "report": report_experiments(), "titles": section_titles(report_experiments()),
+                  "errors": EXPERIMENT_ERRORS}))
+'''
+
+
+def _experiment_site(tmp_path: Path) -> dict:
+    import os
+
+    site = tmp_path / "site"
+    _fake_distribution(site, "thirdparty-experiments", {"harness.experiments": {
+        "evals": "evals_per_step:EvalsPerStep", "broken": "no_such_module_xyz:EXPERIMENT"}})
+    path = os.pathsep.join([str(site), str(ROOT / "tests" / "plugins"), str(ROOT)])
+    return {**os.environ, "PYTHONPATH": path}
+
+
+def test_an_experiment_from_another_distribution_is_listed_run_and_reported(tmp_path):
+    """The tests/plugins experiment, registered only by a fake installed distribution's entry
+    point: listed after the built-ins, in the report's experiments with a section, run by the
+    CLI; a broken entry point is a warning naming it."""
+    import json
+    import subprocess
+
+    env = _experiment_site(tmp_path)
+    out = subprocess.run([sys.executable, "-c", EXPERIMENT_SCRIPT], env=env, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    seen = json.loads(out.stdout)
+    assert seen["listed"] == [*seen["builtin"], "evals-per-step"]
+    assert seen["report"] == [*seen["builtin"], "evals-per-step"]
+    assert ["evals-per-step", "Evals per step"] in seen["titles"]  # the generic section
+    assert len(seen["errors"]) == 1 and "'broken'" in seen["errors"][0]
+    harness_cli = str(Path(sys.executable).with_name("harness"))
+    listed = subprocess.run([harness_cli, "list", "experiments"], env=env, capture_output=True,
+                            text=True, timeout=300)
+    assert listed.returncode == 0 and "evals-per-step" in listed.stdout.splitlines()[-1]
+    assert "warning: entry point 'broken'" in listed.stderr
+    env["HARNESS_CACHE_DIR"] = str(tmp_path / "cache")
+    ran = subprocess.run([harness_cli, "run", "evals-per-step", "--stepper", "rk4", "--stepper",
+                          "leapfrog", "--problem", "harmonic", "--quick", "--jobs", "1", "--json"],
+                         env=env, capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr
+    rows = {r["stepper"]: r for r in json.loads(ran.stdout)}
+    assert rows["rk4"]["evals"] == 80 and rows["leapfrog"]["evals"] == 21
+    assert all(r["passed"] for r in rows.values())
