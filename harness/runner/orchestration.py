@@ -328,13 +328,14 @@ def run_experiment(
                      out["wall_s"], out["worker"])
                 bar.update(1, failed=1)
 
+        alone = bool(getattr(exp, "exclusive", False))  # timed cells: one at a time, nothing beside
         if tasks:
-            if _client is not None:
+            if _client is not None and not alone:
                 run_dask(interleaved(tasks), _client, accept)
-            elif jobs_n == 1:
+            elif jobs_n == 1 or _client is not None:
                 run_serial(tasks, accept)
             else:
-                run_loky(interleaved(tasks), jobs_n, accept)
+                run_loky(interleaved(tasks), 1 if alone else jobs_n, accept)
     finally:
         if own_client:
             _client.close()
