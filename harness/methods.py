@@ -4,7 +4,7 @@
 self-checking), its claims (order, stability figures where declared), its literature reference
 and, rarely, options of its family's step loop. Every built-in method is one `Method` entry in
 its family module's `METHODS` list; `Method.stepper()` picks the family's one step loop
-(`implementations.build_stepper`), and the registry, gate, experiments, compiled loops,
+(`implementations.builder.build_stepper`), and the registry, gate, experiments, compiled loops,
 benchmarks and report all start from there. Symmetry and symplecticity are never typed: they
 are asked of the coefficients.
 
@@ -79,7 +79,7 @@ class Method:
 
     def stepper(self) -> Stepper:
         """The stepper running this method with its family's step loop."""
-        from implementations import build_stepper
+        from implementations.builder import build_stepper
 
         return build_stepper(self)
 
