@@ -151,7 +151,9 @@ SCIPY_MIN_RTOL = 100.0 * EPS
 # h*omega limits of Newtonian steppers are searched up to this (the catalogue's are below 4).
 STABILITY_HW_SEARCH_LIMIT = 100.0
 # Stability probe against the coefficients' formula: largest relative difference of recurrence
-# coefficients (R(z), c_j, propagator entries) allowed; a step is a few dozen roundings.
+# coefficients (R(z), c_j, propagator entries) allowed; a step is a few dozen roundings of
+# numbers of the coefficients' size, so this is multiplied by that size (sum of |coefficients|,
+# or the magnitude of a splitting's product of factors at that h omega).
 STABILITY_AGREEMENT_TOL = 1e-12
 # Interval figures from the probe and from the formula must agree to this (each is root-found
 # to STABILITY_XTOL; the amplification tolerance shifts a transversal crossing by ~1e-12).
