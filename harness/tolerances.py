@@ -10,6 +10,10 @@ COEFFICIENT_TOL = 1e-14
 # ... or, for coefficients of large magnitude (extrapolation methods: sum |b| up to ~3000), this
 # many units of rounding of the sum of their magnitudes, per term summed.
 COEFFICIENT_ULPS = 16.0
+# A coefficient whose shortest float text has this many significant digits (and at most 15) was
+# typed as a cut decimal: published tableaux print 10-15 digits; exact short decimals (0.5,
+# 0.1875) print fewer, a float computed from a fraction 16-17.
+PUBLISHED_MIN_DIGITS = 10
 
 # Order conditions from coefficients: sums of products of up to 8 float64 factors; 1e-11 is far
 # above their rounding and far below any genuine defect (the smallest condition value is 1/8!).
@@ -147,7 +151,9 @@ SCIPY_MIN_RTOL = 100.0 * EPS
 # h*omega limits of Newtonian steppers are searched up to this (the catalogue's are below 4).
 STABILITY_HW_SEARCH_LIMIT = 100.0
 # Stability probe against the coefficients' formula: largest relative difference of recurrence
-# coefficients (R(z), c_j, propagator entries) allowed; a step is a few dozen roundings.
+# coefficients (R(z), c_j, propagator entries) allowed; a step is a few dozen roundings of
+# numbers of the coefficients' size, so this is multiplied by that size (sum of |coefficients|,
+# or the magnitude of a splitting's product of factors at that h omega).
 STABILITY_AGREEMENT_TOL = 1e-12
 # Interval figures from the probe and from the formula must agree to this (each is root-found
 # to STABILITY_XTOL; the amplification tolerance shifts a transversal crossing by ~1e-12).

@@ -5,7 +5,7 @@ Every stepper runs on the same problem to the same final time (the problem's
 
 - every problem applies; fixed-step steppers by a step-size sweep, and adaptive steppers by a
   tolerance sweep (`AdaptiveStepper.with_tolerance`), both the convergence experiment's own
-  sweeps (`harness.experiments.common.step_sweep` and `tolerance_sweep`, with the local error
+  sweeps (`harness.experiments.convergence.step_sweep` and `tolerance_sweep`, with the local error
   sweep turned off), so the two experiments measure identical points;
 - one trajectory (`ensemble` = 1): the step count differs from point to point, so the ensemble
   axis cannot batch a sweep, and one member keeps wall times comparable between NumPy steppers
@@ -38,13 +38,8 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.base import Cell, Experiment, register_experiment
-from harness.experiments.common import (
-    check_config,
-    perturbation_used,
-    problem_cells,
-    step_sweep,
-    tolerance_sweep,
-)
+from harness.experiments.common import check_config, perturbation_used, problem_cells
+from harness.experiments.convergence import step_sweep, tolerance_sweep
 from harness.experiments.timed_runs import TIMING_COLUMNS, time_points
 from harness.stepper import AdaptiveStepper
 

@@ -16,8 +16,7 @@ from harness.problem.checks import check_count, check_time
 if TYPE_CHECKING:
     from harness.stepper import Stepper
 
-__all__ = ["FORMS", "MAX_STEPS", "StepFailure", "StepperInfo", "Carry", "Trajectory", "as_real_state",
-           "check_step_size",
+__all__ = ["FORMS", "MAX_STEPS", "StepFailure", "StepperInfo", "Carry", "Trajectory", "check_step_size",
            "check_steps", "check_compatible"]
 
 
@@ -103,27 +102,6 @@ class Trajectory:
     def final(self) -> np.ndarray:
         """The state at the last output time, shaped (dim, N)."""
         return self.y[-1]
-
-
-def as_real_state(value: Any, stepper: str) -> np.ndarray:
-    """A step function's output as a float64 array; complex values (even with zero imaginary
-    part) and non-numbers are the stepper's `StepperOutputError`, never cast with a warning.
-
-    Parameters
-    ----------
-    value : what the step function returned; stepper : its name, for the message.
-
-    Returns
-    -------
-    numpy.ndarray
-    """
-    from harness.errors import StepperOutputError
-
-    arr = np.asarray(value)
-    if np.iscomplexobj(arr) or arr.dtype.kind not in "fiub":
-        raise StepperOutputError(f"stepper {stepper!r} returned a state of dtype {arr.dtype}; "
-                                 "expected real numbers (complex values are not cast to real)")
-    return arr.astype(np.float64, copy=False)
 
 
 def check_step_size(h: Any) -> float:

@@ -4,7 +4,9 @@ The package re-exports the public names of its modules: `orders` (rooted trees, 
 order conditions, multistep error constants), `classes` (orders on problem classes where
 elementary differentials vanish, stage order, order-condition defects), `series` (order from
 an exact local-error series), `amplification` (stability functions, scanned intervals),
-`intervals` (intervals decided on polynomials and root loci), `checks` (argument checks).
+`intervals` (intervals decided on polynomials and root loci), `roots` (exact polynomial
+arithmetic and root isolation), `newtonian` (every unstable h omega band of Newtonian
+methods), `checks` (argument checks).
 
 Everything here is a pure function of a coefficient object of `harness.coefficients`; nothing
 integrates a registered problem. The experiments measure the same properties from the outside
@@ -58,6 +60,7 @@ from harness.theory.classes import (
 )
 from harness.theory.intervals import (
     analytic_stability,
+    exact_hw_bands,
     lmm_real_interval,
     rk_stability_intervals,
     splitting_hw_limit,
@@ -125,4 +128,5 @@ __all__ = [
     "splitting_hw_limit",
     "MAX_TREE_ORDER",
     "splitting_trace_polynomial",
+    "exact_hw_bands",
 ]

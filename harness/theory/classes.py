@@ -132,7 +132,8 @@ def rk_class_orders(tableau: ButcherTableau, classes: list[tuple[bool, int | Non
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
     phi, size = elementary_weights(tableau, max_order)
     violated = [t for t in rooted_trees(max_order)
-                if abs(phi[t.index] - 1.0 / t.gamma) > condition_tolerance(t, size[t.index])]
+                if abs(phi[t.index] - 1.0 / t.gamma) > condition_tolerance(t, size[t.index],
+                                                                           tableau.published_precision)]
     out = []
     for nystrom, degree in classes:
         failed = [t.order for t in violated if tree_survives(t, nystrom=nystrom, degree=degree)]

@@ -113,13 +113,15 @@ def elementary_weights(tableau: ButcherTableau, max_order: int,
     return [float(b @ gk) for gk in g], [float(absb @ gk) for gk in g_abs]
 
 
-def condition_tolerance(t: RootedTree, size: float) -> float:
+def condition_tolerance(t: RootedTree, size: float, precision: float = 0.0) -> float:
     """How far Phi(t) may sit from 1/gamma(t) through rounding alone: ORDER_CONDITION_ULPS
     roundings per vertex of the sum of magnitudes, and never less than ORDER_CONDITION_TOL
     relative to the condition's value 1/gamma(t) nor ORDER_CONDITION_FLOOR (tableaux published
-    with 13-14 digits)."""
+    with 13-14 digits); for coefficients printed to `precision` (`published_precision`), each of
+    a product's t.order factors may be off by that much (twice, for safety)."""
     return max(tol.ORDER_CONDITION_ULPS * tol.EPS * t.order * size,
-               tol.ORDER_CONDITION_TOL / t.gamma, tol.ORDER_CONDITION_FLOOR)
+               tol.ORDER_CONDITION_TOL / t.gamma, tol.ORDER_CONDITION_FLOOR,
+               2.0 * precision * t.order * max(1.0, size))
 
 
 def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondition]:
@@ -137,7 +139,8 @@ def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondit
         expected = 1.0 / t.gamma
         r = phi[t.index] - expected
         out.append(OrderCondition(t.label, t.order, phi[t.index], expected, r,
-                                  abs(r) <= condition_tolerance(t, size[t.index])))
+                                  abs(r) <= condition_tolerance(t, size[t.index],
+                                                                tableau.published_precision)))
     return out
 
 
@@ -154,7 +157,8 @@ def rk_order(tableau: ButcherTableau, max_order: int | None = None,
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
     phi, size = elementary_weights(tableau, max_order, weights)
     failed = [t.order for t in rooted_trees(max_order)
-              if abs(phi[t.index] - 1.0 / t.gamma) > condition_tolerance(t, size[t.index])]
+              if abs(phi[t.index] - 1.0 / t.gamma) > condition_tolerance(t, size[t.index],
+                                                                         tableau.published_precision)]
     return min(failed) - 1 if failed else max_order
 
 
