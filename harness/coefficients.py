@@ -46,8 +46,7 @@ def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
             dtype=np.float64,
         )
     except (TypeError, ValueError, OverflowError) as exc:
-        raise CoefficientError(f"`{name}` must hold real numbers within float64's range: "
-                               f"{exc}") from None
+        raise CoefficientError(f"`{name}` must hold real numbers in float64's range: {exc}") from None
     if arr.ndim != ndim:
         raise CoefficientError(f"`{name}` must be {ndim}-dimensional, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):

@@ -198,9 +198,7 @@ def run_experiment(
     for name, flag in (("quick", quick), ("fresh", fresh), ("cache", cache)):
         if not isinstance(flag, bool | np.bool_):
             raise InputError(f"`{name}` must be True or False, got {flag!r}")
-    store = CellCache(cache_dir) if cache else None
-    if store is not None:
-        store.check_writable()  # one line and exit 77, not every cell failing
+    store = CellCache(cache_dir).check_writable() if cache else None  # unwritable: one line, 77
     from harness.registry import load_plugin
 
     for p in plugin_paths:

@@ -170,8 +170,8 @@ class CellCache:
         print(f"harness: warning: damaged cache entry {str(path)!r} {done} ({why})"[:600],
               file=sys.stderr)
 
-    def check_writable(self) -> None:
-        """Raise `OutputError` (exit 77/73/74, one line naming the directory) when the cache
+    def check_writable(self) -> CellCache:
+        """This cache, or `OutputError` (exit 77/73/74, one line naming the directory) when it
         cannot be written: found before any cell runs, not as every cell's failure."""
         import tempfile
 
@@ -186,6 +186,7 @@ class CellCache:
             message, status = describe_os_error(exc, self.root)
             raise OutputError(f"cache directory: {message} (set HARNESS_CACHE_DIR, or run "
                               "without the cache)", status) from None
+        return self
 
     # -- packs: every cell of one experiment's run in one file --------------------------------------
     @staticmethod
