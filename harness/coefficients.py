@@ -38,14 +38,23 @@ __all__ = [
 Number = float | int | Fraction
 
 
+def _real(v) -> float:
+    """One coefficient as float64: numbers as they are, strings as decimals ("0.25") or as exact
+    rationals ("2/3", rounded once)."""
+    if isinstance(v, str) and "/" in v:
+        return float(Fraction(v.strip()))
+    return float(v)
+
+
 def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
-    """Convert coefficients (floats, ints, Fractions, nested lists) to a read-only float64 array."""
+    """Convert coefficients (floats, ints, Fractions, decimal or rational strings such as "2/3",
+    nested lists) to a read-only float64 array."""
     try:
         arr = np.array(
-            [[float(v) for v in row] for row in values] if ndim == 2 else [float(v) for v in values],
+            [[_real(v) for v in row] for row in values] if ndim == 2 else [_real(v) for v in values],
             dtype=np.float64,
         )
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, ZeroDivisionError) as exc:
         raise CoefficientError(f"`{name}` must hold real numbers: {exc}") from None
     if arr.ndim != ndim:
         raise CoefficientError(f"`{name}` must be {ndim}-dimensional, got shape {arr.shape}")
@@ -116,6 +125,7 @@ class ButcherTableau:
     stages: int = field(init=False)
     explicit: bool = field(init=False)
     exact: tuple | None = field(init=False, repr=False)  # (A, b, c) as Fractions, when given exactly
+    exact_b_hat: tuple | None = field(init=False, repr=False)  # b_hat as Fractions, when given exactly
 
     def __init__(self, name: str, A: Sequence, b: Sequence, c: Sequence | None = None,
                  b_hat: Sequence | None = None):
@@ -163,6 +173,21 @@ class ButcherTableau:
             _exact_rows(c, 1) if c is not None else None)
         object.__setattr__(self, "exact", (exact_A, exact_b, exact_c)
                            if exact_A and exact_b and exact_c else None)
+        object.__setattr__(self, "exact_b_hat", _exact_rows(b_hat, 1)
+                           if b_hat is not None and self.exact is not None else None)
+
+    def embedded(self, name: str | None = None) -> ButcherTableau:
+        """The embedded method (A, b_hat, c) as a tableau of its own, exact where this one and
+        `b_hat` are exact (so extended-precision runs measure it as well).
+
+        Raises `CoefficientError` when the tableau has no `b_hat`."""
+        if self.b_hat is None:
+            raise CoefficientError(f"`{self.name}` has no embedded weights `b_hat`")
+        name = name or f"{self.name}@embedded"
+        if self.exact is not None and self.exact_b_hat is not None:
+            A, _, c = self.exact
+            return ButcherTableau(name, A, self.exact_b_hat, c)
+        return ButcherTableau(name, self.A, self.b_hat, self.c)
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         """R(z) = 1 + z b^T (I - zA)^{-1} e, evaluated for an array of complex z."""
@@ -194,7 +219,7 @@ class ButcherTableau:
             return None
         from harness.theory import rk_order
 
-        return rk_order(ButcherTableau(f"{self.name}-embedded", self.A, self.b_hat, self.c))
+        return rk_order(self.embedded(f"{self.name}-embedded"))
 
     def linear_order(self) -> int:
         """Order on linear constant-coefficient problems: of R(z) against e^z."""
