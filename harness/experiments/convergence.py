@@ -49,7 +49,7 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
-from harness.experiments.convergence_extended import extended_if_floor_bound
+from harness.experiments.convergence_extended import coefficient_floor, extended_if_floor_bound
 from harness.experiments.convergence_fit import classify_points, fit_order
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
@@ -204,6 +204,9 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     # Rounding committed along the way is carried to T by the flow: the floor is sqrt(n) eps |y|
     # times the flow's sensitivity over the horizon (at least 1), as in the reversibility bound.
     amplification = _flow_amplification(problem, T - T0, y0[:, 0])
+    # The error the record's own digits leave (None where its defects are float64 rounding).
+    floor_of = coefficient_floor(getattr(stepper, "coefficients", None), problem, span=span,
+                                 scale=scale, noise=tol.EPS)
 
     def run(n: int) -> dict:
         nonlocal spent
@@ -243,11 +246,13 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
         frame = _frame(records)
         return frame, classify_points(frame.h.values, frame.error.values,
                                       frame.reference_error.values, frame.rounding_level.values,
-                                      start_error)
+                                      start_error, floor_of(frame.h.values))
 
     def at_floor(rec: dict) -> bool:
         return rec["error"] < tol.ROUNDOFF_MARGIN * rec["rounding_level"] or (
-            rec["error"] < tol.REFERENCE_MARGIN * ref_err)
+            rec["error"] < tol.REFERENCE_MARGIN * ref_err) or (
+            floor_of(np.array([rec["h"]])) is not None
+            and rec["error"] < tol.COEFFICIENT_FLOOR_MARGIN * float(floor_of(np.array([rec["h"]]))[0]))
 
     # Phase 0: a start that is already below the start error (a high-order method on a smooth
     # span) is coarsened first, down to one step, so the sweep sees the error fall.
@@ -293,7 +298,7 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     frame = _frame(records)
     frame["excluded"] = classify_points(frame.h.values, frame.error.values,
                                         frame.reference_error.values, frame.rounding_level.values,
-                                        start_error)
+                                        start_error, floor_of(frame.h.values))
     frame["in_fit"] = frame["excluded"] == ""
     frame["kind"] = "global"
     frame["tol"] = np.nan

@@ -1,6 +1,15 @@
-"""Extended-precision reruns of convergence sweeps: where the float64 rounding floor ended a
-sweep before its asymptotic range, the same exact coefficients run in real128
-(`harness.extended`) and those rows replace the float64 ones, or the message says why not."""
+"""Extended-precision reruns of convergence sweeps, and what the coefficients say about a sweep.
+
+Where the float64 rounding floor ended a sweep before its asymptotic range, the same exact
+coefficients run in real128 (`harness.extended`) and those rows replace the float64 ones, or the
+message says why not. Two facts of the coefficients bound what a sweep can show:
+- `coefficient_floor`: the record's own defects in the order conditions leave an error no
+  arithmetic removes (`harness.theory.defects`); points near it are excluded as `coefficients`;
+- `order_bound`: no problem shows a slope above max(order, linear order) asymptotically (the
+  linear order counts the tall trees, which every class keeps); a fitted slope above it by more
+  than ABOVE_ORDER_TOL is higher-order terms still dominating, so its points are pre-asymptotic,
+  and where the floor came first the sweep is rerun in real128 like any floor-bound one.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +21,58 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.stepper import Stepper
 
-__all__ = ["floor_bound", "extended_if_floor_bound"]
+__all__ = ["floor_bound", "extended_if_floor_bound", "coefficient_floor", "order_bound", "mark_above_order"]
+
+
+def coefficient_floor(coefficients, problem, *, span: float, scale: float,
+                      noise: float) -> Callable[[np.ndarray], np.ndarray | None]:
+    """h -> the error floor an explicit Runge-Kutta tableau's defects in the order conditions
+    leave (`harness.theory.defects.defect_floor`), or None where those defects are within
+    `noise` (the arithmetic's unit roundoff) of rounding or `coefficients` is no such tableau."""
+    from harness.coefficients import ButcherTableau
+    from harness.theory.defects import condition_defects, defect_floor
+
+    none = lambda h: None  # noqa: E731
+    if not isinstance(coefficients, ButcherTableau) or not coefficients.explicit:
+        return none
+    defects = condition_defects(coefficients, coefficients.order())
+    threshold = tol.DEFECT_NOISE_ULPS * noise
+    if not any(d > threshold * q * max(1.0, size) for q, (d, size) in enumerate(defects, start=1)):
+        return none
+    from harness.scales import derive_time_scale
+
+    rate = derive_time_scale(problem).fastest_rate
+
+    def floor(h: np.ndarray) -> np.ndarray:
+        return defect_floor(defects, threshold, h, span=span, rate=rate, scale=scale)
+
+    return floor
+
+
+def order_bound(stepper: Stepper) -> int | None:
+    """max(order, linear order) of the stepper's coefficients, or None without coefficients."""
+    coefficients = getattr(stepper, "coefficients", None)
+    try:
+        return max(int(coefficients.order()), int(coefficients.linear_order()))
+    except Exception:  # a black box, or a family without both facts
+        return None
+
+
+def mark_above_order(h: np.ndarray, error: np.ndarray, reasons: np.ndarray,
+                     bound: int | None) -> str:
+    """Where the points kept (reason '') fit a slope above `bound` + ABOVE_ORDER_TOL, mark them
+    `pre-asymptotic` in place and return the reason; else ''."""
+    from harness.experiments.convergence_fit import fit_order
+
+    kept = np.flatnonzero(reasons == "")
+    if bound is None or kept.size < 2:
+        return ""
+    slope = fit_order(h[kept], error[kept])["order"]
+    if slope <= bound + tol.ABOVE_ORDER_TOL:
+        return ""
+    reasons[kept] = "pre-asymptotic"
+    return (f"slope {slope:.3f} over the settled points is above the coefficients' order bound {bound} "
+            f"(max of order and linear order): higher-order error terms still dominate there")
 
 
 def floor_bound(g: pd.DataFrame) -> bool:
@@ -34,6 +94,19 @@ def extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, conf
     `amplification(T)` is the flow's error amplification over the horizon ending at T."""
     from harness.extended import NotMeasurable, extended_sweep
 
+    bound = order_bound(stepper)
+    mine = (frame.kind == "global").values
+    if mine.any():
+        g = frame[mine].sort_values("h", ascending=False)
+        reasons = g.excluded.values.copy()
+        why = mark_above_order(g.h.values, g.error.values, reasons, bound)
+        if why:
+            frame = frame.copy()
+            frame.loc[g.index, "excluded"] = reasons
+            frame.loc[g.index, "in_fit"] = reasons == ""
+            frame["message"] = frame["message"].fillna("").astype(str)
+            frame.loc[g.index, "message"] = ["; ".join(x for x in (m, why) if x)
+                                             for m in frame.loc[g.index, "message"]]
     g = frame[frame.kind == "global"]
     if config.get("extended") is False or not floor_bound(g):
         return frame
@@ -45,7 +118,7 @@ def extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, conf
         if coefficients is None:
             raise NotMeasurable("not measurable in extended precision: a black box has no coefficients")
         ext = extended_sweep(coefficients, problem, T=T, amplification=amplification(T),
-                             work_budget=config.get("extended_work_budget"))
+                             work_budget=config.get("extended_work_budget"), order_bound=bound)
     except NotMeasurable as exc:
         frame = frame.copy()
         frame["message"] = frame["message"].fillna("").astype(str)
@@ -66,7 +139,8 @@ def extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, conf
                 f"{int(rows.in_fit.sum())} asymptotic point(s) before {ext['stopped_by']}")
     rows["message"] = (f"{head}; measured in real128 from the problem's start with the exact "
                        f"coefficients against a {ext['reference_precision']} reference: {measured}, "
-                       f"local slopes " + " ".join(f"{x:.3f}" for x in ext["local_slopes"][-5:]))
+                       f"local slopes " + " ".join(f"{x:.3f}" for x in ext["local_slopes"][-5:])
+                       + (f"; {ext['note']}" if ext.get("note") else ""))
     for col in ("stepper", "problem", "t_end"):
         rows[col] = g[col].iloc[0]
     rows["implementation"] = "real128"
