@@ -56,7 +56,8 @@ def cmd_population(args) -> int:
         raise InputError(f"`--max-order` must lie in [4, 12], got {args.max_order}")
     started = time.perf_counter()
     families = HIGH_FAMILIES if args.high_order else FAMILIES
-    table, rates = error_rates(generate(args.size, seed=args.seed, families=families, max_order=args.max_order))
+    members = generate(args.size, seed=args.seed, families=families, max_order=args.max_order)
+    table, rates = error_rates(members)
     empty = pd.DataFrame()
     result = RunResult(experiment="gate-population",
                        description="the gate's error rates on generated methods",
