@@ -385,6 +385,8 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
                "h_max": max(r["h"] for r in kept), "error_min": min(r["error"] for r in kept),
                "error_max": max(r["error"] for r in kept)}
     slopes = np.diff(np.log([r["error"] for r in rows])) / np.diff(np.log([r["h"] for r in rows]))
+    if fit is None and not note and stop:
+        note = "the local slopes had not settled on an integer order (the error is still curving)"
     return {"rows": rows, "fit": fit, "reference_error": ref_err, "stopped_by": stop, "note": note,
             "evals": spent, "wall_s": time.perf_counter() - started, "t_end": T,
             "local_slopes": [float(s) for s in slopes], "precision": "real128",

@@ -58,33 +58,34 @@ def extrapolation_weights(steps: Sequence[int], power: int) -> list[Fraction]:
     return [M[r][k] for r in range(k)]
 
 
-def extrapolation_tableau(k: int, base: str = "euler", steps: Sequence[int] | None = None
+def extrapolation_tableau(k: int, base: str = "forward-euler", steps: Sequence[int] | None = None
                           ) -> tuple[list[list[Fraction]], list[Fraction]]:
     """(A, b) of the extrapolated method as one explicit Runge-Kutta tableau (first stage shared).
 
     Parameters
     ----------
     k : number of extrapolation columns: order k (Euler) or 2k (midpoint)
-    base : 'euler' or 'midpoint'
+    base : 'forward-euler' (steps of explicit Euler) or 'gragg-midpoint' (an Euler step, then
+        midpoint steps)
     steps : the step-number sequence (default 1..k for Euler, 2, 4, ..., 2k for the midpoint
         rule; midpoint sequences must be even)
 
     Returns
     -------
     (A, b) as nested lists of Fractions."""
-    if base not in ("euler", "midpoint"):
-        raise ValueError(f"`base` must be 'euler' or 'midpoint', got {base!r}")
+    if base not in ("forward-euler", "gragg-midpoint"):
+        raise ValueError(f"`base` must be 'forward-euler' or 'gragg-midpoint', got {base!r}")
     if steps is None:
-        steps = list(range(1, k + 1)) if base == "euler" else [2 * j for j in range(1, k + 1)]
+        steps = list(range(1, k + 1)) if base == "forward-euler" else [2 * j for j in range(1, k + 1)]
     steps = [int(n) for n in steps]
-    odd = base == "midpoint" and any(n % 2 for n in steps)
+    odd = base == "gragg-midpoint" and any(n % 2 for n in steps)
     if len(steps) != k or sorted(set(steps)) != steps or odd:
         raise ValueError(f"`steps` must be {k} increasing step numbers (even for the midpoint rule), "
                          f"got {steps}")
     rows: list[dict[int, Fraction]] = [{}]  # stage 0: f(y0), shared
     finals: list[dict[int, Fraction]] = []  # each member's value as sum_j w_j k_j
     for n in steps:
-        if base == "euler":
+        if base == "forward-euler":
             z: dict[int, Fraction] = {0: Fraction(1, n)}  # y_1 = y0 + (h/n) k_0
             for _ in range(1, n):
                 rows.append(dict(z))
@@ -101,7 +102,7 @@ def extrapolation_tableau(k: int, base: str = "euler", steps: Sequence[int] | No
         finals.append(z)
     s = len(rows)
     A = [[row.get(j, Fraction(0)) for j in range(s)] for row in rows]
-    gamma = extrapolation_weights(steps, 1 if base == "euler" else 2)
+    gamma = extrapolation_weights(steps, 1 if base == "forward-euler" else 2)
     b = [sum((g * f.get(j, Fraction(0)) for g, f in zip(gamma, finals, strict=True)), Fraction(0))
          for j in range(s)]
     return A, b
@@ -176,11 +177,11 @@ def draw_high_order(family: str, rng, max_order: int = 12):
     if family == "extrap-euler":
         p = int(rng.integers(5, min(12, max_order) + 1))
         steps = sorted(int(x) for x in rng.choice(np.arange(1, p + 3), size=p, replace=False))
-        return ("rk", *extrapolation_tableau(p, "euler", steps)), p
+        return ("rk", *extrapolation_tableau(p, "forward-euler", steps)), p
     if family == "extrap-midpoint":
         k = int(rng.integers(3, min(12, max_order) // 2 + 1))
         steps = sorted(int(x) for x in rng.choice(np.arange(2, 2 * k + 6, 2), size=k, replace=False))
-        return ("rk", *extrapolation_tableau(k, "midpoint", steps)), 2 * k
+        return ("rk", *extrapolation_tableau(k, "gragg-midpoint", steps)), 2 * k
     if family == "compose":
         levels: list[str] = []
         for _ in range(int(rng.integers(1, min(10, max_order) // 2))):

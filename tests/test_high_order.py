@@ -171,7 +171,7 @@ def test_high_order_members_have_the_order_they_are_built_for():
             assert order == (m.stepper.info.claimed_order - (m.kind == "overclaimed")), m.stepper.info.name
         else:
             assert order < m.stepper.info.claimed_order, m.stepper.info.name
-    A, b = extrapolation_tableau(4, "euler", [1, 2, 3, 5])
+    A, b = extrapolation_tableau(4, "forward-euler", [1, 2, 3, 5])
     assert ButcherTableau("e4", A, b).order() == 4
     with pytest.raises(ValueError, match="`steps` must be 3 increasing"):
-        extrapolation_tableau(3, "midpoint", [2, 3, 4])
+        extrapolation_tableau(3, "gragg-midpoint", [2, 3, 4])

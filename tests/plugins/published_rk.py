@@ -690,8 +690,8 @@ TSIT5_B = [TSIT5_A[(6, j)] if j < 6 else "0" for j in range(7)]
 
 _NODEPY = "ketch/nodepy, nodepy/runge_kutta_method.py"
 _RKLIB = "jacobwilliams/rklib, src/rklib_variable_steps.f90"
-_EULER8 = extrapolation_tableau(8, "euler")
-_MIDPOINT10 = extrapolation_tableau(5, "midpoint")
+_EULER8 = extrapolation_tableau(8, "forward-euler")
+_MIDPOINT10 = extrapolation_tableau(5, "gragg-midpoint")
 
 METHODS = [
     {"name": "dormand-prince-5", "A": _dense(7, DP5_A), "b": DP5_b, "b_hat": DP5_bhat, "claimed_order": 5,
