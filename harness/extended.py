@@ -325,6 +325,7 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     start_error = tol.SWEEP_START_ERROR * scale
     span = T - float(problem.t0)
     floor_of = _defect_floor(coefficients, problem, span, scale)
+    rounded_of = _coefficient_rounding(coefficients, problem, span, scale)
     rows: list[dict] = []
     spent = 0
     note = ""
@@ -333,7 +334,8 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
         with np.errstate(all="ignore"):  # a coarse step may overflow: that point is a blow-up
             y, evals = runner(y0, span, n)
         rows.append({"h": span / n, "n_steps": n, "error": _error(y, ref), "reference_error": ref_err,
-                     "rounding_level": math.sqrt(n) * EXTENDED_EPS * scale * max(1.0, amplification)})
+                     "rounding_level": math.sqrt(n) * EXTENDED_EPS * scale * max(1.0, amplification)
+                     + (float(rounded_of(np.array([span / n]))[0]) if rounded_of else 0.0)})
         rows.sort(key=lambda r: -r["h"])
         return evals
 
@@ -391,6 +393,20 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
             "evals": spent, "wall_s": time.perf_counter() - started, "t_end": T,
             "local_slopes": [float(s) for s in slopes], "precision": "real128",
             "reference_precision": f"real{_REFERENCE_PREC} certified by real{_CERTIFIER_PREC}"}
+
+
+def _coefficient_rounding(coefficients, problem, span: float, scale: float):
+    """h -> what rounding a tableau's coefficients to real128 leaves: each order condition off by
+    about EXTENDED_EPS times the size of its products (`harness.theory.defects`), as large as
+    1e-29 for extrapolation weights summing |b| to 1e5; None for other families."""
+    if not isinstance(coefficients, ButcherTableau):
+        return None
+    from harness.scales import derive_time_scale
+    from harness.theory.defects import condition_defects, defect_floor
+
+    sizes = [(EXTENDED_EPS * size, size) for _, size in condition_defects(coefficients, coefficients.order())]
+    rate = derive_time_scale(problem).fastest_rate
+    return lambda h: defect_floor(sizes, 0.0, h, span=span, rate=rate, scale=scale)
 
 
 def _defect_floor(coefficients, problem, span: float, scale: float):

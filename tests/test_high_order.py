@@ -118,6 +118,7 @@ def test_a_slope_above_the_coefficients_order_bound_is_marked_pre_asymptotic():
 @pytest.mark.parametrize("name, problem", [
     ("dormand-prince-5", "harmonic"),
     ("tsitouras-5@embedded", "harmonic"),
+    ("dop853@embedded", "harmonic"),  # DOP853's fifth-order estimator
     ("prince-dormand-8", "harmonic"),
 ])
 def test_published_methods_pass_or_are_not_measurable_with_their_reason(name, problem, registered):

@@ -49,7 +49,11 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
-from harness.experiments.convergence_extended import coefficient_floor, extended_if_floor_bound
+from harness.experiments.convergence_extended import (
+    coefficient_floor,
+    coefficient_rounding_floor,
+    extended_if_floor_bound,
+)
 from harness.experiments.convergence_fit import classify_points, fit_order
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
@@ -207,6 +211,10 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     # The error the record's own digits leave (None where its defects are float64 rounding).
     floor_of = coefficient_floor(getattr(stepper, "coefficients", None), problem, span=span,
                                  scale=scale, noise=tol.EPS)
+    # ... and what rounding its coefficients to float64 leaves (large coefficients only): a part
+    # of the rounding level, so a sweep that reaches it is floor-bound and rerun in real128.
+    rounded_of = coefficient_rounding_floor(getattr(stepper, "coefficients", None), problem,
+                                            span=span, scale=scale)
 
     def run(n: int) -> dict:
         nonlocal spent
@@ -232,7 +240,8 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
             err, evals, msg = float("nan"), {}, str(exc)
         rec = {
             "n_steps": n, "h": span / n, "error": err, "reference_error": target_err,
-            "rounding_level": math.sqrt(n) * tol.EPS * scale * amplification,
+            "rounding_level": max(math.sqrt(n) * tol.EPS * scale * amplification,
+                                  _first_or_zero(rounded_of(np.array([span / n])))),
             "rhs_evals": float(evals.get("rhs", 0)), "force_evals": float(evals.get("accel", 0)),
             "wall_s": time.perf_counter() - started, "message": msg,
         }
@@ -317,6 +326,10 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     out["perturbation"] = perturbation_used(problem, config) if y0.shape[1] > 1 else 0.0
     out.attrs["budget_ended"] = budget_ended
     return out
+
+
+def _first_or_zero(values: np.ndarray | None) -> float:
+    return 0.0 if values is None else float(values[0])
 
 
 def _reference_at_clocks(problem, times: np.ndarray, y0: np.ndarray, t0: float):

@@ -21,7 +21,30 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.stepper import Stepper
 
-__all__ = ["floor_bound", "extended_if_floor_bound", "coefficient_floor", "order_bound", "mark_above_order"]
+__all__ = ["floor_bound", "extended_if_floor_bound", "coefficient_floor", "coefficient_rounding_floor",
+           "order_bound", "mark_above_order"]
+
+
+def coefficient_rounding_floor(coefficients, problem, *, span: float,
+                               scale: float) -> Callable[[np.ndarray], np.ndarray | None]:
+    """h -> the error a float64 loop owes to its tableau's coefficients rounded to float64 (their
+    defects in the order conditions as run, `harness.theory.defects`): part of the float64
+    rounding floor, which it raises only for coefficients of large magnitude (an order-11
+    extrapolation tableau's weights sum |b| to ~1e5 and lose ~1e-11); None where every defect
+    is within DEFECT_NOISE_ULPS roundings, as for coefficients of ordinary size."""
+    from harness.coefficients import ButcherTableau
+    from harness.theory.defects import condition_defects, defect_floor
+
+    none = lambda h: None  # noqa: E731
+    if not isinstance(coefficients, ButcherTableau) or not coefficients.explicit:
+        return none
+    defects = condition_defects(coefficients, coefficients.order(), as_run_in_float64=True)
+    if not any(d > tol.DEFECT_NOISE_ULPS * tol.EPS for d, _ in defects):
+        return none
+    from harness.scales import derive_time_scale
+
+    rate = derive_time_scale(problem).fastest_rate
+    return lambda h: defect_floor(defects, 0.0, h, span=span, rate=rate, scale=scale)
 
 
 def coefficient_floor(coefficients, problem, *, span: float, scale: float,
