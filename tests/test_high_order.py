@@ -72,6 +72,17 @@ def test_defects_in_the_order_conditions_measure_the_records_digits():
     assert max(d for d, _ in condition_defects(pd8, 7, "b_hat")) > 1e-19  # embedded weights too
 
 
+def test_large_coefficients_lose_their_order_conditions_to_float64_rounding_not_exactly():
+    from harness.high_order import extrapolation_tableau
+
+    A, b = extrapolation_tableau(11, "forward-euler")
+    tableau = ButcherTableau("e11", A, b)
+    assert float(np.abs(tableau.b).sum()) > 1e4
+    as_run = max(d for d, _ in condition_defects(tableau, 11, as_run_in_float64=True))
+    exact = max(d for d, _ in condition_defects(tableau, 11))
+    assert as_run > 1e3 * tol.EPS and exact < 1e-80
+
+
 # -- the fit at any order ---------------------------------------------------------------------------------
 def _series(slopes, e0=1e-3):
     h = 0.5 ** np.arange(len(slopes) + 1)
