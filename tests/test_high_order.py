@@ -176,7 +176,7 @@ def test_high_order_members_have_the_order_they_are_built_for():
     from harness.high_order import extrapolation_tableau
     from harness.populations import HIGH_FAMILIES, generate
 
-    members = generate(1, seed=2, families=HIGH_FAMILIES, max_order=8)
+    members = generate(1, seed=2, families=HIGH_FAMILIES, max_order=7)
     for m in members:
         order = m.stepper.coefficients.order()
         if m.kind in ("correct", "overclaimed"):
