@@ -401,11 +401,11 @@ def _coefficient_rounding(coefficients, problem, span: float, scale: float):
     1e-29 for extrapolation weights summing |b| to 1e5; None for other families."""
     if not isinstance(coefficients, ButcherTableau):
         return None
-    from harness.scales import derive_time_scale
+    from harness.experiments.convergence_extended import problem_rate
     from harness.theory.defects import condition_defects, defect_floor
 
     sizes = [(EXTENDED_EPS * size, size) for _, size in condition_defects(coefficients, coefficients.order())]
-    rate = derive_time_scale(problem).fastest_rate
+    rate = problem_rate(problem)
     return lambda h: defect_floor(sizes, 0.0, h, span=span, rate=rate, scale=scale)
 
 

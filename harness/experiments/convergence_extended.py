@@ -22,7 +22,19 @@ from harness import tolerances as tol
 from harness.stepper import Stepper
 
 __all__ = ["floor_bound", "extended_if_floor_bound", "coefficient_floor", "coefficient_rounding_floor",
-           "order_bound", "mark_above_order"]
+           "order_bound", "mark_above_order", "problem_rate"]
+
+
+def problem_rate(problem) -> float:
+    """The problem's fastest rate along its orbit (`harness.scales`), the size of an elementary
+    differential per order; 1 per unit time where it cannot be derived."""
+    from harness.scales import derive_time_scale
+
+    try:
+        rate = float(derive_time_scale(problem).fastest_rate)
+    except Exception:  # a problem whose orbit sampling fails keeps its cell: unit rate
+        return 1.0
+    return rate if np.isfinite(rate) and rate > 0 else 1.0
 
 
 def coefficient_rounding_floor(coefficients, problem, *, span: float,
@@ -41,9 +53,7 @@ def coefficient_rounding_floor(coefficients, problem, *, span: float,
     defects = condition_defects(coefficients, coefficients.order(), as_run_in_float64=True)
     if not any(d > tol.DEFECT_NOISE_ULPS * tol.EPS for d, _ in defects):
         return none
-    from harness.scales import derive_time_scale
-
-    rate = derive_time_scale(problem).fastest_rate
+    rate = problem_rate(problem)
     return lambda h: defect_floor(defects, 0.0, h, span=span, rate=rate, scale=scale)
 
 
@@ -62,9 +72,7 @@ def coefficient_floor(coefficients, problem, *, span: float, scale: float,
     threshold = tol.DEFECT_NOISE_ULPS * noise
     if not any(d > threshold * q * max(1.0, size) for q, (d, size) in enumerate(defects, start=1)):
         return none
-    from harness.scales import derive_time_scale
-
-    rate = derive_time_scale(problem).fastest_rate
+    rate = problem_rate(problem)
 
     def floor(h: np.ndarray) -> np.ndarray:
         return defect_floor(defects, threshold, h, span=span, rate=rate, scale=scale)
