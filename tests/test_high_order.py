@@ -187,3 +187,10 @@ def test_high_order_members_have_the_order_they_are_built_for():
     assert ButcherTableau("e4", A, b).order() == 4
     with pytest.raises(ValueError, match="`steps` must be 3 increasing"):
         extrapolation_tableau(3, "gragg-midpoint", [2, 3, 4])
+
+
+def test_population_refuses_an_order_outside_the_families(capsys):
+    from harness.cli import main
+
+    assert main(["population", "--high-order", "--max-order", "13"]) == 2
+    assert "`--max-order` must lie in [4, 12]" in capsys.readouterr().err
