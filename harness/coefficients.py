@@ -24,6 +24,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from harness.coefficient_input import as_float_array, exact_rows, exact_value, published_precision
 from harness.errors import CoefficientError
 from harness.tolerances import COEFFICIENT_TOL, COEFFICIENT_ULPS, EPS
 
@@ -33,35 +34,10 @@ __all__ = [
     "LinearMultistep",
     "SecondOrderMultistep",
     "as_float_array",
+    "exact_value",
 ]
 
 Number = float | int | Fraction
-
-
-def _real(v) -> float:
-    """One coefficient as float64: numbers as they are, strings as decimals ("0.25") or as exact
-    rationals ("2/3", rounded once)."""
-    if isinstance(v, str) and "/" in v:
-        return float(Fraction(v.strip()))
-    return float(v)
-
-
-def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
-    """Convert coefficients (floats, ints, Fractions, decimal or rational strings such as "2/3",
-    nested lists) to a read-only float64 array."""
-    try:
-        arr = np.array(
-            [[_real(v) for v in row] for row in values] if ndim == 2 else [_real(v) for v in values],
-            dtype=np.float64,
-        )
-    except (TypeError, ValueError, ZeroDivisionError) as exc:
-        raise CoefficientError(f"`{name}` must hold real numbers: {exc}") from None
-    if arr.ndim != ndim:
-        raise CoefficientError(f"`{name}` must be {ndim}-dimensional, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise CoefficientError(f"`{name}` must be finite, got {arr.tolist()}")
-    arr.setflags(write=False)
-    return arr
 
 
 def _close(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
@@ -72,48 +48,14 @@ def _close(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
     return abs(a - b) <= max(COEFFICIENT_TOL, COEFFICIENT_ULPS * EPS * (terms + 1) * scale)
 
 
-def exact_value(x) -> Fraction | None:
-    """`x` as an exact rational when it is given exactly (int, Fraction, Decimal, a decimal
-    string, or a float that is a short dyadic such as 0.5), else None: a float like 1/3 is only
-    a float64 approximation, and extended-precision runs (`harness.extended`) need better."""
-    from decimal import Decimal
-
-    if isinstance(x, bool):
-        return None
-    if isinstance(x, (int, Fraction, Decimal, str)):
-        try:
-            return Fraction(x)
-        except (ValueError, ZeroDivisionError):
-            return None
-    if isinstance(x, (float, np.floating)) and np.isfinite(x):
-        f = Fraction(float(x))
-        return f if f.denominator <= _EXACT_DYADIC and abs(f.numerator) <= _EXACT_DYADIC else None
-    return None
-
-
-def _exact_rows(values, ndim: int):
-    """Nested tuples of `exact_value`s, or None when any entry is not exact."""
-    try:
-        rows = [values] if ndim == 1 else list(values)
-        out = tuple(tuple(exact_value(x) for x in row) for row in rows)
-    except TypeError:
-        return None
-    if any(v is None for row in out for v in row):
-        return None
-    return out[0] if ndim == 1 else out
-
-
-# A float with numerator and denominator (a power of two) at most this is taken as exact (0.5,
-# 0.25, 3.0): a rounded decimal such as 0.1 or 1/3 has a 2^52-sized denominator.
-_EXACT_DYADIC = 1 << 20
-
-
 @dataclass(frozen=True, eq=False)
 class ButcherTableau:
     """A Runge-Kutta method: stage matrix `A`, weights `b`, nodes `c`.
 
     Checks on creation: `A` square with as many rows as `b` and `c`; row sums of `A` equal `c`
-    (the stages are consistent in time); weights sum to one (the method is consistent).
+    (the stages are consistent in time); weights sum to one (the method is consistent); with
+    coefficients cut to `published_precision`, up to their printing: that miss is stated
+    (`consistency_defect`, `defect_note`) and the order conditions allow for it.
     Derived: `stages`, `explicit` (A strictly lower triangular), `diagonally_implicit`.
     """
 
@@ -126,6 +68,8 @@ class ButcherTableau:
     explicit: bool = field(init=False)
     exact: tuple | None = field(init=False, repr=False)  # (A, b, c) as Fractions, when given exactly
     exact_b_hat: tuple | None = field(init=False, repr=False)  # b_hat as Fractions, when given exactly
+    consistency_defect: float = field(init=False, default=0.0)
+    published_precision: float = field(init=False, default=0.0)
 
     def __init__(self, name: str, A: Sequence, b: Sequence, c: Sequence | None = None,
                  b_hat: Sequence | None = None):
@@ -137,6 +81,17 @@ class ButcherTableau:
                 f"`{name}.A` must be {s}x{s} to match {s} weights in `b`, got {A_arr.shape}"
             )
         row_sums = A_arr.sum(axis=1)
+        precision = published_precision(A_arr, b_arr, *[as_float_array(v, f"{name}.{k}", 1) for k, v in
+                                                         (("c", c), ("b_hat", b_hat)) if v is not None])
+        defect = 0.0
+
+        def near(total: float, want: float, size: float, terms: int) -> bool:  # rounding, or printing
+            nonlocal defect
+            if _close(total, want, size, terms):
+                return True
+            defect = max(defect, abs(total - want))  # refused (raises) unless within the printing
+            return abs(total - want) <= (terms + 1) * precision
+
         if c is None:
             c_arr = row_sums.copy()
             c_arr.setflags(write=False)
@@ -145,35 +100,37 @@ class ButcherTableau:
             if c_arr.shape != (s,):
                 raise CoefficientError(f"`{name}.c` must have {s} nodes, got {c_arr.shape[0]}")
             for i in range(s):
-                if not _close(row_sums[i], c_arr[i], float(np.abs(A_arr[i]).sum()), s):
+                if not near(row_sums[i], c_arr[i], float(np.abs(A_arr[i]).sum()), s):
                     raise CoefficientError(
                         f"`{name}`: row {i} of A sums to {float(row_sums[i])!r} but node c[{i}] is "
                         f"{float(c_arr[i])!r}; the row sums of A must equal the nodes"
                     )
-        if not _close(b_arr.sum(), 1.0, float(np.abs(b_arr).sum()), s):
+        if not near(b_arr.sum(), 1.0, float(np.abs(b_arr).sum()), s):
             raise CoefficientError(f"`{name}.b` must sum to 1 (consistency), sums to {float(b_arr.sum())!r}")
         bh_arr = None
         if b_hat is not None:
             bh_arr = as_float_array(b_hat, f"{name}.b_hat", 1)
             if bh_arr.shape != (s,):
                 raise CoefficientError(f"`{name}.b_hat` must have {s} weights, got {bh_arr.shape[0]}")
-            if not _close(bh_arr.sum(), 1.0, float(np.abs(bh_arr).sum()), s):
+            if not near(bh_arr.sum(), 1.0, float(np.abs(bh_arr).sum()), s):
                 raise CoefficientError(
                     f"`{name}.b_hat` must sum to 1 (consistency), sums to {float(bh_arr.sum())!r}"
                 )
         object.__setattr__(self, "b_hat", bh_arr)
+        object.__setattr__(self, "consistency_defect", float(defect))
+        object.__setattr__(self, "published_precision", float(precision))
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "A", A_arr)
         object.__setattr__(self, "b", b_arr)
         object.__setattr__(self, "c", c_arr)
         object.__setattr__(self, "stages", s)
         object.__setattr__(self, "explicit", bool(np.all(np.triu(A_arr) == 0.0)))
-        exact_A, exact_b = _exact_rows(A, 2), _exact_rows(b, 1)
+        exact_A, exact_b = exact_rows(A, 2), exact_rows(b, 1)
         exact_c = tuple(sum(row, Fraction(0)) for row in exact_A) if exact_A and c is None else (
-            _exact_rows(c, 1) if c is not None else None)
+            exact_rows(c, 1) if c is not None else None)
         object.__setattr__(self, "exact", (exact_A, exact_b, exact_c)
                            if exact_A and exact_b and exact_c else None)
-        object.__setattr__(self, "exact_b_hat", _exact_rows(b_hat, 1)
+        object.__setattr__(self, "exact_b_hat", exact_rows(b_hat, 1)
                            if b_hat is not None and self.exact is not None else None)
 
     def embedded(self, name: str | None = None) -> ButcherTableau:
@@ -188,6 +145,12 @@ class ButcherTableau:
             A, _, c = self.exact
             return ButcherTableau(name, A, self.exact_b_hat, c)
         return ButcherTableau(name, self.A, self.b_hat, self.c)
+
+    @property
+    def defect_note(self) -> str:
+        """The consistency defect in words ('' when there is none)."""
+        return (f"published as cut decimals (to {self.published_precision:.0e}): sums miss their "
+                f"nodes or 1 by up to {self.consistency_defect:.1e}") if self.consistency_defect else ""
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         """R(z) = 1 + z b^T (I - zA)^{-1} e, evaluated for an array of complex z."""

@@ -311,8 +311,8 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     settled. Returns the rows (h, n_steps, error, reference_error, rounding_level, excluded),
     the fit (order, points, h range) or None, and the reference error. Raises NotMeasurable
     with the reason."""
-    from harness.experiments.convergence import classify_points, fit_order
     from harness.experiments.convergence_extended import mark_above_order
+    from harness.experiments.convergence_fit import classify_points, fit_order
 
     runner = _runner(coefficients, problem)
     T = float(problem.convergence_t_end if T is None else T)
