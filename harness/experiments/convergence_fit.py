@@ -7,7 +7,7 @@ slopes next to the floor form a plateau, they do not drift monotonically across 
 slope fitted over it is an order at all. The global error of a one-step method on a smooth
 problem expands as C_p h^p + C_{p+1} h^{p+1} + ... with integer exponents (Hairer, Norsett &
 Wanner I, II.8, Theorem 8.1), so its log-log slope tends to the integer p; a slope steady at
-8.8 or 5.25 is a mixture of terms still changing weight, not an order, however flat it looks
+8.5 or 5.3 is a mixture of terms still changing weight, not an order, however flat it looks
 over a few halvings (an optimized pair's tiny leading constant, an order-12 method whose h^13
 term dominates down to the float64 floor)."""
 
