@@ -311,7 +311,7 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     settled. Returns the rows (h, n_steps, error, reference_error, rounding_level, excluded),
     the fit (order, points, h range) or None, and the reference error. Raises NotMeasurable
     with the reason."""
-    from harness.experiments.convergence_extended import mark_above_order
+    from harness.coefficient_floors import mark_above_order
     from harness.experiments.convergence_fit import classify_points, fit_order
 
     runner = _runner(coefficients, problem)
@@ -401,7 +401,7 @@ def _coefficient_rounding(coefficients, problem, span: float, scale: float):
     1e-29 for extrapolation weights summing |b| to 1e5; None for other families."""
     if not isinstance(coefficients, ButcherTableau):
         return None
-    from harness.experiments.convergence_extended import problem_rate
+    from harness.coefficient_floors import problem_rate
     from harness.theory.defects import condition_defects, defect_floor
 
     sizes = [(EXTENDED_EPS * size, size) for _, size in condition_defects(coefficients, coefficients.order())]
@@ -411,7 +411,7 @@ def _coefficient_rounding(coefficients, problem, span: float, scale: float):
 
 def _defect_floor(coefficients, problem, span: float, scale: float):
     """h -> the error floor of a tableau's defects in the order conditions at real128, or None."""
-    from harness.experiments.convergence_extended import coefficient_floor
+    from harness.coefficient_floors import coefficient_floor
 
     floor = coefficient_floor(coefficients, problem, span=span, scale=scale, noise=EXTENDED_EPS)
     return floor if floor(np.array([1.0])) is not None else None

@@ -132,9 +132,9 @@ def composition(levels: Sequence[str], name: str, top_factor: Fraction = Fractio
     the last level to w (1 + d) and the middle one so they still sum to one: symmetric and
     consistent, of the order below (a subtle mutant)."""
     from harness.coefficients import SplittingScheme
-    from implementations.splitting import VELOCITY_VERLET
 
-    scheme, order = VELOCITY_VERLET, 2
+    half = Fraction(1, 2)  # velocity Verlet, kick-drift-kick: the symmetric base of order 2
+    scheme, order = SplittingScheme(f"{name}-base", [("K", half), ("D", 1), ("K", half)]), 2
     for i, kind in enumerate(levels):
         weights = [Fraction(w) for w in _level_weights(kind, order)]
         if i == len(levels) - 1 and top_factor:

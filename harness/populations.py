@@ -238,12 +238,7 @@ def _high_order_members(family: str, size: int, rng, seed: int, max_order: int) 
         tag = f"pop-{family}-{seed}-{made}"
 
         def member(label, member_spec, claim, tag=tag):
-            from implementations.runge_kutta import ExplicitRungeKutta
-            from implementations.splitting import SplittingStepper
-
-            coefficients = build_high_order(member_spec, tag + label)
-            family_loop = ExplicitRungeKutta if isinstance(coefficients, ButcherTableau) else SplittingStepper
-            return family_loop(coefficients, claimed_order=claim, reference=_REFERENCE)
+            return Method(build_high_order(member_spec, tag + label), claim, _REFERENCE).stepper()
 
         good = member("", spec, claimed)
         if good.coefficients.order() != claimed:

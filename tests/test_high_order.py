@@ -114,7 +114,7 @@ def test_points_at_the_coefficients_floor_are_excluded_with_that_reason():
 
 
 def test_a_slope_above_the_coefficients_order_bound_is_marked_pre_asymptotic():
-    from harness.experiments.convergence_extended import mark_above_order
+    from harness.coefficient_floors import mark_above_order
 
     h, e = _series([9.0] * 6)
     reasons = np.array([""] * h.size, dtype=object)

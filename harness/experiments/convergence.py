@@ -47,13 +47,10 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
+from harness.coefficient_floors import coefficient_floor, coefficient_rounding_floor
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
-from harness.experiments.convergence_extended import (
-    coefficient_floor,
-    coefficient_rounding_floor,
-    extended_if_floor_bound,
-)
+from harness.experiments.convergence_extended import extended_if_floor_bound
 from harness.experiments.convergence_fit import classify_points, fit_order
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
