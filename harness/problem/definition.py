@@ -18,6 +18,7 @@ from harness.errors import InputError
 from harness.problem.checks import check_ensemble_size, check_positive
 from harness.problem.dynamics import Dynamics
 from harness.problem.nbody import NBody, NewtonianForm, expression_names
+from harness.problem.published import Published
 
 ExactSolution = Callable[[float, np.ndarray, float, np.ndarray], np.ndarray]
 
@@ -47,6 +48,7 @@ class Problem:
         period: float | None = None,
         tags: Sequence[str] = (),
         structure: NBody | None = None,
+        published: Published | None = None,
     ):
         if not isinstance(name, str) or not name.strip():
             raise InputError(f"problem `name` must be a non-empty string, got {name!r}")
@@ -122,6 +124,11 @@ class Problem:
         if structure is not None:
             _check_structure(name, structure, var_names)
         self.structure = structure
+        if published is not None:
+            if not isinstance(published, Published):
+                raise InputError(f"problem {name!r}: `published` must be a Published record")
+            published.check(name, y0_arr, parameters, t_end)
+        self.published = published
         self._lock = threading.Lock()
 
     # -- declared facts -------------------------------------------------------------------------
@@ -183,6 +190,8 @@ class Problem:
             "reference": self.reference,
             "description": self.description,
             "structure": None if self.structure is None else self.structure.describe(),
+            "published": None if self.published is None else self.published.describe(),
+            "on_request": "on-request" in self.tags,
         }
 
     def fingerprint(self) -> str:
@@ -196,6 +205,8 @@ class Problem:
         parts += [f"{k}:{e}" for k, e in sorted(self.invariants.items())]
         if getattr(self, "structure", None) is not None:
             parts.append(repr(sorted(self.structure.describe().items())))
+        if getattr(self, "published", None) is not None:
+            parts.append(repr(self.published))
         return "|".join(parts)
 
     # -- initial states -------------------------------------------------------------------------
