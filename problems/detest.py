@@ -43,7 +43,7 @@ _T_END = "20"
 
 
 def _problem(name: str, variables, y0, *, rhs=None, newtonian=None, parameters=None,
-             description: str, exact=None, tags=()) -> Problem:
+             description: str, exact=None, tags=(), **extra) -> Problem:
     published = Published(_SOURCE + f" problem {name.split('-')[1].upper()}", y0=tuple(y0),
                           parameters=parameters or {}, t_end=_T_END)
     return Problem(
@@ -59,6 +59,7 @@ def _problem(name: str, variables, y0, *, rhs=None, newtonian=None, parameters=N
         description=description,
         reference=_SOURCE + ", with diffrax's test/test_detest.py",
         tags=_TAGS + tuple(tags),
+        **extra,
     )
 
 
@@ -214,6 +215,9 @@ D = [
              newtonian=NewtonianForm(positions=(_dx, _dy), velocities=(_dvx, _dvy),
                                      acceleration=_D_ACCELERATION),
              exact=kepler_exact,
+             # a = 1: period 2 pi; the perturbation of the eccentric Kepler orbits
+             # (problems/kepler.py), which keeps every member bound near pericentre
+             period=2.0 * math.pi, perturbation=0.05 * (1.0 - float(e)) ** 2 / 4.0,
              description=f"D{k}: Kepler orbit from pericentre, eccentricity {e}",
              tags=("newtonian", "central-force", "hamiltonian"))
     for k, e in enumerate(("0.1", "0.3", "0.5", "0.7", "0.9"), start=1)

@@ -1,0 +1,144 @@
+"""The published test sets (DETEST A-E, the Bari IVP test set): definitions kept as published,
+references certified for the problem as published, the stiff ones refused as stiff and answered
+by the published end values.
+
+The references are checked against what the sources publish: the Bari problem files' end values
+(HIRES, PLEI integrated here; the stiff ones served) and DETEST's closed forms.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import heyoka as hy
+import numpy as np
+import pytest
+
+from harness.errors import InputError, StiffReferenceError
+from harness.ground_truth import reference
+from harness.ground_truth.levels import LEVELS_BY_NAME
+from harness.problem import Problem, Published
+from harness.registry import problems
+
+TEST_SETS = [p for p in problems.all(variants=True) if "test-set" in p.tags]
+DETEST = [p for p in TEST_SETS if "detest" in p.tags]
+BARI = [p for p in TEST_SETS if "bari" in p.tags]
+STIFF = ["bari-vdpol", "bari-rober", "bari-orego", "bari-e5", "bari-pollu"]
+# closed forms given by the paper (A1-A4, D1-D5, E1)
+WITH_CLOSED_FORM = [p for p in DETEST if p.exact is not None]
+
+
+def test_the_families_are_complete_listed_and_on_request():
+    assert len(DETEST) == 25 and len(BARI) == 7
+    assert {p.name for p in DETEST} == {f"detest-{c}{i}" for c in "abcde" for i in range(1, 6)}
+    default = set(problems.names())
+    assert all(p.name not in default for p in TEST_SETS)  # run only when named
+    assert all(p.published is not None and p.describe()["on_request"] for p in TEST_SETS)
+
+
+@pytest.mark.parametrize("problem", TEST_SETS, ids=[p.name for p in TEST_SETS])
+def test_definition_is_the_rounding_of_the_published_values(problem: Problem):
+    pub = problem.published
+    assert problem.y0.tolist() == pub.y0_float
+    assert problem.t_end == pub.t_end_float
+    assert list(problem.parameters.values()) == list(pub.parameters_float.values())
+    f = problem.dynamics().f(problem.t0, problem.y0[:, None].copy())
+    assert np.all(np.isfinite(f))
+    rounding = pub.rounding()
+    assert pub.exact_in_float64 == (not any(rounding.values()))
+    assert all(0 <= v <= 2.0**-53 for v in rounding.values())
+
+
+def test_rounding_is_measured_exactly():
+    hires = problems.get("bari-hires").published
+    assert hires.rounding()["y0"] == pytest.approx(abs(float(Fraction(0.0057) - Fraction("0.0057")))
+                                                   / 0.0057, rel=1e-12)
+    assert problems.get("detest-a1").published.exact_in_float64
+    assert problems.get("bari-plei").published.exact_in_float64
+
+
+def test_exact_levels_hold_more_than_the_float64_rounding():
+    real128 = LEVELS_BY_NAME["real128"]
+    exact = real128.exact(["0.0057"])[0]
+    assert exact != real128.array(np.array([0.0057]))[0]
+    assert abs(float(exact - hy.real128("0.0057"))) == 0.0
+
+
+@pytest.mark.parametrize("bad, match", [
+    (dict(y0=(0.5,)), "must be exact"),
+    (dict(y0=("x",)), "decimal number"),
+    (dict(y0=("1",), values=("1",)), "stated `accuracy`"),
+])
+def test_published_record_refuses_inexact_or_incomplete_values(bad, match):
+    with pytest.raises(InputError, match=match):
+        Published("source", **bad)
+
+
+def test_a_float64_form_that_is_not_the_rounding_is_refused():
+    y = hy.make_vars("y")
+    with pytest.raises(InputError, match="float64 rounding of the published"):
+        Problem("p", variables=[y], rhs=[-y], y0=[0.1], t_span=(0.0, 1.0),
+                published=Published("s", y0=("0.1000001",)), description="d", reference="r")
+
+
+def test_hires_reference_matches_the_published_values():
+    """Integrated as published (exact decimals): within the stated 1e-15 of the Bari values,
+    where the float64 form alone is ~1e-13 relative away in the smallest component."""
+    p = problems.get("bari-hires")
+    ref = reference(p, [p.t_end])
+    assert ref.form == "published" and ref.precision != "published"
+    published = np.array(p.published.values_float)
+    got = ref.y[0][:, 0]
+    assert np.all(np.abs(got - published) <= p.published.accuracy * np.abs(published) + ref.max_error)
+
+
+def test_plei_reference_matches_the_published_values():
+    p = problems.get("bari-plei")
+    ref = reference(p, [p.t_end])
+    published = np.array(p.published.values_float)
+    assert np.all(np.abs(ref.y[0][:, 0] - published)
+                  <= p.published.accuracy * np.abs(published) + ref.max_error)
+
+
+@pytest.mark.parametrize("name", STIFF)
+def test_stiff_problems_are_refused_as_stiff_and_served_their_published_values(name):
+    p = problems.get(name)
+    with pytest.raises(StiffReferenceError, match="stiff for the explicit Taylor reference"):
+        reference(p, [p.t0 + (p.t_end - p.t0) / 2])
+    ref = reference(p, [p.t_end])
+    assert ref.form == "published values" and ref.precision == "published"
+    assert ref.y[0][:, 0].tolist() == p.published.values_float
+    assert ref.max_error == pytest.approx(p.published.accuracy * max(map(abs, p.published.values_float)))
+    assert "stiff" in ref.certified_by and p.published.source in ref.certified_by
+    # another start is not the published problem: no published values for it
+    with pytest.raises(StiffReferenceError):
+        reference(p, [p.t_end], p.y0 * 1.0)
+
+
+@pytest.mark.parametrize("problem", WITH_CLOSED_FORM, ids=[p.name for p in WITH_CLOSED_FORM])
+def test_detest_references_match_the_closed_forms(problem: Problem):
+    """The float64 form's reference against the closed form from the same float64 start, and
+    the published form's reference against it within the effect of the start's rounding."""
+    t = problem.t_end
+    exact = problem.exact(t, problem.y0[:, None], problem.t0, problem.pars_for(1))[:, 0]
+    scale = np.max(np.abs(exact)) + 1.0
+    as_float64 = reference(problem, [t], problem.y0.reshape(-1, 1))
+    assert as_float64.form == "float64"
+    assert np.max(np.abs(as_float64.y[0][:, 0] - exact)) <= 1e-14 * scale + as_float64.max_error
+    as_published = reference(problem, [t])
+    assert as_published.form == "published"
+    assert np.max(np.abs(as_published.y[0][:, 0] - exact)) <= 1e-12 * scale
+
+
+@pytest.mark.parametrize("problem", WITH_CLOSED_FORM, ids=[p.name for p in WITH_CLOSED_FORM])
+def test_detest_closed_forms_solve_the_equation(problem: Problem):
+    """d/dt exact by a 4th-order central difference equals f(t, exact) for perturbed starts."""
+    y0 = problem.ensemble(3)
+    pars = problem.pars_for(3)
+    dyn = problem.dynamics(pars, 3)
+    for t in (0.37, 7.1, 18.0):
+        d = 1e-3
+        ys = [problem.exact(t + k * d, y0, problem.t0, pars) for k in (-2, -1, 1, 2)]
+        deriv = (ys[0] - 8 * ys[1] + 8 * ys[2] - ys[3]) / (12 * d)
+        rhs = dyn.f(t, problem.exact(t, y0, problem.t0, pars))
+        np.testing.assert_allclose(deriv, rhs, rtol=0, atol=1e-7 * (np.max(np.abs(rhs)) + 1.0))
