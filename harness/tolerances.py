@@ -35,6 +35,16 @@ REFERENCE_STIFF_STEPS = 3e4
 # stability bound (an accuracy-limited step is far shorter than p / (e |lambda|) on a stiff
 # problem only while the solution itself varies that fast).
 REFERENCE_STIFF_SHARE = 0.3
+# The stiff reference (scipy Radau cross-checked by CVODE BDF): rtol for both, a decade above
+# scipy's floor of 100 eps and inside CVODE's documented [1e-15, 1e-3]; atol_i = rtol x s_i.
+STIFF_REFERENCE_RTOL = 1e-13
+# ... with atol_i = rtol x s_i x this share: nearly pure relative control, as the Bari test set's
+# own references for OREGO and E5 (atol 1.1e-40), whose components fall to 1e-22 and below
+# (E5 at atol = rtol x s_i: both solvers agreed to 7e-22 on values of 9e-22 that were wrong by
+# 1e-21).
+STIFF_REFERENCE_ATOL_SHARE = 1e-8
+# ... and each solver's evaluation bound per member (~1 min of Python-level evaluations).
+STIFF_REFERENCE_MAX_EVALS = 2_000_000
 
 # Convergence sweep: start where the error first falls below this, relative to the size of the
 # state (the asymptotic law rarely holds at larger errors) ...

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from harness.errors import InputError, StiffReferenceError
-from harness.ground_truth import reference
+from harness.ground_truth import reference, stiff
 from harness.ground_truth.levels import LEVELS_BY_NAME
 from harness.problem import Problem, Published
 from harness.registry import problems
@@ -100,8 +100,17 @@ def test_plei_reference_matches_the_published_values():
                   <= p.published.accuracy * np.abs(published) + ref.max_error)
 
 
+@pytest.fixture
+def without_implicit_path(monkeypatch):
+    """The explicit reference alone (as without scikit-sundae): its refusal is what is seen."""
+    from harness.ground_truth import stiff
+
+    monkeypatch.setattr(stiff, "available", lambda: False)
+
+
 @pytest.mark.parametrize("name", STIFF)
-def test_stiff_problems_are_refused_as_stiff_and_served_their_published_values(name):
+def test_stiff_problems_are_refused_as_stiff_and_served_their_published_values(
+        name, without_implicit_path):
     p = problems.get(name)
     with pytest.raises(StiffReferenceError, match="stiff for the explicit Taylor reference"):
         reference(p, [p.t0 + (p.t_end - p.t0) / 2])
@@ -111,7 +120,7 @@ def test_stiff_problems_are_refused_as_stiff_and_served_their_published_values(n
     assert ref.max_error == pytest.approx(p.published.accuracy * max(map(abs, p.published.values_float)))
     assert "stiff" in ref.certified_by and p.published.source in ref.certified_by
     # another start is not the published problem: no published values for it
-    with pytest.raises(StiffReferenceError):
+    with pytest.raises(StiffReferenceError, match="stiff for the explicit"):
         reference(p, [p.t_end], p.y0 * 1.0)
 
 
@@ -142,3 +151,55 @@ def test_detest_closed_forms_solve_the_equation(problem: Problem):
         deriv = (ys[0] - 8 * ys[1] + 8 * ys[2] - ys[3]) / (12 * d)
         rhs = dyn.f(t, problem.exact(t, y0, problem.t0, pars))
         np.testing.assert_allclose(deriv, rhs, rtol=0, atol=1e-7 * (np.max(np.abs(rhs)) + 1.0))
+
+
+PROTHERO_ROBINSON_RATE = 1e6
+
+
+def _prothero_robinson() -> Problem:
+    """y' = -L (y - cos t) - sin t, y(0) = 1: the solution is cos t whatever L, and L = 1e6 makes
+    the explicit reference stiff (Prothero & Robinson, Math. Comp. 28 (1974) 145-162)."""
+    y = hy.make_vars("y")
+    return Problem("prothero-robinson", variables=[y],
+                   rhs=[-PROTHERO_ROBINSON_RATE * (y - hy.cos(hy.time)) - hy.sin(hy.time)],
+                   y0=[1.0], t_span=(0.0, 10.0), description="d", reference="r")
+
+
+@pytest.mark.skipif(not stiff.available(), reason="scikit-sundae (the optional sundials extra) "
+                    "is not installed: the cross-check needs CVODE")
+def test_the_implicit_cross_check_answers_a_stiff_problem_within_its_stated_error():
+    p = _prothero_robinson()
+    times = np.array([2.5, 10.0])
+    ref = reference(p, times)
+    assert ref.precision == stiff.IMPLICIT_LEVEL and ref.certified_by == stiff.IMPLICIT_CERTIFIER
+    truth = np.cos(times)
+    actual = np.abs(ref.y[:, 0, 0] - truth)
+    assert np.all(actual <= ref.error[:, 0] + 4 * np.finfo(float).eps)
+    assert np.all(ref.error < 1e-10)
+
+
+def test_without_the_implicit_solvers_a_stiff_problem_is_refused_as_stiff(without_implicit_path):
+    with pytest.raises(StiffReferenceError, match="eigenvalue with real part -1e\\+06"):
+        reference(_prothero_robinson(), [10.0])
+
+
+def test_a_libraries_c_level_stdout_goes_to_stderr_while_it_runs():
+    """What C code prints to stdout inside `c_stdout_to_stderr` (SUNDIALS' warnings, through
+    printf's buffer or straight to fd 1) lands on stderr; Python's stdout is left alone."""
+    import subprocess
+    import sys
+
+    code = (
+        "import ctypes, os\n"
+        "from harness.cli.output import c_stdout_to_stderr\n"
+        "libc = ctypes.CDLL(None)\n"
+        "print('before', flush=True)\n"
+        "with c_stdout_to_stderr():\n"
+        "    libc.printf(b'buffered C text\\n')\n"
+        "    os.write(1, b'raw fd text\\n')\n"
+        "print('after', flush=True)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["before", "after"]
+    assert "buffered C text" in proc.stderr and "raw fd text" in proc.stderr

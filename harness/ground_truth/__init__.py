@@ -113,6 +113,64 @@ def published_values(problem: Problem, times: np.ndarray, as_published: bool, st
                      form="published values")
 
 
+def _stiff_reference(problem: Problem, times: np.ndarray, y: np.ndarray, t0: float, P: np.ndarray,
+                     start: float, refusal: StiffReferenceError) -> Reference:
+    """The cross-checked implicit reference (`harness.ground_truth.stiff`), cached on disk like
+    the Taylor ones; the refusal stands when its solvers are not installed."""
+    from harness.ground_truth import stiff
+
+    if not stiff.available():
+        raise refusal
+    exam = _implicit_exam(problem, start)
+    if exam:
+        raise StiffReferenceError(f"{refusal}; the implicit cross-check does not apply: {exam}")
+    return _implicit_cached(problem, times, y, t0, P, start)
+
+
+def _implicit_cached(problem: Problem, times: np.ndarray, y: np.ndarray, t0: float, P: np.ndarray,
+                     start: float) -> Reference:
+    from harness.ground_truth import stiff
+
+    key = reference_key(problem, stiff.IMPLICIT_LEVEL, times, t0, y, P)
+    path = cache_path(problem, stiff.IMPLICIT_LEVEL, key)
+    loaded = load_reference(path, times, (times.size, problem.dim, y.shape[1]))
+    if loaded is not None:
+        y_ref, error, _, certified_by, compute_s = loaded
+        cached = True
+    else:
+        y_ref, error, compute_s = stiff.implicit_reference(problem, times, y, t0, P)
+        certified_by, cached = stiff.IMPLICIT_CERTIFIER, False
+        try:
+            store_reference(path, y=y_ref, error=error, floor=np.zeros_like(error), t=times,
+                            certified_by=np.array(certified_by), compute_s=np.array(compute_s))
+        except OSError as exc:
+            warnings.warn(f"reference cache not written ({path}): {exc}", stacklevel=2)
+    return Reference(problem.name, times, y_ref, error, stiff.IMPLICIT_LEVEL, certified_by,
+                     time.perf_counter() - start, cached=cached, compute_s=compute_s)
+
+
+def _implicit_exam(problem: Problem, start: float) -> str:
+    """The implicit cross-check judged where the truth is known: from the published start (its
+    float64 form) to the published end time, against the published values. '' when it passes
+    (its difference from them within its own stated error plus their stated accuracy, and the
+    effect of the float64 rounding of the inputs), else why not. A problem without published
+    values is not examined."""
+    pub = problem.published
+    if pub is None or pub.values is None or pub.t_end_float is None:
+        return ""
+    times = np.array([pub.t_end_float])
+    ref = _implicit_cached(problem, times, problem.y0.reshape(-1, 1), problem.t0,
+                           problem.pars_for(1), start)
+    values = np.array(pub.values_float)
+    diff = float(np.max(np.abs(ref.y[0][:, 0] - values)))
+    rounding = max(pub.rounding().values()) * float(np.max(np.abs(values)))
+    allowed = ref.max_error + pub.accuracy * float(np.max(np.abs(values))) + 100.0 * rounding
+    if diff <= allowed:
+        return ""
+    return (f"at the published end time it is {diff:.3g} from the published values, more than "
+            f"its stated error {ref.max_error:.3g} plus their accuracy allow ({allowed:.3g})")
+
+
 # -- public entry point ----------------------------------------------------------------------------
 def _check_times(times: Any, t0: float) -> np.ndarray:
     try:
@@ -196,7 +254,12 @@ def reference(
             except StiffReferenceError as exc:
                 served = published_values(problem, times, as_published, start, exc)
                 if served is None:
-                    raise
+                    served = _stiff_reference(problem, times, y, t0, P, start, exc)
+                if required is not None and served.max_error > required:
+                    raise ReferenceError_(
+                        f"ground truth for problem {problem.name!r} cannot meet `required_error` "
+                        f"= {required:.3g}: the stiff problem's reference ({served.certified_by}) "
+                        f"has error {served.max_error:.3g}") from exc
                 return served
             y_ref, error, floor = certify(values, level, higher, cert)
             compute_s = cost_level + cost_cert
