@@ -73,7 +73,7 @@ class CvodeStepper(MemberByMemberStepper):
 
     def extra_info(self) -> dict:
         return {"tol": self.tol, "rtol": max(self.tol, SCIPY_MIN_RTOL),
-                "atol": "tol x max|y_i| along the orbit, per component",
+                "atol": self.tol, "atol_per_component": "tol x max|y_i| along the orbit",
                 # scikit-sundae documents rtol in [1e-15, 1e-3]
                 "tol_range": list(CVODE_TOL_RANGE),
                 "cvode_method": self.method, "scikit_sundae_version": SUNDAE_VERSION,

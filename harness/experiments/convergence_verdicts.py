@@ -79,7 +79,16 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
                                f"{allowed[k][1]}); "
                                f"tolerance exponent {base['measured_order']:.3g} "
                                f"(minimum {tol.MIN_TOLERANCE_EXPONENT:g})")
-        capped = g[g.kind == "tolerance-not-run"]
+        not_run = g[g.kind == "tolerance-not-run"]
+        capped = not_run[not_run.excluded != "tol-range"]
+        outside = not_run[not_run.excluded == "tol-range"]
+        if len(outside):  # not measurable there: said once, with the library's range
+            listed = ", ".join(f"{t:.0e}" for t in sorted(outside.tol, reverse=True))
+            first = str(outside.message.iloc[0])
+            why = first[first.find(" is outside") + 1:] if " is outside" in first else first
+            base["message"] = "; ".join(filter(None, [base["message"], (
+                f"not measurable at tol {listed}: {why}")]))
+        messages = [m for m in t.message.fillna("") if m]  # failures of tolerances that ran
         if len(capped):
             listed = ", ".join(f"{t:.0e}" for t in sorted(capped.tol, reverse=True))
             base["message"] = "; ".join(filter(None, [base["message"], (
