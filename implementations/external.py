@@ -4,8 +4,9 @@
 every ensemble member separately from t to t + h with `scipy.integrate.solve_ivp`, at
 rtol = tol (raised to scipy's own floor of 100 machine epsilons when tol is below it) and a
 per-component absolute tolerance atol_i = tol x s_i, s_i the component's size along the problem's
-orbit (`component_atol`: max |y_i| sampled along it, at most the start's largest component, as the Bari test set's reports scale atol
-for ROBER and E5, whose small components an atol of tol would leave uncontrolled); the
+orbit (`component_atol`: max |y_i| sampled along it, at most the start's largest component,
+as the Bari test set's reports scale atol for ROBER and E5, whose small components an atol of
+tol would leave uncontrolled); the
 implicit methods get the problem's symbolic Jacobian, one member at a time. A solve that
 scipy reports as failed (status < 0) raises `StepFailure` with scipy's message.
 

@@ -19,9 +19,10 @@ the last one uncertain) for the references computed at rtol = 1.1e-18, and to 1e
 (HIRES, PLEI: tests/test_test_sets.py).
 
 Their convergence horizon is the published span (the derived one, ten periods of the fastest
-rate, stops inside the initial layer of a stiff problem). All are listed on request only (tag `on-request`): the stiff ones need an implicit method and
-their explicit reference is refused (the published end values serve), and together they would
-add several minutes to the default run.
+rate, stops inside the initial layer of a stiff problem). All are listed on request only (tag
+`on-request`): the stiff ones need an implicit method, and their references the stiff path
+(`harness.ground_truth.stiff`, or the published end values), and together they would add
+several minutes to the default run.
 """
 
 from __future__ import annotations
