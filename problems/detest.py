@@ -53,6 +53,8 @@ def _problem(name: str, variables, y0, *, rhs=None, newtonian=None, parameters=N
         newtonian=newtonian,
         y0=published.y0_float,
         t_span=(0.0, 20.0),
+        # the paper compares methods at the end point, t = 20
+        convergence_t_end=20.0,
         parameters=published.parameters_float,
         published=published,
         exact=exact,

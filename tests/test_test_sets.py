@@ -12,6 +12,7 @@ from fractions import Fraction
 
 import heyoka as hy
 import numpy as np
+import pandas as pd
 import pytest
 
 from harness.errors import InputError, StiffReferenceError
@@ -230,3 +231,42 @@ def test_peers_scale_atol_to_each_components_size(name):
     small = tr.final[1, 0]
     # rtol = 1e-3 over the span leaves a few percent; atol = tol would leave ~100 %
     assert abs(small - 1e-6 * np.exp(-4.0)) <= 0.1 * 1e-6 * np.exp(-4.0)
+
+
+class _View:
+    def __init__(self, rows):
+        self._rows = rows
+
+    def has(self, name):
+        return name == "work-precision"
+
+    def rowtable(self, name):
+        return self._rows
+
+
+def test_the_report_section_shows_error_digits_and_work_at_the_end_point():
+    from harness.report.test_sets import test_sets_section
+
+    p = problems.get("detest-a1")
+    y_end = float(np.exp(-20.0))
+    rows = pd.DataFrame([
+        {"stepper": "rk4", "problem": "detest-a1", "kind": "step-size", "h": 0.1, "tol": np.nan,
+         "t_end": 20.0, "error": 1e-3 * y_end, "rhs_evals": 800, "wall_s": 0.01, "message": ""},
+        {"stepper": "rk4", "problem": "harmonic", "kind": "step-size", "h": 0.1, "tol": np.nan,
+         "t_end": 8.0, "error": 1e-6, "rhs_evals": 320, "wall_s": 0.01, "message": ""},
+    ])
+    sec = test_sets_section(_View(rows))
+    tables = [b.table for b in sec.blocks if b.kind == "table"]
+    assert len(tables) == 2
+    work, refs = tables
+    assert len(work.rows) == 1  # harmonic has no published form
+    text = [c.text for c in work.rows[0].cells]
+    assert "detest-a1" in text and "3" in text  # 1e-3 of |y(20)|: three significant digits
+    assert p.published.source in [c.text for c in refs.rows[0].cells]
+
+
+def test_without_test_set_problems_the_section_says_how_to_ask_for_them():
+    from harness.report.test_sets import test_sets_section
+
+    sec = test_sets_section(_View(pd.DataFrame()))
+    assert any("on request" in b.text for b in sec.blocks if b.kind != "table")
