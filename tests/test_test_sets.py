@@ -270,3 +270,11 @@ def test_without_test_set_problems_the_section_says_how_to_ask_for_them():
 
     sec = test_sets_section(_View(pd.DataFrame()))
     assert any("on request" in b.text for b in sec.blocks if b.kind != "table")
+
+
+def test_a_clause_repeated_with_other_numbers_is_said_once():
+    from harness.experiments.convergence_verdicts import summarise_clauses
+
+    clauses = [f"horizon cut to t = {t:g} at h = {h:.3g}" for t, h in ((8, 0.1), (2, 0.05), (0.5, 1e-3))]
+    out = summarise_clauses(["too few points", *clauses, "too few points", ""])
+    assert out == "too few points; horizon cut to t = 8 at h = 0.1 (and 2 more like it)"

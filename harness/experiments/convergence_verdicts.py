@@ -17,6 +17,8 @@ Verdicts, in the order they are decided:
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
 
@@ -24,7 +26,7 @@ from harness import tolerances as tol
 from harness.experiments.convergence import fit_order
 from harness.stepper import Stepper
 
-__all__ = ["summarize_cell", "insufficient_range_reason"]
+__all__ = ["summarize_cell", "insufficient_range_reason", "summarise_clauses"]
 
 
 def _fit_kind(g: pd.DataFrame, kind: str) -> float:
@@ -120,8 +122,8 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         base["verdict"] = "unstable"
     else:
         base["verdict"] = "insufficient-range"
-        base["message"] = "; ".join(dict.fromkeys(  # the sweep's own notes (horizon, extended precision)
-            [insufficient_range_reason(gl, len(kept)), *(m for m in gl.get("message", []) if m)]))
+        base["message"] = summarise_clauses(  # the sweep's own notes (horizon, extended precision)
+            [insufficient_range_reason(gl, len(kept)), *(m for m in gl.get("message", []) if m)])
     base["local_exponent"] = _fit_kind(g, "local")
     base["local_exponent_q"] = _fit_kind(g, "local-q")
     if messages and not base["message"]:
@@ -129,6 +131,17 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
     return base
 
 
+
+
+def summarise_clauses(clauses: list[str]) -> str:
+    """The clauses joined by '; ', each said once: clauses that differ only in their numbers
+    (one note per step size or member) are kept at their first, with how many more there were."""
+    variants: dict[str, dict[str, None]] = {}  # shape -> its distinct texts, in order
+    for c in clauses:
+        if c:
+            variants.setdefault(re.sub(r"[-+]?\d[\d.]*(?:e[-+]?\d+)?", "#", c), {})[c] = None
+    return "; ".join(next(iter(v)) + (f" (and {len(v) - 1} more like it)" if len(v) > 1 else "")
+                     for v in variants.values())
 
 
 def insufficient_range_reason(gl: pd.DataFrame, fit_points: int) -> str:

@@ -253,7 +253,8 @@ def skip_note(sec: Section, view: RunView, name: str) -> None:
 
 # -- the sections in order ---------------------------------------------------------------------------
 FIXED_BEFORE = (("verdicts", "Verdicts"), ("changes", "What changed since the last run"))
-FIXED_AFTER = (("ground-truth", "Ground truth"), ("test-sets", "Published test sets"), ("claims", "Claims from the course material, checked"),
+FIXED_AFTER = (("ground-truth", "Ground truth"), ("test-sets", "Published test sets"),
+               ("claims", "Claims from the course material, checked"),
                ("gate-population", "How much to trust the gate"),
                ("provenance", "Provenance"), ("performance-history", "Performance history"))
 

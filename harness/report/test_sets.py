@@ -43,6 +43,28 @@ def _published(name: str):
         return None
 
 
+def _stiff_over(problem, T: float) -> dict[str, Any]:
+    """The problem's stiffness (largest -Re(lambda) along the reference over its horizon,
+    `harness.facts`) times its declared span and times the span the points measured; a problem
+    stiff over its span (`STIFF_STEP_COUNT`: more steps than that for stability alone at an
+    interval of 1) but not over the measured one is flagged: its points test nothing stiff."""
+    from harness.facts import problem_facts
+    from harness.tolerances import STIFF_STEP_COUNT
+
+    try:
+        rate = float(problem_facts(problem).stiffness)
+    except Exception as exc:  # reported in the row, never fatal
+        return {"stiff_check": f"unknown: {type(exc).__name__}"}
+    span, measured = rate * (problem.t_end - problem.t0), rate * (T - problem.t0)
+    if span <= STIFF_STEP_COUNT:
+        check = "not stiff over its span"
+    elif measured <= STIFF_STEP_COUNT:
+        check = f"NOT STIFF where measured (t <= {T:.3g}): the points test nothing stiff"
+    else:
+        check = "stiff where measured"
+    return {"stiffness_span": span, "stiffness_measured": measured, "stiff_check": check}
+
+
 def test_sets_section(view: Any) -> Section:
     """The section from a `RunView`: the work-precision rows of test-set problems."""
     from harness.ground_truth import reference
@@ -73,6 +95,7 @@ def test_sets_section(view: Any) -> Section:
             rec.update(reference=f"not available: {type(exc).__name__}", message=str(exc)[:300])
         rounding = problem.published.rounding()
         rec["float64_rounding"] = max(rounding.values())
+        rec.update(_stiff_over(problem, T))
         refs.append(rec)
     frame["tol_or_h"] = [(f"tol {t:.0e}" if isinstance(t, float) and math.isfinite(t) else
                           f"h {h:.4g}") for t, h in zip(frame["tol"], frame["h"], strict=True)]
@@ -86,13 +109,17 @@ def test_sets_section(view: Any) -> Section:
                        "Error at the end point against work, per method", experiment=EXPERIMENT,
                        key=("stepper", "problem", "tol_or_h"), status=None, digits=3))
     table = pd.DataFrame(refs)
-    for c in ("reference", "reference_error", "form", "message"):
+    for c in ("reference", "reference_error", "form", "message", "stiffness_span",
+              "stiffness_measured", "stiff_check"):
         if c not in table:
             table[c] = None
     sec.table(df_table(table, [("problem", "problem"), ("t_end", "end point"),
                                ("published_t_end", "published end"), ("reference", "reference"),
                                ("reference_error", "its stated error"),
                                ("float64_rounding", "float64 rounding of the inputs"),
+                               ("stiffness_span", "-Re(lambda) x span"),
+                               ("stiffness_measured", "-Re(lambda) x measured span"),
+                               ("stiff_check", "stiff where measured?"),
                                ("source", "source"), ("message", "message")],
                        "The reference behind each problem's errors", key=("problem",),
                        status=None, digits=3))
