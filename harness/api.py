@@ -11,7 +11,8 @@ energy bounded", measured by the harness's own experiments and judged by its own
 
 and returns a `ClaimReport` (one row per claim and problem, measured beside claimed). When a claim
 is false it raises `ClaimError`, an `AssertionError` whose message is the measured table, so a
-plain `pytest` run shows why.
+plain `pytest` run shows why; an order claim that no problem given could measure (the gate's
+`not-verified`) fails the same way, its message saying "not verified" apart from "false".
 
 The stepper may be a harness `Stepper`, a registered stepper's name, or a plain step function
 wrapped by `FunctionStepper` (no harness import needed in the library under test):
@@ -50,6 +51,8 @@ from harness.stepper import FORMS, Carry, Stepper, StepperInfo
 __all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "CLAIM_COLUMNS", "ENERGY_CLAIMS"]
 
 CLAIM_COLUMNS = ["claim", "problem", "claimed", "measured", "passed", "detail"]
+# `measured` of a claim no cell could measure (the gate's `not-verified`): a failure, told apart.
+NOT_VERIFIED_TEXT = "not verified"
 ENERGY_CLAIMS = ("bounded", "sqrt", "linear")
 
 
@@ -75,9 +78,12 @@ class ClaimReport:
         return bool(self.table["passed"].all()) and self.failures.empty
 
     def __str__(self) -> str:
-        failed = int((~self.table["passed"]).sum()) + len(self.failures)
-        head = (f"stepper {self.stepper!r}: " + ("every claim holds" if not failed
-                else f"{failed} of {len(self.table) + len(self.failures)} claims false"))
+        unverified = int((self.table["measured"] == NOT_VERIFIED_TEXT).sum())
+        failed = int((~self.table["passed"]).sum()) + len(self.failures) - unverified
+        total = len(self.table) + len(self.failures)
+        verdicts = ([f"{failed} of {total} claims false"] if failed else []) + (
+            [f"{unverified} claim(s) not verified: no problem given measured them"] if unverified else [])
+        head = f"stepper {self.stepper!r}: " + (", ".join(verdicts) or "every claim holds")
         shown = self.table.assign(passed=self.table["passed"].map({True: "yes", False: "NO"}))
         lines = [head, shown.to_string(index=False, max_colwidth=90)]
         for rec in self.failures.to_dict("records"):
@@ -222,7 +228,7 @@ def _check_claims(order, symmetric, energy) -> None:
 
 # -- judging ----------------------------------------------------------------------------------------
 def _order_rows(summary: pd.DataFrame) -> list[dict]:
-    from harness.gate import gate_table
+    from harness.gate import NOT_VERIFIED, gate_table
 
     rows = []
     for rec in gate_table(summary).to_dict("records"):
@@ -230,9 +236,11 @@ def _order_rows(summary: pd.DataFrame) -> list[dict]:
         shown = "nan" if measured is None or pd.isna(measured) else f"{float(measured):.3f}"
         lo, hi = rec.get("order_ci_low"), rec.get("order_ci_high")
         ci = "" if lo is None or pd.isna(lo) else f" [{float(lo):.2f}, {float(hi):.2f}]"
+        unverified = rec.get("outcome") == NOT_VERIFIED
         rows.append({
             "claim": "order", "problem": rec["problem"], "claimed": str(rec["claimed_order"]),
-            "measured": f"{shown}{ci} ({rec['verdict']})", "passed": bool(rec["passed"]),
+            "measured": NOT_VERIFIED_TEXT if unverified else f"{shown}{ci} ({rec['verdict']})",
+            "passed": bool(rec["passed"]),
             "detail": rec.get("reason") or f"{rec.get('fit_points')} points in the fit",
         })
     return rows

@@ -9,7 +9,8 @@ A verdict never looks at a name. It follows from
 - `ProblemFacts`: what the symbolic (heyoka) definition says: linear (a constant Jacobian and no
   explicit time), the degree of a polynomial solution (a nilpotent affine system), whether the
   acceleration is velocity-free, and how stiff it is (the Jacobian's spectrum sampled along the
-  reference solution over the convergence horizon).
+  reference solution over the convergence horizon); `central_field`: whether every body's
+  acceleration is parallel to its own position (decided on the definition at sampled positions).
 
 Two steppers with the same coefficients have the same facts, whatever they are called.
 References: Hairer, Norsett & Wanner, *Solving ODEs I*, II.2 and III.2 (order), Hairer & Wanner,
@@ -29,7 +30,7 @@ import numpy as np
 from harness.problem import Problem
 from harness.stepper import AdaptiveStepper, Stepper
 
-__all__ = ["MethodFacts", "ProblemFacts", "method_facts", "problem_facts"]
+__all__ = ["MethodFacts", "ProblemFacts", "central_field", "method_facts", "problem_facts"]
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,57 @@ def _problem_facts(fingerprint: str, box: tuple) -> ProblemFacts:
 
     return ProblemFacts(**remembered(__name__, "problem_facts", [fingerprint],
                                      lambda: asdict(_derive_problem_facts(box[0]))))
+
+
+def central_field(problem: Problem) -> bool:
+    """True when every body moves in a central field about the origin: q'' = a(q), no velocity
+    or time in the force, and each body's acceleration parallel to its own position (a
+    spherically symmetric potential, where each body's angular momentum q x q' is conserved;
+    Hairer, Lubich & Wanner I.2.3). The bodies are those of the problem's `NBody` structure
+    (groups of its dimension), or the whole position when it has 2 or 3 components (otherwise
+    False: no body to speak of). Decided on the definition itself: the cross products q_i x a_i
+    at CENTRAL_FIELD_SAMPLES positions about the start (each body's radius times 0.5-2, seeded
+    directions) must vanish to CENTRAL_FIELD_TOL |q_i| |a_i|.
+
+    Parameters
+    ----------
+    problem : Problem
+
+    Returns
+    -------
+    bool
+    """
+    return _central_field(problem.fingerprint(), (problem,))
+
+
+@lru_cache(maxsize=256)
+def _central_field(fingerprint: str, box: tuple) -> bool:
+    from harness import tolerances as tol
+
+    problem = box[0]
+    if problem.newtonian is None or problem.velocity_dependent or problem.time_dependent:
+        return False
+    nq = len(problem.newtonian.positions)
+    structure = getattr(problem, "structure", None)
+    d = structure.dimension if structure is not None else nq
+    if d not in (2, 3) or nq % d:
+        return False
+    rng = np.random.default_rng(0)
+    q0 = problem.y0[:nq].reshape(-1, d)
+    radius = np.linalg.norm(q0, axis=1)
+    radius = np.where(radius > 0, radius, 1.0)
+    n = tol.CENTRAL_FIELD_SAMPLES
+    directions = rng.standard_normal((n, len(q0), d))
+    directions /= np.linalg.norm(directions, axis=2, keepdims=True)
+    q = directions * (radius[None, :, None] * rng.uniform(0.5, 2.0, (n, len(q0), 1)))
+    q = np.concatenate([q0[None], q])  # (samples, bodies, d), the start first
+    with np.errstate(all="ignore"):
+        a = problem.dynamics(size=len(q)).accel(problem.t0, np.ascontiguousarray(
+            q.reshape(len(q), nq).T)).T.reshape(q.shape)
+        cross = np.cross(q, a) if d == 3 else (q[..., 0] * a[..., 1] - q[..., 1] * a[..., 0])[..., None]
+        size = np.linalg.norm(q, axis=2) * np.linalg.norm(a, axis=2)
+        residual = np.linalg.norm(cross, axis=2)
+    return bool(np.all(np.isfinite(residual)) and np.all(residual <= tol.CENTRAL_FIELD_TOL * size))
 
 
 def _derive_problem_facts(problem: Problem) -> ProblemFacts:

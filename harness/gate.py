@@ -8,7 +8,9 @@ tolerated verdict. Besides the cells, a stepper fails when
 - the order computed from its coefficients differs from its claimed order, or its claimed
   symmetry or symplecticity contradicts what its coefficients say (a mislabelled table fails even
   if a measurement happens to look right);
-- none of its cells measured the claim (a stepper judged on nothing does not pass).
+- none of its cells measured the claim and none contradicted it (a stepper judged on nothing
+  does not pass): a row of its own, problem `(any)`, outcome `not-verified` (not `fail`: on
+  other problems the claim may well hold), which the CLI reports with its own exit status.
 A map that declares an error law in the perturbation (eps^a h^b terms) on an N-body problem is
 judged by `harness.perturbation_law` from that law and the problem's masses instead.
 No stepper is named here: the same coefficients get the same verdicts under any name.
@@ -25,7 +27,10 @@ from harness.facts import MethodFacts, method_facts, problem_facts
 from harness.perturbation_law import judge_split_map
 from harness.rules import convergence_expectation, judge_convergence
 
-__all__ = ["judge", "gate_table", "claim_contradictions", "GATE_COLUMNS"]
+__all__ = ["judge", "gate_table", "claim_contradictions", "GATE_COLUMNS", "NOT_VERIFIED"]
+
+# The outcome of a stepper's `(any)` row when no cell measured its claim.
+NOT_VERIFIED = "not-verified"
 
 GATE_COLUMNS = [
     "stepper", "problem", "claimed_order", "coefficient_order", "measured_order",
@@ -70,8 +75,19 @@ def judge(record: Mapping, facts: MethodFacts | None = None,
 
 def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
     """Judge every convergence summary record; failing rows first. A stepper whose claims its
-    coefficients contradict fails on every row; one with no passing row gets a failing row of
-    its own (problem `(any)`)."""
+    coefficients contradict fails on every row; one with neither a passing nor a failing row
+    gets a row of its own (problem `(any)`, outcome `not-verified`, not passed).
+
+    Parameters
+    ----------
+    summary : pandas.DataFrame
+        The convergence experiment's summary.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per cell and per unverified stepper, columns GATE_COLUMNS.
+    """
     from harness.registry import get_stepper
 
     rows = []
@@ -95,13 +111,13 @@ def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
     table = pd.DataFrame(rows, columns=GATE_COLUMNS)
     for name, (facts, _) in per_stepper.items():
         mine = table[table.stepper == name]
-        if not (mine.outcome == "pass").any():
+        if not mine.outcome.isin(["pass", "fail"]).any():  # nothing verified, nothing contradicted
             table.loc[len(table)] = {
                 "stepper": name, "problem": "(any)", "claimed_order": mine.claimed_order.iloc[0],
                 "coefficient_order": facts.order if facts.source == "coefficients" else None,
                 "measured_order": np.nan, "verdict": "", "expected": "a measured claim",
-                "expected_order": None, "outcome": "fail", "passed": False,
-                "reason": f"no cell measured the claim ({len(mine)} cell(s), none passing: "
+                "expected_order": None, "outcome": NOT_VERIFIED, "passed": False,
+                "reason": f"not verified: no cell measured the claim ({len(mine)} cell(s), none passing: "
                           + ", ".join(sorted(set(mine.outcome))) + ")",
             }
     if len(table):

@@ -28,10 +28,10 @@ __all__ = ["not_converged", "format_not_converged", "main"]
 def not_converged(gate: pd.DataFrame) -> pd.DataFrame:
     """The rows of a gate table (`harness.gate.gate_table`) whose verdict is not `converged`
     (the stepper-level `(any)` rows included), with a `group` column: predicted,
-    not-measurable or fail."""
+    not-measurable, not-verified or fail."""
     rows = gate[(gate.verdict != "converged") | (gate.outcome != "pass")].copy()
     rows["group"] = rows.outcome.map({"pass": "predicted"}).fillna(rows.outcome)
-    order = {"fail": 0, "not-measurable": 1, "predicted": 2}
+    order = {"fail": 0, "not-verified": 1, "not-measurable": 2, "predicted": 3}
     rows["_k"] = rows.group.map(order)
     return rows.sort_values(["_k", "stepper", "problem"]).drop(columns="_k").reset_index(drop=True)
 
@@ -47,7 +47,8 @@ def format_not_converged(rows: pd.DataFrame, total: int) -> str:
             lines.append(f"  {r.stepper} x {r.problem}: {r.verdict or '-'} (expected {expected}): {r.reason}")
     counts = rows.group.value_counts()
     lines.append(f"{total} cells: {total - len(rows)} converged as expected, "
-                 + ", ".join(f"{int(counts.get(k, 0))} {k}" for k in ("predicted", "not-measurable", "fail")))
+                 + ", ".join(f"{int(counts.get(k, 0))} {k}"
+                             for k in ("predicted", "not-measurable", "not-verified", "fail")))
     return "\n".join(lines)
 
 

@@ -31,20 +31,32 @@ estimate itself being only asymptotically correct. On y' = -y (A = 1, N ~ 2-50) 
 than a fixed 1e4, and on the e = 0.99 orbit (A ~ 7e4) it admits what the flow does to a
 perfectly controlled local error.
 
-Energy (`energy_expectation`, `judge_drift`):
-- a method whose coefficients make it symplectic must keep the energy error bounded (up to
-  rounding growth; HLW IX.3);
-- a fixed-step one-step method that is neither symplectic nor symmetric, of order p, drifts: its
-  energy error grows like C h^p t (the modified equation has no conserved modified energy; HLW
-  IX.1 and XI.1, the rk4 drift on Kepler of HLW I.2). The drift is predicted from the run's first
-  natural period (running maximum e_1 there, so e_1 x periods over the fit window) and the
-  expectation is `linear`, or `unstable` where that prediction reaches ENERGY_BLOWUP_ERROR within
-  the run. Where the prediction is within DRIFT_MEASURABLE_FACTOR of what rounding explains, the
-  cell is not measurable, with the numbers;
-- a symmetric method that is not symplectic is measured without a claim: on reversible
-  *integrable* problems it keeps the energy error bounded (near-conservation of the actions,
-  HLW XI.3, Theorem 3.1), on non-integrable ones it may drift (HLW XI.4-XI.5), and integrability
-  is not among the derived problem facts;
+Energy (`energy_expectation`, `drift_prediction`, `describe_drift`). A verdict only where a
+theorem backs it; elsewhere the cell is informational (`no-claim`):
+- symplectic by its coefficients => the energy error stays bounded, O(h^p), over exponentially
+  long times, for small h and an orbit that stays in a compact set (backward error analysis:
+  the method exactly conserves a modified Hamiltonian; HLW IX.8, Theorem 8.1, and IX.3), plus
+  rounding's random walk (Brouwer's law, HLW VIII.5). The energy experiment states where the
+  premises fail (a run that leaves its bounded regime, h rho beyond the method's h-omega limit
+  in a close encounter) as `not-measurable`;
+- declared symplectic (a black box, or a claim its coefficients contradict): the claim's own
+  words, held to the same bound (the gate fails the contradiction itself);
+- symmetric, not symplectic: no drift on reversible *integrable* problems (near-conservation of
+  the actions, HLW XI.3, Theorem 3.1), possibly a drift on others (HLW XI.4-XI.5); integrability
+  is not a derived problem fact, so `no-claim`;
+- neither symplectic nor symmetric, a fixed-step one-step method of order p: `no-claim`, with a
+  prediction beside the measurement. On a bounded interval the global error expands as
+  h^p e_p(t) + O(h^(p+1)) (HNW I, II.8, Theorem 8.1), so the energy error is
+  h^p int_0^t grad H . d_(p+1)(y(s)) ds + O(h^(p+1)) (d_(p+1) the principal local error): a
+  drift linear in t on a periodic orbit when that integrand's orbit average is non-zero, the
+  rk4 drift on Kepler of HLW I.2. No theorem makes it obligatory over a long run at fixed h: the
+  average may vanish, and once the drift is no longer small the orbit it is averaged over has
+  changed (a dissipative method's energy settles towards an equilibrium and its error
+  saturates: backward Euler on y'' = -w^2 y gives E_n = E_0 (1 + h^2 w^2)^-n). The drift is
+  predicted from the run's first natural period (running maximum e_1 there, so e_1 x periods
+  over the fit window) and the cell says whether the run shows it; where the prediction is
+  within DRIFT_MEASURABLE_FACTOR of what rounding explains, it is `not-measurable`, with the
+  numbers;
 - adaptive steppers, multistep methods and black boxes are measured without a claim.
 """
 
@@ -56,8 +68,8 @@ from dataclasses import dataclass
 from harness import tolerances as tol
 from harness.facts import MethodFacts, ProblemFacts
 
-__all__ = ["Expectation", "convergence_expectation", "energy_expectation", "judge_convergence",
-           "judge_drift", "tolerance_allowance"]
+__all__ = ["Expectation", "convergence_expectation", "describe_drift", "drift_prediction",
+           "energy_expectation", "judge_convergence", "tolerance_allowance"]
 
 
 @dataclass(frozen=True)
@@ -157,31 +169,70 @@ def tolerance_allowance(steps_per_trajectory: float, amplification: float) -> tu
 
 
 def energy_expectation(method: MethodFacts, declared_symplectic: bool = False) -> tuple[str, str]:
-    """(expected drift class or '', reason): a symplectic method keeps the energy error bounded
-    (HLW IX.3; rounding adds a sqrt(t) random walk, Brouwer's law, HLW VIII.5). A declared claim
-    is held to that too, even where the coefficients contradict it (the gate fails the
-    contradiction itself)."""
+    """(expected drift class or '', reason): the only energy claim a theorem backs is that a
+    symplectic method keeps the energy error bounded (HLW IX.8, Theorem 8.1; rounding adds a
+    sqrt(t) random walk, Brouwer's law, HLW VIII.5). A declared claim is held to that too, even
+    where the coefficients contradict it (the gate fails the contradiction itself). Every
+    other method gets ('', ''): no claim (see `drift_prediction`)."""
     if method.symplectic:
         return "bounded", ("symplectic" + (" by its coefficients" if method.source == "coefficients"
                                           else " (declared)") + ": the energy error stays bounded")
     if declared_symplectic:
         return "bounded", ("claimed symplectic (its coefficients say it is not): the energy error "
                            "should stay bounded")
-    if method.one_step and not method.adaptive and method.symmetric is False and method.order:
-        return "linear", (f"neither symplectic nor symmetric, order {method.order}: the energy error "
-                          f"drifts like h^{method.order} t")
     return "", ""
 
 
-def judge_drift(expected_reason: str, drift_class: str, max_error: float, first_period_error: float,
-                periods_in_fit: float, periods_total: float, rounding_fit: float,
-                rounding_period: float) -> tuple[str, bool, str]:
-    """(verdict, passed, reason) of an energy cell expected to drift linearly (see the module
-    docstring): `as-expected`, `not-measurable` (the predicted drift is hidden by rounding) or
-    `unexpected` (a resolved drift was predicted and not seen)."""
+def drift_prediction(method: MethodFacts) -> str:
+    """The informational drift prediction for a fixed-step one-step method that is neither
+    symplectic nor symmetric (the module docstring), or '' for every other method.
+
+    Parameters
+    ----------
+    method : MethodFacts
+
+    Returns
+    -------
+    str
+        The prediction's sentence, or ''.
+    """
+    if (method.one_step and not method.adaptive and not method.symplectic
+            and method.symmetric is False and method.order):
+        return (f"neither symplectic nor symmetric, order {method.order}: first-order theory "
+                f"predicts an energy drift ~h^{method.order} t while it stays small (no theorem "
+                "requires it)")
+    return ""
+
+
+def describe_drift(prediction: str, drift_class: str, max_error: float, first_period_error: float,
+                   periods_in_fit: float, periods_total: float, rounding_fit: float,
+                   rounding_period: float) -> tuple[str, str]:
+    """(verdict, reason) of an energy cell that carries a drift prediction (`drift_prediction`):
+    `not-measurable` when the predicted drift is hidden by rounding or cannot be predicted,
+    else `no-claim`, saying whether the run shows the predicted drift. Never a failure: no
+    theorem makes the drift obligatory (the module docstring).
+
+    Parameters
+    ----------
+    prediction : str
+        The prediction's sentence (`drift_prediction`).
+    drift_class : str
+        The measured class of the energy error's envelope.
+    max_error, first_period_error : float
+        The largest relative energy error of the run, and within its first natural period.
+    periods_in_fit, periods_total : float
+        Natural periods in the envelope's fit window, and in the whole run.
+    rounding_fit, rounding_period : float
+        What rounding explains over the fit window and over one period.
+
+    Returns
+    -------
+    (str, str)
+        The verdict and its reason.
+    """
     if not math.isfinite(first_period_error):
-        return "not-measurable", True, (f"{expected_reason}, but the run has no finite energy sample "
-                                        "within its first period, so the drift cannot be predicted")
+        return "not-measurable", (f"{prediction}, but the run has no finite energy sample within "
+                                  "its first period, so the drift cannot be predicted")
     predicted = first_period_error * periods_in_fit
     hidden = (first_period_error <= tol.DRIFT_MEASURABLE_FACTOR * rounding_period
               or predicted <= tol.DRIFT_MEASURABLE_FACTOR * rounding_fit)
@@ -189,12 +240,14 @@ def judge_drift(expected_reason: str, drift_class: str, max_error: float, first_
                f"~{predicted:.3g} over the fit window ({periods_in_fit:.3g} periods); rounding "
                f"explains {rounding_fit:.3g}")
     if hidden:
-        return "not-measurable", True, (f"{expected_reason}, but the predicted drift is within "
-                                        f"{tol.DRIFT_MEASURABLE_FACTOR:g}x of rounding: {numbers}")
+        return "not-measurable", (f"{prediction}, but the predicted drift is within "
+                                  f"{tol.DRIFT_MEASURABLE_FACTOR:g}x of rounding: {numbers}")
     if drift_class == "linear":
-        return "as-expected", True, f"{expected_reason}: {numbers}"
-    saturates = first_period_error * periods_total >= tol.ENERGY_BLOWUP_ERROR
-    if drift_class == "unstable" and saturates and max_error >= tol.ENERGY_BLOWUP_ERROR:
-        return "as-expected", True, (f"{expected_reason}; the predicted drift reaches "
-                                     f"{tol.ENERGY_BLOWUP_ERROR:g} within the run: {numbers}")
-    return "unexpected", False, f"{expected_reason}, but it is {drift_class}: {numbers}"
+        return "no-claim", f"{prediction}; the run shows it: {numbers}"
+    reaches = first_period_error * periods_total >= tol.ENERGY_BLOWUP_ERROR
+    if drift_class == "unstable" and reaches and max_error >= tol.ENERGY_BLOWUP_ERROR:
+        return "no-claim", (f"{prediction}; the run shows it reaching {tol.ENERGY_BLOWUP_ERROR:g}: "
+                            f"{numbers}")
+    return "no-claim", (f"{prediction}; the run is {drift_class} instead (the secular term may "
+                        f"vanish, and a dissipative method's error saturates as the orbit settles; "
+                        f"max error {max_error:.3g}): {numbers}")

@@ -197,6 +197,11 @@ ENERGY_ROUNDING_ULPS = 100.0
 # ulps per step (systematic rounding grows at most linearly in n; measured on Kepler: at most 0.25
 # ulps per step over 10^4-10^5 steps, Stormer's central-difference velocity the largest).
 ANGULAR_MOMENTUM_ROUNDING_ULPS = 2.0
+# A central field (`harness.facts.central_field`): each body's q x a(q), at this many positions
+# about the start, within this fraction of |q| |a| (evaluating a rounds it by a few ulps; a
+# field that is not central, e.g. Henon-Heiles or the planets' mutual pulls, is off by >1e-3).
+CENTRAL_FIELD_SAMPLES = 16
+CENTRAL_FIELD_TOL = 1e-12
 
 # Memory guard (harness.runner): a run is refused up front when its estimated peak exceeds this
 # fraction of the memory available when it starts (the rest is for Python, libraries, the OS).

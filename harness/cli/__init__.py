@@ -8,7 +8,9 @@
     harness report --from RUN [--compare RUN]   (re-render a saved run, nothing measured)
 
 Errors a user can fix exit 2 with one line on stderr naming the argument and the rule; the
-gate exits 1 when a claim fails; a run or gate over zero applicable cells exits 2 and prints why
+gate exits 1 when a claim fails (a cell contradicts it, or a cell failed), 3 when none does but
+a stepper's claim was measured on no cell (not verified on the problems given); a run or gate
+over zero applicable cells exits 2 and prints why
 each requested pair does not apply (a table on stdout, or JSON records with `--json`).
 
 One output layer serves every command. While a command runs, `sys.stdout` points at stderr (a
@@ -102,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p, grid=False)
 
     p = sub.add_parser("gate", help="convergence of every stepper on every compatible problem; "
-                                    "exit 1 when a measured order misses its claim")
+                                    "exit 1 when a measured order misses its claim, 3 when a "
+                                    "claim was measured on no cell (not verified)")
     _common(p)
 
     p = sub.add_parser("population", help="the gate's own error rates: run it over generated correct "

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 
 from harness.cli.output import (
     EXIT_FAILED,
+    EXIT_NOT_VERIFIED,
     EXIT_OK,
     SHOWN_SKIPS,
     one_line,
@@ -266,13 +267,16 @@ def _print_footer(result, failures) -> None:
 
 
 def cmd_gate(args) -> int:
-    """`harness gate`: run convergence and judge every stepper's claims; exit 1 when one fails."""
-    from harness.gate import GATE_COLUMNS, gate_table
+    """`harness gate`: run convergence and judge every stepper's claims; exit 1 when one is
+    contradicted (or a cell failed), else EXIT_NOT_VERIFIED when a stepper's claim was measured
+    on no cell of the problems given, else 0."""
+    from harness.gate import GATE_COLUMNS, NOT_VERIFIED, gate_table
 
     result = _run(args, "convergence")
     table = gate_table(result.summary)
     failures = _failures_table(result)
-    passed = bool(table["passed"].all()) and not failures
+    contradicted = bool((table["outcome"] == "fail").any()) or bool(failures)
+    n_unverified = int((table["outcome"] == NOT_VERIFIED).sum())
     if args.json:
         print_json(table.to_dict("records") + [
             dict(f, verdict="failed", passed=False) for f in failures
@@ -280,11 +284,15 @@ def cmd_gate(args) -> int:
     else:
         print_table(table, GATE_COLUMNS)
         _print_footer(result, failures)
-        n_bad = int((~table["passed"]).sum()) + len(failures)
+        n_bad = int((table["outcome"] == "fail").sum()) + len(failures)
         n_unmeasured = int((table["outcome"] == "not-measurable").sum())
-        print(f"gate: {'PASSED' if passed else 'FAILED'} ({len(table)} cells, {n_bad} failing, "
-              f"{n_unmeasured} not measurable: see their reasons)", file=output_buffer())
-    return EXIT_OK if passed else EXIT_FAILED
+        word = "FAILED" if contradicted else "NOT VERIFIED" if n_unverified else "PASSED"
+        print(f"gate: {word} ({len(table)} cells, {n_bad} failing, {n_unverified} stepper(s) not "
+              f"verified on these problems, {n_unmeasured} not measurable: see their reasons)",
+              file=output_buffer())
+    if contradicted:
+        return EXIT_FAILED
+    return EXIT_NOT_VERIFIED if n_unverified else EXIT_OK
 
 
 def cmd_report(args) -> int:

@@ -17,6 +17,7 @@ from typing import Any
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 EXIT_CANTCREAT, EXIT_IOERR, EXIT_NOPERM, EXIT_PIPE = 73, 74, 77, 141
+EXIT_NOT_VERIFIED = 3  # the gate: no claim contradicted, but one was measured on no cell
 # A run's footer lists at most this many pairs that do not apply (all are in the saved run).
 SHOWN_SKIPS = 10
 

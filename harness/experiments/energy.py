@@ -29,24 +29,28 @@ For one (stepper, problem) cell:
 4. Verdicts. A stepper claimed symplectic must be `bounded`, or show a secular growth within
    what rounding explains (Brouwer's law: rounding makes the energy error a random walk,
    ~ sqrt(n) eps; HLW VIII.5): `as-claimed`, else `claim-false`. Whether a method is symplectic
-   comes from its coefficients (`harness.rules.energy_expectation`), never from its name. A
-   fixed-step one-step method that is neither symplectic nor symmetric is expected to drift
-   (`harness.rules.judge_drift`: `as-expected`, `unexpected`, or `not-measurable` when the drift
-   predicted from its first period is hidden by rounding); other methods are measured without
-   a claim (`no-claim`).
+   comes from its coefficients (`harness.rules.energy_expectation`), never from its name. No
+   other energy claim has a theorem behind it: other methods are measured without a claim
+   (`no-claim`), a one-step method neither symplectic nor symmetric with the drift predicted
+   from its first period beside (`harness.rules.describe_drift`). A run too short to tell a
+   drift from a bounded error (less than ENCOUNTER_MIN_DECADES after the fit's start: free fall
+   leaves its regime within 16 steps) is `not-measurable`; no `not-measurable` cell gets a
+   drift class, unless an implicit solve broke down (that run is `unstable`).
    Close encounters: where the fastest rate along the run rises more than ENCOUNTER_RATE_RISE
    times over its start after the usual fit start, the envelope is read from where that rate is
    first reached (a bounded error ~(h rho)^p rises with each closer approach; the Pleiades'
-   energy error jumps to ~4e-3 at t ~ 1.7 and stays below it). The cell is not measurable when
-   h rho exceeds the method's h-omega stability limit there, or when less than
-   ENCOUNTER_MIN_DECADES of the run remains after it. For central-force problems, steppers whose
+   energy error jumps to ~4e-3 at t ~ 1.7 and stays below it). A bounded-energy claim is not
+   measurable where h rho exceeds the method's h-omega limit (there, or at any orbit's fastest
+   rate: the theorem needs small steps), nor with less than ENCOUNTER_MIN_DECADES of the run
+   after the encounter. In a central field (each body's
+   acceleration parallel to its position, `harness.facts.central_field`), steppers whose
    structure conserves quadratic invariants (symplectic Runge-Kutta, splitting and Stormer
    methods: HLW IV.2 and VI.4) must keep the angular momentum to rounding: a relative error of
    at most ANGULAR_MOMENTUM_ROUNDING_ULPS * n * eps after n steps.
 
 References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), I.2-I.3
-(Kepler and the outer solar system), IX.3 (near-conservation of energy by symplectic methods),
-VIII.5 (rounding: Brouwer's law); course material 004_bfdbb1594143ed8b.txt (symplectic
+(Kepler and the outer solar system), IX.3 and IX.8 (near-conservation of energy by symplectic
+methods), VIII.5 (rounding: Brouwer's law); course material 004_bfdbb1594143ed8b.txt (symplectic
 integrators conserve a modified energy while RK4 drifts; the Kepler practice session).
 """
 
@@ -342,11 +346,12 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
                        fit_start=int(fit_start), min_decades=max(min_decades, 1e-3))
     if "step failure: " in message:
         e["drift_class"] = "unstable"  # an implicit solve broke down: the motion is destroyed
-    from harness.facts import method_facts
-    from harness.rules import energy_expectation, judge_drift
+    from harness.facts import central_field, method_facts
+    from harness.rules import describe_drift, drift_prediction, energy_expectation
 
     facts = method_facts(stepper)
     expected_class, expected_reason = energy_expectation(facts, bool(info.symplectic))
+    prediction = "" if expected_class else drift_prediction(facts)
     limit = rounding_growth(n_end)
     rec = {
         "stepper": info.name, "problem": problem, "invariant": str(first["invariant"]),
@@ -367,7 +372,9 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
     }
     reasons: list[str] = []
     passed = True
-    why_not = _not_measurable(expected_class, expected_reason, encounter, n_end, fit_start, facts.hw_limit)
+    why_not = _not_measurable(expected_class, expected_reason or prediction, encounter, n_end,
+                              fit_start, facts.hw_limit,
+                              float(first["h"]) * _problem(problem).time_scale.fastest_rate)
     if why_not:
         verdict = "not-measurable"
         rec["message"] = _with_note(message, why_not)
@@ -383,20 +390,19 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
                 f"{expected_reason}, but it is {e['drift_class']} (growth "
                 f"{e['secular_growth']:.3g} over the fit window, rounding explains {limit:.3g})"
             )
-    elif expected_class == "linear":
+    elif prediction:
         m = max(1.0, steps_per_period)
         first = energy[(energy.step > 0) & (energy.step <= math.ceil(m))]
         first_err = float(first.error.max()) if len(first) else float("nan")
-        verdict, passed, why = judge_drift(
-            expected_reason, e["drift_class"], e["max_error"], first_err,
+        verdict, why = describe_drift(
+            prediction, e["drift_class"], e["max_error"], first_err,
             periods_in_fit=(n_end - e["fit_start"]) / m, periods_total=n_end / m,
             rounding_fit=limit, rounding_period=rounding_growth(m))
-        if passed:
-            rec["message"] = _with_note(message, why)
-        else:
-            reasons.append(why)
+        rec["message"] = _with_note(message, why)
     else:
         verdict = "no-claim"
+    if verdict == "not-measurable" and "step failure: " not in message:
+        rec["drift_class"] = ""  # a class drawn from a run that cannot show one would mislead
     L = g[g.quantity == "angular_momentum"].sort_values("step")
     problem_obj = _problem(problem)
     if len(L):
@@ -406,7 +412,7 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
                    angular_momentum_class=lc["drift_class"], angular_momentum_rounding=L_limit)
         conserved = bool(np.isfinite(lc["max_error"]) and lc["max_error"] <= L_limit)
         rec["angular_momentum_conserved"] = conserved
-        if problem_obj.central_force and conserves_quadratic_invariants(stepper):
+        if central_field(problem_obj) and conserves_quadratic_invariants(stepper):
             rec["angular_momentum_expected"] = True
             if not conserved:
                 passed = False
@@ -429,11 +435,13 @@ def _encounter_note(encounter: dict) -> str:
 
 
 def _not_measurable(expected_class: str, expected_reason: str, encounter: dict | None, n_end: int,
-                    fit_start: float, hw_limit: float | None) -> str | None:
-    """Why this run cannot tell whether the energy error is `expected_class`, or None (too short a
-    run, or a close `encounter`: the module docstring, item 4)."""
-    if expected_class not in ("bounded", "linear"):
-        return None
+                    fit_start: float, hw_limit: float | None, h_rho: float) -> str | None:
+    """Why this run cannot tell the energy error's class, or None (the module docstring, item 4):
+    too short; a bounded claim's h rho beyond `hw_limit`; a close `encounter`."""
+    beyond = hw_limit is not None and math.isfinite(hw_limit) and h_rho > hw_limit
+    if expected_class == "bounded" and beyond and encounter is None:
+        return (f"not measurable at this step: h omega_max = {h_rho:.3g} exceeds the method's "
+                f"limit {hw_limit:.4g} (the near-conservation of energy holds for small steps only)")
     if encounter is None:
         span_decades = math.log10(n_end / max(fit_start, 1.0)) if n_end > 0 else -math.inf
         if span_decades >= tol.ENCOUNTER_MIN_DECADES:
@@ -442,9 +450,11 @@ def _not_measurable(expected_class: str, expected_reason: str, encounter: dict |
                 f"{tol.ENCOUNTER_MIN_DECADES:g} decade after the fit's start (step {fit_start:.3g}: "
                 f"{tol.FIT_MIN_PERIODS:g} natural periods at least), too short to tell a drift from a "
                 "bounded error")
+    if not expected_reason:
+        return None
     note = _encounter_note(encounter)
     decades_after = math.log10(n_end / max(encounter["step"], 1.0))
-    if expected_class == "linear":
+    if expected_class != "bounded":
         return (f"{expected_reason}, but not measurable on this run: {note}; the error's jump there "
                 f"dominates the envelope and {decades_after:.2g} decade(s) of steps after it cannot "
                 "resolve a drift proportional to t")

@@ -317,6 +317,7 @@ def _energy_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], b
         return [("—", "")], False
     parts: list[tuple[str, str]] = []
     for cls, g in s.groupby("drift_class", sort=False):
+        cls = cls or "not measurable"  # the experiment gives such a cell no class
         parts += [(", " if parts else "", ""),
                   (f"{cls} ×{len(g)}" if len(g) > 1 else str(cls),
                    "#" + anchor("energy", stepper, g["problem"].iloc[0]))]
@@ -328,7 +329,8 @@ def _energy_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], b
     intro=("Relative energy error against time over long runs on log axes, the same step size for "
            "every stepper of a problem; lines are the largest error in log-spaced time bins. "
            "Each panel holds one drift class (bounded, sqrt, linear, unstable) as measured from "
-           "the growth of the error's running maximum; symplectic steppers are drawn solid."),
+           "the growth of the error's running maximum, and runs too short or otherwise not "
+           "measurable get none; symplectic steppers are drawn solid."),
     measures=(Measure("max_rel_energy_error", "max relative energy error",
                       factor=tol.REPORT_CHANGE_ROUNDING),),
     score=(ScoreColumn("energy drift class", _energy_score),),

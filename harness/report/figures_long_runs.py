@@ -84,8 +84,9 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     steppers = list(dict.fromkeys(g["stepper"]))
     order = {c: i for i, c in enumerate(("bounded", "sqrt", "linear", "unstable"))}
     steppers.sort(key=lambda s: order.get(classes.get(s, ""), len(order)))
-    groups = panels(steppers, {s: f"drift class: {classes.get(s) or 'not classified'}"
-                               for s in steppers}, pack=False)
+    groups = panels(steppers, {s: (f"drift class: {classes[s]}" if classes.get(s) else
+                                   "not measurable: no drift class" if s in classes
+                                   else "not classified") for s in steppers}, pack=False)
     fig, axes = small_multiples(len(groups), sharex=True, sharey=True)
     what = "energy" if quantity == "energy" else "angular momentum"
     data = []
