@@ -32,6 +32,18 @@ directory. References are cached on disk under `cache_dir()/references`, keyed b
 problem's fingerprint, times, t0, initial states, parameters, level, tolerance factors and heyoka
 version; files are written atomically, and a corrupt file is ignored and recomputed.
 
+A problem with a published form (`Problem.published`: a test set's exact decimals), asked from
+its own start with its own constants, is integrated as published: every level starts from the
+exact start values and constants, rounded once to the level, and reaches the exact published end
+time (`Reference.form` = 'published'); any other request integrates the float64 form.
+
+Stiff problems: when the Taylor step is held by the Jacobian's eigenvalues and the span would
+need more than `REFERENCE_STIFF_STEPS` steps (`propagation.stiff_check`), the explicit reference
+refuses with `StiffReferenceError`. Then, in order: the published end values, for the problem as
+published at its published end time (precision 'published', error = their stated accuracy);
+else the implicit cross-check (`harness.ground_truth.stiff`: scipy Radau against CVODE BDF,
+error = their disagreement, examined first against the published end values); else the refusal.
+
 This module computes and certifies a reference (`reference`); `levels` (precision levels, exact
 comparison), `propagation` (bounded Taylor propagation) and `disk` (the reference cache) serve it.
 """
