@@ -308,6 +308,12 @@ MIN_ENSEMBLE_PERTURBATION = 1e-8
 # Convergence horizon of a problem that declares none: at most this many natural periods of its
 # span (order does not depend on the horizon; a long span only costs steps).
 HORIZON_PERIODS = 10.0
+# ... and a problem whose fastest rate times its span exceeds this (stiff over its span: an
+# explicit step of stability interval ~1 needs this many steps) but times that horizon does not,
+# is measured to STIFF_HORIZON_STEPS / rate instead: 1e4 widths of its initial layer, so the
+# points lie on the slow manifold (VDPOL, eps = 1e-6: 3.3e-3 instead of 7.4e-5, span 2). No
+# catalogue problem without a declared horizon reaches it (largest: van-der-pol-stiff, 1.5e3).
+STIFF_HORIZON_STEPS = 1e4
 # A probe member's fastest rate is read from the spectra at this many samples of its orbit where
 # ||J|| (a bound on the spectral radius) is largest: the fastest motion is among them.
 REGIME_CANDIDATES = 64

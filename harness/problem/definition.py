@@ -155,12 +155,21 @@ class Problem:
     @property
     def convergence_t_end(self) -> float:
         """The convergence horizon: declared, else the span cut to HORIZON_PERIODS natural
-        periods (`time_scale`; order does not depend on the horizon, a long span only costs)."""
+        periods (`time_scale`; order does not depend on the horizon, a long span only costs).
+        A problem stiff over its span whose cut horizon is not (its fastest rate times the
+        horizon below STIFF_HORIZON_STEPS: ten periods of the fastest rate end inside the initial
+        layer) gets the horizon STIFF_HORIZON_STEPS / rate, within the span: many layer widths,
+        so the measurement reaches the slow manifold, where the problem is stiff."""
         if self.declared_convergence_t_end is not None:
             return self.declared_convergence_t_end
-        from harness.tolerances import HORIZON_PERIODS
+        from harness.tolerances import HORIZON_PERIODS, STIFF_HORIZON_STEPS
 
-        return min(self.t_end, self.t0 + HORIZON_PERIODS * self.time_scale.period)
+        scale = self.time_scale
+        horizon = min(self.t_end, self.t0 + HORIZON_PERIODS * scale.period)
+        rate = scale.fastest_rate
+        if rate * (horizon - self.t0) < STIFF_HORIZON_STEPS <= rate * (self.t_end - self.t0):
+            horizon = min(self.t_end, self.t0 + STIFF_HORIZON_STEPS / rate)
+        return horizon
 
     @property
     def parameter_values(self) -> np.ndarray:
