@@ -278,3 +278,20 @@ def test_a_clause_repeated_with_other_numbers_is_said_once():
     clauses = [f"horizon cut to t = {t:g} at h = {h:.3g}" for t, h in ((8, 0.1), (2, 0.05), (0.5, 1e-3))]
     out = summarise_clauses(["too few points", *clauses, "too few points", ""])
     assert out == "too few points; horizon cut to t = 8 at h = 0.1 (and 2 more like it)"
+
+
+def test_a_stiff_problems_horizon_reaches_past_its_initial_layer():
+    """A damped fast rotation (eigenvalues -1e6 +- 1e6 i) driven slowly: ten periods of the
+    fastest oscillation (6e-5) end inside the initial layer; the horizon is STIFF_HORIZON_STEPS
+    layer widths instead, within the span."""
+    from harness.tolerances import HORIZON_PERIODS, STIFF_HORIZON_STEPS
+
+    u, v = hy.make_vars("u", "v")
+    k = 1e6
+    p = Problem("damped-rotation", variables=[u, v],
+                rhs=[-k * (u - hy.cos(hy.time)) - k * v, k * (u - hy.cos(hy.time)) - k * v],
+                y0=[1.0, 0.0], t_span=(0.0, 10.0), description="d", reference="r")
+    rate = p.time_scale.fastest_rate
+    assert rate == pytest.approx(k * 2**0.5, rel=1e-3)
+    assert HORIZON_PERIODS * p.time_scale.period * rate < STIFF_HORIZON_STEPS
+    assert p.convergence_t_end == pytest.approx(STIFF_HORIZON_STEPS / rate)
