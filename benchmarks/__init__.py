@@ -9,6 +9,9 @@ do not apply, which asv records as skipped):
   load time);
 - `bench_accuracy`: accuracy over commits: measured order, energy-drift slope, reversibility
   return error, ground-truth error;
+- `bench_time_to_accuracy`: the warm time each stepper needs to reach an error of 1e-8 per
+  problem (seconds, and steps of its family's C loop timed in the same cell): time to accuracy,
+  not only time per step;
 - `bench_workflow`: the ground-truth build (cached and cold) and the gate on one problem;
 - `scaling`: time against ensemble size, step count and number of steppers (also a script).
 

@@ -13,3 +13,5 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     _os.environ.setdefault(_var, "1")
 
 __version__ = "0.1.0"
+# The distribution (pyproject.toml's project name) whose entry points are the built-ins.
+DISTRIBUTION = "integrator-harness"

@@ -8,6 +8,7 @@ energy bounded", measured by the harness's own experiments and judged by its own
 - the reversibility experiment (N steps forward and back, against the rounding bound);
 - the energy experiment (the envelope's drift class: `bounded` claims are judged as the energy
   experiment judges a symplectic claim; `sqrt`/`linear` claims must match the measured class);
+- with `symplectic=True/False`, the symplecticity experiment (the one-step map's Jacobian);
 
 and returns a `ClaimReport` (one row per claim and problem, measured beside claimed). When a claim
 is false it raises `ClaimError`, an `AssertionError` whose message is the measured table, so a
@@ -21,6 +22,9 @@ wrapped by `FunctionStepper` (no harness import needed in the library under test
     Newtonian form:    step(a, t, q, v, h) -> (q_next, v_next)      a(t, q) -> q''
 
 States are arrays shaped (dim, N) (ensemble axis last); plain NumPy arithmetic handles them.
+A solver with state (its own init/step, a multistep history), an implicit solver that wants the
+Jacobian and a linear solve, and a JAX solver stepping in compiled loops are wrapped by
+`StateStepper` (`harness.stepper.contracts`).
 While a check runs, the stepper (and any `Problem` objects given) are registered under their names
 and the previous entries restored afterwards. Cells run in this process (`jobs=1`) without the
 cell cache unless asked, so a changed function is always measured afresh.
@@ -35,6 +39,7 @@ import contextlib
 import dataclasses
 import hashlib
 import inspect
+import textwrap
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -47,8 +52,17 @@ from harness.problem import Dynamics, Problem
 from harness.problem.checks import check_positive
 from harness.sources import source_of
 from harness.stepper import FORMS, Carry, Stepper, StepperInfo
+from harness.stepper.contracts import (
+    AdaptiveStateStepper,
+    Field,
+    StateStepper,
+    batched_solve,
+    checked_float64,
+)
 
-__all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "CLAIM_COLUMNS", "ENERGY_CLAIMS"]
+__all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "StateStepper", "Field",
+           "AdaptiveStateStepper",
+           "CLAIM_COLUMNS", "ENERGY_CLAIMS"]
 
 CLAIM_COLUMNS = ["claim", "problem", "claimed", "measured", "passed", "detail"]
 # `measured` of a claim no cell could measure (the gate's `not-verified`): a failure, told apart.
@@ -85,7 +99,11 @@ class ClaimReport:
             [f"{unverified} claim(s) not verified: no problem given measured them"] if unverified else [])
         head = f"stepper {self.stepper!r}: " + (", ".join(verdicts) or "every claim holds")
         shown = self.table.assign(passed=self.table["passed"].map({True: "yes", False: "NO"}))
-        lines = [head, shown.to_string(index=False, max_colwidth=90)]
+        lines = [head, shown.drop(columns="detail").to_string(index=False, max_colwidth=None)]
+        for rec in self.table.to_dict("records"):  # details wrapped at spaces, never cut
+            lines += textwrap.wrap(f"- {rec['claim']} on {rec['problem']}: {rec['detail']}", width=100,
+                                   subsequent_indent="    ", break_long_words=False,
+                                   break_on_hyphens=False)
         for rec in self.failures.to_dict("records"):
             lines.append(f"failed cell {rec.get('cell', '')}: {rec.get('kind', '')}: "
                          f"{rec.get('message', '')}")
@@ -100,7 +118,11 @@ class FunctionStepper(Stepper):
     `step(a, t, q, v, h)` returns `(q, v)` and needs a problem written as q'' = a(q, t). The
     claims (order, symmetric, symplectic) are stated here, never inferred from the name.
     `evals_per_step` sizes the convergence sweep's budget (work budget / evaluations per step).
-    The fingerprint includes the function's source, so an edited function is a new method.
+    `implicit=True`: the step is called as `step(f, t, y, h, jac=jac, solve=solve)`, `jac(t, y)`
+    the problem's Jacobian (dim, dim, N), `solve(A, b)` the solve of A x = b per member (Jacobian
+    calls are counted). A solver object with its own init/step is refused: use `StateStepper`. A float32
+    state is refused (`checked_float64`). The fingerprint includes the function's source, so an
+    edited function is a new method.
     """
 
     def __init__(
@@ -113,9 +135,16 @@ class FunctionStepper(Stepper):
         symplectic: bool = False,
         form: str = "first-order",
         evals_per_step: float = 1.0,
+        implicit: bool = False,
         reference: str = "",
         description: str = "",
     ):
+        if callable(getattr(step, "init", None)) and callable(getattr(step, "step", None)):
+            raise InputError(
+                f"`step` is a {type(step).__name__} with its own init/step: a solver with state "
+                "(an FSAL derivative, a second state, a multistep history) that a stateless step "
+                "function would drop; wrap it with `StateStepper(init, step, ...)`"
+            )
         if not callable(step):
             raise InputError(f"`step` must be a function, got {type(step).__name__}")
         if form not in FORMS:
@@ -127,7 +156,7 @@ class FunctionStepper(Stepper):
             name=name or getattr(step, "__name__", "user-step"),
             family="user",
             claimed_order=order,
-            explicit=True,
+            explicit=not implicit,
             symplectic=bool(symplectic),
             symmetric=bool(symmetric),
             evals_per_step=evals,
@@ -154,9 +183,13 @@ class FunctionStepper(Stepper):
         if self.info.form == "newtonian":
             nq = dyn.nq
             q, v = self.step_function(lambda t, q: dyn.accel(t, q), c.t, c.y[:nq], c.y[nq:], c.h)
-            c.y = np.concatenate([np.asarray(q, dtype=float), np.asarray(v, dtype=float)])
+            when = f"at t = {c.t + c.h:.6g}"
+            c.y = np.concatenate([checked_float64(q, self.info.name, when),
+                                  checked_float64(v, self.info.name, when)])
         else:
-            c.y = np.asarray(self.step_function(dyn.f, c.t, c.y, c.h), dtype=float)
+            extra = {"jac": dyn.jac, "solve": batched_solve} if not self.info.explicit else {}
+            c.y = checked_float64(self.step_function(dyn.f, c.t, c.y, c.h, **extra),
+                                  self.info.name, f"at t = {c.t + c.h:.6g}")
         if c.y.shape != (dyn.dim, dyn.size):
             raise InputError(
                 f"stepper {self.info.name!r}: the step function returned a state shaped "
@@ -187,13 +220,13 @@ def _registered(registry, obj) -> Iterator[str]:
             registry.register(previous[0], origin=previous[1], replace=True)
 
 
-def _resolve_stepper(stepper: Any, order, symmetric, energy) -> Stepper:
+def _resolve_stepper(stepper: Any, order, symmetric, energy, symplectic=None) -> Stepper:
     from harness.registry import get_stepper
 
     if isinstance(stepper, str):
         stepper = get_stepper(stepper)
     elif not isinstance(stepper, Stepper):
-        if not callable(stepper):
+        if not callable(stepper) and not hasattr(stepper, "init"):  # init/step: FunctionStepper says
             raise InputError(
                 f"`stepper` must be a Stepper, a registered name or a step function, got "
                 f"{type(stepper).__name__}"
@@ -204,6 +237,8 @@ def _resolve_stepper(stepper: Any, order, symmetric, energy) -> Stepper:
         changes["claimed_order"] = order
     if symmetric is not None and bool(symmetric) != stepper.info.symmetric:
         changes["symmetric"] = bool(symmetric)
+    if symplectic is not None and bool(symplectic) != stepper.info.symplectic:
+        changes["symplectic"] = bool(symplectic)
     if energy == "bounded" and not stepper.info.symplectic:
         # the energy experiment judges a bounded-energy claim as it judges a symplectic one
         changes["symplectic"] = True
@@ -215,15 +250,17 @@ def _resolve_stepper(stepper: Any, order, symmetric, energy) -> Stepper:
     return stepper
 
 
-def _check_claims(order, symmetric, energy) -> None:
+def _check_claims(order, symmetric, energy, symplectic=None) -> None:
     if order is not None and (isinstance(order, bool) or not isinstance(order, int) or order < 1):
         raise InputError(f"`order` must be a positive whole number, got {order!r}")
     if symmetric is not None and not isinstance(symmetric, bool | np.bool_):
         raise InputError(f"`symmetric` must be True or False, got {symmetric!r}")
+    if symplectic is not None and not isinstance(symplectic, bool | np.bool_):
+        raise InputError(f"`symplectic` must be True or False, got {symplectic!r}")
     if energy is not None and energy not in ENERGY_CLAIMS:
         raise InputError(f"`energy` must be one of {ENERGY_CLAIMS}, got {energy!r}")
-    if order is None and symmetric is None and energy is None:
-        raise InputError("state at least one claim: `order`, `symmetric` or `energy`")
+    if order is None and symmetric is None and energy is None and symplectic is None:
+        raise InputError("state at least one claim: `order`, `symmetric`, `energy` or `symplectic`")
 
 
 # -- judging ----------------------------------------------------------------------------------------
@@ -278,6 +315,17 @@ def _energy_rows(summary: pd.DataFrame, claimed: str) -> list[dict]:
     return rows
 
 
+def _symplectic_rows(summary: pd.DataFrame, claimed: bool) -> list[dict]:
+    rows = []
+    for rec in summary.to_dict("records"):
+        detail = (f"deviation {rec['deviation']:.3g} (threshold {rec['threshold']:.3g}) over "
+                  f"{rec['states']} states")
+        rows.append({"claim": "symplectic", "problem": rec["problem"],
+                     "claimed": "yes" if claimed else "no", "measured": rec["verdict"],
+                     "passed": bool(rec["passed"]), "detail": str(rec.get("message") or detail)})
+    return rows
+
+
 def _missing_rows(claim: str, claimed: str, problems: Sequence[str], summary: pd.DataFrame,
                   skips: pd.DataFrame) -> list[dict]:
     """A claim on a problem the experiment did not measure is a failed row saying why."""
@@ -299,6 +347,7 @@ def check(
     order: int | None = None,
     symmetric: bool | None = None,
     energy: str | None = None,
+    symplectic: bool | None = None,
     quick: bool = True,
     configs: Mapping[str, Mapping[str, Any]] | None = None,
     jobs: int = 1,
@@ -310,27 +359,30 @@ def check(
 
     `order`: the convergence order claimed on every problem; `symmetric`: True (returns to its
     start within rounding) or False; `energy`: 'bounded', 'sqrt' or 'linear'. `quick` starts from
-    the experiments' quick settings; `configs` maps experiment name ('convergence',
-    'reversibility', 'energy') to setting overrides. Raises `ClaimError` (an AssertionError with
-    the measured table) when a claim is false and `raise_on_failure`; `InputError` for bad input.
+    the experiments' quick settings; `symplectic`: True or False, judged by the symplecticity
+    experiment (the one-step map's Jacobian); `configs` maps experiment name ('convergence',
+    'reversibility', 'energy', 'symplecticity') to setting overrides. Raises `ClaimError` (an
+    AssertionError with the measured table) when a claim is false and `raise_on_failure`;
+    `InputError` for bad input.
     """
     from harness.registry import problems as problem_registry
     from harness.registry import steppers as stepper_registry
     from harness.runner import run_experiment
 
-    _check_claims(order, symmetric, energy)
+    _check_claims(order, symmetric, energy, symplectic)
     if isinstance(problems, str | Problem) or not isinstance(problems, Sequence) or not problems:
         raise InputError("`problems` must be a non-empty list of problem names or Problem objects")
     for p in problems:
         if not isinstance(p, str | Problem):
             raise InputError(f"`problems` must hold problem names or Problem objects, got {type(p).__name__}")
     configs = dict(configs or {})
-    unknown = set(configs) - {"convergence", "reversibility", "energy"}
+    unknown = set(configs) - {"convergence", "reversibility", "energy", "symplecticity"}
     if unknown:
         raise InputError(
-            f"`configs` may set convergence, reversibility and energy only, got {sorted(unknown)}"
+            f"`configs` may set convergence, reversibility, energy and symplecticity only, got "
+            f"{sorted(unknown)}"
         )
-    resolved = _resolve_stepper(stepper, order, symmetric, energy)
+    resolved = _resolve_stepper(stepper, order, symmetric, energy, symplectic)
     options = {"quick": quick, "jobs": jobs, "cache": cache, "cell_timeout": cell_timeout,
                "progress": False}
     with contextlib.ExitStack() as stack:
@@ -349,6 +401,8 @@ def check(
             plan.append(("reversibility", "symmetric", "yes" if symmetric else "no"))
         if energy is not None:
             plan.append(("energy", "energy", energy))
+        if symplectic is not None:
+            plan.append(("symplecticity", "symplectic", "yes" if symplectic else "no"))
         for experiment, claim, claimed in plan:
             config = dict(configs.get(experiment, {}))  # experiments apply by facts, to `names`
             result = run_experiment(experiment, [name], names, config=config, **options)
@@ -360,6 +414,8 @@ def check(
                     rows += _order_rows(summary)
                 elif claim == "symmetric":
                     rows += _symmetry_rows(summary, bool(symmetric))
+                elif claim == "symplectic":
+                    rows += _symplectic_rows(summary, bool(symplectic))
                 else:
                     rows += _energy_rows(summary, energy)
             rows += _missing_rows(claim, claimed, names, summary, result.skips)

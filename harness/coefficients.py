@@ -25,7 +25,7 @@ from fractions import Fraction
 import numpy as np
 
 from harness.errors import CoefficientError
-from harness.tolerances import COEFFICIENT_TOL, COEFFICIENT_ULPS, EPS
+from harness.tolerances import COEFFICIENT_TOL, COEFFICIENT_ULPS, EPS, PUBLISHED_MIN_DIGITS
 
 __all__ = [
     "ButcherTableau",
@@ -61,6 +61,16 @@ def _close(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
     its sum to ~1e-13, and that is no defect)."""
     scale = max(1.0, abs(a), abs(b), float(size))
     return abs(a - b) <= max(COEFFICIENT_TOL, COEFFICIENT_ULPS * EPS * (terms + 1) * scale)
+
+
+def published_precision(*arrays: np.ndarray) -> float:
+    """Half a unit in the last digit of the coarsest coefficient typed as a cut decimal (shortest
+    float text of PUBLISHED_MIN_DIGITS to 15 significant digits), else 0.0."""
+    from decimal import Decimal
+
+    cut = [Decimal(repr(float(x))).as_tuple() for a in arrays for x in np.ravel(a) if x != 0.0]
+    return max([0.5 * 10.0 ** int(e) for _, d, e in cut if PUBLISHED_MIN_DIGITS <= len(d) <= 15],
+               default=0.0)
 
 
 def exact_value(x) -> Fraction | None:
@@ -104,7 +114,9 @@ class ButcherTableau:
     """A Runge-Kutta method: stage matrix `A`, weights `b`, nodes `c`.
 
     Checks on creation: `A` square with as many rows as `b` and `c`; row sums of `A` equal `c`
-    (the stages are consistent in time); weights sum to one (the method is consistent).
+    (the stages are consistent in time); weights sum to one (the method is consistent); with
+    coefficients cut to `published_precision`, up to their printing: that miss is stated
+    (`consistency_defect`, `defect_note`) and the order conditions allow for it.
     Derived: `stages`, `explicit` (A strictly lower triangular), `diagonally_implicit`.
     """
 
@@ -116,6 +128,8 @@ class ButcherTableau:
     stages: int = field(init=False)
     explicit: bool = field(init=False)
     exact: tuple | None = field(init=False, repr=False)  # (A, b, c) as Fractions, when given exactly
+    consistency_defect: float = field(init=False, default=0.0)
+    published_precision: float = field(init=False, default=0.0)
 
     def __init__(self, name: str, A: Sequence, b: Sequence, c: Sequence | None = None,
                  b_hat: Sequence | None = None):
@@ -127,6 +141,16 @@ class ButcherTableau:
                 f"`{name}.A` must be {s}x{s} to match {s} weights in `b`, got {A_arr.shape}"
             )
         row_sums = A_arr.sum(axis=1)
+        precision = published_precision(A_arr, b_arr, *[v for v in (c, b_hat) if v is not None])
+        defect = 0.0
+
+        def near(total: float, want: float, size: float, terms: int) -> bool:  # rounding, or printing
+            nonlocal defect
+            if _close(total, want, size, terms):
+                return True
+            defect = max(defect, abs(total - want))  # refused (raises) unless within the printing
+            return abs(total - want) <= (terms + 1) * precision
+
         if c is None:
             c_arr = row_sums.copy()
             c_arr.setflags(write=False)
@@ -135,23 +159,25 @@ class ButcherTableau:
             if c_arr.shape != (s,):
                 raise CoefficientError(f"`{name}.c` must have {s} nodes, got {c_arr.shape[0]}")
             for i in range(s):
-                if not _close(row_sums[i], c_arr[i], float(np.abs(A_arr[i]).sum()), s):
+                if not near(row_sums[i], c_arr[i], float(np.abs(A_arr[i]).sum()), s):
                     raise CoefficientError(
                         f"`{name}`: row {i} of A sums to {float(row_sums[i])!r} but node c[{i}] is "
                         f"{float(c_arr[i])!r}; the row sums of A must equal the nodes"
                     )
-        if not _close(b_arr.sum(), 1.0, float(np.abs(b_arr).sum()), s):
+        if not near(b_arr.sum(), 1.0, float(np.abs(b_arr).sum()), s):
             raise CoefficientError(f"`{name}.b` must sum to 1 (consistency), sums to {float(b_arr.sum())!r}")
         bh_arr = None
         if b_hat is not None:
             bh_arr = as_float_array(b_hat, f"{name}.b_hat", 1)
             if bh_arr.shape != (s,):
                 raise CoefficientError(f"`{name}.b_hat` must have {s} weights, got {bh_arr.shape[0]}")
-            if not _close(bh_arr.sum(), 1.0, float(np.abs(bh_arr).sum()), s):
+            if not near(bh_arr.sum(), 1.0, float(np.abs(bh_arr).sum()), s):
                 raise CoefficientError(
                     f"`{name}.b_hat` must sum to 1 (consistency), sums to {float(bh_arr.sum())!r}"
                 )
         object.__setattr__(self, "b_hat", bh_arr)
+        object.__setattr__(self, "consistency_defect", float(defect))
+        object.__setattr__(self, "published_precision", float(precision))
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "A", A_arr)
         object.__setattr__(self, "b", b_arr)
@@ -163,6 +189,12 @@ class ButcherTableau:
             _exact_rows(c, 1) if c is not None else None)
         object.__setattr__(self, "exact", (exact_A, exact_b, exact_c)
                            if exact_A and exact_b and exact_c else None)
+
+    @property
+    def defect_note(self) -> str:
+        """The consistency defect in words ('' when there is none)."""
+        return (f"published as cut decimals (to {self.published_precision:.0e}): sums miss their "
+                f"nodes or 1 by up to {self.consistency_defect:.1e}") if self.consistency_defect else ""
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
         """R(z) = 1 + z b^T (I - zA)^{-1} e, evaluated for an array of complex z."""

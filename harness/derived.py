@@ -9,7 +9,7 @@ the judging code reads them again; each process would follow the same float64 Ta
 
 `remembered(module, function, parts, compute)` returns the value from
 `<cache root>/derived/<k[:2]>/<k>.json`, where `k` hashes the function's name, `parts` (the
-problem's fingerprint and the arguments) and `harness.keys.module_version` of `module` and of
+problem's fingerprint and the arguments) and `harness.code_versions.module_version` of `module` and of
 `harness.problem` (the source of each and of everything it imports, with the thresholds it
 reads) with heyoka's version: an edit to that code is a new key, so a value is never served
 after the code that made it changed. A file that cannot be read or parsed is recomputed and
@@ -22,7 +22,6 @@ it once: the others wait and read it.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import hashlib
 import json
@@ -30,7 +29,9 @@ import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from harness.errors import OutputError
+from harness.code_versions import module_version, project_files
+from harness.memo import kept
+from harness.provenance import PROJECT_ROOT
 
 __all__ = ["remembered", "kept"]
 
@@ -38,9 +39,6 @@ __all__ = ["remembered", "kept"]
 @functools.lru_cache(maxsize=1)
 def _project_paths() -> tuple[str, ...]:
     """Every project source file's absolute path (the listing is read once per process)."""
-    from harness.keys import project_files
-    from harness.provenance import PROJECT_ROOT
-
     return tuple(os.path.join(str(PROJECT_ROOT), rel) for rel in project_files())
 
 
@@ -63,8 +61,6 @@ _versions: dict[str, tuple[tuple, str]] = {}
 
 
 def _version(module: str) -> str:
-    from harness.keys import module_version
-
     signature = _project_files_signature()
     known = _versions.get(module)
     if known is None or known[0] != signature:
@@ -83,59 +79,3 @@ def remembered(module: str, function: str, parts: Sequence[Any], compute: Callab
     `module` (see the module docstring)."""
     text = json.dumps([module, function, _version(module), *map(repr, parts)])
     return kept("derived", hashlib.sha256(text.encode()).hexdigest()[:32], compute, function)
-
-
-def kept(directory: str, key: str, compute: Callable[[], Any], label: str = "") -> Any:
-    """The JSON value stored under `key` in `<cache root>/<directory>`, else `compute()`, then
-    stored (atomically). A file that cannot be read or parsed is recomputed and replaced; a
-    cache that cannot be written costs only time."""
-    from harness.cache import cache_dir
-    from harness.store import atomic_write_bytes
-
-    try:
-        path = cache_dir() / directory / key[:2] / f"{key}.json"
-    except OutputError:  # no cache directory: the value is computed every time
-        return compute()
-    found = _read(path, key)
-    if found:
-        return found[0]
-    with _key_lock(path):
-        found = _read(path, key)  # computed by another process while this one waited
-        if found:
-            return found[0]
-        value = compute()
-        with contextlib.suppress(OutputError):
-            atomic_write_bytes(path, json.dumps({"key": key, "function": label, "value": value}).encode())
-    return value
-
-
-def _read(path, key: str) -> tuple[Any] | None:
-    """(value,) stored at `path` under `key`, or None when missing or unreadable."""
-    with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
-        stored = json.loads(path.read_text())
-        if stored["key"] == key:
-            return (stored["value"],)
-    return None
-
-
-@contextlib.contextmanager
-def _key_lock(path):
-    """An exclusive lock on `path`'s `.lock` file while the value is computed; no lock (each
-    process computes for itself) without `fcntl` or where the lock file cannot be made."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
-        yield
-        return
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle = open(path.with_suffix(".lock"), "a")  # noqa: SIM115 - held across the yield
-    except OSError:
-        yield
-        return
-    with handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)

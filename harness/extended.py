@@ -304,7 +304,7 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     real128 floor is reached or `work_budget` function evaluations are spent. Returns the rows
     (h, n_steps, error, reference_error, rounding_level, excluded), the fit (order, points,
     h range) or None, and the reference error. Raises NotMeasurable with the reason."""
-    from harness.experiments.convergence import classify_points, fit_order
+    from harness.experiments.convergence_fit import classify_points, fit_order
 
     runner = _runner(coefficients, problem)
     T = float(problem.convergence_t_end if T is None else T)

@@ -8,9 +8,12 @@ A verdict never looks at a name. It follows from
   (`source = "claims"`);
 - `ProblemFacts`: what the symbolic (heyoka) definition says: linear (a constant Jacobian and no
   explicit time), the degree of a polynomial solution (a nilpotent affine system), whether the
-  acceleration is velocity-free, and how stiff it is (the Jacobian's spectrum sampled along the
+  acceleration is velocity-free (the Nystrom class), the right-hand side's degree when it is a
+  polynomial in the state, and how stiff it is (the Jacobian's spectrum sampled along the
   reference solution over the convergence horizon); `central_field`: whether every body's
   acceleration is parallel to its own position (decided on the definition at sampled positions).
+A Runge-Kutta method's facts include its orders on those classes (`class_orders`, keyed by
+`class_key`), its stage order and whether it is stiffly accurate (`harness.theory.classes`).
 
 Two steppers with the same coefficients have the same facts, whatever they are called.
 References: Hairer, Norsett & Wanner, *Solving ODEs I*, II.2 and III.2 (order), Hairer & Wanner,
@@ -21,6 +24,7 @@ Numerical Integration*, V-VI (symmetry, symplecticity).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 from typing import Any
@@ -30,7 +34,22 @@ import numpy as np
 from harness.problem import Problem
 from harness.stepper import AdaptiveStepper, Stepper
 
-__all__ = ["MethodFacts", "ProblemFacts", "central_field", "method_facts", "problem_facts"]
+__all__ = ["MethodFacts", "ProblemFacts", "central_field", "class_key", "method_facts",
+           "problem_facts"]
+
+# class orders are derived for right-hand sides of degree 2..CLASS_MAX_DEGREE (degree 1 is the
+# linear order); beyond it the first vanishing tree has more vertices than the orders judged here
+CLASS_MAX_DEGREE = 6
+
+
+def class_key(nystrom: bool, degree: int | None) -> str | None:
+    """The key of `MethodFacts.class_orders` for a problem class (None: no class, or one with
+    no derived order: degree 1 is the linear order, degrees above CLASS_MAX_DEGREE not kept)."""
+    if degree is not None and not 2 <= degree <= CLASS_MAX_DEGREE:
+        degree = None
+    if not nystrom and degree is None:
+        return None
+    return "+".join(([] if not nystrom else ["nystrom"]) + ([] if degree is None else [f"degree-{degree}"]))
 
 
 @dataclass(frozen=True)
@@ -49,6 +68,9 @@ class MethodFacts:
     imag_interval: float | None
     hw_limit: float | None
     one_step: bool | None = None  # a one-step map (Runge-Kutta, splitting); None for a black box
+    class_orders: dict[str, int] | None = None  # order per problem class (`class_key`), RK only
+    stage_order: int | None = None  # B(q) and C(q), RK only
+    stiffly_accurate: bool | None = None  # last row of A = b, RK only
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -65,6 +87,7 @@ class ProblemFacts:
     time_dependent: bool
     stiffness: float
     horizon: float
+    rhs_degree: int | None = None  # polynomial degree of the right-hand side in the state
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -121,7 +144,18 @@ def _derive_coefficient_facts(coeffs: Any) -> dict[str, Any]:
         "imag_interval": stab.get("imag_interval"),
         "hw_limit": stab.get("hw_limit"),
         "one_step": isinstance(coeffs, (ButcherTableau, SplittingScheme)),
+        **(_rk_class_facts(coeffs) if isinstance(coeffs, ButcherTableau) else {}),
     }
+
+
+def _rk_class_facts(tableau: Any) -> dict[str, Any]:
+    from harness.theory.classes import rk_class_orders, rk_stage_order, rk_stiffly_accurate
+
+    classes = [(nystrom, degree) for nystrom in (False, True)
+               for degree in (None, *range(2, CLASS_MAX_DEGREE + 1)) if class_key(nystrom, degree)]
+    orders = {class_key(*c): k for c, k in zip(classes, rk_class_orders(tableau, classes), strict=True)}
+    return {"class_orders": orders, "stage_order": rk_stage_order(tableau),
+            "stiffly_accurate": rk_stiffly_accurate(tableau)}
 
 
 # -- problems ---------------------------------------------------------------------------------
@@ -206,7 +240,45 @@ def _derive_problem_facts(problem: Problem) -> ProblemFacts:
         time_dependent=bool(problem.time_dependent),
         stiffness=_stiffness(problem),
         horizon=float(problem.convergence_t_end - problem.t0),
+        rhs_degree=_rhs_degree(problem),
     )
+
+
+_POLYNOMIAL_SCREEN = re.compile(r"\*\*(?!\d+\.0+\b)|/ (?!p\d|\d)")
+
+
+def _rhs_degree(problem: Problem) -> int | None:
+    """The right-hand side's total degree in the state (and the time, which joins the state as
+    t' = 1: every Runge-Kutta tableau here has c = A e) when it is a polynomial of degree at most
+    CLASS_MAX_DEGREE, else None. Decided exactly: the (d+1)-th derivative along a fixed
+    direction folds to the constant 0 in heyoka's algebra for a polynomial of degree d, never
+    for a transcendental or rational term. A text screen (only variables, parameters, sums,
+    products, non-negative integer powers and division by a parameter or number) skips the
+    derivatives where they could not vanish."""
+    import heyoka as hy
+
+    variables, rhs = list(problem.variables), list(problem.rhs)
+    if problem.time_dependent:
+        clock = hy.make_vars("clock_time_")
+        variables.append(clock)
+        rhs = [hy.subs(e, {hy.time: clock}) for e in rhs]
+    names = [str(v) for v in variables]
+    allowed = set(names)
+    for e in rhs:
+        text = str(e)
+        words = {w for w in re.findall(r"[A-Za-z_][A-Za-z_0-9]*", text) if not re.fullmatch(r"p\d+", w)}
+        if words - allowed or _POLYNOMIAL_SCREEN.search(text):
+            return None
+    direction = np.linspace(0.75, 1.25, len(names))  # fixed, so the fact is reproducible
+    zero = hy.expression(0.0)
+    exprs = rhs
+    for k in range(CLASS_MAX_DEGREE + 2):
+        if all(e == zero for e in exprs):
+            return max(k - 1, 1)
+        grads = [hy.diff_tensors([e], diff_args=variables, diff_order=1).get_derivatives(1)
+                 for e in exprs]
+        exprs = [hy.sum([float(w) * d for w, (_, d) in zip(direction, g, strict=True)]) for g in grads]
+    return None
 
 
 def _constant_jacobian(problem: Problem) -> np.ndarray | None:

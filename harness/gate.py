@@ -4,7 +4,9 @@ A cell (stepper x problem) is judged by `harness.rules` from the method's facts 
 or the claims of a black box) and the problem's facts (its symbolic definition): it passes when
 the verdict and order match the expectation, fails when they contradict it, and is
 `not-measurable` (reported with the limit that stopped it, neither pass nor fail) for a
-tolerated verdict. Besides the cells, a stepper fails when
+tolerated verdict. A slope above the expected order of a Runge-Kutta method is `not-measurable`
+when the predicted leading error term (`harness.prediction`) is too small to show in the fitted
+points, and stays a failure otherwise. Besides the cells, a stepper fails when
 - the order computed from its coefficients differs from its claimed order, or its claimed
   symmetry or symplecticity contradicts what its coefficients say (a mislabelled table fails even
   if a measurement happens to look right);
@@ -23,6 +25,7 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
+from harness import tolerances as tol
 from harness.facts import MethodFacts, method_facts, problem_facts
 from harness.perturbation_law import judge_split_map
 from harness.rules import convergence_expectation, judge_convergence
@@ -35,7 +38,7 @@ NOT_VERIFIED = "not-verified"
 GATE_COLUMNS = [
     "stepper", "problem", "claimed_order", "coefficient_order", "measured_order",
     "order_ci_low", "order_ci_high", "fit_points", "fit_h_min", "fit_h_max", "verdict",
-    "expected", "expected_order", "outcome", "passed", "reason",
+    "expected", "expected_order", "predicted_coefficient", "outcome", "passed", "reason",
 ]
 
 
@@ -60,6 +63,12 @@ def claim_contradictions(stepper) -> list[str]:
 def judge(record: Mapping, facts: MethodFacts | None = None,
           problem=None) -> tuple[str, str, str, float | None]:
     """(outcome, expected verdict, reason, expected order) for one convergence summary record."""
+    return _judge(record, facts, problem)[:4]
+
+
+def _judge(record: Mapping, facts: MethodFacts | None = None,
+           problem=None) -> tuple[str, str, str, float | None, float]:
+    """`judge` and the predicted leading error coefficient (NaN where none was needed)."""
     from harness.registry import get_problem, get_stepper
 
     stepper = get_stepper(record["stepper"])
@@ -67,10 +76,44 @@ def judge(record: Mapping, facts: MethodFacts | None = None,
     problem = problem if problem is not None else get_problem(record["problem"])
     split = judge_split_map(record, stepper, problem)  # a declared error law in eps h^p
     if split is not None:
-        return split
+        return (*split, np.nan)
     expectation = convergence_expectation(facts, problem_facts(problem))
     outcome, reason = judge_convergence(dict(record), expectation)
-    return outcome, expectation.verdict, reason, expectation.order
+    predicted = np.nan
+    if outcome == "fail" and _slope_above(record, expectation):
+        outcome, reason, predicted = _explain_slope(record, stepper, problem, expectation, reason)
+    return outcome, expectation.verdict, reason, expectation.order, predicted
+
+
+def _slope_above(record: Mapping, expectation) -> bool:
+    measured = float(record.get("measured_order", np.nan))
+    return (record.get("verdict") == "converged" and expectation.order is not None
+            and expectation.order_low is None and np.isfinite(measured)
+            and measured > expectation.order + tol.GATE_ORDER_TOL)
+
+
+def _explain_slope(record: Mapping, stepper, problem, expectation, reason: str
+                   ) -> tuple[str, str, float]:
+    """A slope above the expected order of a Runge-Kutta method: the predicted leading error
+    term (`harness.prediction`) says whether the fitted points could show the order at all.
+    Explained (a tiny or cancelling leading term) is `not-measurable`, otherwise the fail
+    stands with the prediction's numbers. Returns (outcome, reason, predicted C)."""
+    from harness.coefficients import ButcherTableau
+    from harness.prediction import explain_slope, predicted_error
+
+    coeffs = getattr(stepper, "coefficients", None)
+    if not isinstance(coeffs, ButcherTableau):
+        return "fail", reason, np.nan
+    try:
+        prediction = predicted_error(coeffs, problem, int(expectation.order))
+    except Exception as exc:  # a definition heyoka cannot differentiate or integrate: no verdict change
+        return "fail", f"{reason}; no predicted error ({type(exc).__name__}: {exc})"[:2000], np.nan
+    explained, why = explain_slope(
+        float(record["measured_order"]), expectation.order, prediction,
+        (float(record["fit_h_min"]), float(record["fit_h_max"])),
+        (float(record["fit_error_min"]), float(record["fit_error_max"])))
+    C = float(prediction["coefficient"])
+    return ("not-measurable", why, C) if explained else ("fail", f"{reason}; {why}", C)
 
 
 def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
@@ -98,13 +141,14 @@ def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
             stepper = get_stepper(name)
             per_stepper[name] = (method_facts(stepper), claim_contradictions(stepper))
         facts, contradictions = per_stepper[name]
-        outcome, expected, why, expected_order = judge(rec, facts)
+        outcome, expected, why, expected_order, predicted = _judge(rec, facts)
         if contradictions:
             outcome, why = "fail", "; ".join(contradictions)
         row = {k: rec.get(k) for k in GATE_COLUMNS if k in rec}
         row.update({
             "coefficient_order": facts.order if facts.source == "coefficients" else None,
             "expected": expected, "expected_order": expected_order, "outcome": outcome,
+            "predicted_coefficient": predicted,
             "passed": outcome != "fail", "reason": why,
         })
         rows.append(row)

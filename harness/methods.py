@@ -4,7 +4,7 @@
 self-checking), its claims (order, stability figures where declared), its literature reference
 and, rarely, options of its family's step loop. Every built-in method is one `Method` entry in
 its family module's `METHODS` list; `Method.stepper()` picks the family's one step loop
-(`implementations.build_stepper`), and the registry, gate, experiments, compiled loops,
+(`implementations.builder.build_stepper`), and the registry, gate, experiments, compiled loops,
 benchmarks and report all start from there. Symmetry and symplecticity are never typed: they
 are asked of the coefficients.
 
@@ -17,7 +17,8 @@ family and so the step loop:
 - `A`, `b` (optional `c`, `b_hat`): a Runge-Kutta method, explicit when A is strictly lower
   triangular (`implementations.runge_kutta`), implicit otherwise (`implementations.implicit_rk`);
 - `sequence` of ("D", a) drifts and ("K", b) kicks: a splitting scheme (`implementations.splitting`);
-- `alpha`, `beta`: a linear multistep method (`implementations.multistep`).
+- `alpha`, `beta`: a linear multistep method: for y' = f (`implementations.multistep`), or for
+  x'' = f when sum j alpha_j = 0 (`implementations.second_order_multistep`).
 
 The coefficient object checks itself when the record is built, so a plugin file that lists its
 methods as records (`METHODS = [...]`) loads every good record and reports each bad one by name
@@ -78,7 +79,7 @@ class Method:
 
     def stepper(self) -> Stepper:
         """The stepper running this method with its family's step loop."""
-        from implementations import build_stepper
+        from implementations.builder import build_stepper
 
         return build_stepper(self)
 
@@ -121,6 +122,27 @@ def from_record(record: Mapping[str, Any]) -> Stepper:
     return method_from_record(record).stepper()
 
 
+def _multistep(name: str, alpha, beta):
+    """A first-order (`LinearMultistep`) or second-order (`SecondOrderMultistep`) table, told
+    apart by the coefficients: consistency for y' = f needs sum j alpha_j = sum beta_j != 0,
+    for x'' = f it needs sum j alpha_j = 0 and sum beta_j = sum j^2 alpha_j / 2 (HNW I, III.2
+    and III.10)."""
+    from harness.coefficients import LinearMultistep, SecondOrderMultistep, exact_value
+
+    try:
+        exact = [exact_value(a) for a in alpha]
+        moment = (sum(j * a for j, a in enumerate(exact)) if all(e is not None for e in exact)
+                  else sum(j * float(a) for j, a in enumerate(alpha)))
+        size = sum(j * abs(float(a)) for j, a in enumerate(alpha))
+    except (TypeError, ValueError):
+        return LinearMultistep(name, alpha, beta)  # reports the bad coefficient
+    from harness.tolerances import COEFFICIENT_TOL
+
+    if abs(float(moment)) <= COEFFICIENT_TOL * max(1.0, size) and any(b != 0 for b in beta):
+        return SecondOrderMultistep(name, alpha, beta)
+    return LinearMultistep(name, alpha, beta)
+
+
 def method_from_record(record: Mapping[str, Any]) -> Method:
     """The `Method` a plain mapping declares (see the module docstring).
 
@@ -145,9 +167,7 @@ def method_from_record(record: Mapping[str, Any]) -> Method:
 
             coeffs = SplittingScheme(name, record["sequence"])
         else:
-            from harness.coefficients import LinearMultistep
-
-            coeffs = LinearMultistep(name, record["alpha"], record["beta"])
+            coeffs = _multistep(name, record["alpha"], record["beta"])
     except KeyError as exc:
         raise InputError(
             f"method record {name!r}: `{exc.args[0]}` is required for a {family} method"

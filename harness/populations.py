@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from harness.coefficients import ButcherTableau, LinearMultistep, SplittingScheme
+from harness.methods import Method
 
 __all__ = ["Member", "generate", "error_rates", "FAMILIES", "PROBLEMS"]
 
@@ -144,18 +145,16 @@ _CLAIMED = {"rk-s2p2": 2, "rk-s3p3": 3, "rk-s4p4": 4, "split-p2": 2, "split-p4":
 
 
 def _stepper(family: str, name: str, coeffs, claimed: int):
-    from implementations.multistep import LinearMultistepStepper
-    from implementations.runge_kutta import ExplicitRungeKutta
-    from implementations.splitting import SplittingStepper
-
+    """The generated method as a `Method` record, built by its family's step loop (as a
+    plugin's method record is)."""
     if family.startswith("rk-"):
         A, b = coeffs
-        return ExplicitRungeKutta(ButcherTableau(name, A, b), claimed_order=claimed, reference=_REFERENCE)
+        return Method(ButcherTableau(name, A, b), claimed, _REFERENCE).stepper()
     if family.startswith("split-"):
-        return SplittingStepper(SplittingScheme(name, coeffs), claimed_order=claimed, reference=_REFERENCE)
+        return Method(SplittingScheme(name, coeffs), claimed, _REFERENCE).stepper()
     alpha, beta = coeffs
-    return LinearMultistepStepper(LinearMultistep(name, alpha, beta), name=name, claimed_order=claimed,
-                                  reference=_REFERENCE, description="generated two-step method")
+    return Method(LinearMultistep(name, alpha, beta), claimed, _REFERENCE,
+                  description="generated two-step method").stepper()
 
 
 def _perturb(family: str, coeffs, rng: np.random.Generator):

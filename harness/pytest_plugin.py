@@ -9,8 +9,10 @@ the signature of `harness.api.check`:
                           energy="bounded")
 
 A false claim fails the test with the measured table as its message (no traceback into the
-harness). `--integrator-claims-full` runs the experiments' full settings instead of their quick
-ones (slower, tighter).
+harness). The fixture returns the `ClaimReport` (`report.table`: one row per claim and problem,
+measured beside claimed); `fail=False` returns it without failing, for a test that inspects it.
+`--integrator-claims-full` runs the experiments' full settings instead of their quick ones
+(slower, tighter).
 """
 
 from __future__ import annotations
@@ -36,15 +38,16 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 @pytest.fixture
 def integrator_claims(request: pytest.FixtureRequest) -> Callable[..., Any]:
     """`check(stepper, problems, order=..., symmetric=..., energy=..., **options)`: measures the
-    claims (see `harness.api.check`), returns the `ClaimReport`, fails the test when one is false."""
+    claims (see `harness.api.check`), returns the `ClaimReport`, fails the test when one is false
+    (unless `fail=False`)."""
     from harness.api import check
 
     full = bool(request.config.getoption("--integrator-claims-full"))
 
-    def _check(stepper: Any, problems: Any, **claims: Any):
+    def _check(stepper: Any, problems: Any, *, fail: bool = True, **claims: Any):
         claims.setdefault("quick", not full)
         report = check(stepper, problems, raise_on_failure=False, **claims)
-        if not report.passed:
+        if fail and not report.passed:
             pytest.fail(str(report), pytrace=False)
         return report
 

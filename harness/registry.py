@@ -1,14 +1,16 @@
-"""The registry of steppers and problems: built-ins, entry points, and users' plugin files.
+"""The registry of steppers and problems: entry points (built-ins included) and users' plugin files.
 
-- Built-ins are registered in one place each: `implementations.builtin_steppers()` and
-  `problems.builtin_problems()`.
-- Third-party packages add entries through the entry-point groups `harness.steppers` and
-  `harness.problems`; an entry point names a Stepper/Problem instance, a class, or a callable
-  returning one or a list of them. They are loaded lazily, on the first lookup.
+- Every entry comes through the entry-point groups `harness.steppers` and `harness.problems`,
+  the built-ins too: this project's own distribution declares `implementations:builtin_steppers`
+  and `problems:builtin_problems` there (pyproject.toml), so the registry names neither
+  catalogue package. An entry point names a Stepper/Problem instance, a class, or a callable
+  returning one or a list of them. They are loaded lazily, on the first lookup: this project's
+  own first (origin 'builtin'; one that fails raises, never a silently smaller registry), then
+  other distributions' by distribution and entry-point name.
 - `load_plugin(path)` imports a user's own file (`--plugin FILE.py`) and registers every
   module-level Stepper or Problem it defines (or those listed in `STEPPERS` / `PROBLEMS`).
-A file or entry point that fails to import is reported by name (`PluginError`); the rest of the
-registry still loads.
+A third party's file or entry point that fails to import is reported by name (`PluginError`);
+the rest of the registry still loads.
 
 Plugin files are first imported in a guarded child process (`probe_plugin`), because a file can
 hurt the process that imports it in ways no `try` catches: `os._exit` or a fatal signal ends it
@@ -26,16 +28,18 @@ import difflib
 import hashlib
 import importlib.util
 import os
+import re
 import signal
 import subprocess
 import sys
 import tempfile
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from importlib import metadata
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
+from harness import DISTRIBUTION
 from harness.errors import InputError, PluginError, UnknownNameError
 from harness.problem import Problem
 from harness.stepper import Stepper
@@ -48,6 +52,8 @@ __all__ = [
     "get_problem",
     "load_plugin",
     "plugin_errors",
+    "expand",
+    "group_entry_points",
 ]
 
 T = TypeVar("T")
@@ -58,6 +64,7 @@ PLUGIN_PROBE_TIMEOUT_S = 120.0
 _PROBE = r"""
 import contextlib, importlib.util, os, sys, threading
 path, result = sys.argv[1], sys.argv[2]
+sys.path.insert(0, os.path.dirname(os.path.abspath(path)))
 outcome = "ok"
 try:
     with contextlib.redirect_stdout(sys.stderr):
@@ -77,6 +84,7 @@ with open(result, "w") as fh:
 os._exit(0)
 """
 _probed: dict[str, str | None] = {}
+_refused: dict[str, str] = {}  # a method record's name -> why its plugin's record was refused
 
 
 def _is_variant(obj: Any) -> bool:
@@ -93,11 +101,10 @@ def _is_variant(obj: Any) -> bool:
 class Registry(Generic[T]):
     """A name -> object map for one kind of entry, filled lazily on the first lookup."""
 
-    def __init__(self, kind: str, cls: type, group: str, builtins: Callable[[], Iterable[T]]):
+    def __init__(self, kind: str, cls: type, group: str):
         self.kind = kind
         self.cls = cls
         self.group = group
-        self._builtins = builtins
         self._items: dict[str, T] = {}
         self._origin: dict[str, str] = {}
         self._loaded = False
@@ -111,20 +118,25 @@ class Registry(Generic[T]):
             if self._loaded:
                 return
             self._loaded = True
-            for obj in self._builtins():
-                self.register(obj, origin="builtin")
             self._load_entry_points()
 
     def _load_entry_points(self) -> None:
+        """Register every entry point of `self.group`: this project's own (the built-ins) first,
+        and an error there raises; then the others', each failure recorded in `errors`."""
         try:
-            eps = metadata.entry_points(group=self.group)
+            own, others = group_entry_points(self.group)
         except Exception as exc:  # a broken distribution must not take the registry down
             self.errors.append(f"entry points {self.group}: {exc}")
             return
-        for ep in eps:
+        if not own:
+            self.errors.append(missing_builtins(self.kind, self.group))
+        for ep in own:
+            for obj in expand(ep.load(), self.cls):
+                self.register(obj, origin="builtin")
+        for ep in others:
             try:
                 loaded = ep.load()
-                for obj in _expand(loaded, self.cls):
+                for obj in expand(loaded, self.cls):
                     self.register(obj, origin=f"entry point {ep.name} ({ep.value})")
             except Exception as exc:
                 self.errors.append(f"entry point {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}")
@@ -159,6 +171,8 @@ class Registry(Generic[T]):
             close = difflib.get_close_matches(name, self._items, n=3, cutoff=0.5)
             hint = f"; closest: {', '.join(close)}" if close else ""
             shown = name if len(name) <= 60 else name[:57] + "..."
+            if self.kind == "stepper" and name in _refused:
+                raise UnknownNameError(f"stepper {shown!r} is not registered: {_refused[name]}") from None
             raise UnknownNameError(
                 f"unknown {self.kind} {shown!r}{hint} (see `harness list {self.kind}s`)"
             ) from None
@@ -191,37 +205,58 @@ def _name_of(obj: Any) -> str:
     return obj.info.name if isinstance(obj, Stepper) else obj.name
 
 
-def _expand(loaded: Any, cls: type) -> list:
+def expand(loaded: Any, cls: type) -> list:
+    """The `cls` objects an entry point or plugin names: an instance, a subclass (instantiated),
+    a callable returning either or a list of them, or a list; else `PluginError`."""
     if isinstance(loaded, cls):
         return [loaded]
     if isinstance(loaded, type) and issubclass(loaded, cls):
         return [loaded()]
     if callable(loaded):
-        return _expand(loaded(), cls)
+        return expand(loaded(), cls)
     if isinstance(loaded, Iterable) and not isinstance(loaded, str | bytes):
         out = []
         for item in loaded:
-            out.extend(_expand(item, cls))
+            out.extend(expand(item, cls))
         return out
     raise PluginError(
         f"expected a {cls.__name__}, a list of them, or a callable; got {type(loaded).__name__}"
     )
 
 
-def _builtin_steppers() -> list[Stepper]:
-    from implementations import builtin_steppers
-
-    return builtin_steppers()
-
-
-def _builtin_problems() -> list[Problem]:
-    from problems import builtin_problems
-
-    return builtin_problems()
+def _dist_name(ep: metadata.EntryPoint) -> str:
+    """The normalized name of the distribution declaring `ep` ('' when unknown)."""
+    dist = getattr(ep, "dist", None)
+    return re.sub(r"[-_.]+", "-", dist.name).lower() if dist is not None and dist.name else ""
 
 
-steppers: Registry[Stepper] = Registry("stepper", Stepper, "harness.steppers", _builtin_steppers)
-problems: Registry[Problem] = Registry("problem", Problem, "harness.problems", _builtin_problems)
+def _is_own(ep: metadata.EntryPoint) -> bool:
+    """Declared by this project's own distribution: a built-in."""
+    return _dist_name(ep) == DISTRIBUTION
+
+
+def group_entry_points(group: str) -> tuple[list, list]:
+    """The installed entry points of `group`.
+
+    Returns
+    -------
+    (this project's own, sorted by name; every other distribution's, sorted by distribution
+    and name)
+    """
+    eps = list(metadata.entry_points(group=group))
+    own = sorted((ep for ep in eps if _is_own(ep)), key=lambda ep: ep.name)
+    others = sorted((ep for ep in eps if not _is_own(ep)), key=lambda ep: (_dist_name(ep), ep.name))
+    return own, others
+
+
+def missing_builtins(kind: str, group: str) -> str:
+    """The error of a registry whose built-in entry points are not installed."""
+    return (f"no built-in {kind}s: the {group!r} entry points of {DISTRIBUTION} are not "
+            "installed; install the project (`make setup`, or `pip install -e .`)")
+
+
+steppers: Registry[Stepper] = Registry("stepper", Stepper, "harness.steppers")
+problems: Registry[Problem] = Registry("problem", Problem, "harness.problems")
 
 _plugins: dict[str, list[str]] = {}
 _plugin_errors: list[str] = []
@@ -258,6 +293,7 @@ def _build_records(records: Any, path: str | Path) -> list[Stepper]:
             out.extend(method.steppers())
         except (InputError, ValueError, TypeError) as exc:
             _plugin_errors.append(f"plugin {str(path)!r}: method {label!r} not loaded: {exc}")
+            _refused[str(label)] = f"plugin {str(path)!r} refused its record: {exc}"
     return out
 
 
@@ -335,6 +371,10 @@ def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) ->
             raise PluginError(f"plugin {str(path)!r}: cannot be imported as a Python module")
         module = importlib.util.module_from_spec(spec)
         sys.modules[mod_name] = module
+        folder = str(p.resolve().parent)  # the plugin imports its own folder's modules
+        added = folder not in sys.path
+        if added:
+            sys.path.insert(0, folder)
         try:
             with contextlib.redirect_stdout(sys.stderr):
                 spec.loader.exec_module(module)
@@ -345,6 +385,9 @@ def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) ->
             raise PluginError(
                 f"plugin {str(path)!r} failed to import: {type(exc).__name__}: {exc}"
             ) from None
+        finally:
+            if added and folder in sys.path:
+                sys.path.remove(folder)
         names: list[str] = []
         listed_s = getattr(module, "STEPPERS", None)
         listed_p = getattr(module, "PROBLEMS", None)

@@ -10,7 +10,18 @@ Convergence (`convergence_expectation`), first rule that applies:
    (the one-step map is the Taylor polynomial of the exact flow up to degree d);
 3. linear constant-coefficient problem: `converged` at the linear order (R(z) against e^z),
    which exceeds the order for some methods (several SSP methods, Merson's);
-4. otherwise `converged` at the order (from coefficients, or the claim of a black box).
+4. a problem class where elementary differentials vanish (x'' = g(x) as a first-order system,
+   a right-hand side polynomial of degree d in the state; `harness.theory.classes`): `converged`
+   at the Runge-Kutta method's order on that class where it exceeds the order (HNW I, II.2 and
+   II.14: only the surviving trees' conditions enter the local error);
+5. an implicit Runge-Kutta method on a problem that is stiff over its horizon (the fastest
+   decay rate times the horizon above STIFF_HORIZON_DECAYS) whose stage order q is below its
+   order p: `converged` with any order in [q, p] (`order_low` = q). On the Prothero-Robinson
+   equation with h|lambda| -> oo the error is O(h^q), O(h^(q+1)) for stiffly accurate methods,
+   and the method is B-convergent of order q (Hairer & Wanner II, IV.15, Theorem 15.3; for
+   singularly perturbed problems VI.3); a sweep whose steps cross h|lambda| ~ 1 sees a slope
+   between the stiff and the classical order that no theorem fixes, so the range is the verdict;
+6. otherwise `converged` at the order (from coefficients, or the claim of a black box).
 Verdicts that say "not measurable here" rather than "wrong" (`tolerated`):
 - `insufficient-range` always: the measurement states the limit that stopped it (work budget,
   float64 floor, reference accuracy) and the order is then judged on the other problems;
@@ -66,7 +77,7 @@ import math
 from dataclasses import dataclass
 
 from harness import tolerances as tol
-from harness.facts import MethodFacts, ProblemFacts
+from harness.facts import MethodFacts, ProblemFacts, class_key
 
 __all__ = ["Expectation", "convergence_expectation", "describe_drift", "drift_prediction",
            "energy_expectation", "judge_convergence", "tolerance_allowance"]
@@ -76,12 +87,13 @@ __all__ = ["Expectation", "convergence_expectation", "describe_drift", "drift_pr
 class Expectation:
     """The verdict a cell should show, the order it should measure (or None), the verdicts that
     only mean "not measurable here", and the reason for the expectation (empty when it is the
-    plain claim)."""
+    plain claim). With `order_low`, any measured order in [order_low, order] is expected."""
 
     verdict: str
     order: float | None
     tolerated: tuple[str, ...]
     reason: str
+    order_low: float | None = None
 
 
 def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
@@ -119,7 +131,48 @@ def convergence_expectation(method: MethodFacts, problem: ProblemFacts) -> Expec
         reason = (f"linear problem: the error follows R(z) - e^z, which this method matches to "
                   f"order {linear_order} (its order is {method.order})")
         return Expectation("converged", float(linear_order), tuple(tolerated), "; ".join([reason, *notes]))
+    class_order, class_reason = _class_order(method, problem)
+    if class_order is not None and class_order > method.order:
+        return Expectation("converged", float(class_order), tuple(tolerated),
+                           "; ".join([class_reason, *notes]))
+    low, stiff_reason = _stiff_reduced_order(method, problem)
+    if low is not None:
+        return Expectation("converged", float(method.order), tuple(tolerated),
+                           "; ".join([stiff_reason, *notes]), order_low=float(low))
     return Expectation("converged", float(method.order), tuple(tolerated), "; ".join(notes))
+
+
+def _class_order(method: MethodFacts, problem: ProblemFacts) -> tuple[int | None, str]:
+    """(the method's order on the problem's class, why) or (None, '') when no class applies."""
+    degree = problem.rhs_degree if problem.rhs_degree is not None and problem.rhs_degree >= 2 else None
+    key = class_key(problem.velocity_free, degree)
+    if key is None or not method.class_orders or key not in method.class_orders:
+        return None, ""
+    parts = ([] if not problem.velocity_free else
+             ["x'' = g(x) without velocities (only trees whose vertices of one depth parity have "
+              "at most one child survive; HNW I, II.14)"])
+    if degree is not None:
+        parts.append(f"a right-hand side polynomial of degree {degree} in the state (trees with a "
+                     f"vertex of more than {degree} children vanish)")
+    order = method.class_orders[key]
+    return order, (f"problem class: {' and '.join(parts)}; the coefficients satisfy every "
+                   f"surviving order condition up to order {order} (their order is {method.order})")
+
+
+def _stiff_reduced_order(method: MethodFacts, problem: ProblemFacts) -> tuple[int | None, str]:
+    """(stage order q, why) for an implicit Runge-Kutta method with q below its order on a
+    problem stiff over its horizon (module docstring, rule 5); (None, '') otherwise."""
+    q = method.stage_order
+    if (method.explicit or q is None or method.order is None or q >= method.order
+            or not problem.stiffness * problem.horizon > tol.STIFF_HORIZON_DECAYS):
+        return None, ""
+    extra = (", O(h^(q+1)) = h^" + str(q + 1) + " for this stiffly accurate method as h|lambda| -> oo"
+             if method.stiffly_accurate else "")
+    return q, (f"stiff over the horizon (-Re(lambda) up to {problem.stiffness:.3g}, horizon "
+               f"{problem.horizon:.3g}): an implicit method of stage order {q} may fall from its "
+               f"order {method.order} towards {q} (B-convergence, Prothero-Robinson{extra}; Hairer "
+               f"& Wanner II, IV.15); where the steps cross h|lambda| ~ 1 no theorem fixes the "
+               f"slope, so any order in [{q}, {method.order}] is expected")
 
 
 def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]:
@@ -135,6 +188,12 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
         if expectation.order is None:
             return "pass", expectation.reason
         measured = float(record["measured_order"])
+        if expectation.order_low is not None:
+            lo, hi = expectation.order_low, expectation.order
+            if math.isfinite(measured) and lo - tol.GATE_ORDER_TOL <= measured <= hi + tol.GATE_ORDER_TOL:
+                return "pass", f"measured order {measured:.3f} within [{lo:g}, {hi:g}]: {expectation.reason}"
+            return "fail", (f"measured order {measured:.3f} outside [{lo:g}, {hi:g}] (+-"
+                            f"{tol.GATE_ORDER_TOL}): {expectation.reason}")
         diff = abs(measured - expectation.order)
         if math.isfinite(measured) and diff <= tol.GATE_ORDER_TOL:
             return "pass", expectation.reason

@@ -10,6 +10,10 @@ COEFFICIENT_TOL = 1e-14
 # ... or, for coefficients of large magnitude (extrapolation methods: sum |b| up to ~3000), this
 # many units of rounding of the sum of their magnitudes, per term summed.
 COEFFICIENT_ULPS = 16.0
+# A coefficient whose shortest float text has this many significant digits (and at most 15) was
+# typed as a cut decimal: published tableaux print 10-15 digits; exact short decimals (0.5,
+# 0.1875) print fewer, a float computed from a fraction 16-17.
+PUBLISHED_MIN_DIGITS = 10
 
 # Order conditions from coefficients: sums of products of up to 8 float64 factors; 1e-11 is far
 # above their rounding and far below any genuine defect (the smallest condition value is 1/8!).
@@ -80,6 +84,10 @@ GATE_ORDER_TOL = 0.2
 # a fourth-order method's error on an O(1) problem is then ~1e-12, within a few halvings of the
 # float64 floor, so `unstable` above the floor is not evidence against its order.
 STIFF_STEP_COUNT = 1000.0
+# A problem is stiff over its horizon when its fastest decaying mode decays by e^-this over the
+# horizon (-Re(lambda) x horizon): the transient it leaves is then far below any error measured,
+# and an implicit method's stages see h|lambda| >> 1 at the sweep's coarse steps.
+STIFF_HORIZON_DECAYS = 100.0
 
 # Ensemble: members and the relative size of the perturbation of the initial state.
 ENSEMBLE_SIZE = 16
@@ -163,7 +171,9 @@ SCIPY_MIN_RTOL = 100.0 * EPS
 # h*omega limits of Newtonian steppers are searched up to this (the catalogue's are below 4).
 STABILITY_HW_SEARCH_LIMIT = 100.0
 # Stability probe against the coefficients' formula: largest relative difference of recurrence
-# coefficients (R(z), c_j, propagator entries) allowed; a step is a few dozen roundings.
+# coefficients (R(z), c_j, propagator entries) allowed; a step is a few dozen roundings of
+# numbers of the coefficients' size, so this is multiplied by that size (sum of |coefficients|,
+# or the magnitude of a splitting's product of factors at that h omega).
 STABILITY_AGREEMENT_TOL = 1e-12
 # Interval figures from the probe and from the formula must agree to this (each is root-found
 # to STABILITY_XTOL; the amplification tolerance shifts a transversal crossing by ~1e-12).
@@ -376,3 +386,47 @@ ENCOUNTER_MIN_DECADES = 0.3
 # dominant term's exponent the slope to within GATE_ORDER_TOL (a 10 % second term moves a
 # two-point slope by at most log(1.1)/log(2) ~ 0.14 per unit of exponent difference, damped).
 SPLIT_TERM_DOMINANCE = 10.0
+
+# Timing protocol (`harness.timing`, the work-precision experiment's timed runs). A point is
+# repeated until the spread (median - min) / min of its repeats is at most TIMING_TARGET_SPREAD
+# (5 %: below the +-30 % load noise of a shared machine, which the minimum filters, and the
+# resolution a ratio table is read at), after at least TIMING_MIN_REPEATS runs (three give a
+# median that is not one of the extremes), at most TIMING_MAX_REPEATS runs (quick: fewer), or
+# until the point has spent TIMING_POINT_BUDGET_S seconds (quick: less). The sweep's own warm run
+# is the first sample, so a point dearer than the budget is not run again and the timing costs a
+# cell at most about (points below the budget) x budget: with ~5 points per sweep in the
+# 1-20 ms band, ~0.1 s a cell, ~1 minute over the registry (the report's budget: +25 %).
+TIMING_TARGET_SPREAD = 0.05
+TIMING_MIN_REPEATS = 3
+TIMING_MAX_REPEATS = 7
+TIMING_QUICK_MAX_REPEATS = 3
+TIMING_POINT_BUDGET_S = 0.02
+TIMING_QUICK_POINT_BUDGET_S = 0.01
+# The C baseline is timed on a run of about this many seconds per repeat (its step count is
+# doubled until one run takes this long), so the timer's resolution and the call's overhead are
+# below 0.1 % of it.
+TIMING_BASELINE_RUN_S = 0.002
+# Implementations of one method agree "to rounding" when their errors at the same step differ by
+# at most this many float64 ulps of the state's scale, times sqrt(n_steps) (rounding accumulated
+# as a random walk), or this many times the point's rounding level (which carries the flow's
+# amplification) -- or relatively by TIMING_SAME_ERROR_RTOL where the error is far above
+# rounding (a different summation order changes the last bits of each step only).
+TIMING_SAME_ERROR_ULPS = 64.0
+TIMING_SAME_ERROR_RTOL = 1e-6
+# The target errors of the time-to-target table.
+TIMING_TARGET_ERRORS = (1e-4, 1e-8, 1e-12)
+# A NumPy loop of a method whose compiled loop ran the sweep is timed beside it at the largest
+# point whose work (steps x evaluations per step, x IMPLICIT_STEP_COST for implicit steps) is at
+# most TIMING_TWIN_WORK: a NumPy step on one trajectory costs ~5-40 us explicit, ~0.2-1 ms
+# implicit (Newton in NumPy), so a run costs ~3-50 ms; one point shows the agreement.
+TIMING_TWIN_WORK = 512
+
+# Predicted leading error (harness.prediction): symbolic elementary differentials of trees with
+# m vertices grow like dim^(m-1), so they are built only up to this size (12 variables at order
+# 5: ~30 s once, cached; order 6 took ~100 s under load; 4 variables at order 8: ~6 s).
+PREDICTION_MAX_WORK = 12**4
+# The variational integration needs only a few digits of E_t(T): the prediction is asymptotic.
+PREDICTION_TAYLOR_TOL = 1e-10
+# A slope above the order is explained when the predicted leading term C h^p is below this
+# fraction of the measured error over the fit: the fitted points are then set by later terms.
+SLOPE_EXPLAINED_RATIO = 0.3

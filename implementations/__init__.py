@@ -8,7 +8,7 @@ import threading
 from importlib import import_module
 
 __all__ = [
-    "ProblemCache", "builtin_steppers", "build_stepper", "coefficient_info", "unavailable_steppers",
+    "ProblemCache", "builtin_steppers", "coefficient_info", "unavailable_steppers",
     "FAMILY_MODULES", "OPTIONAL_MODULES", "optional_library",
 ]
 
@@ -16,6 +16,7 @@ FAMILY_MODULES = (
     "runge_kutta",
     "splitting",
     "verlet",
+    "second_order_multistep",
     "taylor",
     "implicit_rk",
     "multistep",
@@ -102,51 +103,6 @@ def coefficient_info(coefficients, *, family: str, form: str = "first-order", **
         "velocity_dependent": form != "newtonian",
     }
     return StepperInfo(family=family, form=form, **{**derived, **fields})
-
-
-def build_stepper(method):
-    """The stepper that runs a `harness.methods.Method` record: the one step loop of its
-    coefficients' family (explicit or implicit Runge-Kutta, splitting or its staggered leapfrog
-    form, linear multistep, Stormer's two-step form)."""
-    from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
-    from harness.errors import InputError
-
-    c = method.coefficients
-    opts = dict(method.options)
-    claims = {"claimed_order": method.claimed_order, "reference": method.reference,
-              "description": method.description}
-    stability = dict(method.stability) if method.stability is not None else None
-    if isinstance(c, ButcherTableau):
-        if c.explicit:
-            from implementations.runge_kutta import ExplicitRungeKutta
-
-            stepper = ExplicitRungeKutta(c, **claims, **opts)
-        else:
-            from implementations.implicit_rk import ImplicitRungeKutta
-
-            return ImplicitRungeKutta(c, name=c.name, **claims, stability=stability, **opts)
-    elif isinstance(c, SplittingScheme):
-        from implementations.splitting import SplittingStepper, StaggeredLeapfrog
-
-        if opts.pop("loop", None) == "staggered":
-            stepper = StaggeredLeapfrog(c.name, c, reference=method.reference,
-                                        description=method.description)
-        else:
-            stepper = SplittingStepper(c, **claims, **opts)
-    elif isinstance(c, LinearMultistep):
-        from implementations.multistep import LinearMultistepStepper
-
-        return LinearMultistepStepper(c, name=c.name, **claims, stability=stability, **opts)
-    elif isinstance(c, SecondOrderMultistep):
-        from implementations.verlet import TwoStepVerlet
-
-        stepper = TwoStepVerlet(opts.pop("name", c.name), c, reference=method.reference,
-                                description=method.description, **opts)
-    else:
-        raise InputError(f"method {method.name!r}: no step loop for coefficients of type {type(c).__name__}")
-    if stability is not None:
-        stepper.info.extra["stability"] = stability
-    return stepper
 
 
 def unavailable_steppers() -> dict[str, str]:

@@ -649,6 +649,14 @@ def compiled_variant(stepper: Stepper) -> Stepper:
     if isinstance(coeffs, LinearMultistep):
         return CompiledMultistep(stepper)
     if isinstance(coeffs, SecondOrderMultistep):
+        from implementations.second_order_multistep import SecondOrderMultistepStepper
+
+        if isinstance(stepper, SecondOrderMultistepStepper):
+            raise InputError(
+                f"`stepper` {stepper.info.name!r}: no compiled loop for k-step second-order "
+                "multistep methods yet (its starter is heyoka's Taylor integrator, and its implicit "
+                "tables take a Newton solve per step; the compiled Stormer loop runs the course's "
+                "two-step form only)")
         return CompiledStormer(stepper)
     raise InputError(
         f"`stepper` {stepper.info.name!r} has no coefficient object a compiled family runs "
@@ -699,7 +707,8 @@ def fastest(stepper: Stepper, problem: Problem) -> Stepper:
 
 
 # -- the registered variants -----------------------------------------------------------------------------
-#: Built-in steppers with a coefficient object that no compiled family runs: name -> reason.
+#: Built-in steppers with a coefficient object that no compiled family runs: name -> reason
+#: (today the k-step second-order multistep family, which runs its NumPy loop everywhere).
 NOT_COMPILED: dict[str, str] = {}
 
 

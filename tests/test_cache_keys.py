@@ -10,7 +10,7 @@ import textwrap
 
 import pytest
 
-from harness import keys
+from harness import code_versions, keys
 from harness import tolerances as tol
 from harness.experiments import EXPERIMENTS
 from harness.runner import run_experiment
@@ -21,13 +21,13 @@ def _fingerprints() -> dict[str, str]:
 
 
 def _edited(monkeypatch, module: str, edit):
-    real = keys._source
+    real = code_versions._source
 
     def source(name):
         text = real(name)
         return edit(text) if name == module else text
 
-    monkeypatch.setattr(keys, "_source", source)
+    monkeypatch.setattr(code_versions, "_source", source)
 
 
 def _importers(module: str) -> set[str]:
@@ -71,7 +71,7 @@ def test_editing_only_summarize_leaves_the_key_alone(monkeypatch):
     exp = EXPERIMENTS["energy"]
     before = keys.experiment_fingerprint(exp)
     marker = "    def summarize(self, rows"
-    assert marker in keys._source("harness.experiments.energy")
+    assert marker in code_versions._source("harness.experiments.energy")
     _edited(monkeypatch, "harness.experiments.energy",
             lambda text: text.replace(marker, "    def summarize(self, rows_renamed=None, *, rows", 1))
     assert keys.experiment_fingerprint(exp) == before
@@ -196,17 +196,17 @@ def test_parsed_imports_kept_on_disk_are_read_back_and_a_damaged_file_is_parsed_
                                                                                         monkeypatch):
     monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
     exp = EXPERIMENTS["energy"]
-    keys._read_once.cache_clear()
-    keys._module_imports.cache_clear()
+    code_versions._read_once.cache_clear()
+    code_versions._module_imports.cache_clear()
     first = keys.measuring_modules(exp)
     stored = sorted((tmp_path / "keys").rglob("*.json"))
     assert len(stored) > 10  # one file per module text read
-    keys._read_once.cache_clear()
-    keys._module_imports.cache_clear()
+    code_versions._read_once.cache_clear()
+    code_versions._module_imports.cache_clear()
     assert keys.measuring_modules(exp) == first  # read back from disk
     for f in stored:
         f.write_text("{not json")
-    keys._read_once.cache_clear()
-    keys._module_imports.cache_clear()
+    code_versions._read_once.cache_clear()
+    code_versions._module_imports.cache_clear()
     assert keys.measuring_modules(exp) == first  # parsed again and rewritten
     assert all(f.read_text().startswith('{"key"') for f in stored)

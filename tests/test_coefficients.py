@@ -278,3 +278,22 @@ BROKEN = [
 def test_broken_tables_are_refused(build, pattern):
     with pytest.raises(CoefficientError, match=pattern):
         build()
+
+
+def test_a_tableau_published_with_12_digits_is_accepted_with_its_defect_stated():
+    """Bogacki-Shampine's fractions (2/9, 4/9, ...) printed to 12 significant digits: the row
+    sums miss their nodes by ~1e-12, far above float rounding, a defect of the printing only."""
+    from harness.registry import get_stepper
+
+    exact = get_stepper("bogacki-shampine").coefficients
+    cut = lambda v: [float(f"{x:.12g}") for x in v]  # noqa: E731
+    A, b, c = [cut(row) for row in exact.A], cut(exact.b), cut(exact.c)
+    published = ButcherTableau("bs-12-digits", A, b, c)
+    assert 1e-14 < published.consistency_defect < 1e-11
+    assert "1e-12" in published.defect_note or "e-12" in published.defect_note
+    assert published.order() == exact.order() == 3
+    assert ButcherTableau("bs-exact", exact.A, exact.b, exact.c).consistency_defect == 0.0
+    off = [row[:] for row in A]
+    off[3][0] += 1e-9  # a real defect, 1000 times the printing's
+    with pytest.raises(CoefficientError, match="row 3 of A sums to"):
+        ButcherTableau("bs-off", off, b, c)

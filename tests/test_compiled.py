@@ -113,10 +113,12 @@ def test_every_builtin_with_coefficients_has_a_registered_compiled_variant():
         if s.coefficients is not None
     ]
     assert len(builtins) >= 25
-    assert NOT_COMPILED == {}
+    # the one family without a compiled loop says why (its NumPy loop runs everywhere)
+    assert {get_stepper(n).info.family for n in NOT_COMPILED} <= {"second-order-multistep"}
+    assert all("no compiled loop" in why for why in NOT_COMPILED.values())
     names = {s.info.name for s in COMPILED}
     for s in builtins:
-        assert s.info.name + SUFFIX in names
+        assert s.info.name + SUFFIX in names or s.info.name in NOT_COMPILED
     families = {s.info.family for s in COMPILED}
     assert {"explicit-rk", "splitting", "stormer", "multistep", "implicit-rk"} <= families
 
@@ -135,7 +137,7 @@ def test_every_registered_method_with_coefficients_has_a_compiled_variant():
             continue
         if s.coefficients is None and not isinstance(s, ControlledSplittingStepper):
             black_boxes.append(s.info.name)
-        elif s.info.name + SUFFIX not in names:
+        elif s.info.name + SUFFIX not in names and s.info.name not in NOT_COMPILED:
             missing.append(s.info.name)
     assert missing == []
     assert {"bogacki-shampine@embedded", "velocity-verlet+dtheta-reversible"} <= {

@@ -41,7 +41,7 @@ def test_changed_code_is_a_new_value(calls, monkeypatch):
 
 
 def test_the_version_follows_an_edit_of_an_imported_module(tmp_path, monkeypatch):
-    from harness import keys
+    from harness import code_versions as keys
 
     before = keys.module_version("harness.scales")
     original = keys._source

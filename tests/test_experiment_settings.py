@@ -32,6 +32,8 @@ BAD_SETTINGS = {
         ({"tolerances": []}, r"config `tolerances` must be a non-empty list of numbers in \(0, 1\)"),
         ({"tolerances": [1e-3, 2.0]}, r"config `tolerances` must be"),
         ({"work_budget": 0}, r"config `work_budget` must be a whole number >= 1, got 0"),
+        ({"timing_max_repeats": 0}, r"config `timing_max_repeats` must be a whole number >= 1"),
+        ({"timing_budget_s": -1.0}, r"config `timing_budget_s` must be a positive finite number"),
     ]),
 }
 

@@ -114,6 +114,26 @@ def test_pareto_marks_match_the_helper(table):
     assert "euler" not in set(marked[marked.error < 0.1].stepper)
 
 
+def test_timed_columns_follow_the_protocol(table):
+    """Logic only (no wall-clock value is asserted): every measured point is timed warm with a
+    repeat count and a stop reason, min <= median, the ratio columns are the time over the same
+    cell's baseline, and the Pareto marks of time are the helper's."""
+    timed = table[table.error.notna()]
+    assert (timed.t_repeats >= 1).all() and set(timed.t_stop) <= {"spread", "max-repeats", "budget"}
+    assert (timed.t_min_s <= timed.t_median_s).all()
+    assert (timed.t_repeats <= EXP.config(quick=True)["timing_max_repeats"]).all()
+    with_base = timed[timed.baseline_step_s.notna()]
+    np.testing.assert_allclose(with_base.baseline_units, with_base.t_min_s / with_base.baseline_step_s)
+    assert table.groupby("stepper").first_call_s.nunique().max() == 1  # one per cell
+    front = pareto_front(table, "t_min_s")
+    assert sorted(zip(table[table.pareto_time].stepper, table[table.pareto_time].t_min_s, strict=True)) \
+        == sorted(zip(front.stepper, front.t_min_s, strict=True))
+    # the NumPy loop timed beside the compiled loop that ran the sweep agrees with it to rounding
+    twins = table[table.twin_error.notna()]
+    assert set(twins.stepper) >= {"rk4", "velocity-verlet"}
+    np.testing.assert_allclose(twins.twin_error, twins.error, rtol=1e-6, atol=1e-13)
+
+
 def test_points_are_those_of_the_convergence_sweep():
     """The fixed-step sweep is the convergence experiment's own: same step sizes and errors."""
     from harness.registry import get_problem

@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CompilerUnavailable", "CBaseline", "load", "find_compiler", "FLAGS", "SOURCE", "SINGLE_FAMILY"]
+__all__ = ["CompilerUnavailable", "CBaseline", "load", "find_compiler", "FLAGS", "SOURCE", "SINGLE_FAMILY",
+           "FAMILY_LOOPS", "family_loop", "kepler_start"]
 
 SOURCE = Path(__file__).with_name("kepler.c")
 FLAGS = ("-O3", "-fPIC", "-shared")
@@ -37,6 +38,33 @@ SINGLE_FAMILY = {"leapfrog": 4, "stormer": 4, "ab4": 16, "midpoint": 4}
 # the C baseline loads without the harness.
 NEWTON_TOL = 1e-14
 NEWTON_MAX_ITER = 20
+
+#: A stepper family (`StepperInfo.family`) -> the loop of its representative method here; a family
+#: not listed is compared with the classical RK4 loop.
+FAMILY_LOOPS = {"explicit-rk": "rk4", "splitting": "vv", "stormer": "stormer", "multistep": "ab4",
+                "implicit-rk": "midpoint"}
+
+
+def family_loop(family: str) -> str:
+    """The loop a stepper of `family` is compared with (`FAMILY_LOOPS`, else the RK4 loop)."""
+    return FAMILY_LOOPS.get(family, "rk4")
+
+
+def kepler_start(loop: str, h: float) -> np.ndarray:
+    """The input of `loop` for one Kepler trajectory (e = 0.6, GM = 1) from pericentre at step `h`:
+    the state, with the half-kick (leapfrog), the second position (Stormer) or four copies of the
+    state as a start history (AB4) those loops take."""
+    e = 0.6
+    x, v = 1.0 - e, float(np.sqrt((1.0 + e) / (1.0 - e)))
+    y0 = np.array([x, 0.0, 0.0, v])
+    if loop == "leapfrog":
+        return np.concatenate([y0[:2], y0[2:] - 0.5 * h * y0[:2] / x**3])
+    if loop == "stormer":
+        return np.concatenate([y0[:2], y0[:2] + h * y0[2:] - 0.5 * h**2 * y0[:2] / x**3])
+    if loop == "ab4":
+        return np.concatenate([y0] * 4)
+    return y0
+
 
 _loaded: dict[str, CBaseline] = {}
 

@@ -104,7 +104,9 @@ def cmd_list(args) -> int:
         import pandas as pd
 
         print_table(pd.DataFrame(records), cols)
-    for err in plugin_errors():
+    from harness.experiments.base import EXPERIMENT_ERRORS
+
+    for err in [*plugin_errors(), *(EXPERIMENT_ERRORS if args.kind == "experiments" else [])]:
         print(f"harness: warning: {one_line(err)}", file=sys.stderr)
     return EXIT_OK
 

@@ -12,6 +12,11 @@ Contract for an experiment (a subclass of `Experiment`, registered in `EXPERIMEN
    judges a claim.
 5. Failures stay in their cell: the runner turns an exception in `run_cell` into a failed-cell
    record (`harness.experiments.base.failed_record`), and the run goes on.
+
+Experiments come in through the entry-point group `harness.experiments`, as steppers and
+problems do (`load_experiments`): this project's own entry is the built-in list
+(`harness.experiments.builtin_experiments`), another distribution's entry names an `Experiment`
+instance, a subclass, or a callable returning one or a list of them.
 """
 
 from __future__ import annotations
@@ -33,7 +38,10 @@ __all__ = [
     "EXPERIMENTS",
     "register_experiment",
     "get_experiment",
+    "load_experiments",
     "failed_record",
+    "ENTRY_POINT_EXPERIMENTS",
+    "EXPERIMENT_ERRORS",
 ]
 
 
@@ -111,10 +119,49 @@ def register_experiment(exp: Experiment) -> Experiment:
     return exp
 
 
+# Experiments registered by other distributions' entry points, in load order, and the entry
+# points that failed to load (with their reason).
+ENTRY_POINT_EXPERIMENTS: list[str] = []
+EXPERIMENT_ERRORS: list[str] = []
+_loaded: list[bool] = []
+
+
+def load_experiments() -> None:
+    """Register the experiments of the entry-point group `harness.experiments`, once per process:
+    this project's own entry (the built-ins) first, and an error there raises; then other
+    distributions' entries, each failure (or a name already taken) recorded in
+    `EXPERIMENT_ERRORS` while the rest load."""
+    if _loaded:
+        return
+    _loaded.append(True)
+    from harness.registry import expand, group_entry_points, missing_builtins
+
+    own, others = group_entry_points("harness.experiments")
+    if not own:
+        EXPERIMENT_ERRORS.append(missing_builtins("experiment", "harness.experiments"))
+    for ep in own:
+        for exp in expand(ep.load(), Experiment):
+            register_experiment(exp)
+    for ep in others:
+        try:
+            found = expand(ep.load(), Experiment)
+            taken = [e.name for e in found if e.name in EXPERIMENTS and EXPERIMENTS[e.name] is not e]
+            if taken:
+                raise ValueError(f"experiment name {taken[0]!r} is already registered")
+        except Exception as exc:
+            EXPERIMENT_ERRORS.append(f"entry point {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}")
+            continue
+        for exp in found:
+            register_experiment(exp)
+            ENTRY_POINT_EXPERIMENTS.append(exp.name)
+
+
 def get_experiment(name: str) -> Experiment:
-    from harness import experiments  # noqa: F401  (registers the built-in experiments)
+    """The registered experiment `name` (entry points loaded first); `UnknownNameError` with the
+    closest names otherwise."""
     from harness.errors import UnknownNameError
 
+    load_experiments()
     try:
         return EXPERIMENTS[name]
     except KeyError:

@@ -42,8 +42,6 @@ __all__ = [
     "fixed_plan",
     "long_run_steps",
     "period_states",
-    "step_sweep",
-    "tolerance_sweep",
     "OVERRIDE_KEYS",
 ]
 
@@ -357,17 +355,3 @@ def long_run_steps(problem, h: float, n: int) -> tuple[int, str]:
         return n, ""
     capped = max(1, int((stop - problem.t0) / h))
     return capped, f"run stopped after {capped} of {n} steps (t = {problem.t0 + capped * h:.6g}): {why}"
-
-
-def step_sweep(stepper, problem, config):
-    """The convergence experiment's step-size sweep (errors at the horizon against step size)."""
-    from harness.experiments import convergence
-
-    return convergence.step_sweep(stepper, problem, config)
-
-
-def tolerance_sweep(stepper, problem, config):
-    """The convergence experiment's tolerance sweep of an adaptive stepper."""
-    from harness.experiments import convergence
-
-    return convergence.tolerance_sweep(stepper, problem, config)

@@ -249,14 +249,18 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
         return rec["error"] < tol.ROUNDOFF_MARGIN * rec["rounding_level"] or (
             rec["error"] < tol.REFERENCE_MARGIN * ref_err)
 
+    # A multistep method's first k - 1 values come from its starter: a sweep over fewer steps
+    # than twice its history would measure the starter (often exact), not the method.
+    history = int(getattr(stepper, "history_length", 1))
+    n_min = 2 * history if history > 1 else 1
     # Phase 0: a start that is already below the start error (a high-order method on a smooth
-    # span) is coarsened first, down to one step, so the sweep sees the error fall.
-    n = int(config["n_start"])
+    # span) is coarsened first, down to n_min steps, so the sweep sees the error fall.
+    n = max(int(config["n_start"]), n_min)
     rec = run(n)
-    while n > 1 and np.isfinite(rec["error"]) and rec["error"] < start_error:
-        n = max(1, n // 2)
+    while n > n_min and np.isfinite(rec["error"]) and rec["error"] < start_error:
+        n = max(n_min, n // 2)
         rec = run(n)
-    n = int(config["n_start"])
+    n = max(int(config["n_start"]), n_min)
     # Phase 1 and 2: from coarse to fine (ratio 2) until the error has fallen below the start
     # error and either the asymptotic window holds `target` points or the floor is reached;
     # the budget ends it in any case.

@@ -236,7 +236,10 @@ class SymplecticityExperiment(Experiment):
 
 
 def _not_one_step(stepper: Stepper) -> str | None:
-    if stepper.history_length > 1 and not isinstance(stepper.coefficients, SecondOrderMultistep):
+    # Stormer's two-step rule with its Taylor start is velocity Verlet written in positions; a
+    # multistep loop with a starter (`starter`) is not one map of phase space
+    started = getattr(stepper, "starter", None) is not None
+    if stepper.history_length > 1 and (started or not isinstance(stepper.coefficients, SecondOrderMultistep)):
         return (f"stepper {stepper.info.name!r} is a {stepper.history_length}-step method: the map "
                 "from one observed state measures its starting procedure, not the method, and a "
                 "multistep method's symplecticity is defined through its underlying one-step "

@@ -5,7 +5,7 @@ Every stepper runs on the same problem to the same final time (the problem's
 
 - every problem applies; fixed-step steppers by a step-size sweep, and adaptive steppers by a
   tolerance sweep (`AdaptiveStepper.with_tolerance`), both the convergence experiment's own
-  sweeps (`harness.experiments.common.step_sweep` and `tolerance_sweep`, with the local error
+  sweeps (`harness.experiments.convergence.step_sweep` and `tolerance_sweep`, with the local error
   sweep turned off), so the two experiments measure identical points;
 - one trajectory (`ensemble` = 1): the step count differs from point to point, so the ensemble
   axis cannot batch a sweep, and one member keeps wall times comparable between NumPy steppers
@@ -13,12 +13,15 @@ Every stepper runs on the same problem to the same final time (the problem's
 - cost: `rhs_evals` counts right-hand-side plus force evaluations (one call of the ensemble
   each; for `taylor`, whose unit is the Taylor jet, its internal steps, `evals_unit` says so).
   Jacobian evaluations and linear solves of implicit methods show in the wall time only.
-  `wall_s` is the integration's wall time (plus one error evaluation), compile time excluded
-  (heyoka caches compiled code on disk; the first call per process warms it).
+  `wall_s` is the sweep's own run (plus one error evaluation; the first point's includes
+  compiling and loading); the timed columns (`t_min_s`, ...) come from warm repeats by the
+  protocol of `harness.timing` (`harness.experiments.timed_runs`): the experiment is
+  `exclusive`, so its cells run one at a time on one worker, with no other cell beside them.
 A sweep runs down to the rounding floor or until it has spent `work_budget` right-hand-side
 evaluations (the convergence sweep's own rule, `convergence.step_budget`: implicit steps also pay
 for their Newton solves), so cheap and dear methods get comparable ranges. `pareto_front` marks
-the points no other point beats in both cost and error.
+the points no other point beats in both cost and error (`pareto_evals`, `pareto_wall` for the
+sweep's wall time, `pareto_time` for the warm minimum `t_min_s`).
 
 References: Hairer, Norsett & Wanner, *Solving Ordinary Differential Equations I*, II.10
 (work-precision diagrams); E. Hairer & G. Wanner, *Solving ODEs II*, IV.10.
@@ -35,13 +38,9 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.base import Cell, Experiment, register_experiment
-from harness.experiments.common import (
-    check_config,
-    perturbation_used,
-    problem_cells,
-    step_sweep,
-    tolerance_sweep,
-)
+from harness.experiments.common import check_config, perturbation_used, problem_cells
+from harness.experiments.convergence import step_sweep, tolerance_sweep
+from harness.experiments.timed_runs import TIMING_COLUMNS, time_points
 from harness.stepper import AdaptiveStepper
 
 __all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS"]
@@ -49,7 +48,8 @@ __all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS"]
 COLUMNS = [
     "stepper", "problem", "kind", "h", "tol", "n_steps", "t_end", "error", "reference_error",
     "rhs_evals", "force_evals", "evals_unit", "wall_s", "claimed_order", "explicit", "adaptive",
-    "ensemble_size", "perturbation", "pareto_evals", "pareto_wall", "message",
+    "ensemble_size", "perturbation", "pareto_evals", "pareto_wall", "message", "implementation",
+    "rounding_level", *TIMING_COLUMNS, "pareto_time",
 ]
 
 
@@ -75,6 +75,7 @@ def pareto_front(df: pd.DataFrame, cost: str = "rhs_evals") -> pd.DataFrame:
 
 class WorkPrecisionExperiment(Experiment):
     name = "work-precision"
+    exclusive = True  # timed cells: the runner executes them one at a time (harness.timing)
     finite_columns = ("n_steps", "t_end", "rhs_evals", "wall_s")
     description = "Error at the final time against evaluations and wall time (step-size or tolerance sweep)."
     default_config: Mapping[str, Any] = {
@@ -91,15 +92,19 @@ class WorkPrecisionExperiment(Experiment):
         "target_points": 1_000_000,
         "tolerances": [10.0**-k for k in range(3, 15)],
         "local": False,
+        "timing_max_repeats": tol.TIMING_MAX_REPEATS,
+        "timing_budget_s": tol.TIMING_POINT_BUDGET_S,
     }
     quick_config: Mapping[str, Any] = {
         "work_budget": tol.SWEEP_WORK_BUDGET // 16,
         "tolerances": [10.0**-k for k in range(3, 13, 2)],
+        "timing_max_repeats": tol.TIMING_QUICK_MAX_REPEATS,
+        "timing_budget_s": tol.TIMING_QUICK_POINT_BUDGET_S,
     }
 
     def cells(self, steppers, problems, config):
-        check_config(config, counts=("ensemble", "work_budget", "n_start"),
-                     optional_positives=("t_end", "perturbation"))
+        check_config(config, counts=("ensemble", "work_budget", "n_start", "timing_max_repeats"),
+                     positives=("timing_budget_s",), optional_positives=("t_end", "perturbation"))
         tolerances = config.get("tolerances")
         listed = not isinstance(tolerances, str | bytes) and isinstance(tolerances, Sequence)
         if not listed or not tolerances or not all(
@@ -139,6 +144,9 @@ class WorkPrecisionExperiment(Experiment):
         if "message" not in frame:
             frame["message"] = ""
         frame["message"] = frame["message"].fillna("").astype(str)
+        frame["implementation"] = (frame["implementation"].astype(str) if "implementation" in frame
+                                   else stepper.info.implementation)
+        frame = time_points(stepper, problem, frame.reset_index(drop=True), cfg)
         keep = [c for c in COLUMNS if c in frame.columns]
         return frame[keep].reset_index(drop=True)
 
@@ -148,8 +156,12 @@ class WorkPrecisionExperiment(Experiment):
         out = rows.reset_index(drop=True).copy()
         out["pareto_evals"] = False
         out["pareto_wall"] = False
+        out["pareto_time"] = False
         key = ["stepper", "problem", "kind", "h", "tol"]
-        for cost, column in (("rhs_evals", "pareto_evals"), ("wall_s", "pareto_wall")):
+        for cost, column in (("rhs_evals", "pareto_evals"), ("wall_s", "pareto_wall"),
+                             ("t_min_s", "pareto_time")):
+            if cost not in out:
+                continue
             front = pareto_front(out, cost)
             marks = set(map(tuple, front[key].astype(str).to_numpy()))
             out[column] = [tuple(r) in marks for r in out[key].astype(str).to_numpy()]

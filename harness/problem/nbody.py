@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import heyoka as hy
@@ -39,9 +40,10 @@ class NewtonianForm:
     velocities: tuple[hy.expression, ...]
     acceleration: tuple[hy.expression, ...]
 
-    @property
+    @cached_property
     def velocity_dependent(self) -> bool:
-        """True when the acceleration reads any velocity variable."""
+        """True when the acceleration reads any velocity variable (asked on every integrate
+        call: kept, the expressions are frozen)."""
         used = expression_names(self.acceleration)
         return any(str(v) in used for v in self.velocities)
 

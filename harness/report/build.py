@@ -45,8 +45,11 @@ __all__ = ["build_report", "write_report", "rerender_report", "report_experiment
 
 def report_experiments() -> list[str]:
     """The experiments a report runs, in the order of its sections: the one experiment list
-    (`harness.experiments.EXPERIMENT_NAMES`)."""
-    return list(REPORT_EXPERIMENTS)
+    (`harness.experiments.EXPERIMENT_NAMES`), then those other distributions registered through
+    the `harness.experiments` entry points."""
+    from harness.experiments.base import ENTRY_POINT_EXPERIMENTS
+
+    return [*REPORT_EXPERIMENTS, *ENTRY_POINT_EXPERIMENTS]
 
 TEMPLATE = "report.html.j2"
 

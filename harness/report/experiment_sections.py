@@ -185,7 +185,9 @@ def _stability_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]]
     intro=("Linear stability measured from the outside: one step of y' = λy over a grid of "
            "complex hλ (first-order methods), or of x'' = −ω²x (Newtonian methods), compared "
            "with the formula from the coefficients. Each panel overlays one family's boundaries "
-           "|R(hλ)| = 1 with the stable side shaded; the bars give the largest stable hω."),
+           "|R(hλ)| = 1 with the stable side shaded; the bars give the first instability in hω, "
+           "and the table lists every unstable hω band, found exactly on the propagator's "
+           "polynomials (narrow resonance bands near hω = kπ included)."),
     measures=(Measure("real_interval", "real stability interval", rtol=tol.REPORT_CHANGE_RTOL),
               Measure("imag_interval", "imaginary stability interval", rtol=tol.REPORT_CHANGE_RTOL),
               Measure("hw_limit", "hω limit", rtol=tol.REPORT_CHANGE_RTOL)),
@@ -207,7 +209,8 @@ def stability(view: RunView, sec: Section) -> None:
             ("real_interval", "real (probe)"), ("analytic_real_interval", "real (formula)"),
             ("imag_interval", "imag (probe)"), ("analytic_imag_interval", "imag (formula)"),
             ("hw_limit", "hω (probe)"), ("analytic_hw_limit", "hω (formula)"),
-            ("agrees", "probe = formula"), ("verdict", "verdict"), ("message", "why")]
+            ("hw_bands", "unstable hω bands (exact)"), ("agrees", "probe = formula"),
+            ("verdict", "verdict"), ("message", "why")]
     sec.table(df_table(s, cols, "Per stepper: stability intervals, probe against formula (real "
                        "[−x, 0], imaginary [−y, y])", experiment="stability", digits=8))
 
@@ -409,7 +412,8 @@ def _work_table(summ: pd.DataFrame) -> pd.DataFrame:
         "unit": summ["evals_unit"].astype(str) if "evals_unit" in summ else "",
         "err": summ["error"].astype(float),
         "evals": summ["rhs_evals"].astype(float) if "rhs_evals" in summ else nan,
-        "wall": summ["wall_s"].astype(float) if "wall_s" in summ else nan})
+        "wall": summ[next((c for c in ("t_min_s", "wall_s") if c in summ), "")].astype(float)
+        if {"t_min_s", "wall_s"} & set(summ.columns) else nan})  # the warm time where timed
     grouped = df.groupby(keys, sort=False)
     out = grouped.agg(kind=("kind", "first"), points=("err", "size"), unit=("unit", "first"))
     finite = df[np.isfinite(df["err"])]
@@ -428,10 +432,9 @@ def _work_table(summ: pd.DataFrame) -> pd.DataFrame:
 @register_section(
     "work-precision", title="Work–precision",
     intro=("Error at the final time against the work spent — right-hand-side (or force) "
-           "evaluations — over a step-size sweep (fixed-step methods) or a tolerance sweep "
-           "(adaptive ones, dashed); the wall time each needs is in the table and the CSVs. "
-           "Lower and further left is better; the best method of each family (fewest "
-           "evaluations to reach the target error) is drawn bold."),
+           "evaluations, then warm wall time measured like a benchmark — over a step-size sweep "
+           "(fixed-step methods) or a tolerance sweep (adaptive ones, dashed). Lower and further "
+           "left is better; the best method of each family (to reach the target error) is bold."),
     measures=(Measure("evals_to_target", "evaluations to reach the target error",
                       rtol=tol.REPORT_CHANGE_RTOL),),
 )
@@ -444,8 +447,7 @@ def work_precision(view: RunView, sec: Section) -> None:
         return
     sec.note(f"Each figure: error against evaluations on one problem; bold, the best of each "
              f"family (fewest evaluations to reach {F.WORK_TARGET_ERROR:g}), faint, the others. "
-             "Wall times (they depend on this machine and its load, see Provenance): the table "
-             "below to reach the target, every point's in the figure's CSV.")
+             "Error against warm time, by the timing protocol, follows under 'Error against time'.")
     for problem in _problems_in(view, rows):
         sec.figure(F.work_precision_figure(problem, _part(view, rows, "problem", problem), view.palette,
                                            adaptive),
@@ -459,6 +461,9 @@ def work_precision(view: RunView, sec: Section) -> None:
                 ("wall_to_target", f"wall s to reach {F.WORK_TARGET_ERROR:g}"), ("unit", "evaluation unit")]
         sec.table(df_table(table, cols, f"Per stepper and problem: cost of reaching "
                            f"{F.WORK_TARGET_ERROR:g}", experiment=name, status=None, sort_failing=False))
+    from harness.report.timing_section import add_time_sections
+
+    add_time_sections(view, sec)  # error against warm time, time to target, same-method groups
 
 
 # -- roundoff -------------------------------------------------------------------------------------

@@ -57,6 +57,8 @@ Experiments may declare (all optional):
 - `finite_columns = ("n_steps", "wall_s")`: measured columns in which NaN/inf means the cell went
   wrong (other columns may hold NaN/inf as a measurement, e.g. the error of a blow-up);
 - `estimate_bytes(cell, config) -> int`: peak memory of one cell, for the memory guard.
+- `exclusive = True`: its cells time themselves (`harness.timing`): they run one at a time on
+  one loky worker (in this process with `jobs=1` or a Dask scheduler), never beside another.
 
 Time limit (`cell_timeout` seconds, from the moment the cell starts):
 - in a process's main thread (`jobs=1`, and every loky worker): `SIGALRM` via

@@ -56,6 +56,7 @@ from harness.runner.validation import SCALARS, CellOutputError
 from harness.runner.workers import (
     one_line,
     plugin_spec,
+    shipped_objects,
     short_traceback,
 )
 from harness.store import (
@@ -291,6 +292,8 @@ def run_experiment(
                 record(i, cell, key, "ok", True, float(c["wall_s"]), int(c["n_rows"]), str(c["worker"]))
             cached = len(keyed)
             keyed = []
+        shipped = None if jobs_n == 1 and _client is None else shipped_objects(  # for workers
+            [c.stepper for _, c, _, _ in keyed], [c.problem for _, c, _, _ in keyed])
         for i, cell, key, v in keyed:
             hit = store.get(key) if (store is not None and not fresh) else None
             if hit is not None:
@@ -301,7 +304,8 @@ def run_experiment(
                 cached += 1
                 continue
             payload = {"key": key, "cell": cell, "config": cfg, "experiment": exp,
-                       "plugins": plugin_specs, "timeout": timeout, "sp_version": v}
+                       "plugins": plugin_specs, "timeout": timeout, "sp_version": v,
+                       "objects": shipped, "submitter": os.getpid()}
             tasks.append(Task(i, cell, key, payload))
         if cached:
             bar.update(cached, cached=cached)
@@ -328,13 +332,14 @@ def run_experiment(
                      out["wall_s"], out["worker"])
                 bar.update(1, failed=1)
 
+        alone = bool(getattr(exp, "exclusive", False))  # timed cells: one at a time, nothing beside
         if tasks:
-            if _client is not None:
+            if _client is not None and not alone:
                 run_dask(interleaved(tasks), _client, accept)
-            elif jobs_n == 1:
+            elif jobs_n == 1 or _client is not None:
                 run_serial(tasks, accept)
             else:
-                run_loky(interleaved(tasks), jobs_n, accept)
+                run_loky(interleaved(tasks), 1 if alone else jobs_n, accept)
     finally:
         if own_client:
             _client.close()

@@ -77,6 +77,50 @@ def _ensure_plugins(specs: Sequence[dict]) -> None:
         load_plugin(path, probe=False)  # the submitting process probed it
 
 
+SHIPPED_ORIGIN = "harness.api.check"  # the registry origin of objects `check` registered
+_shipped: dict[str, list] = {}
+
+
+def shipped_objects(stepper_names: Sequence[str], problem_names: Sequence[str]) -> bytes | None:
+    """The steppers and problems of a run that a worker cannot import (registered in this process
+    by `harness.api.check`: a user's function stepper, a `Problem` object), cloudpickled, or
+    None when there are none."""
+    from harness.registry import problems, steppers
+
+    objs = [reg.get(n) for reg, names in ((steppers, stepper_names), (problems, problem_names))
+            for n in sorted(set(names)) if n in reg and reg.origin(n) == SHIPPED_ORIGIN]
+    if not objs:
+        return None
+    import cloudpickle
+
+    try:
+        return cloudpickle.dumps(objs)
+    except Exception as exc:  # a closure over a lock, an open file, ...
+        from harness.errors import InputError
+
+        raise InputError(f"`jobs` > 1 ships {', '.join(map(repr, objs))} to worker processes, but "
+                         f"cloudpickle cannot pickle it: {type(exc).__name__}: {exc}; use jobs=1") from None
+
+
+def _ensure_objects(data: bytes | None, submitter: int | None) -> None:
+    """Register the objects shipped with a task (`shipped_objects`) in this worker process."""
+    if data is None or submitter == os.getpid():
+        return
+    key = hashlib.sha256(data).hexdigest()
+    if key in _shipped:
+        return
+    import cloudpickle
+
+    from harness.registry import problems, steppers
+    from harness.stepper import Stepper
+
+    objs = cloudpickle.loads(data)
+    for obj in objs:
+        (steppers if isinstance(obj, Stepper) else problems).register(
+            obj, origin=SHIPPED_ORIGIN, replace=True)
+    _shipped[key] = objs
+
+
 def _worker_id() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
@@ -112,6 +156,7 @@ def _prepare_worker(task: Mapping[str, Any]) -> tuple[str, str] | None:
     cell: Cell = task["cell"]
     try:
         _ensure_plugins(task.get("plugins", ()))
+        _ensure_objects(task.get("objects"), task.get("submitter"))
         if task.get("sp_version") is not None:
             here = code_version(cell.stepper, cell.problem)
             if here != task["sp_version"]:

@@ -1,9 +1,12 @@
 """Order and linear stability from the coefficients alone: what a method *should* do.
 
 The package re-exports the public names of its modules: `orders` (rooted trees, Runge-Kutta
-order conditions, multistep error constants), `series` (order from an exact local-error series),
-`amplification` (stability functions, scanned intervals), `intervals` (intervals decided on
-polynomials and root loci), `checks` (argument checks).
+order conditions, multistep error constants), `classes` (orders on problem classes where
+elementary differentials vanish, stage order, order-condition defects), `series` (order from
+an exact local-error series), `amplification` (stability functions, scanned intervals),
+`intervals` (intervals decided on polynomials and root loci), `roots` (exact polynomial
+arithmetic and root isolation), `newtonian` (every unstable h omega band of Newtonian
+methods), `checks` (argument checks).
 
 Everything here is a pure function of a coefficient object of `harness.coefficients`; nothing
 integrates a registered problem. The experiments measure the same properties from the outside
@@ -46,8 +49,18 @@ from harness.theory.amplification import (
     splitting_propagator,
     stability_boundary,
 )
+from harness.theory.classes import (
+    rk_class_order,
+    rk_class_orders,
+    rk_error_defects,
+    rk_stage_order,
+    rk_stiffly_accurate,
+    tree_survives,
+    tree_symmetry,
+)
 from harness.theory.intervals import (
     analytic_stability,
+    exact_hw_bands,
     lmm_real_interval,
     rk_stability_intervals,
     splitting_hw_limit,
@@ -76,6 +89,13 @@ from harness.theory.series import (
 )
 
 __all__ = [
+    "rk_class_order",
+    "rk_class_orders",
+    "rk_error_defects",
+    "rk_stage_order",
+    "rk_stiffly_accurate",
+    "tree_survives",
+    "tree_symmetry",
     "RootedTree",
     "OrderCondition",
     "rooted_trees",
@@ -108,4 +128,5 @@ __all__ = [
     "splitting_hw_limit",
     "MAX_TREE_ORDER",
     "splitting_trace_polynomial",
+    "exact_hw_bands",
 ]

@@ -1,9 +1,9 @@
 """Stability intervals decided exactly on polynomials, and each coefficient kind's stability
 figures (`analytic_stability`).
 
-For Runge-Kutta methods R = P/Q with polynomials P, Q, and for splitting schemes the
-propagator's trace is a polynomial in h omega: stability on a ray is the sign of a polynomial,
-decided from its coefficients rather than by comparing |R| with 1 at a tolerance. A multistep
+For Runge-Kutta methods R = P/Q with polynomials P, Q: stability on a ray is the sign of a
+polynomial, decided from its coefficients rather than by comparing |R| with 1 at a tolerance.
+Newtonian methods' h omega bands are decided in exact arithmetic (`harness.theory.newtonian`). A multistep
 method's real interval ends where its root locus crosses the axis (`lmm_real_interval`;
 Hairer & Wanner, *Solving ODEs II*, V.1).
 """
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,7 @@ from harness.theory.checks import check_type
 from harness.theory.orders import rk_linear_order, rk_stability_coefficients
 
 __all__ = ["rk_stability_intervals", "splitting_trace_polynomial", "splitting_linear_order",
-           "splitting_hw_limit", "lmm_real_interval", "analytic_stability"]
+           "splitting_hw_limit", "exact_hw_bands", "lmm_real_interval", "analytic_stability"]
 
 
 # -- exact intervals from polynomials ------------------------------------------------------
@@ -204,18 +205,24 @@ def splitting_linear_order(scheme: SplittingScheme) -> int:
 
 
 def splitting_hw_limit(scheme: SplittingScheme) -> float:
-    """Largest h omega with |tr M| <= 2 on (0, h omega] (det M = 1: the eigenvalues stay on the
-    unit circle): the sign near 0 from the polynomial 4 - tr(h)^2, the end located on the trace
-    of the propagator multiplied out numerically."""
-    tr, tr_abs, _, _ = splitting_trace_polynomial(scheme)
-    F = _poly_add(np.array([4.0]), -_poly_mul(tr, tr))
-    F_abs = _poly_add(np.array([4.0]), _poly_mul(tr_abs, tr_abs))
+    """The first instability of a splitting on x'' = -omega^2 x: the largest h omega with
+    |tr M| < 2 on (0, h omega), decided exactly on the trace polynomial (every band:
+    `harness.theory.newtonian.splitting_hw_bands`)."""
+    check_type(scheme, SplittingScheme, "scheme")
+    return exact_hw_bands(scheme).limit
 
-    def excess(hw: float) -> float:
-        M = amplification.splitting_propagator(scheme, np.array([hw]))[0]
-        return abs(M[0, 0] + M[1, 1]) / 2.0 - 1.0 - tol.STABILITY_AMPLIFICATION_TOL
 
-    return _interval_end(F, F_abs, 1, excess)
+def exact_hw_bands(coefficients: Any):
+    """`harness.theory.newtonian.hw_bands` of a Newtonian coefficient object, computed once per
+    coefficients (exact root isolation takes up to seconds for 15-stage compositions)."""
+    return _bands_cached(coefficients.fingerprint(), (coefficients,))
+
+
+@lru_cache(maxsize=256)
+def _bands_cached(fingerprint: str, box: tuple):
+    from harness.theory.newtonian import hw_bands
+
+    return hw_bands(box[0], tol.STABILITY_HW_SEARCH_LIMIT)
 
 
 def lmm_real_interval(method: LinearMultistep, scanned: float) -> float:
@@ -279,13 +286,14 @@ def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH
         return {"kind": "first-order", "amplification": amp,
                 "real_interval": lmm_real_interval(coefficients, real),
                 "imag_interval": amplification.imag_stability_interval(amp, limit=limit)}
-    if isinstance(coefficients, SplittingScheme):
-        def hw_amp(hw):
-            return amplification.splitting_amplification(coefficients, hw)
-        return {"kind": "newtonian", "amplification": hw_amp, "hw_limit": splitting_hw_limit(coefficients)}
-    if isinstance(coefficients, SecondOrderMultistep):
-        def hw_amp(hw):
-            return amplification.second_order_lmm_amplification(coefficients, hw)
-        return {"kind": "newtonian", "amplification": hw_amp,
-                "hw_limit": amplification.hw_stability_limit(hw_amp, limit=limit)}
+    if isinstance(coefficients, SplittingScheme | SecondOrderMultistep):
+        if isinstance(coefficients, SplittingScheme):
+            def hw_amp(hw):
+                return amplification.splitting_amplification(coefficients, hw)
+        else:
+            def hw_amp(hw):
+                return amplification.second_order_lmm_amplification(coefficients, hw)
+        bands = exact_hw_bands(coefficients)
+        return {"kind": "newtonian", "amplification": hw_amp, "hw_limit": bands.limit,
+                "hw_bands": bands}
     return None

@@ -23,7 +23,8 @@ from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMul
 from harness.theory.checks import check_int, check_type
 from harness.theory.series import splitting_order
 
-__all__ = ["MAX_TREE_ORDER", "RootedTree", "OrderCondition", "rooted_trees", "rk_order",
+__all__ = ["MAX_TREE_ORDER", "RootedTree", "OrderCondition", "rooted_trees", "rk_order", "elementary_weights",
+           "condition_tolerance",
            "rk_order_conditions", "rk_stability_coefficients", "rk_linear_order",
            "lmm_error_constants", "lmm_order", "second_order_lmm_error_constants",
            "second_order_lmm_order", "order_from_coefficients"]
@@ -92,7 +93,7 @@ class OrderCondition:
     satisfied: bool
 
 
-def _elementary_weights(tableau: ButcherTableau, max_order: int,
+def elementary_weights(tableau: ButcherTableau, max_order: int,
                         weights: np.ndarray | None = None) -> tuple[list[float], list[float]]:
     """Phi(t) = b^T g(t) for every tree up to `max_order`, and the same sum taken over the
     magnitudes |b|, |A| (the size the rounding of Phi(t) scales with)."""
@@ -112,23 +113,25 @@ def _elementary_weights(tableau: ButcherTableau, max_order: int,
     return [float(b @ gk) for gk in g], [float(absb @ gk) for gk in g_abs]
 
 
-def _condition_tol(t: RootedTree, size: float) -> float:
+def condition_tolerance(t: RootedTree, size: float, precision: float = 0.0) -> float:
     """How far Phi(t) may sit from 1/gamma(t) through rounding alone: ORDER_CONDITION_ULPS
     roundings per vertex of the sum of magnitudes, and never less than ORDER_CONDITION_TOL
     relative to the condition's value 1/gamma(t) nor ORDER_CONDITION_FLOOR (tableaux published
-    with 13-14 digits)."""
+    with 13-14 digits); for coefficients printed to `precision` (`published_precision`), each of
+    a product's t.order factors may be off by that much (twice, for safety)."""
     return max(tol.ORDER_CONDITION_ULPS * tol.EPS * t.order * size,
-               tol.ORDER_CONDITION_TOL / t.gamma, tol.ORDER_CONDITION_FLOOR)
+               tol.ORDER_CONDITION_TOL / t.gamma, tol.ORDER_CONDITION_FLOOR,
+               2.0 * precision * t.order * max(1.0, size))
 
 
 def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondition]:
     """The order conditions of exactly `order` (one per rooted tree with `order` vertices),
     with residual Phi(t) - 1/gamma(t); satisfied when |residual| is within rounding
-    (`_condition_tol`)."""
+    (`condition_tolerance`)."""
     check_type(tableau, ButcherTableau, "tableau")
     order = check_int(order, "order", 1, MAX_TREE_ORDER)
     trees = rooted_trees(order)
-    phi, size = _elementary_weights(tableau, order)
+    phi, size = elementary_weights(tableau, order)
     out = []
     for t in trees:
         if t.order != order:
@@ -136,14 +139,15 @@ def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondit
         expected = 1.0 / t.gamma
         r = phi[t.index] - expected
         out.append(OrderCondition(t.label, t.order, phi[t.index], expected, r,
-                                  abs(r) <= _condition_tol(t, size[t.index])))
+                                  abs(r) <= condition_tolerance(t, size[t.index],
+                                                                tableau.published_precision)))
     return out
 
 
 def rk_order(tableau: ButcherTableau, max_order: int | None = None,
              weights: np.ndarray | None = None) -> int:
     """The order of a Butcher tableau: the largest p <= `max_order` such that every order
-    condition of order <= p holds to rounding (`_condition_tol`, scaled by the size of the
+    condition of order <= p holds to rounding (`condition_tolerance`, scaled by the size of the
     coefficients). By default `max_order` is the highest order the tableau could have (s for
     an explicit s-stage method, 2s otherwise), capped at MAX_TREE_ORDER; a result equal to
     MAX_TREE_ORDER means "at least that". `weights` replaces b (an embedded method)."""
@@ -151,9 +155,10 @@ def rk_order(tableau: ButcherTableau, max_order: int | None = None,
     if max_order is None:
         max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
-    phi, size = _elementary_weights(tableau, max_order, weights)
+    phi, size = elementary_weights(tableau, max_order, weights)
     failed = [t.order for t in rooted_trees(max_order)
-              if abs(phi[t.index] - 1.0 / t.gamma) > _condition_tol(t, size[t.index])]
+              if abs(phi[t.index] - 1.0 / t.gamma) > condition_tolerance(t, size[t.index],
+                                                                         tableau.published_precision)]
     return min(failed) - 1 if failed else max_order
 
 

@@ -87,6 +87,42 @@ def newtonian_pair(coeffs: Any, probe: NewtonianProbe, hw: float, matrix: np.nda
     return None
 
 
+def coefficient_size(coeffs: Any) -> float:
+    """The sum of the magnitudes of the coefficients that enter one step (at least 1): the
+    rounding of a step grows with it (a weighted sum sum b_i k_i rounds to eps sum |b_i| |k_i|),
+    so the probe-formula agreement is judged relative to it."""
+    if isinstance(coeffs, ButcherTableau):
+        return max(1.0, float(np.abs(coeffs.A).sum() + np.abs(coeffs.b).sum()))
+    if isinstance(coeffs, LinearMultistep | SecondOrderMultistep):
+        return max(1.0, float(np.abs(coeffs.alpha).sum() + np.abs(coeffs.beta).sum()))
+    if isinstance(coeffs, SplittingScheme):
+        return max(1.0, float(sum(abs(c) for _, c in coeffs.sequence)))
+    return 1.0
+
+
+def newtonian_rounding_scale(coeffs: Any, hw: float, predicted: np.ndarray) -> float:
+    """How much larger than one rounding of an O(1) number the rounding of the propagator (or
+    recurrence) entries can be at step `hw`, relative to max(1, |predicted|): for a splitting
+    the entries of |D_1| |K_1| ... (the product of the factors' magnitudes, which bounds the
+    rounding of the product), for a multistep recurrence (|alpha_j| + hw^2 |beta_j|) /
+    |alpha_k + hw^2 beta_k|; at least 1."""
+    big = max(1.0, float(np.max(np.abs(predicted))))
+    if isinstance(coeffs, SplittingScheme):
+        mag = np.eye(2)
+        for kind, c in coeffs.sequence:
+            factor = np.eye(2)
+            factor[(0, 1) if kind == "D" else (1, 0)] = abs(c) * hw
+            mag = factor @ mag
+        return max(1.0, float(np.max(mag)) / big)
+    if isinstance(coeffs, SecondOrderMultistep):
+        w2 = hw * hw
+        lead = float(abs(coeffs.alpha[-1] + w2 * coeffs.beta[-1]))
+        if lead == 0:
+            return 1.0
+        return max(1.0, float(np.sum(np.abs(coeffs.alpha) + w2 * np.abs(coeffs.beta))) / lead / big)
+    return 1.0
+
+
 def newtonian_analytic_amp(coeffs: Any, hw: np.ndarray) -> np.ndarray | None:
     """The spectral radius of the propagator on x'' = -x from `coeffs` for each h omega in `hw`,
     or None for coefficients of another kind.

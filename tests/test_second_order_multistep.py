@@ -1,0 +1,115 @@
+"""Second-order multistep methods for x'' = f(x): coefficients, facts and the step loop.
+
+Oracles: the Stormer and Cowell coefficients sigma_j, sigma*_j of Hairer, Norsett & Wanner I,
+III.10, Table 10.1 (1, 0, 1/12, 1/12, 19/240, 3/40, 863/12096, 275/4032 and 1, -1, 1/12, 0,
+-1/240, -1/240, -221/60480, -19/6048); Numerov's method (x_{n+1} - 2x_n + x_{n-1} =
+h^2/12 (a_{n+1} + 10 a_n + a_{n-1})) with periodicity limit sqrt 6; Stormer-Verlet's limit 2.
+"""
+
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from harness.coefficients import SecondOrderMultistep
+from harness.methods import Method, method_from_record
+from harness.registry import get_problem
+from harness.theory.newtonian import lmm2_hw_bands
+from implementations.second_order_multistep import (
+    METHODS,
+    SecondOrderMultistepStepper,
+    _sigma,
+    cowell_table,
+    stormer_table,
+    velocity_weights,
+)
+
+F = Fraction
+
+
+def test_generating_functions_give_the_published_coefficients():
+    assert _sigma(8, True) == [F(1), F(0), F(1, 12), F(1, 12), F(19, 240), F(3, 40), F(863, 12096),
+                               F(275, 4032)]
+    assert _sigma(8, False) == [F(1), F(-1), F(1, 12), F(0), F(-1, 240), F(-1, 240), F(-221, 60480),
+                                F(-19, 6048)]
+    numerov = cowell_table(2)
+    assert list(numerov.beta) == pytest.approx([1 / 12, 10 / 12, 1 / 12], abs=1e-16)
+    assert list(stormer_table(2).beta) == [0.0, 1.0, 0.0]
+
+
+@pytest.mark.parametrize("method", METHODS, ids=[m.name for m in METHODS])
+def test_order_from_coefficients_is_the_published_order(method):
+    assert method.coefficients.order() == method.claimed_order
+
+
+@pytest.mark.parametrize("method", METHODS, ids=[m.name for m in METHODS])
+def test_periodicity_limit_is_the_exact_root(method):
+    """The limit is a root of the exact criterion: just below it the method is stable (roots on
+    the circle for symmetric methods, inside otherwise), just above it is not."""
+    c = method.coefficients
+    bands = lmm2_hw_bands(c, hw_max=12.0)
+    lim = bands.limit
+    if lim == 0.0:
+        assert not c.symmetric  # symmetric methods are periodic for small h omega
+        return
+
+    def radius(hw: float) -> float:
+        roots = np.roots((c.alpha + hw * hw * c.beta)[::-1])
+        return float(np.max(np.abs(roots)))
+
+    assert radius(lim * (1 - 1e-6)) <= 1 + 1e-9
+    assert radius(lim * (1 + 1e-4)) > 1 + 1e-7 or not c.symmetric
+
+
+@pytest.mark.parametrize("table, limit", [(stormer_table(2), 2.0), (cowell_table(2), math.sqrt(6.0))])
+def test_published_periodicity_limits(table, limit):
+    assert lmm2_hw_bands(table).limit == pytest.approx(limit, abs=1e-12)
+
+
+@pytest.mark.parametrize("m", [2, 3, 5, 8])
+def test_velocity_formula_has_order_m_plus_1(m):
+    """On x(t) = t^j the formula is exact for j <= m + 1 and not for j = m + 2."""
+    w = velocity_weights(m)
+    for j in range(m + 3):
+        h = F(1, 3)
+        x = [F(-i) ** j * h**j for i in range(m)]  # x at t_n - i h with t_n = 0
+        a = [j * (j - 1) * (F(-i) * h) ** (j - 2) if j >= 2 else F(0) for i in range(m)]
+        v = (x[0] - x[1]) / h + h * sum(wi * ai for wi, ai in zip(w, a, strict=True))
+        exact = F(1) if j == 1 else F(0)
+        assert (v == exact) == (j <= m + 1), (m, j)
+
+
+def test_a_record_with_second_order_coefficients_builds_the_family_loop():
+    record = {"name": "numerov-record", "claimed_order": 4, "reference": "Numerov (1924)",
+              "alpha": [1, -2, 1], "beta": [F(1, 12), F(10, 12), F(1, 12)]}
+    method = method_from_record(record)
+    assert isinstance(method.coefficients, SecondOrderMultistep)
+    stepper = method.stepper()
+    assert isinstance(stepper, SecondOrderMultistepStepper) and stepper.info.form == "newtonian"
+    # the two-step table itself, as a Method, builds too (it used to need `implicit_velocity`)
+    assert isinstance(Method(stormer_table(2), 2, "HNW I, III.10").stepper(), SecondOrderMultistepStepper)
+
+
+@pytest.mark.parametrize("name", ["stormer3", "cowell2", "quinlan-tremaine8"])
+def test_the_loop_converges_at_the_order_on_the_harmonic_oscillator(name):
+    method = next(m for m in METHODS if m.name == name)
+    stepper = method.stepper()
+    problem = get_problem("harmonic")
+    y0 = np.array([[1.0], [0.0]])
+    T = 10.0
+    errors = []
+    for n in (40, 80):  # h omega 0.25 and 0.125: inside every limit, above the rounding floor
+        y = stepper.integrate(problem, h=T / n, n_steps=n, y0=y0).y[-1][:, 0]
+        errors.append(np.max(np.abs(y - [math.cos(T), -math.sin(T)])))
+    assert math.log2(errors[0] / errors[1]) == pytest.approx(method.claimed_order, abs=0.35)
+
+
+def test_round_trip_retraces_the_history():
+    stepper = next(m for m in METHODS if m.name == "quinlan-tremaine8").stepper()
+    problem = get_problem("harmonic")
+    y0 = np.array([[1.0], [0.0]])
+    start, back = stepper.round_trip(problem, h=0.05, n_steps=50, y0=y0)
+    assert np.max(np.abs(back - start)) < 1e-12
