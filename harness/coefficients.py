@@ -24,8 +24,9 @@ from fractions import Fraction
 
 import numpy as np
 
+from harness.coefficient_input import as_float_array, exact_rows, exact_value, published_precision
 from harness.errors import CoefficientError
-from harness.tolerances import COEFFICIENT_TOL, COEFFICIENT_ULPS, EPS, PUBLISHED_MIN_DIGITS
+from harness.tolerances import COEFFICIENT_TOL, COEFFICIENT_ULPS, EPS
 
 __all__ = [
     "ButcherTableau",
@@ -33,26 +34,10 @@ __all__ = [
     "LinearMultistep",
     "SecondOrderMultistep",
     "as_float_array",
+    "exact_value",
 ]
 
 Number = float | int | Fraction
-
-
-def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
-    """Convert coefficients (floats, ints, Fractions, nested lists) to a read-only float64 array."""
-    try:
-        arr = np.array(
-            [[float(v) for v in row] for row in values] if ndim == 2 else [float(v) for v in values],
-            dtype=np.float64,
-        )
-    except (TypeError, ValueError) as exc:
-        raise CoefficientError(f"`{name}` must hold real numbers: {exc}") from None
-    if arr.ndim != ndim:
-        raise CoefficientError(f"`{name}` must be {ndim}-dimensional, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise CoefficientError(f"`{name}` must be finite, got {arr.tolist()}")
-    arr.setflags(write=False)
-    return arr
 
 
 def _close(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
@@ -61,52 +46,6 @@ def _close(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
     its sum to ~1e-13, and that is no defect)."""
     scale = max(1.0, abs(a), abs(b), float(size))
     return abs(a - b) <= max(COEFFICIENT_TOL, COEFFICIENT_ULPS * EPS * (terms + 1) * scale)
-
-
-def published_precision(*arrays: np.ndarray) -> float:
-    """Half a unit in the last digit of the coarsest coefficient typed as a cut decimal (shortest
-    float text of PUBLISHED_MIN_DIGITS to 15 significant digits), else 0.0."""
-    from decimal import Decimal
-
-    cut = [Decimal(repr(float(x))).as_tuple() for a in arrays for x in np.ravel(a) if x != 0.0]
-    return max([0.5 * 10.0 ** int(e) for _, d, e in cut if PUBLISHED_MIN_DIGITS <= len(d) <= 15],
-               default=0.0)
-
-
-def exact_value(x) -> Fraction | None:
-    """`x` as an exact rational when it is given exactly (int, Fraction, Decimal, a decimal
-    string, or a float that is a short dyadic such as 0.5), else None: a float like 1/3 is only
-    a float64 approximation, and extended-precision runs (`harness.extended`) need better."""
-    from decimal import Decimal
-
-    if isinstance(x, bool):
-        return None
-    if isinstance(x, (int, Fraction, Decimal, str)):
-        try:
-            return Fraction(x)
-        except (ValueError, ZeroDivisionError):
-            return None
-    if isinstance(x, (float, np.floating)) and np.isfinite(x):
-        f = Fraction(float(x))
-        return f if f.denominator <= _EXACT_DYADIC and abs(f.numerator) <= _EXACT_DYADIC else None
-    return None
-
-
-def _exact_rows(values, ndim: int):
-    """Nested tuples of `exact_value`s, or None when any entry is not exact."""
-    try:
-        rows = [values] if ndim == 1 else list(values)
-        out = tuple(tuple(exact_value(x) for x in row) for row in rows)
-    except TypeError:
-        return None
-    if any(v is None for row in out for v in row):
-        return None
-    return out[0] if ndim == 1 else out
-
-
-# A float with numerator and denominator (a power of two) at most this is taken as exact (0.5,
-# 0.25, 3.0): a rounded decimal such as 0.1 or 1/3 has a 2^52-sized denominator.
-_EXACT_DYADIC = 1 << 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,6 +67,7 @@ class ButcherTableau:
     stages: int = field(init=False)
     explicit: bool = field(init=False)
     exact: tuple | None = field(init=False, repr=False)  # (A, b, c) as Fractions, when given exactly
+    exact_b_hat: tuple | None = field(init=False, repr=False)  # b_hat as Fractions, when given exactly
     consistency_defect: float = field(init=False, default=0.0)
     published_precision: float = field(init=False, default=0.0)
 
@@ -141,7 +81,8 @@ class ButcherTableau:
                 f"`{name}.A` must be {s}x{s} to match {s} weights in `b`, got {A_arr.shape}"
             )
         row_sums = A_arr.sum(axis=1)
-        precision = published_precision(A_arr, b_arr, *[v for v in (c, b_hat) if v is not None])
+        precision = published_precision(A_arr, b_arr, *[as_float_array(v, f"{name}.{k}", 1) for k, v in
+                                                         (("c", c), ("b_hat", b_hat)) if v is not None])
         defect = 0.0
 
         def near(total: float, want: float, size: float, terms: int) -> bool:  # rounding, or printing
@@ -184,11 +125,26 @@ class ButcherTableau:
         object.__setattr__(self, "c", c_arr)
         object.__setattr__(self, "stages", s)
         object.__setattr__(self, "explicit", bool(np.all(np.triu(A_arr) == 0.0)))
-        exact_A, exact_b = _exact_rows(A, 2), _exact_rows(b, 1)
+        exact_A, exact_b = exact_rows(A, 2), exact_rows(b, 1)
         exact_c = tuple(sum(row, Fraction(0)) for row in exact_A) if exact_A and c is None else (
-            _exact_rows(c, 1) if c is not None else None)
+            exact_rows(c, 1) if c is not None else None)
         object.__setattr__(self, "exact", (exact_A, exact_b, exact_c)
                            if exact_A and exact_b and exact_c else None)
+        object.__setattr__(self, "exact_b_hat", exact_rows(b_hat, 1)
+                           if b_hat is not None and self.exact is not None else None)
+
+    def embedded(self, name: str | None = None) -> ButcherTableau:
+        """The embedded method (A, b_hat, c) as a tableau of its own, exact where this one and
+        `b_hat` are exact (so extended-precision runs measure it as well).
+
+        Raises `CoefficientError` when the tableau has no `b_hat`."""
+        if self.b_hat is None:
+            raise CoefficientError(f"`{self.name}` has no embedded weights `b_hat`")
+        name = name or f"{self.name}@embedded"
+        if self.exact is not None and self.exact_b_hat is not None:
+            A, _, c = self.exact
+            return ButcherTableau(name, A, self.exact_b_hat, c)
+        return ButcherTableau(name, self.A, self.b_hat, self.c)
 
     @property
     def defect_note(self) -> str:
@@ -226,7 +182,7 @@ class ButcherTableau:
             return None
         from harness.theory import rk_order
 
-        return rk_order(ButcherTableau(f"{self.name}-embedded", self.A, self.b_hat, self.c))
+        return rk_order(self.embedded(f"{self.name}-embedded"))
 
     def linear_order(self) -> int:
         """Order on linear constant-coefficient problems: of R(z) against e^z."""

@@ -166,7 +166,8 @@ def _with_parameter_values(problem, exprs: list) -> list:
 
 
 def _step_function(problem, step: list, evals_per_step: int):
-    """(y0, h, n) -> (y_n, evaluations): `step` (y_{k+1} as expressions of y_k and h = par[0])
+    """(y0, span, n) -> (y_n, evaluations) with h = span / n: `step` (y_{k+1} as expressions of
+    y_k and h = par[0])
     compiled once in real128 and called n times."""
     import heyoka as hy
 
@@ -176,8 +177,10 @@ def _step_function(problem, step: list, evals_per_step: int):
     fn = hy.cfunc(step, list(problem.variables), fp_type=hy.real128,
                   compact_mode=cache.compact_mode(problem))
 
-    def run(y0: np.ndarray, h: float, n: int) -> tuple[np.ndarray, int]:
-        pars = np.array([hy.real128(h)])
+    def run(y0: np.ndarray, span: float, n: int) -> tuple[np.ndarray, int]:
+        # h = span / n rounded once in real128: a float64 h would end the run ~1e-16 T off the
+        # final time whenever n is not a power of two
+        pars = np.array([hy.real128(span) / hy.real128(n)])
         y = y0.copy()
         for _ in range(n):
             y = fn(y, pars=pars)
@@ -298,12 +301,17 @@ def _settled(rows: list[dict]) -> bool:
 
 # -- the sweep ------------------------------------------------------------------------------------
 def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget: float | None = None,
-                   amplification: float = 1.0) -> dict:
+                   amplification: float = 1.0, order_bound: int | None = None) -> dict:
     """Global error against step size in real128 for one trajectory from the problem's start,
-    n = 1, 2, 4, ... steps until the asymptotic window holds TARGET_FIT_POINTS points, the
-    real128 floor is reached or `work_budget` function evaluations are spent. Returns the rows
-    (h, n_steps, error, reference_error, rounding_level, excluded), the fit (order, points,
-    h range) or None, and the reference error. Raises NotMeasurable with the reason."""
+    n = 1, 2, 4, ... steps until the asymptotic window holds TARGET_FIT_POINTS points whose
+    slopes have settled, the real128 floor or the coefficients' own floor (their defects in the
+    order conditions, `harness.theory.defects`) is reached, or `work_budget` function
+    evaluations are spent; then step sizes between the last ones (ratio sqrt 2) fill in a window
+    the floor cut short. A slope above `order_bound` (max of order and linear order) is never
+    settled. Returns the rows (h, n_steps, error, reference_error, rounding_level, excluded),
+    the fit (order, points, h range) or None, and the reference error. Raises NotMeasurable
+    with the reason."""
+    from harness.coefficient_floors import mark_above_order
     from harness.experiments.convergence_fit import classify_points, fit_order
 
     runner = _runner(coefficients, problem)
@@ -316,25 +324,41 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
                 max(abs(float(r)) for r in ref))
     start_error = tol.SWEEP_START_ERROR * scale
     span = T - float(problem.t0)
+    floor_of = _defect_floor(coefficients, problem, span, scale)
+    rounded_of = _coefficient_rounding(coefficients, problem, span, scale)
     rows: list[dict] = []
     spent = 0
-    n = 1
-    stop = "the work budget"
-    while True:
+    note = ""
+
+    def run(n: int) -> int:
         with np.errstate(all="ignore"):  # a coarse step may overflow: that point is a blow-up
-            y, evals = runner(y0, span / n, n)
-        spent += evals
-        err = _error(y, ref)
-        rows.append({"h": span / n, "n_steps": n, "error": err, "reference_error": ref_err,
-                     "rounding_level": math.sqrt(n) * EXTENDED_EPS * scale * max(1.0, amplification)})
+            y, evals = runner(y0, span, n)
+        rows.append({"h": span / n, "n_steps": n, "error": _error(y, ref), "reference_error": ref_err,
+                     "rounding_level": math.sqrt(n) * EXTENDED_EPS * scale * max(1.0, amplification)
+                     + (float(rounded_of(np.array([span / n]))[0]) if rounded_of else 0.0)})
+        rows.sort(key=lambda r: -r["h"])
+        return evals
+
+    def classified() -> tuple[np.ndarray, str]:
         h_arr = np.array([r["h"] for r in rows])
         e_arr = np.array([r["error"] for r in rows])
         reasons = classify_points(h_arr, e_arr, np.array([r["reference_error"] for r in rows]),
-                                  np.array([r["rounding_level"] for r in rows]), start_error)
+                                  np.array([r["rounding_level"] for r in rows]), start_error,
+                                  floor_of(h_arr) if floor_of else None)
+        return reasons, mark_above_order(h_arr, e_arr, reasons, order_bound)
+
+    stops = {"roundoff": "the real128 rounding floor", "reference": "the 192-bit reference's accuracy",
+             "coefficients": "the coefficients' own accuracy (their defects in the order conditions)"}
+    n = 1
+    stop = "the work budget"
+    while True:
+        evals = run(n)
+        spent += evals
+        reasons, note = classified()
+        err = rows[-1]["error"]
         if math.isfinite(err) and err < start_error:
-            if reasons[-1] in ("roundoff", "reference"):
-                stop = "the real128 rounding floor" if reasons[-1] == "roundoff" else \
-                    "the 192-bit reference's accuracy"
+            if reasons[-1] in stops:
+                stop = stops[reasons[-1]]
                 break
             if int((reasons == "").sum()) >= tol.TARGET_FIT_POINTS and _settled(rows):
                 stop = ""
@@ -342,6 +366,16 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
         if spent + 2 * evals > budget:
             break
         n *= 2
+    # Fill in: where a floor came before TARGET_FIT_POINTS settled points, step sizes between the
+    # last ones above it (ratio sqrt 2), within the budget.
+    if stop and int((reasons == "").sum()) < tol.TARGET_FIT_POINTS:
+        usable = [r["n_steps"] for r, why in zip(rows, reasons, strict=True)
+                  if why in ("", "pre-asymptotic") and r["error"] < start_error]
+        for a, b in list(zip(usable, usable[1:], strict=False))[-3:]:
+            m = int(round(math.sqrt(a * b)))
+            if m not in (a, b) and spent + m * (evals // max(n, 1)) <= budget:
+                spent += run(m)
+        reasons, note = classified()
     for r, why in zip(rows, reasons, strict=True):
         r["excluded"] = why
     kept = [r for r in rows if not r["excluded"]]
@@ -353,10 +387,34 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
                "h_max": max(r["h"] for r in kept), "error_min": min(r["error"] for r in kept),
                "error_max": max(r["error"] for r in kept)}
     slopes = np.diff(np.log([r["error"] for r in rows])) / np.diff(np.log([r["h"] for r in rows]))
-    return {"rows": rows, "fit": fit, "reference_error": ref_err, "stopped_by": stop,
+    if fit is None and not note and stop:
+        note = "the local slopes had not settled on an integer order (the error is still curving)"
+    return {"rows": rows, "fit": fit, "reference_error": ref_err, "stopped_by": stop, "note": note,
             "evals": spent, "wall_s": time.perf_counter() - started, "t_end": T,
             "local_slopes": [float(s) for s in slopes], "precision": "real128",
             "reference_precision": f"real{_REFERENCE_PREC} certified by real{_CERTIFIER_PREC}"}
+
+
+def _coefficient_rounding(coefficients, problem, span: float, scale: float):
+    """h -> what rounding a tableau's coefficients to real128 leaves: each order condition off by
+    about EXTENDED_EPS times the size of its products (`harness.theory.defects`), as large as
+    1e-29 for extrapolation weights summing |b| to 1e5; None for other families."""
+    if not isinstance(coefficients, ButcherTableau):
+        return None
+    from harness.coefficient_floors import problem_rate
+    from harness.theory.defects import condition_defects, defect_floor
+
+    sizes = [(EXTENDED_EPS * size, size) for _, size in condition_defects(coefficients, coefficients.order())]
+    rate = problem_rate(problem)
+    return lambda h: defect_floor(sizes, 0.0, h, span=span, rate=rate, scale=scale)
+
+
+def _defect_floor(coefficients, problem, span: float, scale: float):
+    """h -> the error floor of a tableau's defects in the order conditions at real128, or None."""
+    from harness.coefficient_floors import coefficient_floor
+
+    floor = coefficient_floor(coefficients, problem, span=span, scale=scale, noise=EXTENDED_EPS)
+    return floor if floor(np.array([1.0])) is not None else None
 
 
 def exact_weights(values) -> list[Fraction]:

@@ -88,10 +88,8 @@ class Method:
         out = [self.stepper()]
         b_hat = getattr(self.coefficients, "b_hat", None)
         if b_hat is not None:
-            from harness.coefficients import ButcherTableau
-
             c = self.coefficients
-            embedded = ButcherTableau(f"{c.name}@embedded", c.A, b_hat, c.c)
+            embedded = c.embedded(f"{c.name}@embedded")  # exact where the pair is exact
             claimed = self.claimed_embedded_order or embedded.order()
             out.append(Method(embedded, claimed, self.reference,
                               f"embedded method (weights b_hat) of {c.name}").stepper())

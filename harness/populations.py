@@ -18,6 +18,14 @@ moved within the null space of the lower-order conditions, which are linear in b
 composition moved symmetrically, which keeps order 2 and loses 4), and the correct
 coefficients with a claim one too high (`overclaimed`).
 
+At high order (`harness.high_order`, `generate(..., families=HIGH_FAMILIES)`): Aitken-Neville
+extrapolation of explicit Euler (orders 5-12) and of the midpoint rule (orders 6-12) with random
+step sequences, written as exact Runge-Kutta tableaus, and symmetric compositions of velocity
+Verlet (orders 4-10, a random triple jump or Suzuki five-fold at each level); mutants: an entry of
+A moved (`perturbed`), weights moved in the exact null space of the conditions below the claimed
+order (`subtle`, Runge-Kutta) or the top level's outer weights moved symmetrically (`subtle`,
+compositions: two orders below), and a claim one too high.
+
 `error_rates` runs the gate over a population: a false alarm is a correct method that fails,
 a miss a mutant that passes. It reports both for the full gate (coefficients and measurement)
 and for the measurement alone (every method judged as a black box from its claims).
@@ -33,9 +41,10 @@ import numpy as np
 import pandas as pd
 
 from harness.coefficients import ButcherTableau, LinearMultistep, SplittingScheme
+from harness.high_order import HIGH_ORDER_PROBLEMS
 from harness.methods import Method
 
-__all__ = ["Member", "generate", "error_rates", "FAMILIES", "PROBLEMS"]
+__all__ = ["Member", "generate", "error_rates", "FAMILIES", "HIGH_FAMILIES", "PROBLEMS"]
 
 # Problems each family is measured on: one nonlinear problem (every order condition shows) and,
 # for the first-order families, one linear problem (the linear order shows).
@@ -48,6 +57,8 @@ PROBLEMS = {
     "lmm-k2p2": ("forced-duffing", "dahlquist"),
 }
 FAMILIES = tuple(PROBLEMS)
+HIGH_FAMILIES = tuple(HIGH_ORDER_PROBLEMS)
+PROBLEMS = {**PROBLEMS, **HIGH_ORDER_PROBLEMS}
 _REFERENCE = "generated member of a parametric family (harness.populations)"
 _PERTURBATION = 0.05
 
@@ -217,12 +228,44 @@ def _subtle(family: str, coeffs, claimed: int):
     return None
 
 
-def generate(size_per_family: int, *, seed: int = 0, families: Sequence[str] = FAMILIES) -> list[Member]:
+def _high_order_members(family: str, size: int, rng, seed: int, max_order: int) -> list[Member]:
+    """`size` correct members of a high-order family (`harness.high_order`) and their mutants."""
+    from harness.high_order import build_high_order, draw_high_order, perturb_high_order, subtle_high_order
+
+    out: list[Member] = []
+    for made in range(size):
+        spec, claimed = draw_high_order(family, rng, max_order)
+        tag = f"pop-{family}-{seed}-{made}"
+
+        def member(label, member_spec, claim, tag=tag):
+            return Method(build_high_order(member_spec, tag + label), claim, _REFERENCE).stepper()
+
+        good = member("", spec, claimed)
+        if good.coefficients.order() != claimed:
+            raise RuntimeError(f"{tag}: order {good.coefficients.order()} from the coefficients, "
+                               f"built for {claimed}")
+        out += [Member(family, "correct", good),
+                Member(family, "perturbed", member("-perturbed", perturb_high_order(spec, rng), claimed)),
+                Member(family, "overclaimed", member("-overclaimed", spec, claimed + 1))]
+        subtle = subtle_high_order(spec, claimed)
+        if subtle is not None:
+            sub = member("-subtle", subtle, claimed)
+            if 0 < sub.coefficients.order() < claimed:
+                out.append(Member(family, "subtle", sub))
+    return out
+
+
+def generate(size_per_family: int, *, seed: int = 0, families: Sequence[str] = FAMILIES,
+             max_order: int = 12) -> list[Member]:
     """`size_per_family` correct members of each family, and a perturbed and an overclaimed
-    mutant of each. Every correct member's order from its coefficients equals its claim."""
+    mutant of each. Every correct member's order from its coefficients equals its claim.
+    High-order families (HIGH_FAMILIES) draw orders up to `max_order`."""
     rng = np.random.default_rng(seed)
     out: list[Member] = []
     for family in families:
+        if family in HIGH_ORDER_PROBLEMS:
+            out += _high_order_members(family, size_per_family, rng, seed, max_order)
+            continue
         made = 0
         attempts = 0
         while made < size_per_family:

@@ -67,6 +67,22 @@ PLATEAU_SLOPE_RTOL = 0.03
 # ... and local slopes that rise or fall monotonically by more than this across the window are
 # still drifting: half the gate's order tolerance, the most a fit over them may be off by.
 PLATEAU_DRIFT_TOL = 0.1
+# ... and the slope fitted over the window must lie within this of an integer: the global error
+# expands in integer powers of h (HNW I, II.8), so a slope further from every integer is a
+# mixture of terms still changing weight, not an order (the gate's own tolerance: such a slope
+# could match no claim anyway, and it is reported as not measurable instead of as a wrong order).
+INTEGER_ORDER_TOL = 0.2
+# A slope above the coefficients' order (or their linear order, the highest any problem class
+# shows) by more than this, where the floor ends the sweep, is higher-order terms still
+# dominating (an optimized pair's tiny leading constant): the points are not asymptotic.
+ABOVE_ORDER_TOL = 0.2
+# A point whose error is within this factor of the floor the coefficients' own defects in the
+# order conditions leave (harness.theory.defects; the estimate takes the fastest rate for every
+# elementary differential, so it errs high) measures the record's digits, not the method.
+COEFFICIENT_FLOOR_MARGIN = 10.0
+# Defects in the order conditions within this many roundings (per vertex, of the size of the
+# products) of the arithmetic a sweep runs in are that arithmetic's own rounding, not the record's.
+DEFECT_NOISE_ULPS = 64.0
 # A state whose max-norm is below this is measured against this instead (no division by 0).
 SCALE_FLOOR = 1e-300
 # The fit needs at least this many points in the asymptotic range: three local slopes that agree

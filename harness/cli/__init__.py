@@ -113,6 +113,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--size", type=int, default=5, metavar="N",
                    help="correct methods per family (each with 2-3 mutants; default 5)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed of the population")
+    p.add_argument("--high-order", action="store_true",
+                   help="the high-order families instead (extrapolation of Euler and the midpoint rule, "
+                        "symmetric compositions: orders 4-12)")
+    p.add_argument("--max-order", type=int, default=12, metavar="P",
+                   help="highest order drawn by the high-order families (4-12; default 12)")
     _common(p, grid=False)
 
     p = sub.add_parser("report", help="run every experiment and write the HTML report")

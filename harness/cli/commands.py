@@ -47,22 +47,28 @@ def cmd_population(args) -> int:
     import pandas as pd
 
     from harness.errors import InputError
-    from harness.populations import error_rates, generate
+    from harness.populations import FAMILIES, HIGH_FAMILIES, error_rates, generate
     from harness.runner import RunResult
     from harness.store import save_run
 
     if not 1 <= args.size <= 1000:
         raise InputError(f"`--size` must lie in [1, 1000], got {args.size}")
+    if not 4 <= args.max_order <= 12:
+        raise InputError(f"`--max-order` must lie in [4, 12], got {args.max_order}")
     started = time.perf_counter()
-    table, rates = error_rates(generate(args.size, seed=args.seed))
+    families = HIGH_FAMILIES if args.high_order else FAMILIES
+    members = generate(args.size, seed=args.seed, families=families, max_order=args.max_order)
+    table, rates = error_rates(members)
     empty = pd.DataFrame()
     result = RunResult(experiment="gate-population",
                        description="the gate's error rates on generated methods",
-                       config={"size": args.size, "seed": args.seed}, rows=table, summary=rates,
+                       config={"size": args.size, "seed": args.seed, "high_order": args.high_order,
+                               "max_order": args.max_order}, rows=table, summary=rates,
                        failures=empty, skips=empty, cells=empty, wall_s=time.perf_counter() - started,
                        cached_cells=0, computed_cells=len(table))
     path = save_run({"gate-population": result}, config={"command": "population", "size": args.size,
-                                                          "seed": args.seed})
+                                                          "seed": args.seed, "high_order": args.high_order,
+                                                          "max_order": args.max_order})
     print(f"harness: results saved in {os.fspath(path)}", file=sys.stderr)
     overall = rates[rates.family == "all"].iloc[0]
     bad = int(overall.gate_false_alarms + overall.gate_misses)

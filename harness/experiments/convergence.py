@@ -47,6 +47,7 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
+from harness.coefficient_floors import coefficient_floor, coefficient_rounding_floor
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
 from harness.experiments.convergence_extended import extended_if_floor_bound
@@ -204,6 +205,13 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     # Rounding committed along the way is carried to T by the flow: the floor is sqrt(n) eps |y|
     # times the flow's sensitivity over the horizon (at least 1), as in the reversibility bound.
     amplification = _flow_amplification(problem, T - T0, y0[:, 0])
+    # The error the record's own digits leave (None where its defects are float64 rounding).
+    floor_of = coefficient_floor(getattr(stepper, "coefficients", None), problem, span=span,
+                                 scale=scale, noise=tol.EPS)
+    # ... and what rounding its coefficients to float64 leaves (large coefficients only): a part
+    # of the rounding level, so a sweep that reaches it is floor-bound and rerun in real128.
+    rounded_of = coefficient_rounding_floor(getattr(stepper, "coefficients", None), problem,
+                                            span=span, scale=scale)
 
     def run(n: int) -> dict:
         nonlocal spent
@@ -229,7 +237,8 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
             err, evals, msg = float("nan"), {}, str(exc)
         rec = {
             "n_steps": n, "h": span / n, "error": err, "reference_error": target_err,
-            "rounding_level": math.sqrt(n) * tol.EPS * scale * amplification,
+            "rounding_level": max(math.sqrt(n) * tol.EPS * scale * amplification,
+                                  _first_or_zero(rounded_of(np.array([span / n])))),
             "rhs_evals": float(evals.get("rhs", 0)), "force_evals": float(evals.get("accel", 0)),
             "wall_s": time.perf_counter() - started, "message": msg,
         }
@@ -243,11 +252,13 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
         frame = _frame(records)
         return frame, classify_points(frame.h.values, frame.error.values,
                                       frame.reference_error.values, frame.rounding_level.values,
-                                      start_error)
+                                      start_error, floor_of(frame.h.values))
 
     def at_floor(rec: dict) -> bool:
         return rec["error"] < tol.ROUNDOFF_MARGIN * rec["rounding_level"] or (
-            rec["error"] < tol.REFERENCE_MARGIN * ref_err)
+            rec["error"] < tol.REFERENCE_MARGIN * ref_err) or (
+            floor_of(np.array([rec["h"]])) is not None
+            and rec["error"] < tol.COEFFICIENT_FLOOR_MARGIN * float(floor_of(np.array([rec["h"]]))[0]))
 
     # A multistep method's first k - 1 values come from its starter: a sweep over fewer steps
     # than twice its history would measure the starter (often exact), not the method.
@@ -297,7 +308,7 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     frame = _frame(records)
     frame["excluded"] = classify_points(frame.h.values, frame.error.values,
                                         frame.reference_error.values, frame.rounding_level.values,
-                                        start_error)
+                                        start_error, floor_of(frame.h.values))
     frame["in_fit"] = frame["excluded"] == ""
     frame["kind"] = "global"
     frame["tol"] = np.nan
@@ -316,6 +327,10 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     out["perturbation"] = perturbation_used(problem, config) if y0.shape[1] > 1 else 0.0
     out.attrs["budget_ended"] = budget_ended
     return out
+
+
+def _first_or_zero(values: np.ndarray | None) -> float:
+    return 0.0 if values is None else float(values[0])
 
 
 def _reference_at_clocks(problem, times: np.ndarray, y0: np.ndarray, t0: float):

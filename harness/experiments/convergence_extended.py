@@ -1,6 +1,11 @@
-"""Extended-precision reruns of convergence sweeps: where the float64 rounding floor ended a
-sweep before its asymptotic range, the same exact coefficients run in real128
-(`harness.extended`) and those rows replace the float64 ones, or the message says why not."""
+"""Extended-precision reruns of convergence sweeps, and what the coefficients say about a sweep.
+
+Where the float64 rounding floor ended a sweep before its asymptotic range, the same exact
+coefficients run in real128 (`harness.extended`) and those rows replace the float64 ones, or the
+message says why not. A slope above the coefficients' order bound
+(`harness.coefficient_floors.order_bound`) marks the float64 points pre-asymptotic first, so
+such a sweep is rerun like any floor-bound one.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
+from harness.coefficient_floors import mark_above_order, order_bound
 from harness.stepper import Stepper
 
 __all__ = ["floor_bound", "extended_if_floor_bound"]
@@ -34,6 +40,19 @@ def extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, conf
     `amplification(T)` is the flow's error amplification over the horizon ending at T."""
     from harness.extended import NotMeasurable, extended_sweep
 
+    bound = order_bound(stepper)
+    mine = (frame.kind == "global").values
+    if mine.any():
+        g = frame[mine].sort_values("h", ascending=False)
+        reasons = g.excluded.values.copy()
+        why = mark_above_order(g.h.values, g.error.values, reasons, bound)
+        if why:
+            frame = frame.copy()
+            frame.loc[g.index, "excluded"] = reasons
+            frame.loc[g.index, "in_fit"] = reasons == ""
+            frame["message"] = frame["message"].fillna("").astype(str)
+            frame.loc[g.index, "message"] = ["; ".join(x for x in (m, why) if x)
+                                             for m in frame.loc[g.index, "message"]]
     g = frame[frame.kind == "global"]
     if config.get("extended") is False or not floor_bound(g):
         return frame
@@ -45,7 +64,7 @@ def extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, conf
         if coefficients is None:
             raise NotMeasurable("not measurable in extended precision: a black box has no coefficients")
         ext = extended_sweep(coefficients, problem, T=T, amplification=amplification(T),
-                             work_budget=config.get("extended_work_budget"))
+                             work_budget=config.get("extended_work_budget"), order_bound=bound)
     except NotMeasurable as exc:
         frame = frame.copy()
         frame["message"] = frame["message"].fillna("").astype(str)
@@ -66,7 +85,8 @@ def extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, conf
                 f"{int(rows.in_fit.sum())} asymptotic point(s) before {ext['stopped_by']}")
     rows["message"] = (f"{head}; measured in real128 from the problem's start with the exact "
                        f"coefficients against a {ext['reference_precision']} reference: {measured}, "
-                       f"local slopes " + " ".join(f"{x:.3f}" for x in ext["local_slopes"][-5:]))
+                       f"local slopes " + " ".join(f"{x:.3f}" for x in ext["local_slopes"][-5:])
+                       + (f"; {ext['note']}" if ext.get("note") else ""))
     for col in ("stepper", "problem", "t_end"):
         rows[col] = g[col].iloc[0]
     rows["implementation"] = "real128"

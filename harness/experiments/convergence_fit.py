@@ -1,6 +1,15 @@
 """Fitting an order to (h, error) points: least-squares slope with its 95 % interval, the
 asymptotic window (where the local slopes have settled), and each point's classification
-(blow-up, reference, roundoff, pre-asymptotic) with its reason."""
+(blow-up, reference, roundoff, coefficients, pre-asymptotic) with its reason.
+
+The window is asymptotic only where the error has stopped curving, at any order: the local
+slopes next to the floor form a plateau, they do not drift monotonically across it, and the
+slope fitted over it is an order at all. The global error of a one-step method on a smooth
+problem expands as C_p h^p + C_{p+1} h^{p+1} + ... with integer exponents (Hairer, Norsett &
+Wanner I, II.8, Theorem 8.1), so its log-log slope tends to the integer p; a slope steady at
+8.5 or 5.3 is a mixture of terms still changing weight, not an order, however flat it looks
+over a few halvings (an optimized pair's tiny leading constant, an order-12 method whose h^13
+term dominates down to the float64 floor)."""
 
 from __future__ import annotations
 
@@ -81,6 +90,19 @@ def asymptotic_window(h: np.ndarray, error: np.ndarray, usable: np.ndarray) -> t
         if not (monotone and abs(w[-1] - w[0]) > tol.PLATEAU_DRIFT_TOL):
             break
         first += 1
+    # Not an order: a slope fitted over the window that no integer explains within
+    # INTEGER_ORDER_TOL is still a mixture of error terms; the large-h end is dropped while that
+    # holds, and a window that never settles on an order is no window.
+    while True:
+        window = pts[first:]
+        if window.size < 2:
+            return None
+        slope = fit_order(h[window], error[window])["order"] if window.size > 2 else float(slopes[-1])
+        if abs(slope - round(slope)) <= tol.INTEGER_ORDER_TOL:
+            break
+        if window.size <= tol.MIN_FIT_POINTS:
+            return None
+        first += 1
     return int(pts[first]), int(pts[-1])
 
 
@@ -90,10 +112,13 @@ def classify_points(
     reference_error: np.ndarray,
     rounding_level: np.ndarray,
     start_error: float | None = None,
+    coefficient_floor: np.ndarray | None = None,
 ) -> np.ndarray:
     """Reason each point is excluded from the fit ('' when it is kept), by the rules above.
     Points must be ordered from the largest h to the smallest; `start_error` is absolute (the
-    caller scales it by the state's size)."""
+    caller scales it by the state's size); `coefficient_floor` is the error the coefficients'
+    own defects in the order conditions leave at each h (`harness.theory.defects`), and a point
+    within COEFFICIENT_FLOOR_MARGIN of it measures the record's digits, not the method."""
     n = h.size
     reason = np.array([""] * n, dtype=object)
     for i in range(n):
@@ -103,6 +128,8 @@ def classify_points(
             reason[i] = "reference"
         elif error[i] < tol.ROUNDOFF_MARGIN * rounding_level[i]:
             reason[i] = "roundoff"
+        elif coefficient_floor is not None and error[i] < tol.COEFFICIENT_FLOOR_MARGIN * coefficient_floor[i]:
+            reason[i] = "coefficients"
         elif start_error is not None and error[i] >= start_error:
             reason[i] = "pre-asymptotic"
     usable = reason == ""

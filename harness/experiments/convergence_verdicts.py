@@ -148,12 +148,14 @@ def insufficient_range_reason(gl: pd.DataFrame, fit_points: int) -> str:
     """Which limit ended a sweep with fewer than MIN_FIT_POINTS asymptotic points: the float64
     floor or the reference's accuracy (the finest step's error is judged there), else the work
     budget (the sweep ran out of steps while the errors were still pre-asymptotic); with the
-    horizon and the errors the sweep reached, so a user can decide what to change."""
+    horizon and the errors the sweep reached, so a user can decide what to change. A finest
+    point at the coefficients' own floor names that limit instead."""
     finest = gl.iloc[-1]
     horizon = float(gl["t_end"].iloc[0]) if "t_end" in gl else float("nan")
     limit = {
         "roundoff": "the float64 rounding floor",
         "reference": "the reference's certified accuracy",
+        "coefficients": "the coefficients' own accuracy (their defects in the order conditions)",
     }.get(str(finest.excluded), "the work budget")
     return (f"{fit_points} of {tol.MIN_FIT_POINTS} asymptotic points before {limit} stopped the "
             f"sweep: {len(gl)} step sizes down to h = {float(finest.h):.3g} "

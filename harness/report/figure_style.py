@@ -22,6 +22,7 @@ EXCLUSION_STYLE = {
     "pre-asymptotic": ("o", "pre-asymptotic (excluded from the fit)"),
     "roundoff": ("v", "at the roundoff floor (excluded)"),
     "reference": ("s", "within 100x of the reference error (excluded)"),
+    "coefficients": ("D", "at the coefficients' own floor (excluded)"),
 }
 # Lines of long runs are thinned to about this many points per line (log-spaced in steps): on a
 # panel a few hundred pixels wide, more points add bytes, not detail.

@@ -1,0 +1,103 @@
+"""What a tableau's coefficients say about the errors a convergence sweep can show.
+
+- `coefficient_floor`: the record's own defects in the order conditions leave an error no
+  arithmetic removes (`harness.theory.defects`); a sweep excludes points near it (`coefficients`);
+- `coefficient_rounding_floor`: coefficients rounded to float64 miss the conditions by their
+  rounding times their size, part of the float64 rounding floor (large extrapolation weights);
+- `order_bound` and `mark_above_order`: no problem shows a slope above max(order, linear order)
+  asymptotically (the linear order counts the tall trees, which every class keeps), so a fitted
+  slope above it by more than ABOVE_ORDER_TOL is higher-order terms still dominating.
+Used by the float64 sweep (`harness.experiments.convergence`) and the real128 one
+(`harness.extended`) alike.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from harness import tolerances as tol
+from harness.stepper import Stepper
+
+__all__ = ["coefficient_floor", "coefficient_rounding_floor", "order_bound", "mark_above_order",
+           "problem_rate"]
+
+
+def problem_rate(problem) -> float:
+    """The problem's fastest rate along its orbit (`harness.scales`), the size of an elementary
+    differential per order; 1 per unit time where it cannot be derived."""
+    from harness.scales import derive_time_scale
+
+    try:
+        rate = float(derive_time_scale(problem).fastest_rate)
+    except Exception:  # a problem whose orbit sampling fails keeps its cell: unit rate
+        return 1.0
+    return rate if np.isfinite(rate) and rate > 0 else 1.0
+
+
+def coefficient_rounding_floor(coefficients, problem, *, span: float,
+                               scale: float) -> Callable[[np.ndarray], np.ndarray | None]:
+    """h -> the error a float64 loop owes to its tableau's coefficients rounded to float64 (their
+    defects in the order conditions as run, `harness.theory.defects`): part of the float64
+    rounding floor, which it raises only for coefficients of large magnitude (an order-11
+    extrapolation tableau's weights sum |b| to ~1e5 and lose ~1e-11); None where every defect
+    is within DEFECT_NOISE_ULPS roundings, as for coefficients of ordinary size."""
+    from harness.coefficients import ButcherTableau
+    from harness.theory.defects import condition_defects, defect_floor
+
+    none = lambda h: None  # noqa: E731
+    if not isinstance(coefficients, ButcherTableau) or not coefficients.explicit:
+        return none
+    defects = condition_defects(coefficients, coefficients.order(), as_run_in_float64=True)
+    if not any(d > tol.DEFECT_NOISE_ULPS * tol.EPS for d, _ in defects):
+        return none
+    rate = problem_rate(problem)
+    return lambda h: defect_floor(defects, 0.0, h, span=span, rate=rate, scale=scale)
+
+
+def coefficient_floor(coefficients, problem, *, span: float, scale: float,
+                      noise: float) -> Callable[[np.ndarray], np.ndarray | None]:
+    """h -> the error floor an explicit Runge-Kutta tableau's defects in the order conditions
+    leave (`harness.theory.defects.defect_floor`), or None where those defects are within
+    `noise` (the arithmetic's unit roundoff) of rounding or `coefficients` is no such tableau."""
+    from harness.coefficients import ButcherTableau
+    from harness.theory.defects import condition_defects, defect_floor
+
+    none = lambda h: None  # noqa: E731
+    if not isinstance(coefficients, ButcherTableau) or not coefficients.explicit:
+        return none
+    defects = condition_defects(coefficients, coefficients.order())
+    threshold = tol.DEFECT_NOISE_ULPS * noise
+    if not any(d > threshold * q * max(1.0, size) for q, (d, size) in enumerate(defects, start=1)):
+        return none
+    rate = problem_rate(problem)
+
+    def floor(h: np.ndarray) -> np.ndarray:
+        return defect_floor(defects, threshold, h, span=span, rate=rate, scale=scale)
+
+    return floor
+
+
+def order_bound(stepper: Stepper) -> int | None:
+    """max(order, linear order) of the stepper's coefficients, or None without coefficients."""
+    coefficients = getattr(stepper, "coefficients", None)
+    try:
+        return max(int(coefficients.order()), int(coefficients.linear_order()))
+    except Exception:  # a black box, or a family without both facts
+        return None
+
+
+def mark_above_order(h: np.ndarray, error: np.ndarray, reasons: np.ndarray,
+                     bound: int | None) -> str:
+    """Where the points kept (reason '') fit a slope above `bound` + ABOVE_ORDER_TOL, mark them
+    `pre-asymptotic` in place and return the reason; else ''."""
+    kept = np.flatnonzero(reasons == "")
+    if bound is None or kept.size < 2:
+        return ""
+    slope = float(np.polyfit(np.log(h[kept]), np.log(error[kept]), 1)[0])  # the fit's least-squares slope
+    if slope <= bound + tol.ABOVE_ORDER_TOL:
+        return ""
+    reasons[kept] = "pre-asymptotic"
+    return (f"slope {slope:.3f} over the settled points is above the coefficients' order bound {bound} "
+            f"(max of order and linear order): higher-order error terms still dominate there")

@@ -1,0 +1,91 @@
+"""Reading coefficients as they are typed: numbers, decimal strings and exact rationals ("2/3"),
+their exact form where they are given exactly (`harness.extended` needs better than float64),
+and the precision of a table printed as cut decimals.
+
+Used by the coefficient objects of `harness.coefficients` (which re-exports `as_float_array` and
+`exact_value`) and by the method records of `harness.methods`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from fractions import Fraction
+
+import numpy as np
+
+from harness.errors import CoefficientError
+from harness.tolerances import PUBLISHED_MIN_DIGITS
+
+__all__ = ["as_float_array", "exact_value", "exact_rows", "published_precision"]
+
+
+def _real(v) -> float:
+    """One coefficient as float64: numbers as they are, strings as decimals ("0.25") or as exact
+    rationals ("2/3", rounded once)."""
+    if isinstance(v, str) and "/" in v:
+        return float(Fraction(v.strip()))
+    return float(v)
+
+
+def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
+    """Convert coefficients (floats, ints, Fractions, decimal or rational strings such as "2/3",
+    nested lists) to a read-only float64 array."""
+    try:
+        arr = np.array(
+            [[_real(v) for v in row] for row in values] if ndim == 2 else [_real(v) for v in values],
+            dtype=np.float64,
+        )
+    except (TypeError, ValueError, ZeroDivisionError) as exc:
+        raise CoefficientError(f"`{name}` must hold real numbers: {exc}") from None
+    if arr.ndim != ndim:
+        raise CoefficientError(f"`{name}` must be {ndim}-dimensional, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise CoefficientError(f"`{name}` must be finite, got {arr.tolist()}")
+    arr.setflags(write=False)
+    return arr
+
+
+def published_precision(*arrays: np.ndarray) -> float:
+    """Half a unit in the last digit of the coarsest coefficient typed as a cut decimal (shortest
+    float text of PUBLISHED_MIN_DIGITS to 15 significant digits), else 0.0."""
+    from decimal import Decimal
+
+    cut = [Decimal(repr(float(x))).as_tuple() for a in arrays for x in np.ravel(a) if x != 0.0]
+    return max([0.5 * 10.0 ** int(e) for _, d, e in cut if PUBLISHED_MIN_DIGITS <= len(d) <= 15],
+               default=0.0)
+
+
+def exact_value(x) -> Fraction | None:
+    """`x` as an exact rational when it is given exactly (int, Fraction, Decimal, a decimal
+    string, or a float that is a short dyadic such as 0.5), else None: a float like 1/3 is only
+    a float64 approximation, and extended-precision runs (`harness.extended`) need better."""
+    from decimal import Decimal
+
+    if isinstance(x, bool):
+        return None
+    if isinstance(x, (int, Fraction, Decimal, str)):
+        try:
+            return Fraction(x)
+        except (ValueError, ZeroDivisionError):
+            return None
+    if isinstance(x, (float, np.floating)) and np.isfinite(x):
+        f = Fraction(float(x))
+        return f if f.denominator <= _EXACT_DYADIC and abs(f.numerator) <= _EXACT_DYADIC else None
+    return None
+
+
+def exact_rows(values, ndim: int):
+    """Nested tuples of `exact_value`s, or None when any entry is not exact."""
+    try:
+        rows = [values] if ndim == 1 else list(values)
+        out = tuple(tuple(exact_value(x) for x in row) for row in rows)
+    except TypeError:
+        return None
+    if any(v is None for row in out for v in row):
+        return None
+    return out[0] if ndim == 1 else out
+
+
+# A float with numerator and denominator (a power of two) at most this is taken as exact (0.5,
+# 0.25, 3.0): a rounded decimal such as 0.1 or 1/3 has a 2^52-sized denominator.
+_EXACT_DYADIC = 1 << 20
