@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.cli.output import c_stdout_to_stderr
+from harness.c_streams import c_stdout_to_stderr
 from harness.stepper import AdaptiveStepper, StepFailure
 from harness.tolerances import SCIPY_MIN_RTOL
 from implementations import optional_library

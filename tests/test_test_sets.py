@@ -195,7 +195,7 @@ def test_a_libraries_c_level_stdout_goes_to_stderr_while_it_runs():
 
     code = (
         "import ctypes, os\n"
-        "from harness.cli.output import c_stdout_to_stderr\n"
+        "from harness.c_streams import c_stdout_to_stderr\n"
         "libc = ctypes.CDLL(None)\n"
         "print('before', flush=True)\n"
         "with c_stdout_to_stderr():\n"

@@ -91,7 +91,7 @@ def _radau(problem, times, y0, t0, pars, atol):
 def _cvode(problem, times, y0, t0, pars, atol):
     from sksundae.cvode import CVODE
 
-    from harness.cli.output import c_stdout_to_stderr
+    from harness.c_streams import c_stdout_to_stderr
 
     fn = _Counted(problem, pars, "CVODE BDF")
 
