@@ -420,9 +420,6 @@ INVARIANT_FLOW_RTOL = 1e-8
 # ... and when it also moves along the float64 Taylor orbit (tolerance eps, which keeps a true
 # invariant to ~1e-13 over the catalogue's spans) by more than this fraction of its size.
 INVARIANT_FLOW_DRIFT = 1e-6
-# A problem's float64 orbit that stops before the span's end with its last Taylor step below
-# this fraction of the span (or a non-finite state) is taken as a singularity within the span.
-SINGULAR_STEP_FRACTION = 1e-12
 # The largest file the store reads (a run's table, a cell, meta.json, an earlier report's
 # verdicts): far above any run the harness writes (a full report's rows are ~10 MB), and a
 # bound so that a link to an endless device is refused, not read until memory runs out.
