@@ -269,3 +269,15 @@ def test_every_registered_exact_record_shares_its_fingerprint_with_a_float64_twi
         assert (twin.fingerprint() == c.fingerprint()) == same, name
         seen[type(c)] += not same
     assert all(n >= 1 for n in seen.values()), seen  # exact records that float64 cannot hold
+
+
+def test_a_course_claim_matches_a_method_however_precisely_its_record_is_given():
+    """The course's RK4 is written in float64 (1/6 rounded); the catalogue's rk4 is exact. They
+    key different cells, yet the claim about the method applies to it."""
+    from harness.registry import get_stepper
+    from harness.report.claims import RK4, steppers_with
+
+    record = get_stepper("rk4").coefficients
+    assert RK4.exact is None and record.exact is not None
+    assert RK4.fingerprint() != record.fingerprint()
+    assert "rk4" in steppers_with(RK4)
