@@ -11,6 +11,7 @@ __all__ = [
     "NoApplicableCellsError",
     "StepperOutputError",
     "WorkLimitError",
+    "StiffReferenceError",
     "OutputError",
     "describe_os_error",
     "Terminated",
@@ -66,6 +67,12 @@ class WorkLimitError(ReferenceError_):
     """A computation (a reference integration) would exceed a stated work or time bound; the
     message names the bound and how to raise it. A reference that cannot be computed within
     its bounds is a `ReferenceError_`."""
+
+
+class StiffReferenceError(ReferenceError_):
+    """The problem is stiff for the explicit Taylor reference: its step is held near p/(e |lambda|)
+    by the Jacobian's eigenvalues, not by the solution's variation, so the span needs more steps
+    than the reference's bound; the message names the eigenvalue and the steps."""
 
 
 class OutputError(HarnessError, OSError):

@@ -77,7 +77,10 @@ def _batch_states_at(problem, t: float, starts: np.ndarray) -> np.ndarray:
             lanes = chunk.shape[1]
             ta.set_time(np.full(FLOW_BATCH, float(problem.t0)))
             ta.state[:] = np.pad(chunk, ((0, 0), (0, FLOW_BATCH - lanes)), mode="edge")
-            ta.propagate_until(np.full(FLOW_BATCH, float(t)))
+            # bounded like the scalar orbits (`ORBIT_MAX_STEPS`): on a stiff problem the Taylor
+            # step stays near 1/|lambda| and an unbounded run over its span never ends (ROBER
+            # over 1e11: ~1e13 steps); an orbit that stops there is a NaN column
+            ta.propagate_until(np.full(FLOW_BATCH, float(t)), max_steps=tol.ORBIT_MAX_STEPS)
             done = [r[0] == hy.taylor_outcome.time_limit for r in ta.propagate_res[:lanes]]
             out[:, k:k + lanes] = np.where(done, ta.state[:, :lanes], np.nan)
     return out

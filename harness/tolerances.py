@@ -29,6 +29,26 @@ REFERENCE_MARGIN = 100.0
 
 # Ground truth: the Taylor tolerance of each precision level (its unit roundoff).
 REFERENCE_TOL_FACTOR = 1.0
+# A problem is stiff for the explicit Taylor reference when its step is held by the Jacobian's
+# eigenvalues (a Taylor step of order p stays near p / (e |lambda|): measured on van der Pol,
+# eps = 1e-6, 0.9x and 1.0x that in long double and real128) and the rest of the span then needs
+# more than this many steps at the certifying level (~2.5 s of real128 steps on this machine
+# type, more than every non-stiff catalogue reference together).
+REFERENCE_STIFF_STEPS = 3e4
+# ... and a step counts as held by the eigenvalue when h e |lambda| / p exceeds this share of the
+# stability bound (an accuracy-limited step is far shorter than p / (e |lambda|) on a stiff
+# problem only while the solution itself varies that fast).
+REFERENCE_STIFF_SHARE = 0.3
+# The stiff reference (scipy Radau cross-checked by CVODE BDF): rtol for both, a decade above
+# scipy's floor of 100 eps and inside CVODE's documented [1e-15, 1e-3]; atol_i = rtol x s_i.
+STIFF_REFERENCE_RTOL = 1e-13
+# ... with atol_i = rtol x s_i x this share: nearly pure relative control, as the Bari test set's
+# own references for OREGO and E5 (atol 1.1e-40), whose components fall to 1e-22 and below
+# (E5 at atol = rtol x s_i: both solvers agreed to 7e-22 on values of 9e-22 that were wrong by
+# 1e-21).
+STIFF_REFERENCE_ATOL_SHARE = 1e-8
+# ... and each solver's evaluation bound per member (~1 min of Python-level evaluations).
+STIFF_REFERENCE_MAX_EVALS = 2_000_000
 
 # Convergence sweep: start where the error first falls below this, relative to the size of the
 # state (the asymptotic law rarely holds at larger errors) ...
@@ -314,6 +334,12 @@ MIN_ENSEMBLE_PERTURBATION = 1e-8
 # Convergence horizon of a problem that declares none: at most this many natural periods of its
 # span (order does not depend on the horizon; a long span only costs steps).
 HORIZON_PERIODS = 10.0
+# ... and a problem whose fastest rate times its span exceeds this (stiff over its span: an
+# explicit step of stability interval ~1 needs this many steps) but times that horizon does not,
+# is measured to STIFF_HORIZON_STEPS / rate instead: 1e4 widths of its initial layer, so the
+# points lie on the slow manifold (VDPOL, eps = 1e-6: 3.3e-3 instead of 7.4e-5, span 2). No
+# catalogue problem without a declared horizon reaches it (largest: van-der-pol-stiff, 1.5e3).
+STIFF_HORIZON_STEPS = 1e4
 # A probe member's fastest rate is read from the spectra at this many samples of its orbit where
 # ||J|| (a bound on the spectral radius) is largest: the fastest motion is among them.
 REGIME_CANDIDATES = 64

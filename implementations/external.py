@@ -2,8 +2,12 @@
 
 `scipy-rk45`, `scipy-dop853`, `scipy-radau`, `scipy-bdf`, `scipy-lsoda`. Each `_step` integrates
 every ensemble member separately from t to t + h with `scipy.integrate.solve_ivp`, at
-rtol = atol = tol (rtol raised to scipy's own floor of 100 machine epsilons when tol is below
-it); the implicit methods get the problem's symbolic Jacobian, one member at a time. A solve that
+rtol = tol (raised to scipy's own floor of 100 machine epsilons when tol is below it) and a
+per-component absolute tolerance atol_i = tol x s_i, s_i the component's size along the problem's
+orbit (`component_atol`: max |y_i| sampled along it, at most the start's largest component,
+as the Bari test set's reports scale atol for ROBER and E5, whose small components an atol of
+tol would leave uncontrolled); the
+implicit methods get the problem's symbolic Jacobian, one member at a time. A solve that
 scipy reports as failed (status < 0) raises `StepFailure` with scipy's message.
 
 Evaluation counts (the harness's unit is one evaluation of the whole ensemble): the right-hand
@@ -33,7 +37,8 @@ from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, Steppe
 from harness.tolerances import ADAPTIVE_MAX_EVALS, SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
 from harness.work_projection import projected_work
 
-__all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS", "MemberDynamics", "MemberByMemberStepper"]
+__all__ = ["STEPPERS", "ScipyStepper", "SCIPY_METHODS", "MemberDynamics", "MemberByMemberStepper",
+           "component_atol"]
 
 _SCIPY = "P. Virtanen et al., SciPy 1.0, Nature Methods 17 (2020) 261-272"
 _HNW1 = "Hairer, Norsett & Wanner, Solving Ordinary Differential Equations I"
@@ -131,8 +136,9 @@ class MemberDynamics:
     (e.g. at a finite-time blow-up), evaluates f at the same time forever instead of failing.
     """
 
-    def __init__(self, dyn: Dynamics, member: int):
+    def __init__(self, dyn: Dynamics, member: int, atol: np.ndarray | float | None = None):
         self._view = dyn.member(member)  # shares `counts` and the compiled functions
+        self.atol = atol  # the solve's absolute tolerance (per component), set by the stepper
         self.reset()
 
     def reset(self, start: float | None = None, target: float | None = None) -> None:
@@ -172,6 +178,17 @@ class MemberDynamics:
             raise _WorkLimit(t, projected)
 
 
+def component_atol(dyn: Dynamics, tol: float) -> np.ndarray:
+    """Per-component absolute tolerances tol x s_i: s_i = max |y_i| along the problem's sampled
+    orbit (a component that stays zero takes its block's scale; `harness.scales`), but never
+    above the start's largest component (or 1 when it is zero), so an orbit that runs away (a
+    blow-up) cannot loosen the tolerance past atol = tol x |y0|."""
+    problem = dyn.problem
+    scale = np.asarray(problem.ensemble_perturbation.component_scale, dtype=np.float64)
+    start = float(np.max(np.abs(problem.y0))) or 1.0
+    return tol * np.minimum(scale, start)
+
+
 class MemberByMemberStepper(AdaptiveStepper):
     """An outside library's adaptive solver run on one ensemble member at a time, from t to the
     next output time, as its users call it. Every evaluation goes through the run's `Dynamics`
@@ -197,7 +214,8 @@ class MemberByMemberStepper(AdaptiveStepper):
         raise NotImplementedError
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        members = [MemberDynamics(dyn, m) for m in range(y0.shape[1])]
+        atol = component_atol(dyn, self.tol)
+        members = [MemberDynamics(dyn, m, atol) for m in range(y0.shape[1])]
         for key in ("member_rhs", "member_jac", *self.COUNTERS):
             dyn.counts.setdefault(key, 0)
         return Carry(t0, h, y0, members=members)
@@ -245,7 +263,8 @@ class ScipyStepper(MemberByMemberStepper):
             description=(
                 f"scipy.integrate.solve_ivp(method={method!r}), wrapped: {description} "
                 "Each output step restarts the solver for every member from t to t + h at "
-                "rtol = atol = tol (rtol at least scipy's floor 100 eps). evals_per_step is per "
+                "rtol = tol (at least scipy's floor 100 eps) and atol_i = tol x max |y_i| along "
+                "the problem's orbit. evals_per_step is per "
                 "accepted internal step; counts['rhs'] and counts['jac'] are in ensemble units "
                 "(member calls / N), counts['internal_steps'] is summed over members."
             ),
@@ -258,6 +277,9 @@ class ScipyStepper(MemberByMemberStepper):
             "tol": self.tol,
             "rtol": max(self.tol, SCIPY_MIN_RTOL),
             "atol": self.tol,
+            "atol_per_component": "tol x max|y_i| along the orbit",
+            # scipy documents rtol >= 100 eps (below it rtol is raised, with a warning)
+            "tol_range": [SCIPY_MIN_RTOL, None],
             "scipy_method": self.method,
             "jacobian": "symbolic (dyn.jac)" if self.uses_jacobian else "not used",
             "evals_unit": "ensemble evaluations (member calls / N)",
@@ -272,7 +294,7 @@ class ScipyStepper(MemberByMemberStepper):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)  # overflow: sol.status says it
                 sol = solve_ivp(member.f, (t, target), y, method=self.method,
-                                rtol=max(self.tol, SCIPY_MIN_RTOL), atol=self.tol, **options)
+                                rtol=max(self.tol, SCIPY_MIN_RTOL), atol=member.atol, **options)
         except _Stalled as stall:
             raise StepFailure(
                 f"stepper {self.info.name!r}: scipy {self.method} stalled for ensemble "

@@ -16,7 +16,8 @@ CVODE is adaptive only (no fixed-step mode): variable-order, variable-step linea
 methods, BDF of orders 1-5 (Newton iteration with a dense direct solver and the problem's
 symbolic Jacobian) or Adams-Moulton of orders 1-12 (functional iteration is not offered by
 scikit-sundae; it uses Newton too). Each output step integrates every ensemble member separately
-from t to t + h at rtol = atol = tol (rtol at least 100 eps, as for scipy's methods), exactly as
+from t to t + h at rtol = tol (at least 100 eps, as for scipy's methods) and the per-component
+atol_i = tol x max |y_i| along the orbit of scipy's peers (`external.component_atol`), exactly as
 a CVODE user calls `solve([t, t + h], y)`. The claimed order is each method's highest order (5,
 12); adaptive steppers are judged by their tolerance sweep, not by that order. Evaluation counts
 go through the run's `Dynamics` (ensemble units, like scipy's peers).
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from harness.c_streams import c_stdout_to_stderr
 from harness.stepper import AdaptiveStepper, StepFailure
 from harness.tolerances import SCIPY_MIN_RTOL
 from implementations import optional_library
@@ -51,6 +53,7 @@ _METHODS = {
     "cvode-adams": ("Adams", 12, "CVODE Adams-Moulton, variable order 1-12, Newton iteration with "
                                  "the symbolic Jacobian (dense direct solver)."),
 }
+CVODE_TOL_RANGE = (1e-15, 1e-3)  # scikit-sundae's documented range for rtol
 _MAX_STEPS_PER_OUTPUT = 100_000  # CVODE's default 500 stops long output steps at tight tol
 
 
@@ -64,11 +67,15 @@ class CvodeStepper(MemberByMemberStepper):
         self.info = self._library_info(
             name=name, claimed_order=order, explicit=False, evals_per_step=2.0, reference=_REF,
             implementation="sundials", description=description + " Each output step restarts CVODE "
-            "for every member from t to t + h at rtol = atol = tol.",
+            "for every member from t to t + h at rtol = tol and atol_i = tol x max |y_i| along the "
+            "problem's orbit.",
         )
 
     def extra_info(self) -> dict:
-        return {"tol": self.tol, "rtol": max(self.tol, SCIPY_MIN_RTOL), "atol": self.tol,
+        return {"tol": self.tol, "rtol": max(self.tol, SCIPY_MIN_RTOL),
+                "atol": self.tol, "atol_per_component": "tol x max|y_i| along the orbit",
+                # scikit-sundae documents rtol in [1e-15, 1e-3]
+                "tol_range": list(CVODE_TOL_RANGE),
                 "cvode_method": self.method, "scikit_sundae_version": SUNDAE_VERSION,
                 "evals_unit": "ensemble evaluations (member calls / N)"}
 
@@ -79,13 +86,14 @@ class CvodeStepper(MemberByMemberStepper):
         def jac(t, y, yp, J):
             J[:, :] = member.jac(t, y)
 
-        return CVODE(rhs, method=self.method, rtol=max(self.tol, SCIPY_MIN_RTOL), atol=self.tol,
+        return CVODE(rhs, method=self.method, rtol=max(self.tol, SCIPY_MIN_RTOL), atol=member.atol,
                      jacfn=jac, max_num_steps=_MAX_STEPS_PER_OUTPUT)
 
     def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
                       y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         try:
-            sol = self._solver(member).solve(np.array([t, target]), y)
+            with c_stdout_to_stderr():
+                sol = self._solver(member).solve(np.array([t, target]), y)
         except Exception as exc:  # the adapter's work limit, or CVODE refusing the input
             raise StepFailure(f"stepper {self.info.name!r}: CVODE stopped for ensemble "
                               f"member {m} between t={t!r} and t={target!r}: "

@@ -14,6 +14,8 @@ PROBLEM_MODULES = (
     "many_body",
     "stiff",
     "planetary",
+    "detest",
+    "bari",
 )
 
 

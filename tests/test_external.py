@@ -62,6 +62,7 @@ def test_declared_properties(stepper):
     assert info.reference and "solve_ivp" in info.description and info.evals_per_step > 0
     assert info.extra["scipy_method"] == stepper.method
     assert info.extra["rtol"] == max(stepper.tol, SCIPY_MIN_RTOL) and info.extra["atol"] == stepper.tol
+    assert info.extra["tol_range"] == [SCIPY_MIN_RTOL, None] and "atol_per_component" in info.extra
 
 
 @pytest.mark.parametrize("problem_name", sorted(ACCURACY))

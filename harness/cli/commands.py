@@ -93,9 +93,12 @@ def cmd_list(args) -> int:
         cols = ["name", "family", "claimed_order", "explicit", "symplectic", "symmetric",
                 "evals_per_step", "form", "velocity_dependent", "adaptive"]
     elif args.kind == "problems":
-        records = [dict(p.describe(), origin=problems.origin(p.name)) for p in problems.all()]
+        # every problem, those run only when named (`on_request`: the test sets, experiment-
+        # specific orbits) included and marked
+        records = [dict(p.describe(), origin=problems.origin(p.name))
+                   for p in problems.all(variants=True)]
         cols = ["name", "form", "dim", "t_span", "velocity_dependent", "conservative",
-                "exact_solution", "invariants"]
+                "exact_solution", "invariants", "on_request"]
     else:
         from harness.experiments import EXPERIMENTS, get_experiment  # noqa: F401
 
@@ -138,16 +141,55 @@ def cmd_reference(args) -> int:
         "precision": ref.precision,
         "certified_by": ref.certified_by,
     }
-    if problem.exact is not None:
+    float64_form = ref.y[-1][:, 0]
+    if problem.published is not None:
+        float64_form = _published_record(problem, t, ref, record)
+    if problem.exact is not None and float64_form is not None:
+        # the closed form is evaluated from the float64 start, so it is compared with the
+        # reference of the float64 form
         exact = problem.exact(t, problem.y0[:, None], problem.t0, problem.pars_for(1))[:, 0]
         record["exact_state"] = exact.tolist()
-        record["exact_difference"] = float(np.max(np.abs(exact - ref.y[-1][:, 0])))
+        record["exact_difference"] = float(np.max(np.abs(exact - float64_form)))
     if args.json:
         print_json([record])
     else:
         for k, v in record.items():
             print(f"{k:>18}: {v}", file=output_buffer())
     return EXIT_OK
+
+
+def _published_record(problem, t: float, ref, record: dict):
+    """Add to `record` how the reference of a test-set problem stands to its published form:
+    the float64 rounding of its inputs, the difference the rounding makes to the solution at `t`
+    (the float64 form's reference against the published form's), and, at the published end
+    time, the published values, the difference from them and whether it is within their stated
+    accuracy plus the reference's own error. Returns the float64 form's state at `t` (None when
+    it cannot be had)."""
+    import numpy as np
+
+    from harness.errors import ReferenceError_
+    from harness.ground_truth import reference
+
+    pub = problem.published
+    record["form"] = ref.form
+    record["float64_rounding"] = pub.rounding()
+    state = ref.y[-1][:, 0]
+    float64_form = state
+    if ref.form == "published":
+        try:
+            f64 = reference(problem, np.array([t]), problem.y0.reshape(-1, 1))
+            float64_form = f64.y[-1][:, 0]
+            record["float64_form_difference"] = float(np.max(np.abs(float64_form - state)))
+        except ReferenceError_:
+            float64_form = None
+    if pub.values is not None and t == pub.t_end_float:
+        values = np.array(pub.values_float)
+        diff = float(np.max(np.abs(values - state)))
+        allowed = pub.accuracy * float(np.max(np.abs(values)))
+        record.update(published_state=values.tolist(), published_difference=diff,
+                      published_accuracy=pub.accuracy, published_accuracy_note=pub.accuracy_note,
+                      within_published_accuracy=bool(diff <= allowed + float(np.max(ref.error[-1]))))
+    return float64_form
 
 
 def _shared_run_settings(args) -> dict[str, object]:

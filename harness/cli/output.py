@@ -1,5 +1,6 @@
 """The command line's one output layer: the collected stdout of a command, its writing at the end,
-one-line errors with sysexits-style statuses, and JSON and table printing."""
+one-line errors with sysexits-style statuses, JSON and table printing. (A compiled library's
+C-level stdout is kept off the command's stdout by `harness.c_streams`.)"""
 
 from __future__ import annotations
 
@@ -125,3 +126,5 @@ def print_table(frame, columns: Sequence[str]) -> None:
     with pd.option_context("display.max_rows", None, "display.max_columns", None,
                            "display.width", 200, "display.max_colwidth", 70):
         print(frame[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"), file=output_buffer())
+
+

@@ -430,6 +430,15 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
                 "rhs_evals": 0.0, "force_evals": 0.0, "wall_s": 0.0, "message": "", "not_run": True,
             })
             continue
+        outside = _outside_documented_range(stepper, tolerance)
+        if outside:
+            records.append({
+                "tol": tolerance, "h": np.nan, "n_steps": 0, "error": np.nan,
+                "reference_error": float(np.max(ref.error[-1])), "rounding_level": tol.EPS * scale,
+                "rhs_evals": 0.0, "force_evals": 0.0, "wall_s": 0.0, "message": outside,
+                "not_run": True,
+            })
+            continue
         started = time.perf_counter()
         s = stepper.with_tolerance(tolerance)
         try:
@@ -456,7 +465,8 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     # A tolerance the cost cap left out is a row of its own kind, with the reason, so the verdict
     # judges only the tolerances that ran and the tables say which were not run and why.
     skipped = frame.pop("not_run").astype(bool)
-    frame.loc[skipped, "excluded"] = "cost-cap"
+    frame.loc[skipped, "excluded"] = np.where(frame.loc[skipped, "message"] != "", "tol-range",
+                                              "cost-cap")
     frame.loc[skipped, "in_fit"] = False
     frame.loc[skipped, "kind"] = "tolerance-not-run"
     # how much the flow amplifies an error over the horizon: the rules' allowance for the
@@ -469,6 +479,17 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     frame["ensemble_size"] = y0.shape[1]
     frame["perturbation"] = perturbation_used(problem, config) if y0.shape[1] > 1 else 0.0
     return frame
+
+
+def _outside_documented_range(stepper: AdaptiveStepper, tolerance: float) -> str:
+    """Why `tolerance` is not measurable for `stepper` (outside the range its library documents,
+    `info.extra['tol_range']` = [low or None, high or None]), else ''."""
+    low, high = (list(stepper.info.extra.get("tol_range") or []) + [None, None])[:2]
+    if (low is not None and tolerance < low) or (high is not None and tolerance > high):
+        bounds = f"[{'0' if low is None else f'{low:.3g}'}, {'inf' if high is None else f'{high:.3g}'}]"
+        return (f"not measurable: tol = {tolerance:.3g} is outside the range {bounds} that "
+                f"{stepper.info.name}'s library documents")
+    return ""
 
 
 # The sweeps under public names: work-precision runs them too (through experiments.common).

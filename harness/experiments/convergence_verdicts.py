@@ -17,6 +17,8 @@ Verdicts, in the order they are decided:
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
 
@@ -24,7 +26,7 @@ from harness import tolerances as tol
 from harness.experiments.convergence_fit import fit_order
 from harness.stepper import Stepper
 
-__all__ = ["summarize_cell", "insufficient_range_reason"]
+__all__ = ["summarize_cell", "insufficient_range_reason", "summarise_clauses"]
 
 
 def _fit_kind(g: pd.DataFrame, kind: str) -> float:
@@ -79,7 +81,16 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
                                f"{allowed[k][1]}); "
                                f"tolerance exponent {base['measured_order']:.3g} "
                                f"(minimum {tol.MIN_TOLERANCE_EXPONENT:g})")
-        capped = g[g.kind == "tolerance-not-run"]
+        not_run = g[g.kind == "tolerance-not-run"]
+        capped = not_run[not_run.excluded != "tol-range"]
+        outside = not_run[not_run.excluded == "tol-range"]
+        if len(outside):  # not measurable there: said once, with the library's range
+            listed = ", ".join(f"{t:.0e}" for t in sorted(outside.tol, reverse=True))
+            first = str(outside.message.iloc[0])
+            why = first[first.find(" is outside") + 1:] if " is outside" in first else first
+            base["message"] = "; ".join(filter(None, [base["message"], (
+                f"not measurable at tol {listed}: {why}")]))
+        messages = [m for m in t.message.fillna("") if m]  # failures of tolerances that ran
         if len(capped):
             listed = ", ".join(f"{t:.0e}" for t in sorted(capped.tol, reverse=True))
             base["message"] = "; ".join(filter(None, [base["message"], (
@@ -111,8 +122,8 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         base["verdict"] = "unstable"
     else:
         base["verdict"] = "insufficient-range"
-        base["message"] = "; ".join(dict.fromkeys(  # the sweep's own notes (horizon, extended precision)
-            [insufficient_range_reason(gl, len(kept)), *(m for m in gl.get("message", []) if m)]))
+        base["message"] = summarise_clauses(  # the sweep's own notes (horizon, extended precision)
+            [insufficient_range_reason(gl, len(kept)), *(m for m in gl.get("message", []) if m)])
     base["local_exponent"] = _fit_kind(g, "local")
     base["local_exponent_q"] = _fit_kind(g, "local-q")
     if messages and not base["message"]:
@@ -120,6 +131,17 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
     return base
 
 
+
+
+def summarise_clauses(clauses: list[str]) -> str:
+    """The clauses joined by '; ', each said once: clauses that differ only in their numbers
+    (one note per step size or member) are kept at their first, with how many more there were."""
+    variants: dict[str, dict[str, None]] = {}  # shape -> its distinct texts, in order
+    for c in clauses:
+        if c:
+            variants.setdefault(re.sub(r"[-+]?\d[\d.]*(?:e[-+]?\d+)?", "#", c), {})[c] = None
+    return "; ".join(next(iter(v)) + (f" (and {len(v) - 1} more like it)" if len(v) > 1 else "")
+                     for v in variants.values())
 
 
 def insufficient_range_reason(gl: pd.DataFrame, fit_points: int) -> str:

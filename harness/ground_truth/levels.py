@@ -64,6 +64,17 @@ class Level:
         flat = [hy.real(float(v), self.prec) for v in a.ravel()]
         return np.array(flat).reshape(a.shape)
 
+    def exact(self, values) -> np.ndarray:
+        """Decimal strings (a test set's published values) rounded once, to this level."""
+        texts = [str(v) for v in values]
+        if self.name == "float64":
+            return np.array([float(v) for v in texts], dtype=np.float64)
+        if self.name == "longdouble":
+            return np.array(texts).astype(np.longdouble)
+        if self.name == "real128":
+            return np.array([hy.real128(v) for v in texts])
+        return np.array([hy.real(v, self.prec) for v in texts])
+
 
 _ALL_LEVELS = (
     Level("float64", float, 53),
@@ -141,6 +152,10 @@ class Reference:
     cached: bool = False
     compute_s: float = 0.0
     cost: dict = field(default_factory=dict)
+    #: 'float64' (the problem's float64 form integrated), 'published' (its exact published
+    #: constants and start integrated) or 'published values' (the test set's own end values,
+    #: served where no certified path applies; `error` is then their stated accuracy)
+    form: str = "float64"
 
     @property
     def max_error(self) -> float:

@@ -13,10 +13,15 @@ import heyoka as hy
 import numpy as np
 
 from harness import cache
-from harness.errors import InputError, ReferenceError_, WorkLimitError
+from harness.errors import InputError, ReferenceError_, StiffReferenceError, WorkLimitError
 from harness.ground_truth.levels import SOFTWARE_LEVELS, Level
 from harness.problem import Problem
-from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
+from harness.tolerances import (
+    CERTIFIER_TOL_FACTOR,
+    REFERENCE_STIFF_SHARE,
+    REFERENCE_STIFF_STEPS,
+    REFERENCE_TOL_FACTOR,
+)
 from harness.work_projection import projected_work
 
 # -- work bounds ----------------------------------------------------------------------------------
@@ -54,6 +59,49 @@ def _limit(env: str, default: float) -> float:
     return value
 
 
+# -- stiffness ------------------------------------------------------------------------------------
+# A Taylor step of order p is stable only while h |lambda| stays below about p / e (its stability
+# region grows like the order); on a stiff problem that bound, not the solution, sets the step,
+# and the span needs about e |lambda| T / p steps (`REFERENCE_STIFF_STEPS`).
+def _decay_rate(problem: Problem, t: float, y: np.ndarray, pars: np.ndarray) -> float:
+    """The largest -Re(lambda) of the Jacobian at the float64 state `y` (0 when none decays)."""
+    dyn = problem.dynamics(pars.reshape(-1, 1).astype(np.float64), size=1)
+    jac = dyn.jac(float(t), np.ascontiguousarray(y, dtype=np.float64).reshape(-1, 1))[:, :, 0]
+    with np.errstate(all="ignore"):
+        lam = np.linalg.eigvals(jac) if np.all(np.isfinite(jac)) else np.array([np.nan])
+    if not np.all(np.isfinite(lam)):
+        return 0.0
+    return max(0.0, float(np.max(-lam.real)))
+
+
+def stiff_check(problem: Problem, level: Level, ta: Any, t_end: float, member: int,
+                step: float | None = None) -> None:
+    """Raise `StiffReferenceError` when, from the integrator's current state, the rest of the span
+    needs more than `REFERENCE_STIFF_STEPS` steps held by the Jacobian's eigenvalue: the mean
+    `step` of the last chunk (at the start, the solution's own time scale |y|/|y'|, the step
+    accuracy alone would allow) reaches `REFERENCE_STIFF_SHARE` of the stability bound p/(e |lambda|)."""
+    now = float(ta.time)
+    pars = np.array([float(v) for v in ta.pars]) if len(ta.pars) else np.zeros(0)
+    state = np.array([float(v) for v in ta.state])
+    rate = _decay_rate(problem, now, state, pars)
+    order = int(ta.order)
+    steps = math.e * rate * max(t_end - now, 0.0) / order
+    if rate <= 0 or steps <= REFERENCE_STIFF_STEPS:
+        return
+    if step is None:
+        slope = problem.dynamics(pars.reshape(-1, 1), size=1).f(now, state.reshape(-1, 1))[:, 0]
+        step = float(np.linalg.norm(state) / np.linalg.norm(slope)) if np.any(slope) else math.inf
+    if not step * math.e * rate / order >= REFERENCE_STIFF_SHARE:
+        return
+    raise StiffReferenceError(
+        f"problem {problem.name!r} is stiff for the explicit Taylor reference: at t = {now:.6g} "
+        f"(member {member}, {level.name}) the Jacobian has an eigenvalue with real part "
+        f"{-rate:.3g}, so Taylor steps of order {order} stay near p/(e |lambda|) = "
+        f"{order / (math.e * rate):.3g} and reaching t = {t_end:.6g} needs about {steps:.3g} of "
+        f"them (more than {REFERENCE_STIFF_STEPS:.0e}); a stiff problem's ground truth is its "
+        "published end values, where the problem has them")
+
+
 def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray, member: int,
                        started: float) -> tuple[Any, np.ndarray]:
     """`ta.propagate_grid(grid)` in chunks, within the work bounds (see above); returns
@@ -65,6 +113,7 @@ def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray
     t_start, t_end = float(grid[0]), float(grid[-1])
     rows: list[np.ndarray] = []
     remaining = grid
+    stiff_check(problem, level, ta, t_end, member)
     steps = 0
     checkpoints = [(0, t_start)]  # (steps taken, time reached) after each chunk
     while True:
@@ -76,6 +125,7 @@ def _propagate_bounded(problem: Problem, level: Level, ta: Any, grid: np.ndarray
             return outcome, np.array(rows)
         now = float(ta.time)
         projected = cost * projected_work(checkpoints, steps, now, t_end)
+        stiff_check(problem, level, ta, t_end, member, step=(now - checkpoints[-1][1]) / chunk)
         checkpoints.append((steps, now))
         where = (f"ground truth for problem {problem.name!r} failed in {level.name} at "
                  f"t = {now:.17g} (member {member}): reaching t = {t_end:.6g}")
@@ -138,20 +188,28 @@ def propagate(
     y0: np.ndarray,
     t0: float,
     pars: np.ndarray,
+    published: bool = False,
 ) -> tuple[np.ndarray, float]:
-    """States at `times` for every member, shaped (nt, dim, N), in the level's number type."""
+    """States at `times` for every member, shaped (nt, dim, N), in the level's number type.
+    With `published`, every member starts from the problem's exact published start values and
+    constants (`Problem.published`, rounded once to the level), and a time equal to the published
+    end time's float64 rounding is the exact published end time."""
     lock, ta = _integrator(problem, level, tol)
     prepend = times[0] > t0
     grid = level.array(np.concatenate([[t0], times]) if prepend else times)
+    pub = problem.published if published else None
+    if pub is not None and pub.t_end is not None:
+        grid[grid.astype(np.float64) == pub.t_end_float] = level.exact([pub.t_end])[0]
     n_members = y0.shape[1]
     out = []
     start = time.perf_counter()
     with lock:
         for n in range(n_members):
-            ta.state[:] = level.array(y0[:, n])
+            ta.state[:] = level.array(y0[:, n]) if pub is None else level.exact(pub.y0)
             ta.time = level.scalar(t0)
             if pars.shape[0]:
-                ta.pars[:] = level.array(pars[:, n])
+                ta.pars[:] = (level.array(pars[:, n]) if pub is None
+                              else level.exact(list(pub.parameters.values())))
             outcome, states = _propagate_bounded(problem, level, ta, grid, n, start)
             if outcome != hy.taylor_outcome.time_limit:
                 raise ReferenceError_(

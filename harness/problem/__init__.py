@@ -18,9 +18,11 @@ Contract for a problem definition (checked in `Problem.__init__`):
 3. `y0` has one finite value per variable; `t_span` is finite with t_end > t0.
 4. Parameters are `hy.par[0..P-1]` in the order of `parameters` (name -> default value).
 5. `exact(t, y0, t0, pars)`, when given, maps initial states shaped (dim, N) to states at t.
+6. `published`, when given, holds the exact published start values and constants; `y0` and the
+   parameters are their float64 rounding (`harness.problem.published`).
 
 Modules: `definition` (the `Problem` class), `nbody` (N-body descriptions), `dynamics` (the
-compiled right-hand side), `checks` (input checks).
+compiled right-hand side), `checks` (input checks), `published` (a test set's exact values).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from harness.problem.checks import check_count, check_ensemble_size, check_state
 from harness.problem.definition import ExactSolution, Problem
 from harness.problem.dynamics import Dynamics
 from harness.problem.nbody import NBody, NewtonianForm
+from harness.problem.published import Published
 
 __all__ = ["Problem", "NewtonianForm", "NBody", "Dynamics", "ExactSolution", "check_state", "check_time",
-           "check_ensemble_size", "check_count"]
+           "check_ensemble_size", "check_count", "Published"]

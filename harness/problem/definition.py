@@ -18,6 +18,7 @@ from harness.errors import InputError
 from harness.problem.checks import check_ensemble_size, check_positive
 from harness.problem.dynamics import Dynamics
 from harness.problem.nbody import NBody, NewtonianForm, expression_names
+from harness.problem.published import Published
 
 ExactSolution = Callable[[float, np.ndarray, float, np.ndarray], np.ndarray]
 
@@ -47,6 +48,7 @@ class Problem:
         period: float | None = None,
         tags: Sequence[str] = (),
         structure: NBody | None = None,
+        published: Published | None = None,
     ):
         if not isinstance(name, str) or not name.strip():
             raise InputError(f"problem `name` must be a non-empty string, got {name!r}")
@@ -122,6 +124,11 @@ class Problem:
         if structure is not None:
             _check_structure(name, structure, var_names)
         self.structure = structure
+        if published is not None:
+            if not isinstance(published, Published):
+                raise InputError(f"problem {name!r}: `published` must be a Published record")
+            published.check(name, y0_arr, parameters, t_end)
+        self.published = published
         self._lock = threading.Lock()
 
     # -- declared facts -------------------------------------------------------------------------
@@ -148,12 +155,21 @@ class Problem:
     @property
     def convergence_t_end(self) -> float:
         """The convergence horizon: declared, else the span cut to HORIZON_PERIODS natural
-        periods (`time_scale`; order does not depend on the horizon, a long span only costs)."""
+        periods (`time_scale`; order does not depend on the horizon, a long span only costs).
+        A problem stiff over its span whose cut horizon is not (its fastest rate times the
+        horizon below STIFF_HORIZON_STEPS: ten periods of the fastest rate end inside the initial
+        layer) gets the horizon STIFF_HORIZON_STEPS / rate, within the span: many layer widths,
+        so the measurement reaches the slow manifold, where the problem is stiff."""
         if self.declared_convergence_t_end is not None:
             return self.declared_convergence_t_end
-        from harness.tolerances import HORIZON_PERIODS
+        from harness.tolerances import HORIZON_PERIODS, STIFF_HORIZON_STEPS
 
-        return min(self.t_end, self.t0 + HORIZON_PERIODS * self.time_scale.period)
+        scale = self.time_scale
+        horizon = min(self.t_end, self.t0 + HORIZON_PERIODS * scale.period)
+        rate = scale.fastest_rate
+        if rate * (horizon - self.t0) < STIFF_HORIZON_STEPS <= rate * (self.t_end - self.t0):
+            horizon = min(self.t_end, self.t0 + STIFF_HORIZON_STEPS / rate)
+        return horizon
 
     @property
     def parameter_values(self) -> np.ndarray:
@@ -183,6 +199,8 @@ class Problem:
             "reference": self.reference,
             "description": self.description,
             "structure": None if self.structure is None else self.structure.describe(),
+            "published": None if self.published is None else self.published.describe(),
+            "on_request": "on-request" in self.tags,
         }
 
     def fingerprint(self) -> str:
@@ -196,6 +214,8 @@ class Problem:
         parts += [f"{k}:{e}" for k, e in sorted(self.invariants.items())]
         if getattr(self, "structure", None) is not None:
             parts.append(repr(sorted(self.structure.describe().items())))
+        if getattr(self, "published", None) is not None:
+            parts.append(repr(self.published))
         return "|".join(parts)
 
     # -- initial states -------------------------------------------------------------------------

@@ -253,7 +253,8 @@ def skip_note(sec: Section, view: RunView, name: str) -> None:
 
 # -- the sections in order ---------------------------------------------------------------------------
 FIXED_BEFORE = (("verdicts", "Verdicts"), ("changes", "What changed since the last run"))
-FIXED_AFTER = (("ground-truth", "Ground truth"), ("claims", "Claims from the course material, checked"),
+FIXED_AFTER = (("ground-truth", "Ground truth"), ("test-sets", "Published test sets"),
+               ("claims", "Claims from the course material, checked"),
                ("gate-population", "How much to trust the gate"),
                ("provenance", "Provenance"), ("performance-history", "Performance history"))
 
@@ -297,7 +298,10 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
             say(name)
             out.append(_finish_experiment_section(pending, view, name, number, names, timer))
         trust = lambda v: X.gate_trust(v, Path(results_path).parent)  # noqa: E731
-        for key, fn in (("ground-truth", X.ground_truth), ("claims", X.claims), ("gate-population", trust)):
+        from harness.report.test_sets import test_sets_section
+
+        for key, fn in (("ground-truth", X.ground_truth), ("test-sets", test_sets_section),
+                        ("claims", X.claims), ("gate-population", trust)):
             say(key)
             out.append(timer.run(key, lambda fn=fn, key=key: _guarded(fn, view, key, number, names)))
         say("performance history")
