@@ -6,7 +6,8 @@
   rounding times their size, part of the float64 rounding floor (large extrapolation weights);
 - `order_bound` and `mark_above_order`: no problem shows a slope above max(order, linear order)
   asymptotically (the linear order counts the tall trees, which every class keeps), so a fitted
-  slope above it by more than ABOVE_ORDER_TOL is higher-order terms still dominating.
+  slope above it by more than ABOVE_ORDER_TOL is higher-order terms still dominating; a black
+  box is bounded by its declared claims the same way.
 Used by the float64 sweep (`harness.experiments.convergence`) and the real128 one
 (`harness.extended`) alike.
 """
@@ -80,12 +81,21 @@ def coefficient_floor(coefficients, problem, *, span: float, scale: float,
 
 
 def order_bound(stepper: Stepper) -> int | None:
-    """max(order, linear order) of the stepper's coefficients, or None without coefficients."""
+    """max(order, linear order) of the stepper's coefficients; for a black box, of its declared
+    claims (`claimed_order`, and `extra["linear_order"]` where declared): a slope above the
+    claimed order does not contradict the claim (the error is O(h^p) still) and cannot be read as
+    the order either, so those points are pre-asymptotic as for a tableau. None when neither is
+    known (no coefficients and no claimed order)."""
     coefficients = getattr(stepper, "coefficients", None)
     try:
         return max(int(coefficients.order()), int(coefficients.linear_order()))
-    except Exception:  # a black box, or a family without both facts
-        return None
+    except Exception:  # a black box, or a family without both facts: its declared claims
+        info = getattr(stepper, "info", None)
+        claimed = getattr(info, "claimed_order", None)
+        if not isinstance(claimed, int) or isinstance(claimed, bool) or getattr(info, "adaptive", False):
+            return None
+        linear = (getattr(info, "extra", None) or {}).get("linear_order")
+        return max(claimed, linear) if isinstance(linear, int) and not isinstance(linear, bool) else claimed
 
 
 def mark_above_order(h: np.ndarray, error: np.ndarray, reasons: np.ndarray,
@@ -99,5 +109,6 @@ def mark_above_order(h: np.ndarray, error: np.ndarray, reasons: np.ndarray,
     if slope <= bound + tol.ABOVE_ORDER_TOL:
         return ""
     reasons[kept] = "pre-asymptotic"
-    return (f"slope {slope:.3f} over the settled points is above the coefficients' order bound {bound} "
-            f"(max of order and linear order): higher-order error terms still dominate there")
+    return (f"slope {slope:.3f} over the settled points is above the order bound {bound} (max of "
+            f"order and linear order, from the coefficients or the declared claims): higher-order "
+            f"error terms still dominate there")

@@ -18,6 +18,7 @@ Families
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -165,7 +166,19 @@ class ButcherTableau:
         return out.reshape(z.shape)
 
     def fingerprint(self) -> str:
-        """A stable text form of the coefficients, for cache keys."""
+        """A stable text form of the coefficients, for cache keys: the float64 arrays the loops
+        run and the exact form (or that there is none). Two records with the same floats, one
+        exact and one given only to float64, differ in what follows from them (the real128
+        rerun, the coefficients' error floor), so they must not share a cached result."""
+        if self.exact is None:
+            exact = "float64"
+        else:
+            exact = "exact:" + hashlib.sha256(repr((self.exact, self.exact_b_hat)).encode()).hexdigest()
+        return f"{self.float_fingerprint()}:{exact}"
+
+    def float_fingerprint(self) -> str:
+        """The float64 arrays alone: equal for the same method however precisely it was given
+        (what a claim about a method matches on)."""
         embedded = "" if self.b_hat is None else ":" + self.b_hat.tobytes().hex()
         return f"rk:{self.A.tobytes().hex()}:{self.b.tobytes().hex()}:{self.c.tobytes().hex()}{embedded}"
 
@@ -285,7 +298,14 @@ class SplittingScheme:
         return np.array([v for k, v in self.sequence if k == "D"])
 
     def fingerprint(self) -> str:
-        """The coefficients, exactly, as text (what a cell key records of the method)."""
+        """The coefficients as run and their exact form (or that there is none), as text (what a
+        cell key records of the method: only an exact record is rerun in real128)."""
+        exact = "float64" if self.exact is None else "exact:" + hashlib.sha256(
+            repr(self.exact).encode()).hexdigest()
+        return f"{self.float_fingerprint()}:{exact}"
+
+    def float_fingerprint(self) -> str:
+        """The float64 sequence alone: equal for the same method however precisely it was given."""
         return "split:" + ";".join(f"{k}{v!r}" for k, v in self.sequence)
 
     # -- what the coefficients say about the method --------------------------------------------

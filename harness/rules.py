@@ -4,16 +4,29 @@ Every rule reads `harness.facts.MethodFacts` and `ProblemFacts` and says why in 
 The gate, every experiment and the report use these rules; none of them looks at a name, so a
 user's method with the same coefficients as a built-in gets the same expectation.
 
-Convergence (`convergence_expectation`), first rule that applies:
-1. adaptive method: judged by its tolerance sweep (`meets-tolerance`);
+Convergence (`convergence_expectation`), first rule that applies. Each verdict rests on the
+theorem cited with it; a slope is read against it only over the asymptotic range, where the
+global error's expansion e(h) = C_p h^p + O(h^(p+1)) holds (HNW I, II.8, Theorem 8.1):
+1. adaptive method: judged by its tolerance sweep (`meets-tolerance`), see below;
 2. the solution is a polynomial of degree d in t and the method's linear order is >= d: `exact`
-   (the one-step map is the Taylor polynomial of the exact flow up to degree d);
+   (the one-step map is the Taylor polynomial of the exact flow up to degree d). Such a problem
+   is y' = Ay + b with A nilpotent (A^(d+1) = 0), where a Runge-Kutta step is y_1 = R(hA) y_0
+   (augmented by b) and R(hA) = exp(hA) once R(z) agrees with e^z to degree d, so every step is
+   exact up to rounding (the stability function, Hairer & Wanner II, IV.3; HNW I, II.2 for the
+   Taylor expansion of the numerical solution);
 3. linear constant-coefficient problem: `converged` at the linear order (R(z) against e^z),
-   which exceeds the order for some methods (several SSP methods, Merson's);
+   which exceeds the order for some methods (several SSP methods, Merson's). On y' = Ay the
+   step is y_1 = R(hA) y_0, whose local error R(hA) - exp(hA) = O(h^(q+1)) for R(z) = e^z +
+   O(z^(q+1)) (HW II, IV.3); local errors of order q + 1 carried by a stable recursion give a
+   global error O(h^q) (Lady Windermere's fan, HNW I, II.3, Theorem 3.4);
 4. a problem class where elementary differentials vanish (x'' = g(x) as a first-order system,
    a right-hand side polynomial of degree d in the state; `harness.theory.classes`): `converged`
-   at the Runge-Kutta method's order on that class where it exceeds the order (HNW I, II.2 and
-   II.14: only the surviving trees' conditions enter the local error);
+   at the Runge-Kutta method's order on that class where it exceeds the order. The local error
+   is a sum over rooted trees of the order-condition defects times elementary differentials
+   (HNW I, II.2, Theorem 2.13); on x'' = g(x) only the Nystrom trees survive (HNW I, II.14), and
+   for a polynomial field of degree d every tree with a vertex of more than d children
+   vanishes, so only the surviving trees' conditions enter, and the global order follows from
+   the local one as in rule 3 (HNW I, II.3, Theorem 3.4);
 5. an implicit Runge-Kutta method on a problem that is stiff over its horizon (the fastest
    decay rate times the horizon above STIFF_HORIZON_DECAYS) whose stage order q is below its
    order p: `converged` with any order in [q, p] (`order_low` = q). On the Prothero-Robinson
@@ -21,7 +34,12 @@ Convergence (`convergence_expectation`), first rule that applies:
    and the method is B-convergent of order q (Hairer & Wanner II, IV.15, Theorem 15.3; for
    singularly perturbed problems VI.3); a sweep whose steps cross h|lambda| ~ 1 sees a slope
    between the stiff and the classical order that no theorem fixes, so the range is the verdict;
-6. otherwise `converged` at the order (from coefficients, or the claim of a black box).
+6. otherwise `converged` at the order (from coefficients, or the claim of a black box): a
+   one-step method of order p (local error O(h^(p+1)), HNW I, II.2) with a Lipschitz increment
+   converges with global error O(h^p) (HNW I, II.3, Theorem 3.6); a zero-stable linear
+   multistep method of order p, with starting values of error O(h^p), likewise (Dahlquist;
+   HNW I, III.4, and III.10 for x'' = f(x) methods). A black box's order is its claim's own
+   words, tested by the same expansion.
 Verdicts that say "not measurable here" rather than "wrong" (`tolerated`):
 - `insufficient-range` always: the measurement states the limit that stopped it (work budget,
   float64 floor, reference accuracy) and the order is then judged on the other problems;

@@ -36,7 +36,6 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
-import platform
 import statistics
 import sys
 import time
@@ -51,6 +50,7 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.errors import InputError
+from harness.provenance import cpu_model
 
 __all__ = ["Timing", "measure", "relative_spread", "machine_info", "baseline_step",
            "time_to_target", "time_to_target_table", "method_identity",
@@ -171,18 +171,6 @@ def measure(fn: Callable[[], Any], *, warmup: int = 0, min_repeats: int = tol.TI
 
 
 # -- the machine ----------------------------------------------------------------------------------
-@lru_cache(maxsize=1)
-def _cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown"
-
-
 def machine_info() -> dict[str, Any]:
     """What a timing depends on besides the code (module docstring, rule 5).
 
@@ -207,7 +195,7 @@ def machine_info() -> dict[str, Any]:
         load = float(os.getloadavg()[0])
     except OSError:
         load = float("nan")
-    return {"cpu": _cpu_model(), "cores": int(os.cpu_count() or 1), "blas": blas,
+    return {"cpu": cpu_model(), "cores": int(os.cpu_count() or 1), "blas": blas,
             "blas_threads": threads, "load_1min": load}
 
 

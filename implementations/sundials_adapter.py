@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.c_streams import c_stdout_to_stderr
+from harness.c_streams import library_output_captured
 from harness.stepper import AdaptiveStepper, StepFailure
 from harness.tolerances import SCIPY_MIN_RTOL
 from implementations import optional_library
@@ -92,15 +92,17 @@ class CvodeStepper(MemberByMemberStepper):
     def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
                       y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
         try:
-            with c_stdout_to_stderr():
+            with library_output_captured() as printed:
                 sol = self._solver(member).solve(np.array([t, target]), y)
         except Exception as exc:  # the adapter's work limit, or CVODE refusing the input
             raise StepFailure(f"stepper {self.info.name!r}: CVODE stopped for ensemble "
                               f"member {m} between t={t!r} and t={target!r}: "
                               f"{type(exc).__name__}: {exc}") from None
         if not sol.success:
+            said = printed.last_line()
             raise StepFailure(f"stepper {self.info.name!r}: CVODE failed for ensemble member "
-                              f"{m} between t={t!r} and t={target!r}: {sol.message}")
+                              f"{m} between t={t!r} and t={target!r}: {sol.message}"
+                              + (f" (SUNDIALS: {said})" if said else ""))
         return sol.y[-1], {"internal_steps": int(sol.t.size - 1)}  # every internal step is returned
 
 

@@ -8,6 +8,7 @@ import importlib.util
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 
 from harness import code_versions, keys
@@ -210,3 +211,73 @@ def test_parsed_imports_kept_on_disk_are_read_back_and_a_damaged_file_is_parsed_
     code_versions._module_imports.cache_clear()
     assert keys.measuring_modules(exp) == first  # parsed again and rewritten
     assert all(f.read_text().startswith('{"key"') for f in stored)
+
+
+# -- exact and float64 records of the same method --------------------------------------------------
+_KUTTA3 = ([[0, 0, 0], ["1/2", 0, 0], [-1, 2, 0]], ["1/6", "2/3", "1/6"])
+
+
+def _kutta3(exact: bool):
+    from fractions import Fraction
+
+    from harness.coefficients import ButcherTableau
+    from harness.methods import Method
+
+    as_number = (lambda x: Fraction(x)) if exact else (lambda x: float(Fraction(x)))
+    A = [[as_number(x) for x in row] for row in _KUTTA3[0]]
+    table = ButcherTableau("kutta3-cache-twin", A, [as_number(x) for x in _KUTTA3[1]])
+    return Method(table, 3, "W. Kutta, Z. Math. Phys. 46 (1901) 435").stepper()
+
+
+def test_an_exact_record_and_its_float64_twin_never_share_a_cell_key():
+    """Same floats, same name: only the exact one can be rerun in real128 (and has no error floor
+    of its digits), so a cell cached for one must never be served for the other."""
+    from harness import registry
+
+    keys_by_kind = {}
+    for exact in (True, False, True):
+        stepper = _kutta3(exact)
+        registry.steppers.register(stepper, replace=True)
+        try:
+            keys_by_kind.setdefault(exact, set()).add(keys.code_version(stepper.info.name, "harmonic"))
+        finally:
+            registry.steppers.unregister(stepper.info.name)
+    assert _kutta3(True).coefficients.exact is not None and _kutta3(False).coefficients.exact is None
+    assert np.array_equal(_kutta3(True).coefficients.b, _kutta3(False).coefficients.b)
+    assert len(keys_by_kind[True]) == 1  # the same record keeps its key
+    assert keys_by_kind[True].isdisjoint(keys_by_kind[False])
+
+
+def test_every_registered_exact_record_shares_its_fingerprint_with_a_float64_twin_only_when_equal():
+    """A twin built from a record's float64 values alone is the same record (same fingerprint)
+    exactly when its exact form is the record's (dyadic coefficients), and never otherwise."""
+    from harness.coefficients import ButcherTableau, SplittingScheme
+    from harness.registry import get_stepper, steppers
+
+    seen = {ButcherTableau: 0, SplittingScheme: 0}
+    for name in steppers.names():
+        c = getattr(get_stepper(name), "coefficients", None)
+        if type(c) not in seen or c.exact is None:
+            continue
+        if isinstance(c, ButcherTableau):
+            twin = ButcherTableau(c.name, c.A, c.b, c.c, c.b_hat)
+            same = twin.exact == c.exact and twin.exact_b_hat == c.exact_b_hat
+        else:
+            twin = SplittingScheme(c.name, list(c.sequence))
+            same = twin.exact == c.exact
+        assert twin.float_fingerprint() == c.float_fingerprint(), name
+        assert (twin.fingerprint() == c.fingerprint()) == same, name
+        seen[type(c)] += not same
+    assert all(n >= 1 for n in seen.values()), seen  # exact records that float64 cannot hold
+
+
+def test_a_course_claim_matches_a_method_however_precisely_its_record_is_given():
+    """The course's RK4 is written in float64 (1/6 rounded); the catalogue's rk4 is exact. They
+    key different cells, yet the claim about the method applies to it."""
+    from harness.registry import get_stepper
+    from harness.report.claims import RK4, steppers_with
+
+    record = get_stepper("rk4").coefficients
+    assert RK4.exact is None and record.exact is not None
+    assert RK4.fingerprint() != record.fingerprint()
+    assert "rk4" in steppers_with(RK4)

@@ -119,10 +119,25 @@ def test_a_slope_above_the_coefficients_order_bound_is_marked_pre_asymptotic():
     h, e = _series([9.0] * 6)
     reasons = np.array([""] * h.size, dtype=object)
     why = mark_above_order(h, e, reasons, 8)
-    assert "above the coefficients' order bound 8" in why and set(reasons) == {"pre-asymptotic"}
+    assert "above the order bound 8" in why and set(reasons) == {"pre-asymptotic"}
     reasons = np.array([""] * h.size, dtype=object)
     assert mark_above_order(h, e, reasons, 9) == "" and set(reasons) == {""}
     assert tol.ABOVE_ORDER_TOL <= tol.GATE_ORDER_TOL
+
+
+@pytest.mark.parametrize("claimed, extra, adaptive, bound", [
+    (8, {}, False, 8),                      # a black box's claimed order bounds its slope
+    (3, {"linear_order": 4}, False, 4),     # a declared linear order above it raises the bound
+    (None, {}, False, None),                # nothing declared: no bound
+    (5, {}, True, None),                    # adaptive: judged by its tolerance sweep, not a slope
+])
+def test_a_black_box_is_bounded_by_its_declared_claims(claimed, extra, adaptive, bound):
+    from types import SimpleNamespace
+
+    from harness.coefficient_floors import order_bound
+
+    box = SimpleNamespace(info=SimpleNamespace(claimed_order=claimed, extra=extra, adaptive=adaptive))
+    assert order_bound(box) == bound
 
 
 # -- published methods through the convergence experiment (cheap cells only) -------------------------------

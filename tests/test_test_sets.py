@@ -187,26 +187,31 @@ def test_without_the_implicit_solvers_a_stiff_problem_is_refused_as_stiff(withou
         reference(_prothero_robinson(), [10.0])
 
 
-def test_a_libraries_c_level_stdout_goes_to_stderr_while_it_runs():
-    """What C code prints to stdout inside `c_stdout_to_stderr` (SUNDIALS' warnings, through
-    printf's buffer or straight to fd 1) lands on stderr; Python's stdout is left alone."""
+def test_what_a_library_prints_while_it_runs_is_captured_not_written():
+    """What a library prints to stdout inside `library_output_captured` (SUNDIALS' warnings
+    through printf's buffer or straight to fd 1, scikit-sundae's Python `print` of SUNDIALS'
+    errors) reaches neither stdout nor stderr but the caller; output before and after is kept."""
     import subprocess
     import sys
 
     code = (
         "import ctypes, os\n"
-        "from harness.c_streams import c_stdout_to_stderr\n"
+        "from harness.c_streams import library_output_captured\n"
         "libc = ctypes.CDLL(None)\n"
         "print('before', flush=True)\n"
-        "with c_stdout_to_stderr():\n"
+        "with library_output_captured() as printed:\n"
         "    libc.printf(b'buffered C text\\n')\n"
         "    os.write(1, b'raw fd text\\n')\n"
+        "    print('[cvHandleFailure, Error: -3] python text')\n"
         "print('after', flush=True)\n"
+        "print('captured:', repr(printed.text), repr(printed.last_line()), flush=True)\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split() == ["before", "after"]
-    assert "buffered C text" in proc.stderr and "raw fd text" in proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[:2] == ["before", "after"] and proc.stderr == ""
+    for text in ("buffered C text", "raw fd text", "python text"):
+        assert text in lines[2]
 
 
 def _two_scales() -> Problem:

@@ -161,7 +161,9 @@ IMEX = {"kencarp3": (diffrax.KenCarp3, 3), "kencarp4": (diffrax.KenCarp4, 4),
 
 
 def all_steppers() -> dict[str, StateStepper]:
-    out = {f"diffrax-{k}": stepper(s, order=p, name=f"diffrax-{k}", embedded_order=EMBEDDED.get(k))
+    out = {f"diffrax-{k}": stepper(s, order=p, name=f"diffrax-{k}", embedded_order=EMBEDDED.get(k),
+                                   coefficients=published_tableau(s)
+                                   if hasattr(type(s), "tableau") else None)
            for k, (s, p) in EXPLICIT.items()}
     out.update({f"{out[f'diffrax-{k}'].info.name}@embedded": out[f"diffrax-{k}"].embedded()
                 for k in EMBEDDED})

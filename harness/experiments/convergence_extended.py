@@ -2,8 +2,8 @@
 
 Where the float64 rounding floor ended a sweep before its asymptotic range, the same exact
 coefficients run in real128 (`harness.extended`) and those rows replace the float64 ones, or the
-message says why not. A slope above the coefficients' order bound
-(`harness.coefficient_floors.order_bound`) marks the float64 points pre-asymptotic first, so
+message says why not. A slope above the order bound (the coefficients', or a black box's
+claims: `harness.coefficient_floors.order_bound`) marks the float64 points pre-asymptotic first, so
 such a sweep is rerun like any floor-bound one.
 """
 

@@ -91,7 +91,7 @@ def _radau(problem, times, y0, t0, pars, atol):
 def _cvode(problem, times, y0, t0, pars, atol):
     from sksundae.cvode import CVODE
 
-    from harness.c_streams import c_stdout_to_stderr
+    from harness.c_streams import library_output_captured
 
     fn = _Counted(problem, pars, "CVODE BDF")
 
@@ -104,13 +104,14 @@ def _cvode(problem, times, y0, t0, pars, atol):
     grid = np.concatenate([[t0], times]) if times[0] > t0 else times
     solver = CVODE(rhs, method="BDF", rtol=STIFF_REFERENCE_RTOL, atol=atol, jacfn=jac,
                    max_num_steps=STIFF_REFERENCE_MAX_EVALS)
-    with c_stdout_to_stderr():
+    with library_output_captured() as printed:
         sol = solver.solve(grid, y0)
     # two output times: scikit-sundae returns every internal step (the last is the end point)
     rows = sol.y[-1:] if grid.size == 2 else sol.y
     if not sol.success or rows.shape[0] != (1 if grid.size == 2 else grid.size):
+        said = printed.last_line()
         raise ReferenceError_(f"stiff reference for problem {problem.name!r}: CVODE BDF failed: "
-                              f"{sol.message}")
+                              f"{sol.message}" + (f" (SUNDIALS: {said})" if said else ""))
     return rows[-times.size:]
 
 

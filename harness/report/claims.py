@@ -104,15 +104,17 @@ STORMER = SecondOrderMultistep("two-step Verlet form (Stormer)", alpha=[1, -2, 1
 
 def steppers_with(*records: object) -> list[str]:
     """The registered steppers whose coefficients are one of `records` (same kind, same
-    fingerprint)."""
+    values as run in float64, whether given exactly or not)."""
     from harness import registry
 
-    wanted = {(type(r), r.fingerprint()) for r in records}  # type: ignore[attr-defined]
+    def identity(c) -> tuple:
+        return type(c), getattr(c, "float_fingerprint", c.fingerprint)()
+
+    wanted = {identity(r) for r in records}
     out = []
     for name in registry.steppers.names():
         coeffs = getattr(registry.get_stepper(name), "coefficients", None)
-        if coeffs is not None and hasattr(coeffs, "fingerprint") \
-                and (type(coeffs), coeffs.fingerprint()) in wanted:
+        if coeffs is not None and hasattr(coeffs, "fingerprint") and identity(coeffs) in wanted:
             out.append(name)
     return out
 

@@ -14,11 +14,13 @@ import pytest
 
 STEPPERS = ds.all_steppers()
 
-# (stepper, problems): every solver on two problems where its claim is measurable in float64
-# Dopri8's error on harmonic, kepler-circular and pendulum-small is still pre-asymptotic over the
-# sweep's float64 range (fitted slopes 8.82-8.83, drifting down to 8); on the Henon-Heiles
-# problems the asymptotic range is reached (7.88, 7.94).
-PROBLEMS = {"dopri8": ["henon-heiles", "henon-heiles-chaotic"]}
+# (stepper, problems): every solver on two problems where its claim is measurable in float64.
+# Dopri8's order is not measurable on harmonic and kepler-circular (nor pendulum-small): over the
+# float64 range its slope is 8.82-8.83, above the order bound 8 of diffrax's own tableau, because
+# its linear error constant is tiny (R(z) - e^z = -3.6e-9 z^9 - 3.3e-8 z^10 + ...: the slope is
+# within 0.2 of 8 only below h ~ 0.05, where the error is below float64 rounding). The harness
+# says so (insufficient-range), and Henon-Heiles, where the asymptotic range is reached, measures it.
+PROBLEMS = {"dopri8": ["harmonic", "kepler-circular", "henon-heiles"]}
 ORDER_CASES = [
     *[(f"diffrax-{k}", PROBLEMS.get(k, ["harmonic", "kepler-circular"])) for k in ds.EXPLICIT],
     *[(f"diffrax-{k}@embedded", ["harmonic", "kepler-circular"]) for k in ds.EMBEDDED],
