@@ -260,7 +260,7 @@ def test_a_problem_at_fault_fails_its_cells_naming_the_problem(case, registered,
 def test_true_invariants_of_the_catalogue_pass_the_flow_check():
     """The check must not blame a correct problem (Lennard-Jones starts at an equilibrium,
     where dI/dt cancels inside each term: the drift along the orbit clears it)."""
-    from harness.problem.validation import check_invariants_along_flow
+    from harness.invariant_checks import check_invariants_along_flow
 
     for problem in registry.problems.all():
         check_invariants_along_flow(problem)

@@ -77,7 +77,7 @@ from harness.experiments.common import (
     problem_cells,
     summary_per_cell,
 )
-from harness.problem.validation import check_invariants_along_flow
+from harness.invariant_checks import check_invariants_along_flow
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = [

@@ -5,16 +5,9 @@ At construction (`check_definition`, cheap, no compile): the name (`harness.name
 state of distinct heyoka variables, real finite start values (complex values are refused, never
 cast), and a Newtonian form with one velocity per position.
 
-Against the flow (`check_invariants_along_flow`, once per definition, on first use by an
-experiment that reads invariants): a declared invariant I must satisfy
-dI/dt = grad I . f + dI/dt|explicit = 0 along the problem's own float64 Taylor orbit
-(`harness.scales.sample_orbit`), to INVARIANT_FLOW_RTOL of |grad I| |f| + |dI/dt|. The
-derivative is formed symbolically (`hy.diff`) and evaluated at the orbit's samples; where the
-terms cancel inside themselves (forces near an equilibrium) that ratio is not resolved, so an
-invariant fails only when it also moves along the orbit by more than INVARIANT_FLOW_DRIFT of its
-size. A declared invariant that fails is the problem's error (`ProblemError`), so no method is blamed for not
-conserving it. A singularity within the span is detected from the same orbit
-(`harness.scales.derive_time_scale`).
+Against the flow (declared invariants checked along the problem's own orbit, and singularities
+within the span) is `harness.invariant_checks` and `harness.scales`: they need the orbit, a
+layer above the contracts.
 """
 
 from __future__ import annotations
@@ -27,7 +20,7 @@ import numpy as np
 from harness.errors import InputError, ProblemError
 from harness.names import check_name
 
-__all__ = ["check_definition", "check_start", "check_invariants_along_flow", "exact_state"]
+__all__ = ["check_definition", "check_start", "exact_state"]
 
 
 def check_definition(name: Any, variables: Sequence[Any], newtonian: Any) -> str:
@@ -91,63 +84,6 @@ def check_start(name: str, y0: Any, dim: int) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise InputError(f"problem {name!r}: `y0` must be finite, got {arr.tolist()}")
     return arr
-
-
-def check_invariants_along_flow(problem) -> None:
-    """Raise `ProblemError` when a declared invariant is not conserved by the problem's own
-    exact flow (see the module docstring); remembered per definition (`harness.derived`)."""
-    if not problem.invariants:
-        return
-    from harness.derived import remembered
-
-    defects = remembered("harness.problem.validation", "invariant_defects",
-                         [problem.fingerprint()], lambda: _invariant_defects(problem))
-    if defects:
-        worst = ", ".join(f"{k!r} (relative dI/dt = {r:.2g} at t = {t:.6g})"
-                          for k, r, t in defects)
-        raise ProblemError(
-            f"problem {problem.name!r}: declared invariant(s) {worst} not conserved by the "
-            "problem's own exact flow (dI/dt = grad I . f is not zero); the problem definition "
-            "is at fault, no method is judged on it")
-
-
-def _invariant_defects(problem) -> list:
-    import heyoka as hy
-
-    from harness import tolerances as tol
-    from harness.scales import sample_orbit
-
-    orbit = sample_orbit(problem)
-    idx = np.arange(orbit.t.size)
-    if idx.size > tol.ORBIT_MAX_SAMPLES:
-        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
-    t, y = orbit.t[idx], np.ascontiguousarray(orbit.y[:, idx])
-    pars = problem.pars_for(t.size)
-    names = sorted(problem.invariants)
-    clock = hy.make_vars("harness_explicit_time_")
-    exprs, spans = [], []
-    for k in names:
-        inv = problem.invariants[k]
-        terms = [hy.diff(inv, v) * f for v, f in zip(problem.variables, problem.rhs, strict=True)]
-        explicit = hy.subs(hy.diff(hy.subs(inv, {hy.time: clock}), clock), {clock: hy.time})
-        spans.append((len(exprs), len(exprs) + len(terms) + 1))
-        exprs += [*terms, explicit, inv]
-    out = hy.cfunc(exprs, list(problem.variables))(y, pars=pars, time=t)
-    defects = []
-    for k, (a, b) in zip(names, spans, strict=True):
-        rate, scale = np.abs(np.sum(out[a:b], axis=0)), np.sum(np.abs(out[a:b]), axis=0)
-        values = out[b]
-        with np.errstate(all="ignore"):
-            drift = float(np.max(np.abs(values - values[0])) / np.max(np.abs(values)))
-        if not drift > tol.INVARIANT_FLOW_DRIFT:  # kept along the orbit: cancellation, not a defect
-            continue
-        with np.errstate(all="ignore"):
-            rel = np.where(scale > 0.0, rate / scale, np.where(rate > 0.0, np.inf, 0.0))
-        rel = np.where(np.isfinite(rate), rel, 0.0)
-        j = int(np.argmax(rel))
-        if rel[j] > tol.INVARIANT_FLOW_RTOL:
-            defects.append((k, float(rel[j]), float(t[j])))
-    return defects
 
 
 def exact_state(problem, t: float, y0: np.ndarray) -> np.ndarray:

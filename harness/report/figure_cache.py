@@ -25,7 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["cached_call", "figure_cache_dir", "code_version", "MAX_AGE_DAYS"]
+__all__ = ["cached_call", "figure_cache_dir", "code_version", "keep_figures_of", "MAX_AGE_DAYS"]
 
 # An entry nobody has read for this long belongs to an old run or old drawing code.
 MAX_AGE_DAYS = 14
@@ -69,6 +69,19 @@ def _key(fn: Callable, args: tuple, kwargs: dict) -> str | None:
     return h.hexdigest()[:40]
 
 
+_figure_type: type | None = None
+
+
+def keep_figures_of(cls: type) -> type:
+    """Register the figure class whose results the cache keeps (`harness.report.figure_svg`
+    registers its `Figure`; this module imports no drawing code, so the two stay acyclic). Its
+    objects have `slug`, `svg`, `alt`, `css` and `data` (a DataFrame or None) and are rebuilt
+    from those fields. Until a class is registered nothing is cached."""
+    global _figure_type
+    _figure_type = cls
+    return cls
+
+
 def cached_call(fn: Callable, args: tuple, kwargs: dict) -> Any:
     """`fn(*args, **kwargs)`, from the cache when the same call was drawn before."""
     directory = figure_cache_dir()
@@ -96,8 +109,9 @@ def _read(path: Path) -> Any:
     """The Figure (or None) kept at `path` (+ its `.parquet` table): JSON and Parquet only."""
     import json
 
-    from harness.report.figure_svg import Figure
-
+    Figure = _figure_type
+    if Figure is None:
+        raise LookupError("no figure class registered")
     with open(path, encoding="utf-8") as fh:
         entry = json.load(fh)
     if entry is None:
@@ -114,9 +128,7 @@ def _read(path: Path) -> Any:
 def _write(directory: Path, key: str, result: Any) -> None:
     import json
 
-    from harness.report.figure_svg import Figure
-
-    if result is not None and not isinstance(result, Figure):
+    if _figure_type is None or (result is not None and not isinstance(result, _figure_type)):
         return  # only figures are kept
     tmp = [directory / f".{key}.{os.getpid()}.{ext}.tmp" for ext in ("parquet", "json")]
     try:

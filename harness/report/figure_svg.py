@@ -18,6 +18,7 @@ from typing import Any
 
 import pandas as pd
 
+from harness.report.figure_cache import keep_figures_of
 from harness.report.figure_style import RC_PARAMS
 from harness.report.svg_paths import SVG_DECIMALS, compact_path, dedupe_style, round_numbers
 
@@ -37,6 +38,7 @@ class UnsafeFigureError(ValueError):
     """A figure's SVG holds something that must not be embedded in the report."""
 
 
+@keep_figures_of
 @dataclass(frozen=True)
 class Figure:
     """One figure: its slug (unique in the report), inline SVG text, a short alt text, the
