@@ -201,6 +201,8 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
     if expectation.verdict == "meets-tolerance":
         if verdict == "meets-tolerance":
             return "pass", expectation.reason
+        if verdict == "insufficient-range":  # no tolerance of the sweep inside the library's range
+            return "not-measurable", msg or "adaptive stepper: no tolerance of the sweep could run"
         return "fail", f"adaptive stepper: {verdict}" + (f": {msg}" if msg else "")
     if verdict == expectation.verdict:
         if expectation.order is None:

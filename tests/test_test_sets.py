@@ -303,3 +303,29 @@ def test_a_stiff_problems_horizon_reaches_past_its_initial_layer():
     assert rate == pytest.approx(k * 2**0.5, rel=1e-3)
     assert HORIZON_PERIODS * p.time_scale.period * rate < STIFF_HORIZON_STEPS
     assert p.convergence_t_end == pytest.approx(STIFF_HORIZON_STEPS / rate)
+
+
+def test_a_sweep_whose_every_tolerance_is_outside_the_library_range_is_not_measurable():
+    """No tolerance ran (each below the library's documented minimum): the cell is
+    `insufficient-range` with the reason and the rule calls it not measurable, never a pass on
+    zero points nor a failure."""
+    import pandas as pd
+
+    from harness.experiments.convergence_verdicts import summarize_cell
+    from harness.registry import steppers
+    from harness.rules import Expectation, judge_convergence
+
+    stepper = steppers.get("scipy-radau")
+    why = "tol 1e-15 is outside scipy's documented range (rtol >= 2.2e-14)"
+    g = pd.DataFrame({
+        "kind": ["tolerance-not-run"] * 2, "tol": [1e-14, 1e-15], "excluded": ["tol-range"] * 2,
+        "in_fit": [False, False], "error": [np.nan, np.nan], "h": [np.nan, np.nan],
+        "n_steps": [0, 0], "reference_error": [1e-20, 1e-20], "reference_precision": ["float64"] * 2,
+        "rounding_level": [1e-16, 1e-16], "wall_s": [0.0, 0.0], "message": [why, why],
+        "t_end": [1.0, 1.0],
+    })
+    record = summarize_cell(stepper, "harmonic", g)
+    assert record["verdict"] == "insufficient-range"
+    assert "no tolerance of the sweep ran" in record["message"] and "outside" in record["message"]
+    outcome, reason = judge_convergence(record, Expectation("meets-tolerance", None, (), "adaptive"))
+    assert outcome == "not-measurable" and "outside" in reason

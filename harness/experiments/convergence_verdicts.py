@@ -56,6 +56,16 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         "message": "",
     }
     messages = [m for m in g.get("message", pd.Series(dtype=str)).fillna("") if m]
+    not_run = g[g.kind == "tolerance-not-run"]
+    if not (g.kind == "tolerance").any() and (not_run.excluded == "tol-range").any():
+        # every tolerance of the sweep is outside the library's documented range: nothing ran,
+        # so nothing is judged (not a pass on zero points, not a failure)
+        listed = ", ".join(f"{t:.0e}" for t in sorted(not_run.tol, reverse=True))
+        first = str(not_run[not_run.excluded == "tol-range"].message.iloc[0])
+        why = first[first.find(" is outside") + 1:] if " is outside" in first else first
+        base["verdict"] = "insufficient-range"
+        base["message"] = f"not measurable: no tolerance of the sweep ran (tol {listed}): {why}"
+        return base
     if (g.kind == "tolerance").any():
         t = g[g.kind == "tolerance"]
         scale = t.rounding_level / tol.EPS  # the state's size, as the sweep measured it
