@@ -329,3 +329,30 @@ def test_a_sweep_whose_every_tolerance_is_outside_the_library_range_is_not_measu
     assert "no tolerance of the sweep ran" in record["message"] and "outside" in record["message"]
     outcome, reason = judge_convergence(record, Expectation("meets-tolerance", None, (), "adaptive"))
     assert outcome == "not-measurable" and "outside" in reason
+
+
+@pytest.mark.parametrize("error, verdict", [(np.inf, "unstable"), (np.nan, "failed")])
+def test_a_shortened_horizon_note_is_no_failure_but_a_step_that_could_not_be_completed_is(error, verdict):
+    """Every point of a stiff sweep blew up (rk4 on E5) and each row carries the sweep's note that
+    the horizon was shortened: `unstable` (tolerated where the problem is stiff for the method),
+    not `failed`; a point whose step could not be completed (error NaN, StepFailure's message) is
+    still `failed` with that message."""
+    import pandas as pd
+
+    from harness.experiments.convergence_verdicts import summarize_cell
+    from harness.registry import steppers
+
+    note = "work budget spent with 0 asymptotic point(s) up to t = 60; horizon shortened to t = 15"
+    failure = "stepper 'x': Newton iteration did not converge at t=0.9"
+    last = f"{note}; {failure}" if np.isnan(error) else note
+    g = pd.DataFrame({
+        "kind": ["global"] * 3, "h": [1.0, 0.5, 0.25], "error": [np.inf, np.inf, error],
+        "excluded": ["blow-up", "blow-up", "blow-up" if np.isinf(error) else ""],
+        "in_fit": [False] * 3, "n_steps": [4, 8, 16], "reference_error": [1e-20] * 3,
+        "reference_precision": ["float64"] * 3, "rounding_level": [1e-16] * 3, "wall_s": [0.0] * 3,
+        "message": [note, note, last], "t_end": [15.0] * 3,
+    })
+    record = summarize_cell(steppers.get("rk4"), "bari-e5", g)
+    assert record["verdict"] == verdict
+    if verdict == "failed":
+        assert failure in record["message"]

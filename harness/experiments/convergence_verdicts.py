@@ -114,8 +114,13 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
     finite = gl[np.isfinite(gl.error) & (gl.error <= tol.BLOWUP_ERROR)]
     at_floor = gl.excluded.isin(["roundoff", "reference"])
     blew_up = gl.excluded == "blow-up"
-    if messages and finite.empty:
-        base["verdict"], base["message"] = "failed", messages[0]
+    # a step that could not be completed (StepFailure) leaves its point's error NaN with the
+    # failure as message; the sweep's own notes (a shortened horizon) sit on every row and are no
+    # failure: a sweep whose every point blew up is `unstable`, not `failed`
+    failures = [m for m, e in zip(gl.get("message", pd.Series(dtype=str)).fillna(""), gl.error,
+                                  strict=True) if m and np.isnan(e)]
+    if failures and finite.empty:
+        base["verdict"], base["message"] = "failed", failures[0]
     elif len(gl) and at_floor.all():
         base["verdict"] = "exact"
     elif len(kept) >= tol.MIN_FIT_POINTS:
