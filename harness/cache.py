@@ -21,7 +21,8 @@ from typing import Any, TypeVar
 
 T = TypeVar("T")
 
-__all__ = ["cache_dir", "code_dir", "configure_heyoka_cache", "IntegratorPool"]
+__all__ = ["cache_dir", "code_dir", "configure_heyoka_cache", "IntegratorPool", "interruptible",
+           "set_exit_status"]
 
 _configured: Path | None = None
 
@@ -81,10 +82,26 @@ def float64_taylor_settings(problem) -> dict[str, Any]:
 
 def interruptible(build: Callable[[], T]) -> T:
     """`build()` (a heyoka compile: `hy.cfunc`, `hy.taylor_adaptive`), run so that Ctrl-C and
-    SIGTERM still reach this process while it compiles: heyoka releases the GIL while LLVM
-    works, so in the main thread the compile runs in a daemon thread joined in short slices,
-    and a signal handler (KeyboardInterrupt, the CLI's Terminated) runs between them; the
-    abandoned compile ends with the process. Elsewhere it is called directly."""
+    SIGTERM still reach this process while it compiles.
+
+    1. heyoka releases the GIL while LLVM works, so in the main thread the compile runs in a
+       daemon thread joined in short slices, and a signal handler (KeyboardInterrupt, the CLI's
+       Terminated) runs between them. Elsewhere `build()` is called directly.
+    2. An interrupted compile cannot be cancelled: it goes on in its thread. The process then
+       ends through `os._exit` at interpreter exit (`_exit_past_the_compile`), with the status
+       given to `set_exit_status` (130 after Ctrl-C, 143 after SIGTERM unless told otherwise):
+       a normal exit would run LLVM's static destructors under the running compile, which
+       crashes the process (SIGSEGV, seen about one time in four when the signal lands as the
+       compile starts).
+
+    Parameters
+    ----------
+    build : the compile, called without arguments.
+
+    Returns
+    -------
+    What `build()` returned; what it raised is raised here.
+    """
     if threading.current_thread() is not threading.main_thread():
         return build()
     box: dict[str, Any] = {}
@@ -96,12 +113,45 @@ def interruptible(build: Callable[[], T]) -> T:
             box["error"] = exc
 
     worker = threading.Thread(target=work, name="harness-compile", daemon=True)
-    worker.start()
-    while worker.is_alive():
-        worker.join(0.1)
+    try:
+        worker.start()
+        while worker.is_alive():
+            worker.join(0.1)
+    except BaseException as exc:  # a signal while the compile runs: it is abandoned
+        _abandon(130 if isinstance(exc, KeyboardInterrupt) else 143)
+        raise
     if "error" in box:
         raise box["error"]
     return box["value"]
+
+
+_exit_status: list[int] = []  # set once a compile has been abandoned
+
+
+def _abandon(status: int) -> None:
+    if not _exit_status:
+        import atexit
+
+        _exit_status.append(status)
+        atexit.register(_exit_past_the_compile)
+
+
+def set_exit_status(status: int) -> None:
+    """The status the process ends with if a compile was abandoned (`interruptible`, rule 2);
+    without an abandoned compile the process ends normally and this does nothing."""
+    if _exit_status:
+        _exit_status[0] = status
+
+
+def _exit_past_the_compile() -> None:
+    import sys
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    os._exit(_exit_status[0])
 
 
 def configure_heyoka_cache() -> Path:

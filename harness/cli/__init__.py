@@ -190,14 +190,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        return _main(args)
+        code = _main(args)
     except KeyboardInterrupt:  # a second Ctrl-C while the first was being handled
         _ignore_further_signals()
         print("harness: interrupted", file=sys.stderr)
-        return 130
+        code = 130
     finally:  # restored unless the command is ending on a signal (then ignored, see above)
         if previous is not None and signal.getsignal(signal.SIGTERM) is _on_sigterm:
             signal.signal(signal.SIGTERM, previous)
+    from harness import cache
+
+    cache.set_exit_status(code)  # the status kept if an interrupted compile is still running
+    return code
 
 
 def _main(args: argparse.Namespace) -> int:
