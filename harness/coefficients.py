@@ -22,6 +22,7 @@ import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import ClassVar
 
 import numpy as np
 
@@ -59,6 +60,8 @@ class ButcherTableau:
     (`consistency_defect`, `defect_note`) and the order conditions allow for it.
     Derived: `stages`, `explicit` (A strictly lower triangular), `diagonally_implicit`.
     """
+
+    family: ClassVar[str] = "runge-kutta"  # what `harness.theory` reads a coefficient object as
 
     name: str
     A: np.ndarray
@@ -231,6 +234,8 @@ class SplittingScheme:
     palindrome), `force_evals` per step with the first-same-as-last saving when the sequence
     begins and ends with a kick.
     """
+
+    family: ClassVar[str] = "splitting"  # what `harness.theory` reads a coefficient object as
 
     name: str
     sequence: tuple[tuple[str, float], ...]
@@ -407,6 +412,8 @@ class LinearMultistep(_MultistepFacts):
     (sum alpha = 0 and sum j alpha_j = sum beta_j). Derived: `steps` (k), `explicit` (beta_k = 0).
     """
 
+    family: ClassVar[str] = "multistep"  # what `harness.theory` reads a coefficient object as
+
     def __init__(self, name: str, alpha: Sequence[Number], beta: Sequence[Number]):
         a, b = _multistep_arrays(name, alpha, beta, 2)
         j = np.arange(a.size)
@@ -442,6 +449,8 @@ class SecondOrderMultistep(_MultistepFacts):
     (sum alpha = 0, sum j alpha_j = 0, sum j^2 alpha_j / 2 = sum beta_j).
     Stormer's rule (the two-step Verlet form) is alpha = (1, -2, 1), beta = (0, 1, 0).
     """
+
+    family: ClassVar[str] = "second-order multistep"  # what `harness.theory` reads a coefficient object as
 
     def __init__(self, name: str, alpha: Sequence[Number], beta: Sequence[Number]):
         a, b = _multistep_arrays(name, alpha, beta, 3)

@@ -41,11 +41,9 @@ import numpy as np
 from harness import cache
 from harness import tolerances as tol
 from harness.derived import remembered
-from harness.flow import flow_amplification  # noqa: F401  (a scale of the problem's dynamics)
 
 __all__ = [
     "TimeScale",
-    "flow_amplification",
     "Perturbation",
     "Orbit",
     "derive_time_scale",

@@ -32,14 +32,6 @@ EXCEPTIONS: dict[tuple[str, str], str] = {
     ("harness.methods", "implementations.builder"):
         "a method record is built into a stepper by the family step loops of `implementations` "
         "(`build_stepper`); fix: families register their step loop with the registry",
-    # -- a problem's derived scales -------------------------------------------------------------------
-    ("harness.problem.definition", "harness.scales"):
-        "`Problem` offers its time scales and perturbations, derived by `harness.scales` from the "
-        "flow; fix: scales become functions of a problem, asked by whoever needs them",
-    # -- coefficient objects asked about themselves ------------------------------------------------
-    ("harness.coefficients", "harness.theory"):
-        "a coefficient object answers order and stability questions (NodePy style) through the "
-        "theory functions, which take coefficient objects; fix: theory works on arrays only",
     # -- experiments reaching their neighbours ------------------------------------------------------
     ("harness.extended", "harness.experiments.convergence_fit"):
         "extended precision fits its real128 sweep with the convergence experiment's order fit; "

@@ -13,15 +13,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
 from harness.errors import InputError
 from harness.problem.checks import check_positive
 from harness.theory.checks import check_type
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
 
 __all__ = ["rk_stability_function", "lmm_amplification", "second_order_lmm_amplification",
            "splitting_propagator", "spectral_radius", "splitting_amplification",
@@ -31,7 +33,7 @@ __all__ = ["rk_stability_function", "lmm_amplification", "second_order_lmm_ampli
 
 def rk_stability_function(tableau: ButcherTableau, z: Any) -> np.ndarray:
     """R(z) = 1 + z b^T (I - zA)^{-1} e for an array of complex z (poles give inf or nan)."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     z = np.asarray(z, dtype=complex)
     with np.errstate(all="ignore"):
         try:
@@ -77,7 +79,7 @@ def _max_root_modulus(coeffs: np.ndarray) -> np.ndarray:
 def lmm_amplification(method: LinearMultistep, z: Any) -> np.ndarray:
     """The largest modulus of the roots of rho(zeta) - z sigma(zeta) for each complex z: the
     method is stable at z when it is <= 1 (with simple roots on the unit circle)."""
-    check_type(method, LinearMultistep, "method")
+    check_type(method, "multistep", "method")
     z = np.asarray(z, dtype=complex)
     coeffs = method.alpha[None, :] - z.reshape(-1, 1) * method.beta[None, :]
     return _max_root_modulus(coeffs).reshape(z.shape)
@@ -86,7 +88,7 @@ def lmm_amplification(method: LinearMultistep, z: Any) -> np.ndarray:
 def second_order_lmm_amplification(method: SecondOrderMultistep, hw: Any) -> np.ndarray:
     """For x'' = -omega^2 x: the largest root modulus of sum_j (alpha_j + (h omega)^2 beta_j)
     zeta^j, for each h*omega in `hw`."""
-    check_type(method, SecondOrderMultistep, "method")
+    check_type(method, "second-order multistep", "method")
     hw = np.asarray(hw, dtype=float)
     coeffs = method.alpha[None, :] + (hw.reshape(-1, 1) ** 2) * method.beta[None, :]
     return _max_root_modulus(coeffs.astype(complex)).reshape(hw.shape)
@@ -96,7 +98,7 @@ def splitting_propagator(scheme: SplittingScheme, hw: Any) -> np.ndarray:
     """The one-step matrix of `scheme` on (x, v) for x'' = -x with step h*omega (omega = 1):
     a drift a is [[1, a h], [0, 1]], a kick b is [[1, 0], [-b h, 1]], applied in sequence order.
     Shape hw.shape + (2, 2)."""
-    check_type(scheme, SplittingScheme, "scheme")
+    check_type(scheme, "splitting", "scheme")
     hw = np.asarray(hw, dtype=float)
     flat = hw.reshape(-1)
     M = np.broadcast_to(np.eye(2), (flat.size, 2, 2)).copy()

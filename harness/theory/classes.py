@@ -33,11 +33,11 @@ from __future__ import annotations
 
 import math
 from functools import cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau
 from harness.theory.checks import check_int, check_type
 from harness.theory.orders import (
     MAX_TREE_ORDER,
@@ -46,6 +46,9 @@ from harness.theory.orders import (
     elementary_weights,
     rooted_trees,
 )
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau
 
 __all__ = ["tree_symmetry", "tree_survives", "rk_class_order", "rk_class_orders", "rk_error_defects",
            "rk_stage_order", "rk_stiffly_accurate"]
@@ -113,7 +116,7 @@ def rk_class_order(tableau: ButcherTableau, *, nystrom: bool = False, degree: in
         The class order; at least `rk_order(tableau)`. A result equal to `max_order` means "at
         least that".
     """
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     if degree is not None:
         degree = check_int(degree, "degree", 1, 1000)
     if max_order is None:
@@ -126,7 +129,7 @@ def rk_class_orders(tableau: ButcherTableau, classes: list[tuple[bool, int | Non
                     max_order: int | None = None) -> list[int]:
     """`rk_class_order` for several (nystrom, degree) classes at once: the elementary weights
     are computed once and each violated condition is checked against every class."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     if max_order is None:
         max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
@@ -151,7 +154,7 @@ def rk_error_defects(tableau: ButcherTableau, order: int) -> tuple[list[RootedTr
     -------
     (trees, defects) : the trees of that order and a float array of their coefficients.
     """
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     order = check_int(order, "order", 1, MAX_TREE_ORDER)
     trees = [t for t in rooted_trees(order) if t.order == order]
     if tableau.exact is not None:
@@ -183,7 +186,7 @@ def rk_stage_order(tableau: ButcherTableau) -> int:
     """The stage order: the largest q such that B(q) and C(q) hold (Hairer & Wanner II, IV.15):
     sum_i b_i c_i^(k-1) = 1/k and sum_j a_ij c_j^(k-1) = c_i^k / k for every stage i and
     k <= q. Each residual is compared with rounding of the sum of its magnitudes."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     A, b, c = tableau.A, tableau.b, tableau.c
     for k in range(1, 2 * tableau.stages + 1):
         lhs = np.append(A @ c ** (k - 1), b @ c ** (k - 1))
@@ -198,7 +201,7 @@ def rk_stage_order(tableau: ButcherTableau) -> int:
 def rk_stiffly_accurate(tableau: ButcherTableau) -> bool:
     """The last row of A equals b (so y_1 is the last stage; R(infinity) = 0 when A is
     invertible): Hairer & Wanner II, IV.6 and IV.15."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     scale = np.abs(tableau.b) + np.abs(tableau.A[-1])
     allowed = np.maximum(tol.ORDER_CONDITION_ULPS * tol.EPS * scale, tol.ORDER_CONDITION_FLOOR)
     return bool(np.all(np.abs(tableau.A[-1] - tableau.b) <= allowed))

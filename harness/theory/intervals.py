@@ -13,15 +13,17 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from functools import lru_cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
 from harness.theory import amplification
-from harness.theory.checks import check_type
+from harness.theory.checks import check_type, family_of
 from harness.theory.orders import rk_linear_order, rk_stability_coefficients
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau, LinearMultistep, SplittingScheme
 
 __all__ = ["rk_stability_intervals", "splitting_trace_polynomial", "splitting_linear_order",
            "splitting_hw_limit", "exact_hw_bands", "lmm_real_interval", "analytic_stability"]
@@ -146,7 +148,7 @@ def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
     """(real, imaginary) stability intervals of a Runge-Kutta method: the sign near the origin
     and unboundedness decided on the polynomials Q(-x)^2 - P(-x)^2 and |Q(iy)|^2 - |P(iy)|^2
     (exact zeros from the linear order), the end located on R evaluated in stage form."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     P, P_abs, Q, Q_abs = _rk_numerator_denominator(tableau)
     p_lin = rk_linear_order(tableau)
     out = []
@@ -167,7 +169,7 @@ def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
 
 def splitting_trace_polynomial(scheme: SplittingScheme) -> tuple[np.ndarray, np.ndarray]:
     """The trace of the propagator on x'' = -x as a polynomial in h (ascending), with magnitudes."""
-    check_type(scheme, SplittingScheme, "scheme")
+    check_type(scheme, "splitting", "scheme")
     M = [[np.array([1.0]), np.array([0.0])], [np.array([0.0]), np.array([1.0])]]
     Ma = [[np.array([1.0]), np.array([0.0])], [np.array([0.0]), np.array([1.0])]]
     for kind, c in scheme.sequence:
@@ -208,7 +210,7 @@ def splitting_hw_limit(scheme: SplittingScheme) -> float:
     """The first instability of a splitting on x'' = -omega^2 x: the largest h omega with
     |tr M| < 2 on (0, h omega), decided exactly on the trace polynomial (every band:
     `harness.theory.newtonian.splitting_hw_bands`)."""
-    check_type(scheme, SplittingScheme, "scheme")
+    check_type(scheme, "splitting", "scheme")
     return exact_hw_bands(scheme).limit
 
 
@@ -273,21 +275,22 @@ def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH
     kind). First-order families: {'kind': 'first-order', 'amplification': z -> |R|,
     'real_interval', 'imag_interval'}; Newtonian: {'kind': 'newtonian', 'amplification':
     hw -> spectral radius, 'hw_limit'}."""
-    if isinstance(coefficients, ButcherTableau):
+    family = family_of(coefficients)
+    if family == "runge-kutta":
         def amp(z):
             return np.abs(amplification.rk_stability_function(coefficients, z))
         real, imag = rk_stability_intervals(coefficients)
         return {"kind": "first-order", "amplification": amp, "real_interval": real,
                 "imag_interval": imag}
-    if isinstance(coefficients, LinearMultistep):
+    if family == "multistep":
         def amp(z):
             return amplification.lmm_amplification(coefficients, z)
         real = amplification.real_stability_interval(amp, limit=limit)
         return {"kind": "first-order", "amplification": amp,
                 "real_interval": lmm_real_interval(coefficients, real),
                 "imag_interval": amplification.imag_stability_interval(amp, limit=limit)}
-    if isinstance(coefficients, SplittingScheme | SecondOrderMultistep):
-        if isinstance(coefficients, SplittingScheme):
+    if family in ("splitting", "second-order multistep"):
+        if family == "splitting":
             def hw_amp(hw):
                 return amplification.splitting_amplification(coefficients, hw)
         else:

@@ -32,10 +32,10 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import TYPE_CHECKING
 
 from harness import tolerances as tol
-from harness.coefficients import SecondOrderMultistep, SplittingScheme
-from harness.theory.checks import check_type
+from harness.theory.checks import check_type, family_of
 from harness.theory.roots import (
     Poly,
     count_roots_between,
@@ -51,6 +51,9 @@ from harness.theory.roots import (
     squarefree,
     sturm_sequence,
 )
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import SecondOrderMultistep, SplittingScheme
 
 __all__ = ["HwBands", "splitting_trace_exact", "splitting_hw_bands", "lmm2_hw_bands", "hw_bands"]
 
@@ -132,7 +135,7 @@ def _bands(critical: list[Poly], stable: Callable[[Fraction], bool], hw_max: flo
 def splitting_trace_exact(scheme: SplittingScheme) -> Poly:
     """tr M of a splitting's propagator on x'' = -x as an exact polynomial in x = h^2 (the
     trace is even in h: M(-h) = S M(h) S with S = diag(1, -1))."""
-    check_type(scheme, SplittingScheme, "scheme")
+    check_type(scheme, "splitting", "scheme")
     seq = scheme.exact if scheme.exact is not None else scheme.sequence
     one, zero = (Fraction(1),), ()
     M = [[one, zero], [zero, one]]  # entries: polynomials in h
@@ -177,7 +180,7 @@ def _w_polynomial(c: list[Fraction]) -> Poly:
 def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwBands:
     """Every h omega band where a second-order multistep method is unstable (see the module
     docstring: periodicity for symmetric methods, spectral radius <= 1 otherwise)."""
-    check_type(method, SecondOrderMultistep, "method")
+    check_type(method, "second-order multistep", "method")
     k = method.steps
     alpha = [Fraction(a) for a in method.alpha]
     beta = [Fraction(b) for b in method.beta]
@@ -231,8 +234,9 @@ def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW
 
 def hw_bands(coefficients, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwBands | None:
     """The exact bands of a Newtonian coefficient object, or None for another kind."""
-    if isinstance(coefficients, SplittingScheme):
+    family = family_of(coefficients)
+    if family == "splitting":
         return splitting_hw_bands(coefficients, hw_max)
-    if isinstance(coefficients, SecondOrderMultistep):
+    if family == "second-order multistep":
         return lmm2_hw_bands(coefficients, hw_max)
     return None

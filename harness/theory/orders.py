@@ -14,14 +14,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
-from harness.theory.checks import check_int, check_type
+from harness.theory.checks import check_int, check_type, family_of
 from harness.theory.series import splitting_order
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep
 
 __all__ = ["MAX_TREE_ORDER", "RootedTree", "OrderCondition", "rooted_trees", "rk_order", "elementary_weights",
            "condition_tolerance",
@@ -128,7 +130,7 @@ def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondit
     """The order conditions of exactly `order` (one per rooted tree with `order` vertices),
     with residual Phi(t) - 1/gamma(t); satisfied when |residual| is within rounding
     (`condition_tolerance`)."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     order = check_int(order, "order", 1, MAX_TREE_ORDER)
     trees = rooted_trees(order)
     phi, size = elementary_weights(tableau, order)
@@ -151,7 +153,7 @@ def rk_order(tableau: ButcherTableau, max_order: int | None = None,
     coefficients). By default `max_order` is the highest order the tableau could have (s for
     an explicit s-stage method, 2s otherwise), capped at MAX_TREE_ORDER; a result equal to
     MAX_TREE_ORDER means "at least that". `weights` replaces b (an embedded method)."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     if max_order is None:
         max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
@@ -179,7 +181,7 @@ def rk_linear_order(tableau: ButcherTableau) -> int:
     method's order on linear constant-coefficient problems, at least its order and higher for
     some methods (several SSP methods, Merson's). Checked up to 2s + 2 (beyond any s-stage
     order) and capped there."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     top = min(2 * tableau.stages + 2, 40)
     r, r_abs = rk_stability_coefficients(tableau, top)
     for k in range(1, top + 1):
@@ -210,7 +212,7 @@ def _constants(alpha: np.ndarray, beta: np.ndarray, q_max: int, shift: int):
 def lmm_error_constants(method: LinearMultistep, q_max: int | None = None) -> np.ndarray:
     """C_0 ... C_{q_max} of a linear multistep method (default q_max = 2k + 1, beyond the
     highest order any k-step method reaches)."""
-    check_type(method, LinearMultistep, "method")
+    check_type(method, "multistep", "method")
     q_max = 2 * method.steps + 1 if q_max is None else check_int(q_max, "q_max", 0, 40)
     return _constants(method.alpha, method.beta, q_max, 1)[0]
 
@@ -225,14 +227,14 @@ def lmm_order(method: LinearMultistep) -> int:
     """The order p of a linear multistep method: C_0 = ... = C_p = 0 and C_{p+1} != 0 (each
     constant compared with ORDER_CONDITION_TOL times the size of its terms). 0 means not even
     consistent (which `LinearMultistep` already refuses)."""
-    check_type(method, LinearMultistep, "method")
+    check_type(method, "multistep", "method")
     C, scale = _constants(method.alpha, method.beta, 2 * method.steps + 1, 1)
     return _order_from_constants(C, scale, 1)
 
 
 def second_order_lmm_error_constants(method: SecondOrderMultistep, q_max: int | None = None):
     """C_0 ... C_{q_max} of a multistep method for x'' = a (default q_max = 2k + 2)."""
-    check_type(method, SecondOrderMultistep, "method")
+    check_type(method, "second-order multistep", "method")
     q_max = 2 * method.steps + 2 if q_max is None else check_int(q_max, "q_max", 0, 40)
     return _constants(method.alpha, method.beta, q_max, 2)[0]
 
@@ -240,7 +242,7 @@ def second_order_lmm_error_constants(method: SecondOrderMultistep, q_max: int | 
 def second_order_lmm_order(method: SecondOrderMultistep) -> int:
     """The order p of a multistep method for x'' = a: C_0 = ... = C_{p+1} = 0 (Stormer's rule
     alpha = (1, -2, 1), beta = (0, 1, 0) has C_4 = 1/12, order 2)."""
-    check_type(method, SecondOrderMultistep, "method")
+    check_type(method, "second-order multistep", "method")
     C, scale = _constants(method.alpha, method.beta, 2 * method.steps + 2, 2)
     return _order_from_constants(C, scale, 2)
 
@@ -248,12 +250,7 @@ def order_from_coefficients(stepper: Any) -> int | None:
     """The order implied by a stepper's coefficient object (`stepper.coefficients`), or None
     when it has none (external, adaptive, Taylor) or of a kind this module does not know."""
     coeffs = getattr(stepper, "coefficients", None)
-    if isinstance(coeffs, ButcherTableau):
-        return rk_order(coeffs)
-    if isinstance(coeffs, LinearMultistep):
-        return lmm_order(coeffs)
-    if isinstance(coeffs, SecondOrderMultistep):
-        return second_order_lmm_order(coeffs)
-    if isinstance(coeffs, SplittingScheme):
-        return splitting_order(coeffs)
-    return None
+    order_of = {"runge-kutta": rk_order, "multistep": lmm_order,
+                "second-order multistep": second_order_lmm_order, "splitting": splitting_order}
+    family = family_of(coeffs)
+    return None if family is None else order_of[family](coeffs)

@@ -10,10 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, SplittingScheme
 from harness.theory.checks import check_int, check_type
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau, SplittingScheme
 
 __all__ = ["splitting_local_error_series", "splitting_order", "rk_order_series"]
 
@@ -112,7 +115,7 @@ def splitting_local_error_series(scheme: SplittingScheme, degree: int = 11) -> l
     """|e_n|, n = 0..degree: the coefficients of h^n in the local error of `scheme` on the
     generic problem (max over components and the two starting points), in units of the size of
     the exact solution's h^n coefficient (at least 1)."""
-    check_type(scheme, SplittingScheme, "scheme")
+    check_type(scheme, "splitting", "scheme")
     degree = check_int(degree, "degree", 1, 16)
     import mpmath
 
@@ -191,7 +194,7 @@ def splitting_order(scheme: SplittingScheme, max_order: int = 10) -> int:
     local error that hides h^9 below h ~ 1e-2). Returns `max_order` when every coefficient up
     to h^(max_order+1) vanishes.
     """
-    check_type(scheme, SplittingScheme, "scheme")
+    check_type(scheme, "splitting", "scheme")
     max_order = check_int(max_order, "max_order", 1, 14)
     return _splitting_order_cached(scheme.fingerprint(), max_order, (scheme,))
 
@@ -201,7 +204,7 @@ def rk_order_series(tableau: ButcherTableau, max_order: int = 8) -> int:
     `splitting_order`, on a generic 3-dimensional first-order system: an independent check of
     the rooted-tree count in `rk_order`. The stage equations (implicit or not) are solved on
     series by fixed-point iteration, which fixes one more power of h per sweep."""
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     max_order = check_int(max_order, "max_order", 1, 12)
     import mpmath
 
