@@ -138,7 +138,16 @@ class ButcherTableau:
         """The embedded method (A, b_hat, c) as a tableau of its own, exact where this one and
         `b_hat` are exact (so extended-precision runs measure it as well).
 
-        Raises `CoefficientError` when the tableau has no `b_hat`."""
+        Parameters
+        ----------
+        name : str, optional
+            The new tableau's name; default ``"<name>@embedded"``.
+
+        Returns
+        -------
+        ButcherTableau
+            The embedded method. Raises `CoefficientError` when the tableau has no `b_hat`.
+        """
         if self.b_hat is None:
             raise CoefficientError(f"`{self.name}` has no embedded weights `b_hat`")
         name = name or f"{self.name}@embedded"
@@ -154,7 +163,18 @@ class ButcherTableau:
                 f"nodes or 1 by up to {self.consistency_defect:.1e}") if self.consistency_defect else ""
 
     def stability_function(self, z: np.ndarray) -> np.ndarray:
-        """R(z) = 1 + z b^T (I - zA)^{-1} e, evaluated for an array of complex z."""
+        """R(z) = 1 + z b^T (I - zA)^{-1} e, evaluated for an array of complex z.
+
+        Parameters
+        ----------
+        z : array_like
+            Points of the complex plane, any shape.
+
+        Returns
+        -------
+        ndarray, complex, shape of `z`
+            R at each point.
+        """
         z = np.asarray(z, dtype=complex)
         s = self.stages
         flat = z.reshape(-1)
@@ -169,7 +189,13 @@ class ButcherTableau:
         """A stable text form of the coefficients, for cache keys: the float64 arrays the loops
         run and the exact form (or that there is none). Two records with the same floats, one
         exact and one given only to float64, differ in what follows from them (the real128
-        rerun, the coefficients' error floor), so they must not share a cached result."""
+        rerun, the coefficients' error floor), so they must not share a cached result.
+
+        Returns
+        -------
+        str
+            `float_fingerprint` followed by ``:float64`` or ``:exact:<sha256 of the exact form>``.
+        """
         if self.exact is None:
             exact = "float64"
         else:
@@ -178,19 +204,37 @@ class ButcherTableau:
 
     def float_fingerprint(self) -> str:
         """The float64 arrays alone: equal for the same method however precisely it was given
-        (what a claim about a method matches on)."""
+        (what a claim about a method matches on).
+
+        Returns
+        -------
+        str
+            ``rk:`` and the hex bytes of A, b, c (and b_hat when embedded).
+        """
         embedded = "" if self.b_hat is None else ":" + self.b_hat.tobytes().hex()
         return f"rk:{self.A.tobytes().hex()}:{self.b.tobytes().hex()}:{self.c.tobytes().hex()}{embedded}"
 
     # -- what the coefficients say about the method (asked like a NodePy method object) -----
     def order(self) -> int:
-        """Order from Butcher's rooted-tree conditions (`harness.theory.rk_order`)."""
+        """Order from Butcher's rooted-tree conditions (`harness.theory.rk_order`).
+
+        Returns
+        -------
+        int
+            The largest p whose order conditions all hold, to the coefficients' rounding.
+        """
         from harness.theory import rk_order
 
         return rk_order(self)
 
     def embedded_order(self) -> int | None:
-        """Order of the embedded method (A, b_hat, c), or None without `b_hat`."""
+        """Order of the embedded method (A, b_hat, c).
+
+        Returns
+        -------
+        int or None
+            Its order from the rooted-tree conditions, or None without `b_hat`.
+        """
         if self.b_hat is None:
             return None
         from harness.theory import rk_order
@@ -198,7 +242,13 @@ class ButcherTableau:
         return rk_order(self.embedded(f"{self.name}-embedded"))
 
     def linear_order(self) -> int:
-        """Order on linear constant-coefficient problems: of R(z) against e^z."""
+        """Order on linear constant-coefficient problems: of R(z) against e^z.
+
+        Returns
+        -------
+        int
+            The largest p with R(z) - e^z = O(z^{p+1}) (`harness.theory.rk_linear_order`).
+        """
         from harness.theory import rk_linear_order
 
         return rk_linear_order(self)
@@ -302,34 +352,73 @@ class SplittingScheme:
 
     def fingerprint(self) -> str:
         """The coefficients as run and their exact form (or that there is none), as text (what a
-        cell key records of the method: only an exact record is rerun in real128)."""
+        cell key records of the method: only an exact record is rerun in real128).
+
+        Returns
+        -------
+        str
+            `float_fingerprint` followed by ``:float64`` or ``:exact:<sha256 of the exact form>``.
+        """
         exact = "float64" if self.exact is None else "exact:" + hashlib.sha256(
             repr(self.exact).encode()).hexdigest()
         return f"{self.float_fingerprint()}:{exact}"
 
     def float_fingerprint(self) -> str:
-        """The float64 sequence alone: equal for the same method however precisely it was given."""
+        """The float64 sequence alone: equal for the same method however precisely it was given.
+
+        Returns
+        -------
+        str
+            ``split:`` and the (kind, coefficient) pairs of the merged sequence.
+        """
         return "split:" + ";".join(f"{k}{v!r}" for k, v in self.sequence)
 
     # -- what the coefficients say about the method --------------------------------------------
     symplectic = True  # every drift and every kick is a symplectic map (HLW VI.3)
 
     def order(self) -> int:
-        """Order from the exact local-error series (`harness.theory.splitting_order`)."""
+        """Order from the exact local-error series (`harness.theory.splitting_order`).
+
+        Returns
+        -------
+        int
+            The order of the composition on q'' = a(q, t).
+        """
         from harness.theory import splitting_order
 
         return splitting_order(self)
 
     def linear_order(self) -> int:
         """Order on linear problems q'' = -K q: of the one-step propagator against the exact
-        rotation (`harness.theory.splitting_linear_order`)."""
+        rotation (`harness.theory.splitting_linear_order`).
+
+        Returns
+        -------
+        int
+            The order of the propagator's match with the exact rotation.
+        """
         from harness.theory import splitting_linear_order
 
         return splitting_linear_order(self)
 
     @classmethod
     def compose(cls, name: str, base: SplittingScheme, weights: Sequence[Number]) -> SplittingScheme:
-        """The composition base(w_1 h) o ... o base(w_m h) (Yoshida's construction)."""
+        """The composition base(w_1 h) o ... o base(w_m h) (Yoshida's construction).
+
+        Parameters
+        ----------
+        name : str
+            The new scheme's name.
+        base : SplittingScheme
+            The scheme composed.
+        weights : sequence of numbers
+            w_1, ..., w_m; the result is exact when `base` and every weight are.
+
+        Returns
+        -------
+        SplittingScheme
+            The composed scheme (adjacent drifts or kicks merged, checked on creation).
+        """
         seq: list[tuple[str, Number]] = []
         exact_weights = [exact_value(w) for w in weights]
         if base.exact is not None and all(w is not None for w in exact_weights):

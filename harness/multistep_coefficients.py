@@ -106,13 +106,25 @@ class LinearMultistep(_MultistepFacts):
         _set_multistep(self, name, a, b)
 
     def fingerprint(self) -> str:
-        """alpha and beta, exactly, as text (what a cell key records of the method)."""
+        """alpha and beta, exactly, as text (what a cell key records of the method).
+
+        Returns
+        -------
+        str
+            ``lmm:`` and the hex bytes of alpha and beta.
+        """
         return f"lmm:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
 
     symplectic = False  # no linear multistep method is symplectic (HLW XV.4, Tang 1993)
 
     def order(self) -> int:
-        """Order from the error constants (`harness.theory.lmm_order`)."""
+        """Order from the error constants (`harness.theory.lmm_order`).
+
+        Returns
+        -------
+        int
+            The largest p with C_0 = ... = C_p = 0.
+        """
         from harness.theory import lmm_order
 
         return lmm_order(self)
@@ -147,7 +159,13 @@ class SecondOrderMultistep(_MultistepFacts):
         _set_multistep(self, name, a, b)
 
     def fingerprint(self) -> str:
-        """alpha and beta, exactly, as text (what a cell key records of the method)."""
+        """alpha and beta, exactly, as text (what a cell key records of the method).
+
+        Returns
+        -------
+        str
+            ``lmm2:`` and the hex bytes of alpha and beta.
+        """
         return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
 
     ALPHA_SIGN = 1.0
@@ -156,7 +174,13 @@ class SecondOrderMultistep(_MultistepFacts):
     symplectic = None
 
     def order(self) -> int:
-        """Order from the error constants (`harness.theory.second_order_lmm_order`)."""
+        """Order from the error constants (`harness.theory.second_order_lmm_order`).
+
+        Returns
+        -------
+        int
+            The order p of the method for x'' = a (error constants C_0 ... C_{p+1} zero).
+        """
         from harness.theory import second_order_lmm_order
 
         return second_order_lmm_order(self)

@@ -79,7 +79,13 @@ class HwBands:
     hw_max: float
 
     def describe(self) -> str:
-        """The bands as one line of text."""
+        """The bands as one line of text.
+
+        Returns
+        -------
+        str
+            "stable for every h omega (<criterion>)" or "unstable on [a, b], ...".
+        """
         if not self.bands:
             return f"stable for every h omega ({self.criterion})"
         parts = [f"[{a:.10g}, {b:.10g}]" if math.isfinite(b) else f"[{a:.10g}, inf)" for a, b in self.bands]
@@ -134,7 +140,18 @@ def _bands(critical: list[Poly], stable: Callable[[Fraction], bool], hw_max: flo
 
 def splitting_trace_exact(scheme: SplittingScheme) -> Poly:
     """tr M of a splitting's propagator on x'' = -x as an exact polynomial in x = h^2 (the
-    trace is even in h: M(-h) = S M(h) S with S = diag(1, -1))."""
+    trace is even in h: M(-h) = S M(h) S with S = diag(1, -1)).
+
+    Parameters
+    ----------
+    scheme : SplittingScheme
+        The composition (its exact form when it has one).
+
+    Returns
+    -------
+    Poly
+        The trace's coefficients in ascending powers of x = h^2.
+    """
     check_type(scheme, "splitting", "scheme")
     seq = scheme.exact if scheme.exact is not None else scheme.sequence
     one, zero = (Fraction(1),), ()
@@ -150,7 +167,20 @@ def splitting_trace_exact(scheme: SplittingScheme) -> Poly:
 
 
 def splitting_hw_bands(scheme: SplittingScheme, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwBands:
-    """Every h omega band where the splitting is unstable: |tr M| > 2 (det M = 1)."""
+    """Every h omega band where the splitting is unstable: |tr M| > 2 (det M = 1).
+
+    Parameters
+    ----------
+    scheme : SplittingScheme
+        The composition.
+    hw_max : float, optional
+        The end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+
+    Returns
+    -------
+    HwBands
+        The exact unstable bands that start at or below `hw_max`.
+    """
     T = splitting_trace_exact(scheme)
     two = (Fraction(2),)
 
@@ -179,7 +209,20 @@ def _w_polynomial(c: list[Fraction]) -> Poly:
 
 def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwBands:
     """Every h omega band where a second-order multistep method is unstable (see the module
-    docstring: periodicity for symmetric methods, spectral radius <= 1 otherwise)."""
+    docstring: periodicity for symmetric methods, spectral radius <= 1 otherwise).
+
+    Parameters
+    ----------
+    method : SecondOrderMultistep
+        The method.
+    hw_max : float, optional
+        The end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+
+    Returns
+    -------
+    HwBands
+        The exact unstable bands that start at or below `hw_max`.
+    """
     check_type(method, "second-order multistep", "method")
     k = method.steps
     alpha = [Fraction(a) for a in method.alpha]
@@ -233,7 +276,20 @@ def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW
 
 
 def hw_bands(coefficients, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwBands | None:
-    """The exact bands of a Newtonian coefficient object, or None for another kind."""
+    """The exact bands of a Newtonian coefficient object, or None for another kind.
+
+    Parameters
+    ----------
+    coefficients : coefficient object
+        Any object; read by the `family` it declares.
+    hw_max : float, optional
+        The end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+
+    Returns
+    -------
+    HwBands or None
+        `splitting_hw_bands` or `lmm2_hw_bands`; None for a first-order family.
+    """
     family = family_of(coefficients)
     if family == "splitting":
         return splitting_hw_bands(coefficients, hw_max)

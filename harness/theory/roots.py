@@ -32,7 +32,18 @@ Poly = tuple[Fraction, ...]
 
 def poly(coefficients: Sequence) -> Poly:
     """An exact polynomial from ascending coefficients (ints, Fractions or floats, taken exactly),
-    trailing zeros removed."""
+    trailing zeros removed.
+
+    Parameters
+    ----------
+    coefficients : sequence of int, Fraction or float
+        a_0, a_1, ... in ascending powers.
+
+    Returns
+    -------
+    Poly
+        The coefficients as Fractions.
+    """
     out = [Fraction(c) for c in coefficients]
     while out and out[-1] == 0:
         out.pop()
@@ -40,19 +51,69 @@ def poly(coefficients: Sequence) -> Poly:
 
 
 def padd(a: Poly, b: Poly) -> Poly:
+    """a + b, exactly.
+
+    Parameters
+    ----------
+    a, b : Poly
+        Polynomials in ascending powers.
+
+    Returns
+    -------
+    Poly
+        Their sum, trailing zeros removed.
+    """
     n = max(len(a), len(b))
     return poly([(a[i] if i < len(a) else 0) + (b[i] if i < len(b) else 0) for i in range(n)])
 
 
 def pscale(a: Poly, c) -> Poly:
+    """c a, exactly.
+
+    Parameters
+    ----------
+    a : Poly
+        A polynomial.
+    c : int, Fraction or float
+        The factor (a float is taken exactly).
+
+    Returns
+    -------
+    Poly
+        The scaled polynomial.
+    """
     return poly([c * x for x in a])
 
 
 def psub(a: Poly, b: Poly) -> Poly:
+    """a - b, exactly.
+
+    Parameters
+    ----------
+    a, b : Poly
+        Polynomials in ascending powers.
+
+    Returns
+    -------
+    Poly
+        Their difference, trailing zeros removed.
+    """
     return padd(a, pscale(b, -1))
 
 
 def pmul(a: Poly, b: Poly) -> Poly:
+    """a b, exactly.
+
+    Parameters
+    ----------
+    a, b : Poly
+        Polynomials in ascending powers.
+
+    Returns
+    -------
+    Poly
+        Their product (the zero polynomial ``()`` if either is zero).
+    """
     if not a or not b:
         return ()
     out = [Fraction(0)] * (len(a) + len(b) - 1)
@@ -64,7 +125,20 @@ def pmul(a: Poly, b: Poly) -> Poly:
 
 
 def peval(a: Poly, x: Fraction) -> Fraction:
-    """a(x), exactly (Horner)."""
+    """a(x), exactly (Horner).
+
+    Parameters
+    ----------
+    a : Poly
+        The polynomial.
+    x : Fraction
+        The point.
+
+    Returns
+    -------
+    Fraction
+        a(x).
+    """
     acc = Fraction(0)
     for c in reversed(a):
         acc = acc * x + c
@@ -72,11 +146,34 @@ def peval(a: Poly, x: Fraction) -> Fraction:
 
 
 def pderiv(a: Poly) -> Poly:
+    """a', exactly.
+
+    Parameters
+    ----------
+    a : Poly
+        A polynomial.
+
+    Returns
+    -------
+    Poly
+        Its derivative.
+    """
     return poly([i * a[i] for i in range(1, len(a))])
 
 
 def pdivmod(a: Poly, b: Poly) -> tuple[Poly, Poly]:
-    """Quotient and remainder of a / b (b not zero)."""
+    """Quotient and remainder of a / b (b not zero).
+
+    Parameters
+    ----------
+    a, b : Poly
+        Dividend and divisor; a zero `b` raises ZeroDivisionError.
+
+    Returns
+    -------
+    (Poly, Poly)
+        q and r with a = q b + r and deg r < deg b.
+    """
     if not b:
         raise ZeroDivisionError("polynomial division by zero")
     r = list(a)
@@ -96,14 +193,36 @@ def _monic(a: Poly) -> Poly:
 
 
 def pgcd(a: Poly, b: Poly) -> Poly:
-    """The monic greatest common divisor."""
+    """The monic greatest common divisor.
+
+    Parameters
+    ----------
+    a, b : Poly
+        Polynomials in ascending powers.
+
+    Returns
+    -------
+    Poly
+        gcd(a, b) with leading coefficient 1 (Euclid's algorithm).
+    """
     while b:
         a, b = b, pdivmod(a, b)[1]
     return _monic(a)
 
 
 def squarefree(a: Poly) -> Poly:
-    """a divided by gcd(a, a'): the same roots, each simple."""
+    """a divided by gcd(a, a'): the same roots, each simple.
+
+    Parameters
+    ----------
+    a : Poly
+        A non-zero polynomial.
+
+    Returns
+    -------
+    Poly
+        a / gcd(a, a') (`a` itself when the gcd is constant).
+    """
     g = _chain(_integer(a))[-1]
     if len(g) == 1:
         return a
@@ -159,7 +278,18 @@ def _chain(a: tuple[int, ...]) -> list[tuple[int, ...]]:
 
 
 def sturm_sequence(a: Poly) -> list[tuple[int, ...]]:
-    """The Sturm chain of `a` (see `_chain`), as integer polynomials."""
+    """The Sturm chain of `a` (see `_chain`), as integer polynomials.
+
+    Parameters
+    ----------
+    a : Poly
+        A non-zero polynomial (square-free for Sturm's count of distinct roots).
+
+    Returns
+    -------
+    list of tuple of int
+        p_0 = a, p_1 = a', p_{k+1} = -rem(p_{k-1}, p_k), each scaled to integer coefficients.
+    """
     return _chain(_integer(a))
 
 
@@ -198,13 +328,41 @@ def _sign_changes(seq: list, x: Fraction | None) -> int:
 
 def count_roots_between(a: Poly, lo: Fraction, hi: Fraction | None,
                         seq: list[Poly] | None = None) -> int:
-    """The number of distinct real roots of `a` in (lo, hi] (hi None: (lo, infinity))."""
+    """The number of distinct real roots of `a` in (lo, hi] (hi None: (lo, infinity)).
+
+    Parameters
+    ----------
+    a : Poly
+        A non-zero polynomial.
+    lo : Fraction
+        Left end (excluded).
+    hi : Fraction or None
+        Right end (included); None for infinity.
+    seq : list of Poly, optional
+        The Sturm sequence of a's square-free part, when already computed.
+
+    Returns
+    -------
+    int
+        The count, by Sturm's theorem (sign changes at lo minus sign changes at hi).
+    """
     seq = seq if seq is not None else sturm_sequence(squarefree(a))
     return _sign_changes(seq, lo) - _sign_changes(seq, hi)
 
 
 def root_bound(a: Poly) -> Fraction:
-    """Cauchy's bound: every root has modulus below 1 + max |a_i / a_n|."""
+    """Cauchy's bound: every root has modulus below 1 + max |a_i / a_n|.
+
+    Parameters
+    ----------
+    a : Poly
+        A polynomial of degree >= 1.
+
+    Returns
+    -------
+    Fraction
+        1 + max_i |a_i / a_n|.
+    """
     return 1 + max((abs(c / a[-1]) for c in a[:-1]), default=Fraction(0))
 
 
@@ -227,7 +385,25 @@ def isolate_real_roots(a: Poly, lo: Fraction, hi: Fraction | None = None, *,
     """The distinct real roots of the non-zero polynomial `a` in (lo, hi] (hi None: up to
     Cauchy's bound), in increasing order, each as an interval (left, right] holding exactly one
     root, refined by bisection on the sign of the square-free part until right - left <=
-    rel_width * |right| (an exact root found on the way is returned as (root, root))."""
+    rel_width * |right| (an exact root found on the way is returned as (root, root)).
+
+    Parameters
+    ----------
+    a : Poly
+        The polynomial.
+    lo : Fraction
+        Left end of the search (excluded).
+    hi : Fraction or None, optional
+        Right end (included); None for Cauchy's bound (`root_bound`).
+    rel_width : Fraction, optional
+        The relative width each interval is refined to (default 2^-60).
+
+    Returns
+    -------
+    list of (Fraction, Fraction)
+        One isolating interval (left, right] per root, in increasing order; empty for a
+        constant `a`.
+    """
     if len(a) <= 1:
         return []
     q = squarefree(a)
@@ -284,7 +460,18 @@ def isolate_real_roots(a: Poly, lo: Fraction, hi: Fraction | None = None, *,
 
 
 def det_exact(rows: list[list[Fraction]]) -> Fraction:
-    """The determinant of a square matrix of Fractions (Gaussian elimination, exact)."""
+    """The determinant of a square matrix of Fractions (Gaussian elimination, exact).
+
+    Parameters
+    ----------
+    rows : list of list of Fraction
+        The matrix, row by row.
+
+    Returns
+    -------
+    Fraction
+        Its determinant.
+    """
     m = [list(r) for r in rows]
     n = len(m)
     det = Fraction(1)
@@ -338,7 +525,22 @@ def resultant_in_x(p_of: Callable[[Fraction], Poly], q_of: Callable[[Fraction], 
     """Res_zeta(p(., x), q(., x)) as a polynomial in x, where `p_of(x)` and `q_of(x)` give the
     polynomials in zeta at a rational x, of nominal degrees `zeta_degrees` (the Sylvester matrix
     keeps these sizes, leading coefficients may vanish at some x) and the resultant has degree
-    at most `degree_bound` in x. Found at degree_bound + 1 integer points and interpolated."""
+    at most `degree_bound` in x. Found at degree_bound + 1 integer points and interpolated.
+
+    Parameters
+    ----------
+    p_of, q_of : callable
+        ``p_of(x)`` -> Poly in zeta at a rational x (and likewise `q_of`).
+    degree_bound : int
+        An upper bound on the resultant's degree in x.
+    zeta_degrees : (int, int)
+        The nominal degrees (m, n) of p and q in zeta.
+
+    Returns
+    -------
+    Poly
+        The resultant as a polynomial in x.
+    """
     m, n = zeta_degrees
     xs = [Fraction(i) for i in range(degree_bound + 1)]
     ys = []
@@ -352,7 +554,18 @@ def resultant_in_x(p_of: Callable[[Fraction], Poly], q_of: Callable[[Fraction], 
 def schur_all_inside(a: Poly) -> bool:
     """True when every root of the real polynomial `a` (degree >= 1) lies strictly inside the
     unit disc: the Schur-Cohn recursion a -> (a_n a(z) - a_0 a*(z)) / z with a* the reversed
-    polynomial, which needs |a_0| < |a_n| at every stage."""
+    polynomial, which needs |a_0| < |a_n| at every stage.
+
+    Parameters
+    ----------
+    a : Poly or sequence
+        The polynomial, ascending powers.
+
+    Returns
+    -------
+    bool
+        Whether every root satisfies |z| < 1.
+    """
     a = poly(a)
     while len(a) > 1:
         lead, const = a[-1], a[0]
