@@ -25,7 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # Modules and packages whose public functions carry Parameters/Returns sections.
 SCOPE = (
     "harness/theory", "harness/ground_truth", "harness/problem", "harness/stepper", "harness/store",
-    "harness/runner", "harness/cli", "harness/coefficients.py", "harness/scales.py", "harness/flow.py",
+    "harness/runner", "harness/cli", "harness/coefficients.py", "harness/multistep_coefficients.py",
+    "harness/scales.py", "harness/orbit.py", "harness/regimes.py", "harness/flow.py",
     "harness/derived.py", "harness/facts.py", "harness/api.py", "harness/pytest_plugin.py",
     "harness/tolerances.py", "problems",
 )
