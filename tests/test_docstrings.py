@@ -14,6 +14,7 @@ share (docstring lines over code lines, and over all lines) of the scope and of 
 from __future__ import annotations
 
 import ast
+import functools
 import re
 import sys
 from pathlib import Path
@@ -90,6 +91,7 @@ def _arguments(fn: ast.FunctionDef | ast.AsyncFunctionDef, method: bool) -> list
     return names
 
 
+@functools.cache
 def public_functions(path: Path) -> list[tuple[str, ast.FunctionDef | ast.AsyncFunctionDef, bool]]:
     """The public functions of one module and the public methods of its public classes.
 
@@ -100,7 +102,7 @@ def public_functions(path: Path) -> list[tuple[str, ast.FunctionDef | ast.AsyncF
     Returns
     -------
     list of (qualified name, function node, is a method)
-        Properties, dunder methods and overload stubs are left out.
+        Properties, dunder methods and overload stubs are left out (parsed once per path).
     """
     out = []
 
