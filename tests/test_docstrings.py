@@ -168,6 +168,12 @@ def test_public_function_has_parameters_and_returns(path, qualname, method):
     assert not found, f"{path.relative_to(ROOT)}:{fn.lineno} {qualname}: " + "; ".join(found)
 
 
+def test_every_scope_entry_exists():
+    """A renamed or moved module must not drop out of the sweep unnoticed."""
+    missing = [entry for entry in SCOPE if not (ROOT / entry).exists()]
+    assert not missing, f"SCOPE names paths that do not exist: {missing}"
+
+
 def test_the_rule_catches_what_it_names():
     """The checker itself, on functions with known defects (it must be able to fail)."""
     src = '''
