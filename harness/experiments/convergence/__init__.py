@@ -50,8 +50,9 @@ from harness import tolerances as tol
 from harness.coefficient_floors import coefficient_floor, coefficient_rounding_floor
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
-from harness.experiments.convergence_extended import extended_if_floor_bound
-from harness.experiments.convergence_fit import classify_points, fit_order
+from harness.experiments.convergence.extended import extended_if_floor_bound
+from harness.experiments.convergence.section import SECTION
+from harness.order_fit import classify_points, fit_order
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
@@ -72,6 +73,7 @@ SUMMARY_COLUMNS = [
 # -- fitting ----------------------------------------------------------------------------------
 class ConvergenceExperiment(Experiment):
     name = "convergence"
+    section = SECTION  # its report section: section.py beside this module
     description = "Global and local error order against step size (tolerance for adaptive steppers)."
     default_config: Mapping[str, Any] = {
         "ensemble": tol.ENSEMBLE_SIZE,
@@ -103,7 +105,7 @@ class ConvergenceExperiment(Experiment):
         return _shrinking_sweep(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
-        from harness.experiments.convergence_verdicts import summarize_cell
+        from harness.experiments.convergence.judge import summarize_cell
 
         return summary_per_cell(rows, SUMMARY_COLUMNS, summarize_cell)
 

@@ -42,6 +42,7 @@ from harness.experiments.base import Cell, Experiment, Skip, register_experiment
 from harness.experiments.common import summary_per_cell
 from harness.experiments.convergence import classify_points, fit_order
 from harness.experiments.energy import check_config, classify_drift, rounding_growth, save_grid
+from harness.experiments.step_control.section import SECTION
 
 __all__ = ["StepControlExperiment", "fixed_peer", "is_step_controlled", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
 
@@ -106,6 +107,7 @@ def _with_related(steppers: list[str], problems: list[str], config) -> tuple[lis
 
 class StepControlExperiment(Experiment):
     name = "step-control"
+    section = SECTION  # its report section: section.py beside this module
     description = ("Fixed steps against naive and reversible step control: energy drift, order in "
                    "the control parameter, work to reach an accuracy.")
     default_config: Mapping[str, Any] = {

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.report import figures as F
+from harness.kit.figure_svg import Figure
 
 FAIL, PASS, NONE = "fail", "pass", "none"
 MARK = {FAIL: "✗ FAIL", PASS: "✓ pass", NONE: "– not measured"}
@@ -84,7 +84,7 @@ class Block:
 
     kind: str
     text: str = ""
-    figure: F.Figure | None = None
+    figure: Figure | None = None
     table: Table | None = None
     summary: str = ""
     cls: str = ""
@@ -107,7 +107,7 @@ class Section:
     def heading(self, text: str) -> None:
         self.blocks.append(Block("heading", text=text))
 
-    def figure(self, fig: F.Figure | None, caption: str) -> None:
+    def figure(self, fig: Figure | None, caption: str) -> None:
         if fig is not None:
             dl = csv_download(fig.data, f"{fig.slug}.csv") if fig.data is not None else None
             self.blocks.append(Block("figure", figure=fig, text=caption, download=dl))

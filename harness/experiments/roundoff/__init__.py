@@ -42,6 +42,7 @@ import pandas as pd
 from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.experiments.roundoff.section import SECTION
 from harness.stepper import AdaptiveStepper, StepFailure
 
 __all__ = ["RoundoffExperiment", "ROW_COLUMNS", "SUMMARY_COLUMNS", "step_sizes"]
@@ -73,6 +74,7 @@ def step_sizes(h_max: float, h_min: float, points_per_decade: int) -> np.ndarray
 
 class RoundoffExperiment(Experiment):
     name = "roundoff"
+    section = SECTION  # its report section: section.py beside this module
     description = ("Roundoff floor at very small steps (fixed step count): two-step Verlet "
                    "against leapfrog and velocity Verlet.")
     default_config: Mapping[str, Any] = {

@@ -15,7 +15,7 @@ Every stepper runs on the same problem to the same final time (the problem's
   Jacobian evaluations and linear solves of implicit methods show in the wall time only.
   `wall_s` is the sweep's own run (plus one error evaluation; the first point's includes
   compiling and loading); the timed columns (`t_min_s`, ...) come from warm repeats by the
-  protocol of `harness.timing` (`harness.experiments.timed_runs`): the experiment is
+  protocol of `harness.timing` (`harness.experiments.work_precision.timed_runs`): the experiment is
   `exclusive`, so its cells run one at a time on one worker, with no other cell beside them.
 A sweep runs down to the rounding floor or until it has spent `work_budget` right-hand-side
 evaluations (the convergence sweep's own rule, `convergence.step_budget`: implicit steps also pay
@@ -40,7 +40,8 @@ from harness.errors import InputError
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import check_config, perturbation_used, problem_cells
 from harness.experiments.convergence import step_sweep, tolerance_sweep
-from harness.experiments.timed_runs import TIMING_COLUMNS, time_points
+from harness.experiments.work_precision.section import SECTION
+from harness.experiments.work_precision.timed_runs import TIMING_COLUMNS, time_points
 from harness.stepper import AdaptiveStepper
 
 __all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS"]
@@ -75,6 +76,7 @@ def pareto_front(df: pd.DataFrame, cost: str = "rhs_evals") -> pd.DataFrame:
 
 class WorkPrecisionExperiment(Experiment):
     name = "work-precision"
+    section = SECTION  # its report section: section.py beside this module
     exclusive = True  # timed cells: the runner executes them one at a time (harness.timing)
     finite_columns = ("n_steps", "t_end", "rhs_evals", "wall_s")
     description = "Error at the final time against evaluations and wall time (step-size or tolerance sweep)."

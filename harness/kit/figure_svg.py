@@ -18,9 +18,9 @@ from typing import Any
 
 import pandas as pd
 
-from harness.report.figure_cache import keep_figures_of
-from harness.report.figure_style import RC_PARAMS
-from harness.report.svg_paths import SVG_DECIMALS, compact_path, dedupe_style, round_numbers
+from harness.kit.figure_cache import keep_figures_of
+from harness.kit.figure_style import RC_PARAMS
+from harness.kit.svg_paths import SVG_DECIMALS, compact_path, dedupe_style, round_numbers
 
 __all__ = ["Figure", "UnsafeFigureError", "check_svg", "to_svg", "SVG_DECIMALS", "page_css", "short_classes",
            "short_ids"]

@@ -1,5 +1,5 @@
-"""Convergence figures: error against step size per problem (small multiples per family), and
-the roundoff floor at a fixed step count."""
+"""Convergence figures: error against step size per problem (small multiples per family), with
+the range the order fit used."""
 
 from __future__ import annotations
 
@@ -9,23 +9,21 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.report.figure_style import (
+from harness.kit.figure_style import (
     LOG_CEILING,
     Palette,
-    clip_log,
     label_text,
-    legend_outside,
     loglog_axes,
-    new_figure,
     panel_legend,
     panels,
     small_multiples,
     small_ticks,
     styled,
 )
-from harness.report.figure_svg import Figure, to_svg
+from harness.kit.figure_svg import Figure, to_svg
+from harness.order_fit import fit_order
 
-__all__ = ['SAME_CURVE_DIGITS', 'same_curves', 'convergence_figure', 'roundoff_figure']
+__all__ = ['SAME_CURVE_DIGITS', 'same_curves', 'convergence_figure']
 
 # -- convergence ----------------------------------------------------------------------------------
 # Digits at which two methods' error curves count as the same curve (drawn once): far more than
@@ -64,8 +62,6 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     the thin line only (the CSV says why each was excluded), the fitted slope drawn over exactly
     the range it used, the reference's certified error as the floor every panel shares."""
     from matplotlib.lines import Line2D
-
-    from harness.experiments.convergence import fit_order
 
     g = rows[(rows["kind"] == "global") & np.isfinite(rows["h"].astype(float))]
     if g.empty:
@@ -124,37 +120,5 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     fig.suptitle(f"Convergence on {label_text(problem)}", fontsize=8.5)
     frame = pd.concat(data, ignore_index=True) if data else None
     return to_svg(fig, f"convergence-{problem}", f"error against step size on {problem}", frame)
-
-
-
-# -- roundoff -------------------------------------------------------------------------------------
-@styled
-def roundoff_figure(rows: pd.DataFrame, palette: Palette) -> Figure | None:
-    """Position error against h at a fixed step count, one panel per problem, with the
-    truncation error extrapolated from the largest step."""
-    if rows.empty:
-        return None
-    problems = list(dict.fromkeys(rows["problem"]))
-    fig, axes = new_figure(1, len(problems), size=(3.9 * len(problems) + 1.6, 3.8))
-    for ax, problem in zip(axes[0], problems, strict=True):
-        g = rows[rows["problem"] == problem]
-        for stepper, s in g.groupby("stepper", sort=False):
-            s = s.sort_values("h")
-            ax.plot(s["h"], clip_log(s["error"]), "-",
-                    marker=palette.marker(stepper), ms=4, color=palette.colour(stepper),
-                    label=label_text(stepper))
-        first = g.sort_values("h").groupby("stepper").tail(1)
-        if len(first):
-            s = g[g["stepper"] == first["stepper"].iloc[0]].sort_values("h")
-            ax.plot(s["h"], clip_log(s["truncation_estimate"]), ":",
-                    color="k", lw=0.9, label="truncation alone (∝ h³ at fixed N)")
-        loglog_axes(ax)
-        ax.set_xlabel("step size h")
-        ax.set_title(f"{label_text(problem)}, N = {int(g['n_steps'].iloc[0])} steps")
-    axes[0][0].set_ylabel("relative position error")
-    legend_outside(axes[0][-1], layout=False)
-    cols = [c for c in ("stepper", "problem", "n_steps", "h", "error", "truncation_estimate") if c in rows]
-    return to_svg(fig, "roundoff", "position error against step size at a fixed step count",
-                  rows[cols].reset_index(drop=True))
 
 

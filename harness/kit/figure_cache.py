@@ -73,7 +73,7 @@ _figure_type: type | None = None
 
 
 def keep_figures_of(cls: type) -> type:
-    """Register the figure class whose results the cache keeps (`harness.report.figure_svg`
+    """Register the figure class whose results the cache keeps (`harness.kit.figure_svg`
     registers its `Figure`; this module imports no drawing code, so the two stay acyclic). Its
     objects have `slug`, `svg`, `alt`, `css` and `data` (a DataFrame or None) and are rebuilt
     from those fields. Until a class is registered nothing is cached."""

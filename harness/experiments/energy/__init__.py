@@ -77,6 +77,7 @@ from harness.experiments.common import (
     problem_cells,
     summary_per_cell,
 )
+from harness.experiments.energy.section import SECTION
 from harness.invariant_checks import check_invariants_along_flow
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
@@ -183,6 +184,7 @@ def rounding_growth(n_steps: float) -> float:
 # -- the experiment -------------------------------------------------------------------------------
 class EnergyExperiment(Experiment):
     name = "energy"
+    section = SECTION  # its report section: section.py beside this module
     finite_columns = ("step", "t", "h", "wall_s")
     description = "Long-run energy (and angular momentum) error envelope: bounded, sqrt, linear or unstable."
     default_config: Mapping[str, Any] = {

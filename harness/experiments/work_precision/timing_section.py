@@ -1,8 +1,8 @@
 """The work-precision section's timed part: error against warm time per problem, the time to reach
 target errors, and one method's implementations side by side.
 
-Drawn from the work-precision rows' timing columns (`harness.experiments.timed_runs`, protocol in
-`harness.timing`): one figure per problem (each family's best by time bold, the Pareto front of
+Drawn from the work-precision rows' timing columns (`timed_runs` beside this module, protocol
+in `harness.timing`): one figure per problem (each family's best by time bold, the Pareto front of
 time and error marked), the time-to-target table (log-error against log-time interpolated between
 measured points; "not reached" said), the same-method groups (implementations grouped by their
 coefficients' identity, never by name: their errors at equal steps must agree to rounding, and
@@ -18,8 +18,9 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.report.elements import Block, csv_download
-from harness.report.figure_style import (
+from harness.kit import RunView, Section, df_table
+from harness.kit.elements import Block, csv_download
+from harness.kit.figure_style import (
     LEGEND_CHAR_W,
     LOG_CEILING,
     Palette,
@@ -29,8 +30,7 @@ from harness.report.figure_style import (
     small_ticks,
     styled,
 )
-from harness.report.figure_svg import Figure, to_svg
-from harness.report.sections import RunView, Section, df_table
+from harness.kit.figure_svg import Figure, to_svg
 
 __all__ = ["time_precision_figure", "add_time_sections", "twin_rows", "fastest_table", "group_summary"]
 
@@ -45,7 +45,7 @@ def time_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     (`pareto_time`) as a black step line with open circles."""
     from matplotlib.lines import Line2D
 
-    from harness.report.figures_work import WORK_TARGET_ERROR, best_per_family
+    from harness.experiments.work_precision.figures import WORK_TARGET_ERROR, best_per_family
 
     if "t_min_s" not in rows or "error" not in rows:
         return None

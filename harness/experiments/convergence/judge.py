@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.experiments.convergence_fit import fit_order
+from harness.order_fit import fit_order
 from harness.stepper import Stepper
 
 __all__ = ["summarize_cell", "insufficient_range_reason", "summarise_clauses"]

@@ -76,6 +76,7 @@ from harness.experiments.common import (
     period_states,
     problem_cells,
 )
+from harness.experiments.symplecticity.section import SECTION
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["SymplecticityExperiment", "one_step_jacobians", "symplectic_deviation",
@@ -140,6 +141,7 @@ def one_step_jacobians(
 
 class SymplecticityExperiment(Experiment):
     name = "symplecticity"
+    section = SECTION  # its report section: section.py beside this module
     finite_columns = ("h", "wall_s")
     description = "max ||J^T Omega J - Omega|| of the one-step map's Jacobian, against the claim."
     default_config: Mapping[str, Any] = {

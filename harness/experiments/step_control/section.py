@@ -5,7 +5,8 @@ Session #3: control the step so that Delta theta ~ const, and make sure the orbi
 bounded): the energy error against time for fixed, naive and reversible control (log axes),
 the work saved at each eccentricity, and the verdict on bounded orbits, all read from the run.
 
-Two entry points: `section(view)` returns a `harness.report.sections.Section` (the convention of
+`SECTION` is the spec the experiment names; two more entry points: `section(view)` returns a
+`harness.kit.Section` (the convention of
 the other section builders), `build_section(run_tables)` an HTML fragment from a mapping
 {"rows": DataFrame, "summary": DataFrame} (or a `RunView`) for pluggable section registries.
 """
@@ -19,7 +20,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.report.figure_style import (
+from harness.kit import Section, SectionSpec, df_table
+from harness.kit.figure_style import (
     clip_log,
     label_text,
     legend_outside,
@@ -28,10 +30,9 @@ from harness.report.figure_style import (
     styled,
     thin_line,
 )
-from harness.report.figure_svg import Figure, check_svg, to_svg
-from harness.report.sections import Section, df_table, register_section
+from harness.kit.figure_svg import Figure, check_svg, to_svg
 
-__all__ = ["EXPERIMENT", "TITLE", "section", "build_section", "energy_control_figure"]
+__all__ = ["EXPERIMENT", "TITLE", "SECTION", "section", "build_section", "energy_control_figure"]
 
 EXPERIMENT = "step-control"
 TITLE = "Step control: bounded orbits?"
@@ -101,7 +102,6 @@ INTRO = ("Each step-controlled stepper (Δθ ≈ const, the course's Kepler prac
          "lose; a work ratio above 1 means the control saves work.")
 
 
-@register_section("step-control", title=TITLE, intro=INTRO)
 def build(view: Any, sec: Section) -> None:
     """Figures and tables of the step-control experiment into `sec`."""
     rows = view.rowtable(EXPERIMENT) if hasattr(view, "rowtable") else pd.DataFrame()
@@ -174,3 +174,6 @@ def build_section(run_tables: Mapping[str, pd.DataFrame] | Any) -> str:
             out.append(f'<p class="{e(b.cls)}">{e(b.text)}</p>')
     out.append("</section>")
     return "\n".join(out)
+
+
+SECTION = SectionSpec(EXPERIMENT, title=TITLE, intro=INTRO, build=build)

@@ -133,7 +133,7 @@ def styled(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        from harness.report.figure_cache import cached_call
+        from harness.kit.figure_cache import cached_call
 
         return cached_call(draw, args, kwargs)
 

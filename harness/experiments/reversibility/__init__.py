@@ -64,6 +64,7 @@ from harness.experiments.common import (
     problem_cells,
     reversible_reason,
 )
+from harness.experiments.reversibility.section import SECTION
 from harness.flow import flow_amplification
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
@@ -105,6 +106,7 @@ def one_sided_reason(stepper) -> str | None:
 
 class ReversibilityExperiment(Experiment):
     name = "reversibility"
+    section = SECTION  # its report section: section.py beside this module
     finite_columns = ("steps", "h", "t_span", "flow_amplification", "rounding_bound_ulps", "wall_s")
     description = "Return error of N steps forward and N back (ulps), against the symmetry claim."
     default_config: Mapping[str, Any] = {
