@@ -19,10 +19,10 @@ import pytest
 from harness.experiments.reversibility.section import fold_per_n
 from harness.experiments.work_precision.figures import WORK_TARGET_ERROR
 from harness.experiments.work_precision.section import _work_table
+from harness.kit import figure_cache
 from harness.kit.elements import Block, Row, Section, TextCell, df_table, drop_unlinked_row_ids
 from harness.kit.figure_style import styled
 from harness.kit.figure_svg import short_ids
-from harness.report import figure_cache
 
 CALLS: list[float] = []
 

@@ -19,10 +19,10 @@ import pandas as pd
 import pytest
 from matplotlib.figure import Figure as MplFigure
 
+from harness.kit import csv_download
 from harness.kit.figure_style import styled
 from harness.kit.figure_svg import check_svg, page_css, to_svg
 from harness.kit.svg_paths import relative_path
-from harness.kit import csv_download
 from harness.report.sizes import report_sizes, section_totals
 
 

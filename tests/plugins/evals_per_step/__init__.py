@@ -1,8 +1,10 @@
 """A user's experiment from outside the package: right-hand-side evaluations per step.
 
-Registered through the entry-point group `harness.experiments` by an installed distribution
+One folder, laid out as a built-in experiment's: this module measures and judges, `section.py`
+presents (over the presentation kit `harness.kit`), and the class names its section. Registered
+through the entry-point group `harness.experiments` by an installed distribution
 (tests/test_registry_entry_points.py builds one), it appears in `harness list experiments`, runs
-with `harness run evals-per-step` and gets a report section like a built-in.
+with `harness run evals-per-step` and gets its own section in the report, after the built-ins'.
 
 Claim checked: a fixed-step stepper's declared cost `info.evals_per_step` (evaluations of the
 right-hand side or the force per step). Over n steps an explicit method spends n times its
@@ -17,11 +19,14 @@ import pandas as pd
 from harness.experiments.base import Cell, Experiment, Skip
 from harness.registry import get_problem, get_stepper
 
+from .section import SECTION
+
 
 class EvalsPerStep(Experiment):
     """Evaluations counted over `n_steps` steps against the stepper's declared cost per step."""
 
     name = "evals-per-step"
+    section = SECTION
     description = "Right-hand-side evaluations per step against the stepper's declared cost."
     default_config = {"n_steps": 100, "h": 0.01}
     quick_config = {"n_steps": 20}
