@@ -30,6 +30,7 @@ def _energy_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], b
 
 
 def energy(view: RunView, sec: Section) -> None:
+    """Add the energy figures and tables to `sec`, read from `view`."""
     rows = view.rowtable("energy")
     summ = view.summary("energy")
     symplectic = view.flag("symplectic")

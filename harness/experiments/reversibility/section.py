@@ -36,6 +36,7 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
 
 
 def reversibility(view: RunView, sec: Section) -> None:
+    """Add the reversibility figures and tables to `sec`, read from `view`."""
     summ = view.summary("reversibility")
     symmetric = view.flag("symmetric")
     sec.figure(reversibility_figure(summ, view.palette, symmetric),

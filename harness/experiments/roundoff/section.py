@@ -12,6 +12,7 @@ from harness.kit import (
 
 
 def roundoff(view: RunView, sec: Section) -> None:
+    """Add the roundoff figures and tables to `sec`, read from `view`."""
     ro = view.rowtable("roundoff")
     if len(ro):
         sec.figure(roundoff_figure(ro, view.palette),

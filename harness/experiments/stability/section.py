@@ -37,6 +37,7 @@ def _stability_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]]
 
 
 def stability(view: RunView, sec: Section) -> None:
+    """Add the stability figures and tables to `sec`, read from `view`."""
     rows = view.rowtable("stability")
     summ = view.summary("stability")
     first = rows[rows["kind"] == "grid"] if "kind" in rows else pd.DataFrame()

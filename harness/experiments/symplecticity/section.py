@@ -30,6 +30,7 @@ def _symplectic_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
 
 
 def symplecticity(view: RunView, sec: Section) -> None:
+    """Add the symplecticity figures and tables to `sec`, read from `view`."""
     summ = view.summary("symplecticity")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("h", "h"), ("states", "states"),
             ("deviation", "deviation"), ("threshold", "threshold"),

@@ -53,6 +53,7 @@ def _work_table(summ: pd.DataFrame) -> pd.DataFrame:
 
 
 def work_precision(view: RunView, sec: Section) -> None:
+    """Add the work-precision figures and tables to `sec`, read from `view`."""
     name = "work-precision"
     rows = view.rowtable(name)
     adaptive = view.flag("adaptive")
