@@ -23,28 +23,27 @@ Newton tolerance, iteration cap and convergence test (ensemble-wide), and `StepF
 the NumPy loop raises it. Agreement to rounding is tested over the whole registry
 (`tests/test_compiled.py`).
 
-`fastest(stepper, problem)` is the implementation experiments run: the compiled variant when it
-applies to the problem, else the stepper itself.
+`faster(stepper)` is what the family registers with the registry (`harness.step_loops`, through
+`implementations.builder.builtin_step_loops`): the registry's `fastest(stepper, problem)` runs
+the compiled variant where it applies to the problem, else the stepper itself.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import threading
-import weakref
 from importlib import import_module
 
 import numpy as np
 from scipy.linalg.blas import daxpy
 
+from harness.code_versions import module_version
 from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
 from harness.errors import InputError
 from harness.problem import Dynamics, Problem
 from harness.stepper import Carry, StepFailure, Stepper
 from implementations.compiled_kernels import (
     COMPILE_LOG,
-    TEMPLATES,
     UnsupportedExpression,
     address,
     call_kernel,
@@ -65,7 +64,7 @@ __all__ = [
     "CompiledImplicitRungeKutta",
     "CompiledControlledSplitting",
     "compiled_variant",
-    "fastest",
+    "faster",
     "problem_functions",
     "UnsupportedExpression",
     "COMPILE_LOG",
@@ -112,8 +111,8 @@ def _newton_settings(base: Stepper) -> NewtonSettings:
 
 class _Compiled(Stepper):
     """What the compiled families share: the wrapped NumPy stepper's claims and coefficient
-    object, compatibility through code generation, a fingerprint that includes the kernel
-    templates, and `_advance` as one kernel call (`_run`) for many steps."""
+    object, compatibility through code generation, a fingerprint that includes the kernels'
+    code, and `_advance` as one kernel call (`_run`) for many steps."""
 
     kind = ""
     part = "functions"
@@ -141,7 +140,11 @@ class _Compiled(Stepper):
         return None
 
     def fingerprint(self) -> str:
-        return "\n".join([super().fingerprint(), self.base.fingerprint(), *TEMPLATES])
+        # the source of this module and of every project module it imports (the kernels, their
+        # call intrinsics, the NumPy loops whose helpers it shares): a change to any kernel
+        # changes every compiled stepper's fingerprint, and so the key of every cell it ran
+        return "\n".join([super().fingerprint(), self.base.fingerprint(),
+                          module_version("implementations.compiled")])
 
     def _run(self, dyn: Dynamics, c: Carry, n: int) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -665,10 +668,6 @@ def compiled_variant(stepper: Stepper) -> Stepper:
     )
 
 
-_variants: weakref.WeakKeyDictionary[Stepper, Stepper | None] = weakref.WeakKeyDictionary()
-_variants_lock = threading.Lock()
-
-
 def _family_loops() -> tuple[type, ...]:
     """The NumPy loop classes the compiled families mirror step for step."""
     from implementations.implicit_rk import ImplicitRungeKutta
@@ -679,31 +678,28 @@ def _family_loops() -> tuple[type, ...]:
             LinearMultistepStepper, TwoStepVerlet, ControlledSplittingStepper)
 
 
-def fastest(stepper: Stepper, problem: Problem) -> Stepper:
-    """The fastest correct implementation of `stepper`'s method on `problem`: its compiled
-    variant (agreeing with the NumPy loop to rounding, tested over the registry) when the method
-    is a coefficient object and the problem's functions translate, else `stepper` itself. Read
-    `.info.implementation` of the result to record which one ran. Only a stepper whose loop is
-    exactly its family's own NumPy loop is replaced: a subclass that changes the step (a user's
-    variant, a deliberately broken test stepper) runs as written, since its coefficients alone
-    do not describe what it computes."""
-    if stepper.info.implementation == "compiled":
-        return stepper
-    if type(stepper) not in _family_loops():
-        return stepper
-    with _variants_lock:
-        known = stepper in _variants
-        variant = _variants.get(stepper)
-    if not known:
-        try:
-            variant = compiled_variant(stepper)
-        except InputError:
-            variant = None
-        with _variants_lock:
-            _variants[stepper] = variant
-    if variant is not None and variant.compatible(problem):
-        return variant
-    return stepper
+def faster(stepper: Stepper) -> Stepper | None:
+    """The compiled implementation of `stepper`'s method, as the registry asks it
+    (`harness.step_loops.StepLoop.faster`): its compiled variant (agreeing with the NumPy loop
+    to rounding, tested over the registry) when the method is a coefficient object a compiled
+    family runs, else None. Only a stepper whose loop is exactly its family's own NumPy loop
+    has one: a subclass that changes the step (a user's variant, a deliberately broken test
+    stepper) runs as written, since its coefficients alone do not describe what it computes.
+
+    Parameters
+    ----------
+    stepper : Stepper
+
+    Returns
+    -------
+    Stepper or None
+    """
+    if stepper.info.implementation == "compiled" or type(stepper) not in _family_loops():
+        return None
+    try:
+        return compiled_variant(stepper)
+    except InputError:
+        return None
 
 
 # -- the registered variants -----------------------------------------------------------------------------

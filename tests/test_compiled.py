@@ -28,6 +28,7 @@ from harness.coefficients import ButcherTableau, LinearMultistep, SplittingSchem
 from harness.errors import IncompatibleError, InputError
 from harness.problem import NewtonianForm, Problem
 from harness.registry import get_problem, get_stepper, problems, steppers
+from harness.step_loops import fastest
 from harness.stepper import StepFailure, check_compatible
 from harness.tolerances import COMPILED_AGREEMENT_ULPS, EPS
 from implementations import FAMILY_MODULES
@@ -38,7 +39,6 @@ from implementations.compiled import (
     SUFFIX,
     UnsupportedExpression,
     compiled_variant,
-    fastest,
     problem_functions,
 )
 from implementations.compiled_kernels import COLUMN_BLOCK, family_module
@@ -516,7 +516,7 @@ def test_fastest_runs_a_step_controller_compiled_with_the_numpy_bookkeeping(cont
     """The step-control experiment's long runs take `fastest`: the compiled controller, a subclass
     of the NumPy loop (same carry, reversal and clocks), whose run and round trip are the NumPy
     loop's to rounding, clocks included."""
-    from implementations.compiled import CompiledControlledSplitting, fastest
+    from implementations.compiled import CompiledControlledSplitting
     from implementations.step_control import ControlledSplittingStepper
 
     stepper = get_stepper(f"velocity-verlet+dtheta-{controller}")
@@ -567,7 +567,6 @@ def test_a_compile_holds_a_lock_other_processes_wait_on(tmp_path, monkeypatch):
 def test_fastest_never_replaces_a_changed_loop():
     """A subclass that changes the step (here: the last stage silently reuses the third) is run
     as written: its coefficients alone do not say what it computes."""
-    from implementations.compiled import fastest
     from implementations.runge_kutta import ExplicitRungeKutta
 
     class Changed(ExplicitRungeKutta):
