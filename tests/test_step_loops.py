@@ -71,7 +71,7 @@ def test_a_kernel_change_changes_the_key_of_every_cell_it_could_have_measured(mo
     run `fastest`), so editing a compiled kernel recomputes those cells; a stepper without a
     compiled variant keeps its key."""
     before = {n: keys.code_version(n, "harmonic") for n in ("rk4", "rk4@compiled", "taylor")}
-    kernels = "implementations.compiled_kernels"
+    kernels = "implementations.kernels.one_step"
     read = code_versions._source
 
     def edited(name):
