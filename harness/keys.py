@@ -2,9 +2,10 @@
 
 A cell's key (`cell_key`) hashes the cell, the experiment's resolved configuration, the cell
 file schema and two code versions:
-- `code_version(stepper, problem)`: the fingerprints of the cell's stepper, of the faster
-  implementations the registry may run in its place (a compiled variant: its kernels' source),
-  and of the problem (coefficients, class source, symbolic definition): a changed method
+- `code_version(stepper, problem)`: the fingerprints of the cell's stepper and of the faster
+  implementations the registry may run in its place (`harness.step_loops.fastest`), each with the
+  source of the module its class is defined in and of what that imports (a family's helpers; a
+  compiled variant's kernels), and of the problem (coefficients, class source, symbolic definition): a changed method
   changes only its cells;
 - `experiment_fingerprint(experiment)`: the measuring code of the experiment, found by reading
   the source (never by importing anything new):
@@ -87,9 +88,12 @@ def code_version(stepper: str, problem: str) -> str:
     from harness.registry import get_problem, get_stepper
     from harness.step_loops import implementations_of
 
-    # every implementation a cell of the stepper may run (`fastest`): a change to a compiled
-    # kernel changes the key of each cell it could have measured
-    s = "\n".join(i.fingerprint() for i in implementations_of(get_stepper(stepper))) if stepper else ""
+    # every implementation a cell of the stepper may run (`fastest`), each with the code of the
+    # module its class is defined in and what that imports (module-level helpers of a family's
+    # loop; a compiled variant's kernels): a change to either changes the key of each cell it
+    # could have measured
+    s = "\n".join(f"{i.fingerprint()}\n{module_version(type(i).__module__)}"
+                  for i in implementations_of(get_stepper(stepper))) if stepper else ""
     p = get_problem(problem).fingerprint() if problem else ""
     if not isinstance(s, str) or not isinstance(p, str):
         raise HarnessError(
