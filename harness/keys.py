@@ -5,8 +5,9 @@ file schema and two code versions:
 - `code_version(stepper, problem)`: the fingerprints of the cell's stepper and of the faster
   implementations the registry may run in its place (`harness.step_loops.fastest`), each with the
   source of the module its class is defined in and of what that imports (a family's helpers; a
-  compiled variant's kernels), and of the problem (coefficients, class source, symbolic definition): a changed method
-  changes only its cells;
+  compiled variant's kernels), and of the problem (coefficients, class source, symbolic
+  definition): a changed method changes its cells and those of the steppers its family module
+  (or a module importing it) defines, never another family's;
 - `experiment_fingerprint(experiment)`: the measuring code of the experiment, found by reading
   the source (never by importing anything new):
   1. the experiment's own module, minus the top-level functions and methods that only its
