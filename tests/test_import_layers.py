@@ -27,22 +27,7 @@ PACKAGES = ("harness", "implementations", "problems")
 # the fix that removes it. A deferred (function-level) import is no reason by itself: it is
 # allowed only where a heavy optional library is imported on first use, which is never a module
 # of this project.
-EXCEPTIONS: dict[tuple[str, str], str] = {
-    # -- the catalogue named by the framework ---------------------------------------------------------
-    ("harness.methods", "implementations.builder"):
-        "a method record is built into a stepper by the family step loops of `implementations` "
-        "(`build_stepper`); fix: families register their step loop with the registry",
-    # -- experiments reaching their neighbours ------------------------------------------------------
-    ("harness.experiments.convergence", "implementations.compiled"):
-        "runs the fastest correct implementation of a method by asking the compiled family module; "
-        "fix: 'the fastest implementation' becomes a registry question",
-    ("harness.experiments.energy", "implementations.compiled"): "as above",
-    ("harness.experiments.reversibility", "implementations.compiled"): "as above",
-    ("harness.experiments.step_control", "implementations.compiled"): "as above",
-    ("harness.experiments.symplecticity", "implementations.compiled"): "as above",
-    ("harness.experiments.work_precision.timed_runs", "implementations.compiled"):
-        "as above (which loop is timed)",
-}
+EXCEPTIONS: dict[tuple[str, str], str] = {}
 
 
 # -- the layers, read from docs/LAYOUT.md --------------------------------------------------------------
