@@ -44,6 +44,7 @@ from harness.errors import CoefficientError, IncompatibleError
 from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, StepFailure, Stepper, check_compatible
+from harness.theory.newtonian import velocity_weights
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations import coefficient_info
 
@@ -109,22 +110,6 @@ def _symmetric(name: str, half_alpha: list, half_beta: list, denominator: int) -
     a = [Fraction(x) for x in half_alpha]
     b = [Fraction(x, denominator) for x in half_beta]
     return SecondOrderMultistep(name, a + a[-2::-1], b + b[-2::-1])
-
-
-def velocity_weights(m: int) -> list[Fraction]:
-    """c_0..c_(m-1) of v_n = (x_n - x_(n-1)) / h + h sum_j c_j a_(n-j): c_j = int_0^1 u l_j(u) du
-    with l_j the Lagrange basis on the nodes u_j = 1 - j (order m + 1)."""
-    nodes = [Fraction(1 - j) for j in range(m)]
-    out = []
-    for j, uj in enumerate(nodes):
-        poly = [Fraction(1)]  # l_j(u), ascending
-        for i, ui in enumerate(nodes):
-            if i != j:
-                d = uj - ui
-                poly = [(poly[p - 1] if p > 0 else 0) / d - (poly[p] if p < len(poly) else 0) * ui / d
-                        for p in range(len(poly) + 1)]
-        out.append(sum(c / (p + 2) for p, c in enumerate(poly)))  # int_0^1 u * u^p du
-    return out
 
 
 def _extrapolation_weights(m: int) -> np.ndarray:
@@ -368,7 +353,7 @@ _TABLES = (
                    53222400), 12, _QT, "symmetric explicit 12-step method SL12"),
        (_symmetric("quinlan8a", [1, -2, 2, -2, 2], [0, 22081, -29418, 75183, -75212], 15120),
         8, _Q99, "symmetric explicit 8-step method 8A"),
-       (_symmetric("quinlan8b", [1, 0, 0, -0.5, -1], [0, 192481, 6582, 816783, -156812], 120960),
+       (_symmetric("quinlan8b", [1, 0, 0, Fraction(-1, 2), -1], [0, 192481, 6582, 816783, -156812], 120960),
         8, _Q99, "symmetric explicit 8-step method 8B")]
 )
 

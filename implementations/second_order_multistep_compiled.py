@@ -32,7 +32,8 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
     docstring). Raises InputError for an implicit table or an already compiled stepper."""
 
     def __init__(self, base: Stepper):
-        if not isinstance(base, SecondOrderMultistepStepper) or isinstance(base, CompiledSecondOrderMultistep):
+        compiled = isinstance(base, CompiledSecondOrderMultistep)
+        if not isinstance(base, SecondOrderMultistepStepper) or compiled:
             raise InputError(f"`base` must be a NumPy SecondOrderMultistepStepper, got {type(base).__name__}")
         if not base.coefficients.explicit:
             raise InputError(

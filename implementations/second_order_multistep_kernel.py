@@ -20,7 +20,7 @@ __all__ = ["explicit_advance"]
 
 
 @njit(cache=True, error_model="numpy")
-def explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, known, head, P):  # pragma: no cover - compiled
+def explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, known, head, P):  # pragma: no cover
     """Advance the ring of the last `keep` positions `nsteps` steps.
 
     Parameters

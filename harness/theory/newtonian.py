@@ -52,7 +52,8 @@ from harness.theory.roots import (
     sturm_sequence,
 )
 
-__all__ = ["HwBands", "splitting_trace_exact", "splitting_hw_bands", "lmm2_hw_bands", "hw_bands"]
+__all__ = ["HwBands", "splitting_trace_exact", "splitting_hw_bands", "lmm2_hw_bands", "hw_bands",
+           "velocity_weights"]
 
 
 @dataclass(frozen=True)
@@ -236,3 +237,19 @@ def hw_bands(coefficients, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwB
     if isinstance(coefficients, SecondOrderMultistep):
         return lmm2_hw_bands(coefficients, hw_max)
     return None
+
+
+def velocity_weights(m: int) -> list[Fraction]:
+    """c_0..c_(m-1) of v_n = (x_n - x_(n-1)) / h + h sum_j c_j a_(n-j): c_j = int_0^1 u l_j(u) du
+    with l_j the Lagrange basis on the nodes u_j = 1 - j (order m + 1)."""
+    nodes = [Fraction(1 - j) for j in range(m)]
+    out = []
+    for j, uj in enumerate(nodes):
+        poly = [Fraction(1)]  # l_j(u), ascending
+        for i, ui in enumerate(nodes):
+            if i != j:
+                d = uj - ui
+                poly = [(poly[p - 1] if p > 0 else 0) / d - (poly[p] if p < len(poly) else 0) * ui / d
+                        for p in range(len(poly) + 1)]
+        out.append(sum(c / (p + 2) for p, c in enumerate(poly)))  # int_0^1 u * u^p du
+    return out
