@@ -153,6 +153,8 @@ class SecondOrderMultistepStepper(Stepper):
                 f"{max(1, p - 1)} (the velocity formula has order m + 1), got {velocity_points!r}")
         self.history_length = k
         self._keep = max(k, m)
+        #: positions the loop keeps (and starts): the k of the recurrence, or the velocity formula's m
+        self.kept_points = self._keep
         self._vel_points = m
         if start == "taylor-polynomial" and (self._keep != 2 or p > 2):
             raise CoefficientError(

@@ -59,7 +59,7 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
     def fingerprint(self) -> str:
         from implementations import second_order_multistep_kernel as kernel
 
-        return "\n".join([super().fingerprint(), source_of(kernel.explicit_advance)])
+        return "\n".join([super().fingerprint(), source_of(kernel.explicit_advance.py_func)])
 
     def _advance(self, dyn: Dynamics, c: Carry, n: int) -> None:
         while n > 0 and (c.pending or len(c.hist) < self._keep):  # the NumPy loop's own start
