@@ -158,8 +158,16 @@ def splitting_hw_bands(scheme: SplittingScheme, hw_max: float = tol.STABILITY_HW
     return _bands([psub(T, two), padd(T, two)], stable, hw_max, "|tr M| < 2, det M = 1")
 
 
+def _exact_table(method: SecondOrderMultistep) -> tuple[list[Fraction], list[Fraction]]:
+    """(alpha, beta) exactly as given when the record is exact, else its float64 values."""
+    if getattr(method, "exact", None) is not None:
+        return list(method.exact[0]), list(method.exact[1])
+    return [Fraction(a) for a in method.alpha], [Fraction(b) for b in method.beta]
+
+
 def _char_poly(method: SecondOrderMultistep, x: Fraction) -> Poly:
-    return tuple(Fraction(a) + x * Fraction(b) for a, b in zip(method.alpha, method.beta, strict=False))
+    alpha, beta = _exact_table(method)
+    return tuple(a + x * b for a, b in zip(alpha, beta, strict=False))
 
 
 def _w_polynomial(c: list[Fraction]) -> Poly:
@@ -180,8 +188,7 @@ def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW
     docstring: periodicity for symmetric methods, spectral radius <= 1 otherwise)."""
     check_type(method, SecondOrderMultistep, "method")
     k = method.steps
-    alpha = [Fraction(a) for a in method.alpha]
-    beta = [Fraction(b) for b in method.beta]
+    alpha, beta = _exact_table(method)
     lead = poly([alpha[k], beta[k]])
     if method.symmetric and k % 2 == 0:
         m = k // 2
