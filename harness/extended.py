@@ -383,7 +383,7 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     the fit (order, points, h range) or None, and the reference error. Raises NotMeasurable
     with the reason."""
     from harness.coefficient_floors import mark_above_order
-    from harness.experiments.convergence_fit import classify_points, fit_order
+    from harness.order_fit import classify_points, fit_order
 
     runner = _runner(coefficients, problem)
     growth = getattr(runner, "rounding_exponent", 0.5)  # rounding as a random walk: n^(1/2) eps
