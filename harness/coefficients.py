@@ -465,8 +465,11 @@ class SecondOrderMultistep(_MultistepFacts):
     exact: tuple | None = field(init=False, repr=False)
 
     def fingerprint(self) -> str:
-        """alpha and beta, exactly, as text (what a cell key records of the method)."""
-        return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
+        """alpha and beta, exactly, as text (what a cell key records of the method), and the exact
+        form or that there is none (an extended-precision run differs between the two)."""
+        exact = ("float64" if self.exact is None
+                 else "exact:" + hashlib.sha256(repr(self.exact).encode()).hexdigest())
+        return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}:{exact}"
 
     ALPHA_SIGN = 1.0
     # A multistep recurrence is not a map of phase space: symplecticity is a property of the

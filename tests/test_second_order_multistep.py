@@ -188,3 +188,14 @@ def test_an_exact_record_that_breaks_an_order_condition_shows_the_lower_order_in
     r = extended_sweep(mutant, get_problem("harmonic"), order_bound=4, work_budget=4000)
     assert r["fit"] is not None
     assert r["fit"]["order"] == pytest.approx(mutant.order(), abs=0.15)
+
+
+def test_a_float64_table_is_not_measurable_in_extended_precision_and_says_why():
+    from harness.extended import NotMeasurable, exact_form
+
+    exact = cowell_table(4)
+    floats = SecondOrderMultistep("cowell4-floats", exact.alpha.tolist(), exact.beta.tolist())
+    assert exact.exact is not None and floats.exact is None
+    with pytest.raises(NotMeasurable, match="given only to float64"):
+        exact_form(floats)
+    assert exact.fingerprint() != floats.fingerprint()  # never one cached cell for both
