@@ -1,7 +1,8 @@
 """The compiled implementation of the second-order multistep family (explicit tables).
 
 `CompiledSecondOrderMultistep` is the family's NumPy loop (`SecondOrderMultistepStepper`) with its
-steps run by the compiled kernel `implementations.second_order_multistep_kernel.explicit_advance`:
+steps run by the compiled kernel `implementations.kernels.second_order_multistep`
+(`lmm2_explicit_advance`, called through `implementations.compiled_kernels.call_kernel`):
 the start (starter stepper or Taylor polynomial), the pending starting values, the velocity
 reconstruction, time reversal and the stability probe's history are the NumPy loop's own
 (inherited), so both implementations share every convention and agree to rounding. Registered as
@@ -15,10 +16,11 @@ import dataclasses
 
 import numpy as np
 
+from harness.code_versions import module_version
 from harness.errors import InputError
 from harness.problem import Dynamics, Problem
-from harness.sources import source_of
 from harness.stepper import Carry, Stepper
+from implementations.compiled_kernels import call_kernel
 from implementations.native_functions import UnsupportedExpression, function_address
 from implementations.second_order_multistep import SecondOrderMultistepStepper
 
@@ -57,9 +59,10 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
         return None
 
     def fingerprint(self) -> str:
-        from implementations import second_order_multistep_kernel as kernel
-
-        return "\n".join([super().fingerprint(), source_of(kernel.explicit_advance.py_func)])
+        # this module's and its kernel's code: a change to either changes every cell's key
+        return "\n".join([super().fingerprint(),
+                          module_version("implementations.second_order_multistep_compiled"),
+                          module_version("implementations.kernels.second_order_multistep")])
 
     def _advance(self, dyn: Dynamics, c: Carry, n: int) -> None:
         while n > 0 and (c.pending or len(c.hist) < self._keep):  # the NumPy loop's own start
@@ -68,8 +71,6 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
             n -= 1
         if n <= 0:
             return
-        from implementations.second_order_multistep_kernel import explicit_advance
-
         table = self.coefficients
         keep = self._keep
         X = np.ascontiguousarray(np.stack([e[0] for e in c.hist]), dtype=np.float64)
@@ -83,8 +84,9 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
         if P.ndim != 2:
             P = P.reshape(P.shape[0] if P.size else 0, dyn.size)
         P = np.ascontiguousarray(P, dtype=np.float64)
-        evals, head = explicit_advance(
-            function_address(dyn.problem, "accel"), np.ascontiguousarray(table.alpha, dtype=np.float64),
+        evals, head = call_kernel(
+            "lmm2_explicit_advance", function_address(dyn.problem, "accel"),
+            np.ascontiguousarray(table.alpha, dtype=np.float64),
             np.ascontiguousarray(table.beta, dtype=np.float64), float(c.h * c.h), float(c.t0),
             int(c.n), float(c.h), int(n), X, A, known, 0, P)
         dyn.counts["accel"] += int(evals)

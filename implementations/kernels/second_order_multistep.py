@@ -1,5 +1,5 @@
-"""The compiled step loop of explicit second-order multistep tables (Stormer, the symmetric
-Quinlan-Tremaine methods): a Python function numba compiles, imported only when it runs.
+"""Kernel of explicit second-order multistep tables (Stormer, the symmetric Quinlan-Tremaine
+methods), run by `implementations.second_order_multistep_compiled`.
 
 The same operations in the same order as `SecondOrderMultistepStepper._step` (no fused
 multiply-add, `error_model="numpy"`): psi = -sum_j alpha_j x_(n+j) + sum_j (h^2 beta_j) a_(n+j),
@@ -15,12 +15,13 @@ import numpy as np
 from numba import njit
 
 from implementations.kernel_calls import call_state
+from implementations.kernels.common import EXACT
 
-__all__ = ["explicit_advance"]
+__all__ = ["lmm2_explicit_advance"]
 
 
-@njit(cache=True, error_model="numpy")
-def explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, known, head, P):  # pragma: no cover
+@njit(**EXACT)
+def lmm2_explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, known, head, P):
     """Advance the ring of the last `keep` positions `nsteps` steps.
 
     Parameters
