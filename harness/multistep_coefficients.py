@@ -8,13 +8,14 @@
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
-from harness.coefficient_input import Number, as_float_array, close_to_rounding
+from harness.coefficient_input import Number, as_float_array, close_to_rounding, exact_rows
 from harness.errors import CoefficientError
 from harness.tolerances import COEFFICIENT_ULPS, EPS
 
@@ -157,16 +158,25 @@ class SecondOrderMultistep(_MultistepFacts):
                     f"`{name}`: consistency needs {rule}, got {float(lhs)!r} vs {float(rhs)!r}"
                 )
         _set_multistep(self, name, a, b)
+        exact_a, exact_b = exact_rows(alpha, 1), exact_rows(beta, 1)
+        object.__setattr__(self, "exact", (exact_a, exact_b) if exact_a and exact_b else None)
+
+    #: (alpha, beta) as Fractions when given exactly (extended-precision runs need them), else None
+    exact: tuple | None = field(init=False, repr=False)
 
     def fingerprint(self) -> str:
-        """alpha and beta, exactly, as text (what a cell key records of the method).
+        """alpha and beta, exactly, as text (what a cell key records of the method), and the exact
+        form or that there is none (an extended-precision run differs between the two).
 
         Returns
         -------
         str
-            ``lmm2:`` and the hex bytes of alpha and beta.
+            ``lmm2:``, the hex bytes of alpha and beta, and ``:float64`` or
+            ``:exact:<sha256 of the exact form>``.
         """
-        return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
+        exact = ("float64" if self.exact is None
+                 else "exact:" + hashlib.sha256(repr(self.exact).encode()).hexdigest())
+        return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}:{exact}"
 
     ALPHA_SIGN = 1.0
     # A multistep recurrence is not a map of phase space: symplecticity is a property of the
