@@ -145,8 +145,7 @@ class ButcherTableau:
 
         Returns
         -------
-        ButcherTableau
-            The embedded method. Raises `CoefficientError` when the tableau has no `b_hat`.
+        ButcherTableau: the embedded method. Raises `CoefficientError` when the tableau has no `b_hat`.
         """
         if self.b_hat is None:
             raise CoefficientError(f"`{self.name}` has no embedded weights `b_hat`")
@@ -172,8 +171,7 @@ class ButcherTableau:
 
         Returns
         -------
-        ndarray, complex, shape of `z`
-            R at each point.
+        ndarray, complex, shape of `z`: R at each point.
         """
         z = np.asarray(z, dtype=complex)
         s = self.stages
@@ -193,8 +191,7 @@ class ButcherTableau:
 
         Returns
         -------
-        str
-            `float_fingerprint` followed by ``:float64`` or ``:exact:<sha256 of the exact form>``.
+        str: `float_fingerprint` followed by ``:float64`` or ``:exact:<sha256 of the exact form>``.
         """
         if self.exact is None:
             exact = "float64"
@@ -208,8 +205,7 @@ class ButcherTableau:
 
         Returns
         -------
-        str
-            ``rk:`` and the hex bytes of A, b, c (and b_hat when embedded).
+        str: ``rk:`` and the hex bytes of A, b, c (and b_hat when embedded).
         """
         embedded = "" if self.b_hat is None else ":" + self.b_hat.tobytes().hex()
         return f"rk:{self.A.tobytes().hex()}:{self.b.tobytes().hex()}:{self.c.tobytes().hex()}{embedded}"
@@ -220,8 +216,7 @@ class ButcherTableau:
 
         Returns
         -------
-        int
-            The largest p whose order conditions all hold, to the coefficients' rounding.
+        int: the largest p whose order conditions all hold, to the coefficients' rounding.
         """
         from harness.theory import rk_order
 
@@ -232,8 +227,7 @@ class ButcherTableau:
 
         Returns
         -------
-        int or None
-            Its order from the rooted-tree conditions, or None without `b_hat`.
+        int or None: its order from the rooted-tree conditions, or None without `b_hat`.
         """
         if self.b_hat is None:
             return None
@@ -246,8 +240,7 @@ class ButcherTableau:
 
         Returns
         -------
-        int
-            The largest p with R(z) - e^z = O(z^{p+1}) (`harness.theory.rk_linear_order`).
+        int: the largest p with R(z) - e^z = O(z^{p+1}) (`harness.theory.rk_linear_order`).
         """
         from harness.theory import rk_linear_order
 
@@ -356,8 +349,7 @@ class SplittingScheme:
 
         Returns
         -------
-        str
-            `float_fingerprint` followed by ``:float64`` or ``:exact:<sha256 of the exact form>``.
+        str: `float_fingerprint` followed by ``:float64`` or ``:exact:<sha256 of the exact form>``.
         """
         exact = "float64" if self.exact is None else "exact:" + hashlib.sha256(
             repr(self.exact).encode()).hexdigest()
@@ -368,8 +360,7 @@ class SplittingScheme:
 
         Returns
         -------
-        str
-            ``split:`` and the (kind, coefficient) pairs of the merged sequence.
+        str: ``split:`` and the (kind, coefficient) pairs of the merged sequence.
         """
         return "split:" + ";".join(f"{k}{v!r}" for k, v in self.sequence)
 
@@ -381,8 +372,7 @@ class SplittingScheme:
 
         Returns
         -------
-        int
-            The order of the composition on q'' = a(q, t).
+        int: the order of the composition on q'' = a(q, t).
         """
         from harness.theory import splitting_order
 
@@ -394,8 +384,7 @@ class SplittingScheme:
 
         Returns
         -------
-        int
-            The order of the propagator's match with the exact rotation.
+        int: the order of the propagator's match with the exact rotation.
         """
         from harness.theory import splitting_linear_order
 
@@ -416,8 +405,7 @@ class SplittingScheme:
 
         Returns
         -------
-        SplittingScheme
-            The composed scheme (adjacent drifts or kicks merged, checked on creation).
+        SplittingScheme: the composed scheme (adjacent drifts or kicks merged, checked on creation).
         """
         seq: list[tuple[str, Number]] = []
         exact_weights = [exact_value(w) for w in weights]

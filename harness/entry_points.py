@@ -37,8 +37,7 @@ def group_entry_points(group: str) -> tuple[list, list]:
 
     Returns
     -------
-    (this project's own, sorted by name; every other distribution's, sorted by distribution
-    and name)
+    (this project's own, sorted by name; every other distribution's, sorted by distribution: and name)
     """
     eps = list(metadata.entry_points(group=group))
     own = sorted((ep for ep in eps if _is_own(ep)), key=lambda ep: ep.name)

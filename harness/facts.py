@@ -55,8 +55,7 @@ def class_key(nystrom: bool, degree: int | None) -> str | None:
 
     Returns
     -------
-    str or None
-        "nystrom", "degree-d" or "nystrom+degree-d"; None as above.
+    str or None: "nystrom", "degree-d" or "nystrom+degree-d"; None as above.
     """
     if degree is not None and not 2 <= degree <= CLASS_MAX_DEGREE:
         degree = None
@@ -90,8 +89,7 @@ class MethodFacts:
 
         Returns
         -------
-        dict
-            Every field.
+        dict: every field.
         """
         return asdict(self)
 
@@ -114,8 +112,7 @@ class ProblemFacts:
 
         Returns
         -------
-        dict
-            Every field.
+        dict: every field.
         """
         return asdict(self)
 
@@ -130,8 +127,7 @@ def method_facts(stepper: Stepper) -> MethodFacts:
 
     Returns
     -------
-    MethodFacts
-        With `source` "coefficients" or "claims".
+    MethodFacts: with `source` "coefficients" or "claims".
     """
     coeffs = getattr(stepper, "coefficients", None)
     key = coeffs.fingerprint() if coeffs is not None and hasattr(coeffs, "fingerprint") else None
@@ -206,12 +202,10 @@ def problem_facts(problem: Problem) -> ProblemFacts:
     Parameters
     ----------
     problem : Problem
-        The problem.
 
     Returns
     -------
-    ProblemFacts
-        Linearity, polynomial degrees, Newtonian structure, stiffness and horizon.
+    ProblemFacts: linearity, polynomial degrees, Newtonian structure, stiffness and horizon.
     """
     return _problem_facts(problem.fingerprint(), (problem,))
 

@@ -32,7 +32,6 @@ def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> fl
     Parameters
     ----------
     problem : Problem
-        The problem.
     span : float
         The time the flow runs.
     y0 : ndarray, shape (dim,), optional
@@ -40,8 +39,7 @@ def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> fl
 
     Returns
     -------
-    float
-        ||d Phi_span(y0)||_inf (kept on disk per problem, span, start and code version).
+    float: ||d Phi_span(y0)||_inf (kept on disk per problem, span, start and code version).
     """
     base = np.asarray(problem.y0 if y0 is None else y0, dtype=float).reshape(problem.dim)
     key = (problem.fingerprint(), float(span), base.tobytes())

@@ -111,8 +111,7 @@ class LinearMultistep(_MultistepFacts):
 
         Returns
         -------
-        str
-            ``lmm:`` and the hex bytes of alpha and beta.
+        str: ``lmm:`` and the hex bytes of alpha and beta.
         """
         return f"lmm:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
 
@@ -123,8 +122,7 @@ class LinearMultistep(_MultistepFacts):
 
         Returns
         -------
-        int
-            The largest p with C_0 = ... = C_p = 0.
+        int: the largest p with C_0 = ... = C_p = 0.
         """
         from harness.theory import lmm_order
 
@@ -188,8 +186,7 @@ class SecondOrderMultistep(_MultistepFacts):
 
         Returns
         -------
-        int
-            The order p of the method for x'' = a (error constants C_0 ... C_{p+1} zero).
+        int: the order p of the method for x'' = a (error constants C_0 ... C_{p+1} zero).
         """
         from harness.theory import second_order_lmm_order
 

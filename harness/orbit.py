@@ -62,7 +62,6 @@ def sample_orbit(problem, y0: np.ndarray | None = None, t_end: float | None = No
     Parameters
     ----------
     problem : Problem
-        The problem.
     y0 : ndarray, shape (dim,), optional
         The start (default `problem.y0`).
     t_end : float, optional
@@ -70,8 +69,7 @@ def sample_orbit(problem, y0: np.ndarray | None = None, t_end: float | None = No
 
     Returns
     -------
-    Orbit
-        The samples; `complete` False and `singular` set when the run stopped early.
+    Orbit: the samples; `complete` False and `singular` set when the run stopped early.
     """
     lock, ta = _integrator(problem)
     start = np.array(problem.y0 if y0 is None else y0, dtype=np.float64).reshape(problem.dim)
@@ -124,8 +122,7 @@ def jacobian_eigenvalues(problem, jac: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    ndarray, complex, shape (n, dim)
-        Their eigenvalues.
+    ndarray, complex, shape (n, dim): their eigenvalues.
     """
     mats = np.transpose(jac, (2, 0, 1))
     if problem.newtonian is not None and not problem.velocity_dependent:
@@ -142,7 +139,6 @@ def states_at(problem, times: np.ndarray, y0: np.ndarray | None = None) -> np.nd
     Parameters
     ----------
     problem : Problem
-        The problem.
     times : array_like, shape (m,)
         Increasing times >= t0.
     y0 : ndarray, shape (dim,), optional
@@ -150,8 +146,7 @@ def states_at(problem, times: np.ndarray, y0: np.ndarray | None = None) -> np.nd
 
     Returns
     -------
-    ndarray, shape (dim, m)
-        The states.
+    ndarray, shape (dim, m): the states.
     """
     lock, ta = _integrator(problem)
     times = np.asarray(times, dtype=np.float64)
@@ -178,8 +173,7 @@ def fastest_times(problem, n: int) -> np.ndarray:
 
     Returns
     -------
-    ndarray
-        The chosen times, increasing.
+    ndarray: the chosen times, increasing.
     """
     orbit = sample_orbit(problem)
     rate = orbit_rates(problem, orbit)["spectral"]
@@ -207,7 +201,6 @@ def orbit_rates(problem, orbit: Orbit, *, candidates: int | None = None) -> dict
     Parameters
     ----------
     problem : Problem
-        The problem.
     orbit : Orbit
         An orbit of it (`sample_orbit`); thinned to ORBIT_MAX_SAMPLES samples.
     candidates : int, optional
@@ -215,8 +208,7 @@ def orbit_rates(problem, orbit: Orbit, *, candidates: int | None = None) -> dict
 
     Returns
     -------
-    dict of ndarray
-        'spectral', 'oscillation' and 'change' rates, one per (thinned) sample.
+    dict of ndarray: 'spectral', 'oscillation' and 'change' rates, one per (thinned) sample.
     """
     idx = np.arange(orbit.t.size)
     if idx.size > tol.ORBIT_MAX_SAMPLES:

@@ -55,8 +55,7 @@ def integrator_claims(request: pytest.FixtureRequest) -> Callable[..., Any]:
 
     Returns
     -------
-    callable
-        ``check(stepper, problems, **claims_and_options)`` -> `ClaimReport`.
+    callable: ``check(stepper, problems, **claims_and_options)`` -> `ClaimReport`.
     """
     from harness.api import check
 

@@ -35,14 +35,12 @@ def regime_end(problem, t_end: float) -> tuple[float, str]:
     Parameters
     ----------
     problem : Problem
-        The problem.
     t_end : float
         Where the long run is meant to end (past the span or not).
 
     Returns
     -------
-    (float, str)
-        t_stop in [min(t_end, span end), t_end] and the reason ("" when the regime holds).
+    (float, str): t_stop in [min(t_end, span end), t_end] and the reason ("" when the regime holds).
     """
     key = (problem.fingerprint(), float(t_end))
     if key not in _regime_ends:
@@ -105,14 +103,12 @@ def fastest_approach(problem, t_end: float) -> tuple[float, float, float] | None
     Parameters
     ----------
     problem : Problem
-        The problem.
     t_end : float
         The end of the orbit followed.
 
     Returns
     -------
-    (float, float, float) or None
-        (t, rate, rate at the start), or None.
+    (float, float, float) or None: (t, rate, rate at the start), or None.
     """
     key = (problem.fingerprint(), float(t_end))
     if key not in _approaches:

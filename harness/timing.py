@@ -103,8 +103,7 @@ def relative_spread(samples: Sequence[float]) -> float:
 
     Returns
     -------
-    float
-        The relative spread (0 when every sample is the same).
+    float: the relative spread (0 when every sample is the same).
     """
     if len(samples) < 2 or min(samples) <= 0:
         return float("nan")
@@ -138,8 +137,7 @@ def measure(fn: Callable[[], Any], *, warmup: int = 0, min_repeats: int = tol.TI
 
     Returns
     -------
-    Timing
-        The samples, and the stop reason: "spread", "max-repeats" or "budget".
+    Timing: the samples, and the stop reason: "spread", "max-repeats" or "budget".
     """
     counts = isinstance(min_repeats, int) and isinstance(max_repeats, int)
     if not (counts and 1 <= min_repeats <= max_repeats):
@@ -347,8 +345,7 @@ def method_identity(stepper: Any) -> str | None:
 
     Returns
     -------
-    str or None
-        Equal for two steppers exactly when their coefficients are equal.
+    str or None: equal for two steppers exactly when their coefficients are equal.
     """
     coefficients = getattr(stepper, "coefficients", None)
     declared = stepper.info.extra.get("declared_splitting")

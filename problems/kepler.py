@@ -66,8 +66,7 @@ def orbital_elements(y0: np.ndarray) -> dict[str, np.ndarray]:
 
     Returns
     -------
-    dict of str to ndarray
-        'a', 'e', 'n', 'period' and 'energy', each shape (N,).
+    dict of str to ndarray: 'a', 'e', 'n', 'period' and 'energy', each shape (N,).
     """
     y0 = np.asarray(y0, dtype=np.float64)
     x, y, vx, vy = y0
@@ -204,8 +203,7 @@ def pericentre_start(e: float) -> list[float]:
 
     Returns
     -------
-    list of float
-        (x, y, vx, vy).
+    list of float: (x, y, vx, vy).
     """
     return [1.0 - e, 0.0, 0.0, math.sqrt((1.0 + e) / (1.0 - e))]
 

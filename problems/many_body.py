@@ -40,8 +40,7 @@ def henon_heiles_start(energy: float, y0: float) -> list[float]:
 
     Returns
     -------
-    list of float
-        (x, y, px, py).
+    list of float: (x, y, px, py).
     """
     px2 = 2.0 * energy - y0 * y0 + 2.0 * y0 * y0 * y0 / 3.0
     return [0.0, y0, math.sqrt(px2), 0.0]

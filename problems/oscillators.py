@@ -86,8 +86,7 @@ def pendulum_period(theta0: float, omega0: float = 0.0) -> float:
 
     Returns
     -------
-    float
-        The period; `InputError` for a rotating start (energy >= 2).
+    float: the period; `InputError` for a rotating start (energy >= 2).
     """
     energy = omega0 * omega0 / 2.0 + 2.0 * math.sin(theta0 / 2.0) ** 2
     m = energy / 2.0
@@ -162,8 +161,7 @@ def small_angle(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None = N
 
     Returns
     -------
-    ndarray, shape (2, N)
-        theta0 cos(t - t0) + omega0 sin(t - t0) and its derivative.
+    ndarray, shape (2, N): theta0 cos(t - t0) + omega0 sin(t - t0) and its derivative.
     """
     return _harmonic_exact(t, y0, t0, pars)
 

@@ -61,8 +61,7 @@ def elements_to_cartesian(
 
     Returns
     -------
-    (ndarray, ndarray)
-        Position and velocity, each shape (3,).
+    (ndarray, ndarray): position and velocity, each shape (3,).
     """
     p = a * (1.0 - e * e)
     r = p / (1.0 + e * math.cos(f))

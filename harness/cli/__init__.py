@@ -183,8 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     Returns
     -------
-    int
-        The exit status (module docstring).
+    int: the exit status (module docstring).
     """
     parser = build_parser()
     args = parser.parse_args(_join_values(sys.argv[1:] if argv is None else argv))

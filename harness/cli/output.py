@@ -47,8 +47,7 @@ def report_error(message: str, code: int) -> int:
 
     Returns
     -------
-    int
-        `code`.
+    int: `code`.
     """
     print(f"harness: error: {one_line(message)}", file=sys.stderr)
     return code
@@ -89,8 +88,7 @@ def write_stdout(text: str) -> int:
 
     Returns
     -------
-    int
-        EXIT_OK, or the OS error's exit status.
+    int: EXIT_OK, or the OS error's exit status.
     """
     try:
         if text:
@@ -198,8 +196,7 @@ class EscapingStream(io.TextIOBase):
 
         Returns
         -------
-        int
-            len(text), as `io.TextIOBase.write` counts what it was given.
+        int: len(text), as `io.TextIOBase.write` counts what it was given.
         """
         self._target.write(escape_controls(text))
         return len(text)
@@ -267,7 +264,6 @@ def print_table(frame, columns: Sequence[str]) -> None:
     Parameters
     ----------
     frame : DataFrame
-        The table.
     columns : sequence of str
         The columns shown.
     """

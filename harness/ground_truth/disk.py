@@ -24,8 +24,7 @@ def references_dir() -> Path:
 
     Returns
     -------
-    Path
-        The directory.
+    Path: the directory.
     """
     d = cache.cache_dir() / "references"
     d.mkdir(parents=True, exist_ok=True)
@@ -58,8 +57,7 @@ def reference_key(problem: Problem, level: str, times, t0, y0, pars) -> str:
 
     Returns
     -------
-    str
-        A hex digest.
+    str: A hex digest.
     """
     h = hashlib.sha256()
     for part in (
@@ -94,8 +92,7 @@ def cache_path(problem: Problem, level: str, key: str) -> Path:
 
     Returns
     -------
-    Path
-        ``references_dir()/<name>-<level>-<key>.npz``.
+    Path: ``references_dir()/<name>-<level>-<key>.npz``.
     """
     safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in problem.name)
     return references_dir() / f"{safe}-{level}-{key}.npz"
@@ -116,8 +113,7 @@ def load_reference(path: Path, times: np.ndarray, shape: tuple[int, int, int]):
 
     Returns
     -------
-    tuple or None
-        (y, error, floor, certified_by, compute_s), or None.
+    tuple or None: (y, error, floor, certified_by, compute_s), or None.
     """
     if not path.exists():
         return None

@@ -47,12 +47,10 @@ class Level:
         Parameters
         ----------
         x : float
-            The value.
 
         Returns
         -------
-        float, np.longdouble, hy.real128 or hy.real
-            `x` in this level's number type.
+        float, np.longdouble, hy.real128 or hy.real: `x` in this level's number type.
         """
         x = float(x)
         if self.name == "float64":
@@ -73,8 +71,7 @@ class Level:
 
         Returns
         -------
-        ndarray
-            The same values in this level's number type (a copy), same shape.
+        ndarray: the same values in this level's number type (a copy), same shape.
         """
         a = np.asarray(a, dtype=np.float64)
         if self.name == "float64":
@@ -96,8 +93,7 @@ class Level:
 
         Returns
         -------
-        ndarray
-            The values, each rounded once to this level.
+        ndarray: the values, each rounded once to this level.
         """
         texts = [str(v) for v in values]
         if self.name == "float64":
@@ -136,8 +132,7 @@ def level_chain() -> list[Level]:
 
     Returns
     -------
-    list of Level
-        The chain, least precise first.
+    list of Level: the chain, least precise first.
     """
     chain: list[Level] = []
     for lv in _ALL_LEVELS:
@@ -151,8 +146,7 @@ def available_levels() -> list[str]:
 
     Returns
     -------
-    list of str
-        Level names: every level of `level_chain` but the last that is in LEVELS.
+    list of str: level names: every level of `level_chain` but the last that is in LEVELS.
     """
     chain = level_chain()
     return [lv.name for lv in chain[:-1] if lv.name in LEVELS]
@@ -168,8 +162,7 @@ def certifier_of(level: str) -> str:
 
     Returns
     -------
-    str
-        The certifying level's name; `InputError` for any other `level`.
+    str: the certifying level's name; `InputError` for any other `level`.
     """
     chain = level_chain()
     names = [lv.name for lv in chain]

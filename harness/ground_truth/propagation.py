@@ -84,7 +84,6 @@ def stiff_check(problem: Problem, level: Level, ta: Any, t_end: float, member: i
     Parameters
     ----------
     problem : Problem
-        The problem.
     level : Level
         The integrator's precision level (for the message).
     ta : heyoka taylor_adaptive
@@ -197,8 +196,7 @@ def reference_tol(level: Level) -> float:
 
     Returns
     -------
-    float
-        The tolerance.
+    float: the tolerance.
     """
     return level.eps * REFERENCE_TOL_FACTOR
 
@@ -215,8 +213,7 @@ def certifier_tol(cert: Level, level: Level) -> float:
 
     Returns
     -------
-    float
-        max(cert's epsilon, `reference_tol(level)` x CERTIFIER_TOL_FACTOR).
+    float: max(cert's epsilon, `reference_tol(level)` x CERTIFIER_TOL_FACTOR).
     """
     return max(cert.eps, reference_tol(level) * CERTIFIER_TOL_FACTOR)
 
@@ -239,7 +236,6 @@ def propagate(
     Parameters
     ----------
     problem : Problem
-        The problem.
     level : Level
         The precision level.
     tol : float
@@ -257,8 +253,7 @@ def propagate(
 
     Returns
     -------
-    (ndarray, float)
-        The states (nt, dim, N) in the level's type, and the wall time in seconds.
+    (ndarray, float): the states (nt, dim, N) in the level's type, and the wall time in seconds.
     """
     lock, ta = _integrator(problem, level, tol)
     prepend = times[0] > t0

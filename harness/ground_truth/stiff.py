@@ -49,8 +49,7 @@ def available() -> bool:
 
     Returns
     -------
-    bool
-        Whether ``sksundae.cvode`` imports.
+    bool: whether ``sksundae.cvode`` imports.
     """
     try:
         import sksundae.cvode  # noqa: F401

@@ -38,8 +38,7 @@ def check_ensemble_size(size: Any) -> int:
 
     Returns
     -------
-    int
-        `size`, checked.
+    int: `size`, checked.
     """
     from harness.tolerances import MAX_ENSEMBLE_SIZE
 
@@ -82,8 +81,7 @@ def check_state(y: Any, dim: int, name: str = "y0") -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (dim, N)
-        A new float64 array.
+    ndarray, shape (dim, N): A new float64 array.
     """
     if np.iscomplexobj(y) or (isinstance(y, list | tuple) and any(isinstance(v, complex) for v in y)):
         raise InputError(f"`{name}` must be real numbers (complex values are not cast to real)")

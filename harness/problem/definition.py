@@ -244,8 +244,7 @@ class Problem:
 
         Returns
         -------
-        ndarray, shape (dim, size)
-            The initial states.
+        ndarray, shape (dim, size): the initial states.
         """
         from harness.scales import draw_noise
 
@@ -273,8 +272,7 @@ class Problem:
 
         Returns
         -------
-        ndarray, shape (P, size)
-            Finite float64 values; `InputError` names a bad `pars`.
+        ndarray, shape (P, size): finite float64 values; `InputError` names a bad `pars`.
         """
         P = len(self.parameters)
         if pars is None:
@@ -333,8 +331,7 @@ class Problem:
 
         Returns
         -------
-        Dynamics
-            The right-hand side, acceleration and Jacobian with evaluation counters.
+        Dynamics: the right-hand side, acceleration and Jacobian with evaluation counters.
         """
         return Dynamics(self, self.pars_for(size, pars))
 
@@ -402,8 +399,7 @@ class Problem:
 
         Returns
         -------
-        dict of str to ndarray
-            Each invariant's values, shape (N,); empty when the problem declares none.
+        dict of str to ndarray: each invariant's values, shape (N,); empty when the problem declares none.
         """
         if not self.invariants:
             return {}
@@ -458,8 +454,7 @@ def subs_pars(e: hy.expression, mapping: dict[str, hy.expression]) -> hy.express
 
     Returns
     -------
-    heyoka expression
-        `e` with the substitutions.
+    heyoka expression: `e` with the substitutions.
     """
     pars = [hy.par[int(k[1:])] for k in mapping]
     return hy.subs(e, dict(zip(pars, mapping.values(), strict=True)))

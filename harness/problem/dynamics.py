@@ -106,8 +106,7 @@ class Dynamics:
 
         Returns
         -------
-        ndarray, shape (dim, N)
-            f(t, y) (`out` when given).
+        ndarray, shape (dim, N): f(t, y) (`out` when given).
         """
         self.counts["rhs"] += 1
         return self._call(self._f, t, y, out)
@@ -128,8 +127,7 @@ class Dynamics:
 
         Returns
         -------
-        ndarray, shape (nq, N)
-            a(q, v, t); `InputError` for a problem without a Newtonian form.
+        ndarray, shape (nq, N): a(q, v, t); `InputError` for a problem without a Newtonian form.
         """
         if self._a is None:
             raise InputError(f"problem {self.problem.name!r} has no Newtonian form")
@@ -160,8 +158,7 @@ class Dynamics:
 
         Returns
         -------
-        ndarray, shape (dim, dim, N)
-            The Jacobians.
+        ndarray, shape (dim, dim, N): the Jacobians.
         """
         self.counts["jac"] += 1
         fn = self.problem.compiled("jac", self.constants)

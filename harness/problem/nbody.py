@@ -200,8 +200,7 @@ class NBody:
 
         Returns
         -------
-        dict
-            kind, masses, G, central, frame, dimension, names.
+        dict: kind, masses, G, central, frame, dimension, names.
         """
         return {"kind": "n-body", "masses": list(self.masses), "G": float(self.G),
                 "central": self.central, "frame": self.frame, "dimension": self.dimension,

@@ -42,8 +42,7 @@ def exact_decimal(value: Any) -> str:
 
     Returns
     -------
-    str
-        The value as a decimal string; `InputError` for a float or an unreadable string.
+    str: the value as a decimal string; `InputError` for a float or an unreadable string.
     """
     if isinstance(value, bool) or isinstance(value, float):
         raise InputError(f"a published value must be exact (a decimal string, an integer or a "
@@ -125,8 +124,7 @@ class Published:
 
         Returns
         -------
-        dict
-            'y0', 'parameters', 't_end' -> the largest relative rounding.
+        dict: 'y0', 'parameters', 't_end' -> the largest relative rounding.
         """
         return {
             "y0": max((_relative_rounding(v) for v in self.y0), default=0.0),
@@ -175,8 +173,7 @@ class Published:
 
         Returns
         -------
-        dict
-            source, y0, parameters, t_end, values, accuracy and its note, float64_rounding.
+        dict: source, y0, parameters, t_end, values, accuracy and its note, float64_rounding.
         """
         return {
             "source": self.source,

@@ -26,8 +26,7 @@ def default_jobs() -> int:
 
     Returns
     -------
-    int
-        The number of CPUs in this process's affinity mask (else `os.cpu_count()`), at least 1.
+    int: the number of CPUs in this process's affinity mask (else `os.cpu_count()`), at least 1.
     """
     try:
         return max(1, len(os.sched_getaffinity(0)))
@@ -139,8 +138,7 @@ def check_plugins(plugins: Any) -> list[str]:
 
     Returns
     -------
-    list of str
-        `InputError` for anything else.
+    list of str: `InputError` for anything else.
     """
     if plugins is None:
         return []
@@ -192,8 +190,7 @@ def resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
 
     Returns
     -------
-    dict
-        The settings, checked by the experiment.
+    dict: the settings, checked by the experiment.
     """
     if config is not None and not isinstance(config, Mapping):
         raise InputError(f"`config` must be a mapping of settings, got {type(config).__name__}")

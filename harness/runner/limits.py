@@ -82,8 +82,7 @@ def call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
 
     Returns
     -------
-    any
-        What `fn` returned; `CellTimeout` after `seconds`, and `fn`'s own exception re-raised.
+    any: what `fn` returned; `CellTimeout` after `seconds`, and `fn`'s own exception re-raised.
     """
     if seconds is None:
         return fn()

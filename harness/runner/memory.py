@@ -36,8 +36,7 @@ def estimate_bytes(*, dim: int, ensemble: int = 1, saved_states: int = 2,
 
     Returns
     -------
-    int
-        8 dim ensemble (saved_states + work_arrays).
+    int: 8 dim ensemble (saved_states + work_arrays).
     """
     for name, v in (("dim", dim), ("ensemble", ensemble), ("saved_states", saved_states),
                     ("work_arrays", work_arrays)):

@@ -59,8 +59,7 @@ def run_experiments(
 
     Returns
     -------
-    dict of str to RunResult
-        By experiment name; pass it to `harness.store.save_run`.
+    dict of str to RunResult: by experiment name; pass it to `harness.store.save_run`.
     """
     from harness.experiments import EXPERIMENTS
 

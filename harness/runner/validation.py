@@ -44,8 +44,7 @@ def validate_rows(experiment: Experiment, rows: Any) -> pd.DataFrame:
 
     Returns
     -------
-    DataFrame
-        `rows`, checked.
+    DataFrame: `rows`, checked.
     """
     if not isinstance(rows, pd.DataFrame):
         raise CellOutputError(f"run_cell returned {type(rows).__name__}, expected a pandas DataFrame")

@@ -256,8 +256,7 @@ def execute(task: Mapping[str, Any]) -> dict:
 
     Returns
     -------
-    dict
-        key, ok, kind, message, traceback, rows (the checked DataFrame or None), wall_s, worker.
+    dict: key, ok, kind, message, traceback, rows (the checked DataFrame or None), wall_s, worker.
     """
     cell: Cell = task["cell"]
     timeout = task.get("timeout")

@@ -74,8 +74,7 @@ def batched_solve(A: Any, b: Any, xp: Any = np) -> Any:
 
     Returns
     -------
-    array, shape (dim, N)
-        The solutions.
+    array, shape (dim, N): the solutions.
     """
     mats = xp.moveaxis(A, -1, 0)
     rhs = xp.moveaxis(b, -1, 0)[..., None]
@@ -96,8 +95,7 @@ def checked_float64(y: Any, name: str, when: str) -> np.ndarray:
 
     Returns
     -------
-    ndarray
-        `y` as float64; `StepperOutputError` for a narrower float or a complex state.
+    ndarray: `y` as float64; `StepperOutputError` for a narrower float or a complex state.
     """
     dtype = getattr(y, "dtype", None)
     if dtype is not None and np.issubdtype(np.dtype(dtype), np.floating) and np.dtype(dtype).itemsize < 8:
@@ -262,8 +260,7 @@ class StateStepper(Stepper):
 
         Returns
         -------
-        StateStepper
-            `InputError` when the stepper declares no `error`.
+        StateStepper: `InputError` when the stepper declares no `error`.
         """
         if self.error_function is None:
             raise InputError(f"stepper {self.info.name!r} declares no embedded pair (`error`)")
@@ -465,8 +462,7 @@ class AdaptiveStateStepper(StateStepper, AdaptiveStepper):
 
         Returns
         -------
-        dict
-            {"tol": the tolerance}.
+        dict: {"tol": the tolerance}.
         """
         return {"tol": self.tol}
 

@@ -155,8 +155,7 @@ class CellCache:
 
         Returns
         -------
-        Path
-            ``<root>/<key[:2]>/<key>.parquet``.
+        Path: ``<root>/<key[:2]>/<key>.parquet``.
         """
         if not isinstance(key, str) or not _CELL_KEY.match(key):
             raise InputError(f"`key` must be 32 lowercase hex digits, got {key!r}")
@@ -172,8 +171,7 @@ class CellCache:
 
         Returns
         -------
-        (DataFrame, dict) or None
-            `CorruptResultsError` when the file exists but is damaged.
+        (DataFrame, dict) or None: `CorruptResultsError` when the file exists but is damaged.
         """
         return self._read(self.path(key), key)
 
@@ -246,8 +244,7 @@ class CellCache:
 
         Returns
         -------
-        CellCache
-            self.
+        CellCache: self.
         """
         import tempfile
 
@@ -278,8 +275,7 @@ class CellCache:
 
         Returns
         -------
-        str
-            32 lowercase hex digits.
+        str: 32 lowercase hex digits.
         """
         text = "\n".join(["harness-pack", str(experiment), *keys])
         return hashlib.sha256(text.encode()).hexdigest()[:32]

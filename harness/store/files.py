@@ -124,7 +124,6 @@ def arrow_table(df: pd.DataFrame) -> Any:
     Parameters
     ----------
     df : DataFrame
-        The table.
 
     Returns
     -------
@@ -146,7 +145,6 @@ def table_bytes(table: Any, extra: Mapping[str, Any] | None = None) -> bytes:
     Parameters
     ----------
     table : pyarrow.Table
-        The table.
     extra : mapping, optional
         JSON-able metadata stored under the harness's key.
 
@@ -181,7 +179,6 @@ def encode_parquet(df: pd.DataFrame, extra: Mapping[str, Any] | None = None) -> 
     Parameters
     ----------
     df : DataFrame
-        The table.
     extra : mapping, optional
         JSON-able metadata.
 
@@ -237,14 +234,12 @@ def write_parquet(path: str | os.PathLike, df: pd.DataFrame,
     path : str or PathLike
         The file.
     df : DataFrame
-        The table.
     extra : mapping, optional
         JSON-able metadata.
 
     Returns
     -------
-    str
-        The sha256 of the bytes written, in hex.
+    str: the sha256 of the bytes written, in hex.
     """
     data = encode_parquet(df, extra)
     atomic_write_bytes(path, data)
@@ -366,8 +361,7 @@ def read_json(path: Path) -> Any:
 
     Returns
     -------
-    any
-        The parsed value.
+    any: the parsed value.
     """
     try:
         text = read_bounded(path).decode("utf-8")

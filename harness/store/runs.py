@@ -121,8 +121,7 @@ def resolve_run(run: str | os.PathLike | None = None, root: str | os.PathLike | 
 
     Returns
     -------
-    Path
-        `ResultsError` when there is no such run.
+    Path: `ResultsError` when there is no such run.
     """
     base = results_root(root)
     if run is None or (isinstance(run, str) and run == "latest"):

@@ -7,6 +7,10 @@
   (`splitting_propagator`, `second_order_lmm_amplification`).
 - Intervals (`real_stability_interval`, `imag_stability_interval`, `stability_boundary`): the
   first crossing of |R| = 1 on a scan, refined by root finding (never read off a grid).
+
+Arguments shared by the functions below: `method` or `scheme` is a coefficient object of the
+family its annotation names; `z` holds complex points h lambda and `hw` values of h omega, of
+any shape, and a result over them keeps that shape.
 """
 
 from __future__ import annotations
@@ -36,15 +40,11 @@ def rk_stability_function(tableau: ButcherTableau, z: Any) -> np.ndarray:
 
     Parameters
     ----------
-    tableau : ButcherTableau
-        The method.
-    z : array_like
-        Complex points, any shape.
+    tableau : ButcherTableau; z : complex array_like.
 
     Returns
     -------
-    ndarray, complex, shape of `z`
-        R(z).
+    ndarray, complex, shape of `z`: R(z).
     """
     check_type(tableau, "runge-kutta", "tableau")
     z = np.asarray(z, dtype=complex)
@@ -95,15 +95,11 @@ def lmm_amplification(method: LinearMultistep, z: Any) -> np.ndarray:
 
     Parameters
     ----------
-    method : LinearMultistep
-        The method.
-    z : array_like
-        Complex points h lambda, any shape.
+    method : LinearMultistep; z : complex array_like (h lambda).
 
     Returns
     -------
-    ndarray, shape of `z`
-        The largest root modulus at each point.
+    ndarray, shape of `z`: the largest root modulus at each point.
     """
     check_type(method, "multistep", "method")
     z = np.asarray(z, dtype=complex)
@@ -117,15 +113,11 @@ def second_order_lmm_amplification(method: SecondOrderMultistep, hw: Any) -> np.
 
     Parameters
     ----------
-    method : SecondOrderMultistep
-        The method.
-    hw : array_like
-        Values of h omega, any shape.
+    method : SecondOrderMultistep; hw : array_like.
 
     Returns
     -------
-    ndarray, shape of `hw`
-        The largest root modulus at each value.
+    ndarray, shape of `hw`: the largest root modulus at each value.
     """
     check_type(method, "second-order multistep", "method")
     hw = np.asarray(hw, dtype=float)
@@ -140,15 +132,11 @@ def splitting_propagator(scheme: SplittingScheme, hw: Any) -> np.ndarray:
 
     Parameters
     ----------
-    scheme : SplittingScheme
-        The composition.
-    hw : array_like
-        Values of h omega, any shape.
+    scheme : SplittingScheme, the composition; hw : array_like.
 
     Returns
     -------
-    ndarray, shape hw.shape + (2, 2)
-        The one-step matrices.
+    ndarray, shape hw.shape + (2, 2): the one-step matrices.
     """
     check_type(scheme, "splitting", "scheme")
     hw = np.asarray(hw, dtype=float)
@@ -170,7 +158,6 @@ def spectral_radius(M: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     M : array_like, shape (..., k, k)
-        The matrices.
 
     Returns
     -------
@@ -191,15 +178,11 @@ def splitting_amplification(scheme: SplittingScheme, hw: Any) -> np.ndarray:
 
     Parameters
     ----------
-    scheme : SplittingScheme
-        The composition.
-    hw : array_like
-        Values of h omega, any shape.
+    scheme, hw : as for `splitting_propagator`.
 
     Returns
     -------
-    ndarray, shape of `hw`
-        The spectral radius of the one-step matrix at each value.
+    ndarray, shape of `hw`: the spectral radius of the one-step matrix at each value.
     """
     return spectral_radius(splitting_propagator(scheme, hw))
 
@@ -253,8 +236,7 @@ def stability_boundary(
 
     Returns
     -------
-    float
-        The end of the stable interval: 0.0, a finite x, or +inf.
+    float: the end of the stable interval: 0.0, a finite x, or +inf.
     """
     from scipy.optimize import brentq
 
@@ -296,8 +278,7 @@ def real_stability_interval(R: Callable[[np.ndarray], np.ndarray], **kwargs: Any
 
     Returns
     -------
-    float
-        The length x of the stable interval [-x, 0] (0.0, finite, or inf).
+    float: the length x of the stable interval [-x, 0] (0.0, finite, or inf).
     """
     return stability_boundary(lambda x: np.abs(R(-np.asarray(x) + 0j)), **kwargs)
 
@@ -314,8 +295,7 @@ def imag_stability_interval(R: Callable[[np.ndarray], np.ndarray], **kwargs: Any
 
     Returns
     -------
-    float
-        y (0.0, finite, or inf).
+    float: y (0.0, finite, or inf).
     """
     return stability_boundary(lambda y: np.abs(R(1j * np.asarray(y))), **kwargs)
 
@@ -332,7 +312,6 @@ def hw_stability_limit(amplification: Callable[[np.ndarray], np.ndarray], **kwar
 
     Returns
     -------
-    float
-        The limit (0.0, finite, or inf).
+    float: the limit (0.0, finite, or inf).
     """
     return stability_boundary(amplification, **kwargs)

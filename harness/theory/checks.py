@@ -30,8 +30,7 @@ def check_int(value: Any, name: str, lo: int, hi: int) -> int:
 
     Returns
     -------
-    int
-        `value` as a Python int.
+    int: `value` as a Python int.
     """
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         raise InputError(f"`{name}` must be a whole number, got {value!r}")
@@ -49,8 +48,7 @@ def family_of(obj: Any) -> str | None:
 
     Returns
     -------
-    str or None
-        One of the keys of `FAMILIES`, or None when `obj` declares none of them.
+    str or None: one of the keys of `FAMILIES`, or None when `obj` declares none of them.
     """
     family = getattr(type(obj), "family", None)
     return family if isinstance(family, str) and family in FAMILIES else None

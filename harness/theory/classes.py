@@ -84,8 +84,7 @@ def tree_symmetry(tree: RootedTree, max_order: int | None = None) -> int:
 
     Returns
     -------
-    int
-        sigma(tree).
+    int: sigma(tree).
     """
     trees = rooted_trees(max_order or max(tree.order, 1))
     out = 1
@@ -111,8 +110,7 @@ def tree_survives(tree: RootedTree, *, nystrom: bool = False, degree: int | None
 
     Returns
     -------
-    bool
-        Whether the tree's order condition counts on that class.
+    bool: whether the tree's order condition counts on that class.
     """
     even, odd = _children_counts(tree.order)[tree.index] if tree.order <= MAX_TREE_ORDER else (0, 0)
     d = math.inf if degree is None else degree
@@ -161,7 +159,6 @@ def rk_class_orders(tableau: ButcherTableau, classes: list[tuple[bool, int | Non
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
     classes : list of (bool, int or None)
         (nystrom, degree) pairs, as in `tree_survives`.
     max_order : int, optional
@@ -170,8 +167,7 @@ def rk_class_orders(tableau: ButcherTableau, classes: list[tuple[bool, int | Non
 
     Returns
     -------
-    list of int
-        The order on each class, in the order of `classes`.
+    list of int: the order on each class, in the order of `classes`.
     """
     check_type(tableau, "runge-kutta", "tableau")
     if max_order is None:
@@ -197,7 +193,6 @@ def rk_error_defects(tableau: ButcherTableau, order: int) -> tuple[list[RootedTr
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
     order : int
         The number of vertices, 1 to MAX_TREE_ORDER.
 
@@ -241,12 +236,10 @@ def rk_stage_order(tableau: ButcherTableau) -> int:
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
 
     Returns
     -------
-    int
-        The stage order q (at most 2s).
+    int: the stage order q (at most 2s).
     """
     check_type(tableau, "runge-kutta", "tableau")
     A, b, c = tableau.A, tableau.b, tableau.c
@@ -267,12 +260,10 @@ def rk_stiffly_accurate(tableau: ButcherTableau) -> bool:
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
 
     Returns
     -------
-    bool
-        Whether a_sj = b_j for every j, to rounding.
+    bool: whether a_sj = b_j for every j, to rounding.
     """
     check_type(tableau, "runge-kutta", "tableau")
     scale = np.abs(tableau.b) + np.abs(tableau.A[-1])

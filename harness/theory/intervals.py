@@ -152,12 +152,10 @@ def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
 
     Returns
     -------
-    (float, float)
-        The lengths of the stable intervals [-x, 0] and [0, i y] (each 0.0, finite or inf).
+    (float, float): the lengths of the stable intervals [-x, 0] and [0, i y] (each 0.0, finite or inf).
     """
     check_type(tableau, "runge-kutta", "tableau")
     P, P_abs, Q, Q_abs = _rk_numerator_denominator(tableau)
@@ -184,7 +182,6 @@ def splitting_trace_polynomial(scheme: SplittingScheme) -> tuple[np.ndarray, np.
     Parameters
     ----------
     scheme : SplittingScheme
-        The composition.
 
     Returns
     -------
@@ -214,12 +211,10 @@ def splitting_linear_order(scheme: SplittingScheme) -> int:
     Parameters
     ----------
     scheme : SplittingScheme
-        The composition.
 
     Returns
     -------
-    int
-        The largest p such that the propagator matches the rotation through h^p.
+    int: the largest p such that the propagator matches the rotation through h^p.
     """
     _, _, M, Ma = splitting_trace_polynomial(scheme)
     top = max(m.size for row in M for m in row)
@@ -248,12 +243,10 @@ def splitting_hw_limit(scheme: SplittingScheme) -> float:
     Parameters
     ----------
     scheme : SplittingScheme
-        The composition.
 
     Returns
     -------
-    float
-        The limit (inf when stable up to the search bound of the exact bands).
+    float: the limit (inf when stable up to the search bound of the exact bands).
     """
     check_type(scheme, "splitting", "scheme")
     return exact_hw_bands(scheme).limit
@@ -270,8 +263,7 @@ def exact_hw_bands(coefficients: Any):
 
     Returns
     -------
-    HwBands or None
-        Its exact stability bands, None for another family.
+    HwBands or None: its exact stability bands, None for another family.
     """
     return _bands_cached(coefficients.fingerprint(), (coefficients,))
 
@@ -297,7 +289,6 @@ def lmm_real_interval(method: LinearMultistep, scanned: float) -> float:
     Parameters
     ----------
     method : LinearMultistep
-        The method.
     scanned : float
         The interval found by scanning the amplification (`real_stability_interval`).
 
@@ -355,8 +346,7 @@ def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH
 
     Returns
     -------
-    dict or None
-        The figures described above; Newtonian ones also carry 'hw_bands'.
+    dict or None: the figures described above; Newtonian ones also carry 'hw_bands'.
     """
     family = family_of(coefficients)
     if family == "runge-kutta":

@@ -84,8 +84,7 @@ class HwBands:
 
         Returns
         -------
-        str
-            "stable for every h omega (<criterion>)" or "unstable on [a, b], ...".
+        str: "stable for every h omega (<criterion>)" or "unstable on [a, b], ...".
         """
         if not self.bands:
             return f"stable for every h omega ({self.criterion})"
@@ -150,8 +149,7 @@ def splitting_trace_exact(scheme: SplittingScheme) -> Poly:
 
     Returns
     -------
-    Poly
-        The trace's coefficients in ascending powers of x = h^2.
+    Poly: the trace's coefficients in ascending powers of x = h^2.
     """
     check_type(scheme, "splitting", "scheme")
     seq = scheme.exact if scheme.exact is not None else scheme.sequence
@@ -173,14 +171,12 @@ def splitting_hw_bands(scheme: SplittingScheme, hw_max: float = tol.STABILITY_HW
     Parameters
     ----------
     scheme : SplittingScheme
-        The composition.
     hw_max : float, optional
         The end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
 
     Returns
     -------
-    HwBands
-        The exact unstable bands that start at or below `hw_max`.
+    HwBands: the exact unstable bands that start at or below `hw_max`.
     """
     T = splitting_trace_exact(scheme)
     two = (Fraction(2),)
@@ -223,14 +219,12 @@ def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW
     Parameters
     ----------
     method : SecondOrderMultistep
-        The method.
     hw_max : float, optional
         The end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
 
     Returns
     -------
-    HwBands
-        The exact unstable bands that start at or below `hw_max`.
+    HwBands: the exact unstable bands that start at or below `hw_max`.
     """
     check_type(method, "second-order multistep", "method")
     k = method.steps
@@ -295,8 +289,7 @@ def hw_bands(coefficients, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwB
 
     Returns
     -------
-    HwBands or None
-        `splitting_hw_bands` or `lmm2_hw_bands`; None for a first-order family.
+    HwBands or None: `splitting_hw_bands` or `lmm2_hw_bands`; None for a first-order family.
     """
     family = family_of(coefficients)
     if family == "splitting":
@@ -317,8 +310,7 @@ def velocity_weights(m: int) -> list[Fraction]:
 
     Returns
     -------
-    list of Fraction
-        c_0, ..., c_(m-1), exact.
+    list of Fraction: c_0, ..., c_(m-1), exact.
     """
     nodes = [Fraction(1 - j) for j in range(m)]
     out = []

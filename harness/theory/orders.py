@@ -66,8 +66,7 @@ def rooted_trees(max_order: int = 8) -> tuple[RootedTree, ...]:
 
     Returns
     -------
-    tuple of RootedTree
-        The trees, each tree's `index` its position in the tuple.
+    tuple of RootedTree: the trees, each tree's `index` its position in the tuple.
     """
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
     trees: list[RootedTree] = [RootedTree(0, (), 1, 1, "*")]
@@ -113,7 +112,6 @@ def elementary_weights(tableau: ButcherTableau, max_order: int,
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
     max_order : int
         The largest tree order.
     weights : ndarray, optional
@@ -121,8 +119,7 @@ def elementary_weights(tableau: ButcherTableau, max_order: int,
 
     Returns
     -------
-    (list of float, list of float)
-        Phi(t) and its magnitude sum, indexed like `rooted_trees(max_order)`.
+    (list of float, list of float): phi(t) and its magnitude sum, indexed like `rooted_trees(max_order)`.
     """
     trees = rooted_trees(max_order)
     A, b = tableau.A, tableau.b if weights is None else weights
@@ -158,8 +155,7 @@ def condition_tolerance(t: RootedTree, size: float, precision: float = 0.0) -> f
 
     Returns
     -------
-    float
-        The allowed |Phi(t) - 1/gamma(t)|.
+    float: the allowed |Phi(t) - 1/gamma(t)|.
     """
     return max(tol.ORDER_CONDITION_ULPS * tol.EPS * t.order * size,
                tol.ORDER_CONDITION_TOL / t.gamma, tol.ORDER_CONDITION_FLOOR,
@@ -174,14 +170,12 @@ def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondit
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
     order : int
         The order whose conditions are listed, 1 to MAX_TREE_ORDER.
 
     Returns
     -------
-    list of OrderCondition
-        One per tree of that order, in the order of `rooted_trees`.
+    list of OrderCondition: one per tree of that order, in the order of `rooted_trees`.
     """
     check_type(tableau, "runge-kutta", "tableau")
     order = check_int(order, "order", 1, MAX_TREE_ORDER)
@@ -210,7 +204,6 @@ def rk_order(tableau: ButcherTableau, max_order: int | None = None,
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
     max_order : int, optional
         The highest order checked, 1 to MAX_TREE_ORDER.
     weights : ndarray, optional
@@ -218,8 +211,7 @@ def rk_order(tableau: ButcherTableau, max_order: int | None = None,
 
     Returns
     -------
-    int
-        The order p (0 when even the first-order condition fails).
+    int: the order p (0 when even the first-order condition fails).
     """
     check_type(tableau, "runge-kutta", "tableau")
     if max_order is None:
@@ -239,14 +231,12 @@ def rk_stability_coefficients(tableau: ButcherTableau, degree: int) -> tuple[np.
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
     degree : int
         The last k.
 
     Returns
     -------
-    (ndarray, ndarray)
-        r_0 ... r_degree, and the same products over |b|, |A|.
+    (ndarray, ndarray): r_0 ... r_degree, and the same products over |b|, |A|.
     """
     r, r_abs = [1.0], [1.0]
     v, v_abs = np.ones(tableau.stages), np.ones(tableau.stages)
@@ -266,12 +256,10 @@ def rk_linear_order(tableau: ButcherTableau) -> int:
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
 
     Returns
     -------
-    int
-        The linear order p, at most min(2s + 2, 40).
+    int: the linear order p, at most min(2s + 2, 40).
     """
     check_type(tableau, "runge-kutta", "tableau")
     top = min(2 * tableau.stages + 2, 40)
@@ -308,14 +296,12 @@ def lmm_error_constants(method: LinearMultistep, q_max: int | None = None) -> np
     Parameters
     ----------
     method : LinearMultistep
-        The method.
     q_max : int, optional
         The last constant, 0 to 40.
 
     Returns
     -------
-    ndarray
-        C_0 ... C_{q_max}.
+    ndarray: C_0 ... C_{q_max}.
     """
     check_type(method, "multistep", "method")
     q_max = 2 * method.steps + 1 if q_max is None else check_int(q_max, "q_max", 0, 40)
@@ -336,12 +322,10 @@ def lmm_order(method: LinearMultistep) -> int:
     Parameters
     ----------
     method : LinearMultistep
-        The method.
 
     Returns
     -------
-    int
-        The order p.
+    int: the order p.
     """
     check_type(method, "multistep", "method")
     C, scale = _constants(method.alpha, method.beta, 2 * method.steps + 1, 1)
@@ -354,14 +338,12 @@ def second_order_lmm_error_constants(method: SecondOrderMultistep, q_max: int | 
     Parameters
     ----------
     method : SecondOrderMultistep
-        The method.
     q_max : int, optional
         The last constant, 0 to 40.
 
     Returns
     -------
-    ndarray
-        C_0 ... C_{q_max}.
+    ndarray: C_0 ... C_{q_max}.
     """
     check_type(method, "second-order multistep", "method")
     q_max = 2 * method.steps + 2 if q_max is None else check_int(q_max, "q_max", 0, 40)
@@ -375,12 +357,10 @@ def second_order_lmm_order(method: SecondOrderMultistep) -> int:
     Parameters
     ----------
     method : SecondOrderMultistep
-        The method.
 
     Returns
     -------
-    int
-        The order p.
+    int: the order p.
     """
     check_type(method, "second-order multistep", "method")
     C, scale = _constants(method.alpha, method.beta, 2 * method.steps + 2, 2)
@@ -397,8 +377,7 @@ def order_from_coefficients(stepper: Any) -> int | None:
 
     Returns
     -------
-    int or None
-        The order its coefficients imply.
+    int or None: the order its coefficients imply.
     """
     coeffs = getattr(stepper, "coefficients", None)
     order_of = {"runge-kutta": rk_order, "multistep": lmm_order,

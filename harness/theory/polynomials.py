@@ -1,7 +1,8 @@
 """Exact polynomial arithmetic over the rationals (re-exported by `harness.theory.roots`).
 
 A polynomial is a tuple of `Fraction` coefficients in ascending powers, trailing zeros removed
-(the zero polynomial is ``()``); every operation is exact.
+(the zero polynomial is ``()``); every operation is exact. The arguments a and b of the
+functions below are such polynomials (type `Poly`).
 """
 
 from __future__ import annotations
@@ -26,8 +27,7 @@ def poly(coefficients: Sequence) -> Poly:
 
     Returns
     -------
-    Poly
-        The coefficients as Fractions.
+    Poly: the coefficients as Fractions.
     """
     out = [Fraction(c) for c in coefficients]
     while out and out[-1] == 0:
@@ -40,13 +40,11 @@ def padd(a: Poly, b: Poly) -> Poly:
 
     Parameters
     ----------
-    a, b : Poly
-        Polynomials in ascending powers.
+    a, b : Poly, the two terms.
 
     Returns
     -------
-    Poly
-        Their sum, trailing zeros removed.
+    Poly: their sum, trailing zeros removed.
     """
     n = max(len(a), len(b))
     return poly([(a[i] if i < len(a) else 0) + (b[i] if i < len(b) else 0) for i in range(n)])
@@ -58,14 +56,12 @@ def pscale(a: Poly, c) -> Poly:
     Parameters
     ----------
     a : Poly
-        A polynomial.
     c : int, Fraction or float
         The factor (a float is taken exactly).
 
     Returns
     -------
-    Poly
-        The scaled polynomial.
+    Poly: the scaled polynomial.
     """
     return poly([c * x for x in a])
 
@@ -75,13 +71,11 @@ def psub(a: Poly, b: Poly) -> Poly:
 
     Parameters
     ----------
-    a, b : Poly
-        Polynomials in ascending powers.
+    a, b : Poly, minuend and subtrahend (b is scaled by -1 and added).
 
     Returns
     -------
-    Poly
-        Their difference, trailing zeros removed.
+    Poly: their difference.
     """
     return padd(a, pscale(b, -1))
 
@@ -91,13 +85,11 @@ def pmul(a: Poly, b: Poly) -> Poly:
 
     Parameters
     ----------
-    a, b : Poly
-        Polynomials in ascending powers.
+    a, b : Poly, the factors (schoolbook product, every coefficient pair).
 
     Returns
     -------
-    Poly
-        Their product (the zero polynomial ``()`` if either is zero).
+    Poly: their product (the zero polynomial ``()`` if either is zero).
     """
     if not a or not b:
         return ()
@@ -114,15 +106,11 @@ def peval(a: Poly, x: Fraction) -> Fraction:
 
     Parameters
     ----------
-    a : Poly
-        The polynomial.
-    x : Fraction
-        The point.
+    a : Poly, the polynomial; x : Fraction, the point.
 
     Returns
     -------
-    Fraction
-        a(x).
+    Fraction: a(x).
     """
     acc = Fraction(0)
     for c in reversed(a):
@@ -135,13 +123,11 @@ def pderiv(a: Poly) -> Poly:
 
     Parameters
     ----------
-    a : Poly
-        A polynomial.
+    a : Poly, differentiated term by term.
 
     Returns
     -------
-    Poly
-        Its derivative.
+    Poly: its derivative.
     """
     return poly([i * a[i] for i in range(1, len(a))])
 
@@ -156,8 +142,7 @@ def pdivmod(a: Poly, b: Poly) -> tuple[Poly, Poly]:
 
     Returns
     -------
-    (Poly, Poly)
-        q and r with a = q b + r and deg r < deg b.
+    (Poly, Poly): q and r with a = q b + r and deg r < deg b.
     """
     if not b:
         raise ZeroDivisionError("polynomial division by zero")
@@ -178,17 +163,15 @@ def _monic(a: Poly) -> Poly:
 
 
 def pgcd(a: Poly, b: Poly) -> Poly:
-    """The monic greatest common divisor.
+    """The monic greatest common divisor (Euclid's algorithm).
 
     Parameters
     ----------
     a, b : Poly
-        Polynomials in ascending powers.
 
     Returns
     -------
-    Poly
-        gcd(a, b) with leading coefficient 1 (Euclid's algorithm).
+    Poly: gcd(a, b) with leading coefficient 1.
     """
     while b:
         a, b = b, pdivmod(a, b)[1]
@@ -205,8 +188,7 @@ def det_exact(rows: list[list[Fraction]]) -> Fraction:
 
     Returns
     -------
-    Fraction
-        Its determinant.
+    Fraction: its determinant.
     """
     m = [list(r) for r in rows]
     n = len(m)

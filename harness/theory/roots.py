@@ -52,8 +52,7 @@ def squarefree(a: Poly) -> Poly:
 
     Returns
     -------
-    Poly
-        a / gcd(a, a') (`a` itself when the gcd is constant).
+    Poly: a / gcd(a, a') (`a` itself when the gcd is constant).
     """
     g = _chain(_integer(a))[-1]
     if len(g) == 1:
@@ -175,8 +174,7 @@ def count_roots_between(a: Poly, lo: Fraction, hi: Fraction | None,
 
     Returns
     -------
-    int
-        The count, by Sturm's theorem (sign changes at lo minus sign changes at hi).
+    int: the count, by Sturm's theorem (sign changes at lo minus sign changes at hi).
     """
     seq = seq if seq is not None else sturm_sequence(squarefree(a))
     return _sign_changes(seq, lo) - _sign_changes(seq, hi)
@@ -192,8 +190,7 @@ def root_bound(a: Poly) -> Fraction:
 
     Returns
     -------
-    Fraction
-        1 + max_i |a_i / a_n|.
+    Fraction: 1 + max_i |a_i / a_n|.
     """
     return 1 + max((abs(c / a[-1]) for c in a[:-1]), default=Fraction(0))
 
@@ -222,7 +219,6 @@ def isolate_real_roots(a: Poly, lo: Fraction, hi: Fraction | None = None, *,
     Parameters
     ----------
     a : Poly
-        The polynomial.
     lo : Fraction
         Left end of the search (excluded).
     hi : Fraction or None, optional
@@ -338,8 +334,7 @@ def resultant_in_x(p_of: Callable[[Fraction], Poly], q_of: Callable[[Fraction], 
 
     Returns
     -------
-    Poly
-        The resultant as a polynomial in x.
+    Poly: the resultant as a polynomial in x.
     """
     m, n = zeta_degrees
     xs = [Fraction(i) for i in range(degree_bound + 1)]
@@ -363,8 +358,7 @@ def schur_all_inside(a: Poly) -> bool:
 
     Returns
     -------
-    bool
-        Whether every root satisfies |z| < 1.
+    bool: whether every root satisfies |z| < 1.
     """
     a = poly(a)
     while len(a) > 1:

@@ -61,8 +61,7 @@ class Series:
 
         Returns
         -------
-        list
-            [c, 0, ..., 0], N + 1 coefficients.
+        list: [c, 0, ..., 0], N + 1 coefficients.
         """
         return [self.mp.mpf(c)] + [self.zero] * self.N
 
@@ -76,8 +75,7 @@ class Series:
 
         Returns
         -------
-        list
-            Their coefficient-wise sum.
+        list: their coefficient-wise sum.
         """
         return [sum((t[n] for t in terms), self.zero) for n in range(self.N + 1)]
 
@@ -89,12 +87,10 @@ class Series:
         c : mpmath number
             The factor.
         a : list
-            A series.
 
         Returns
         -------
-        list
-            c a.
+        list: c a.
         """
         return [c * x for x in a]
 
@@ -108,8 +104,7 @@ class Series:
 
         Returns
         -------
-        list
-            a b mod h^(N+1).
+        list: a b mod h^(N+1).
         """
         return [sum((a[k] * b[n - k] for k in range(n + 1)), self.zero) for n in range(self.N + 1)]
 
@@ -119,12 +114,10 @@ class Series:
         Parameters
         ----------
         a : list
-            A series.
 
         Returns
         -------
-        list
-            h a, truncated at degree N.
+        list: h a, truncated at degree N.
         """
         return [self.zero, *a[: self.N]]
 
@@ -134,12 +127,10 @@ class Series:
         Parameters
         ----------
         a : list
-            A series.
 
         Returns
         -------
-        list
-            exp(a), truncated at degree N.
+        list: exp(a), truncated at degree N.
         """
         e = [self.mp.exp(a[0])]
         for n in range(1, self.N + 1):
@@ -163,8 +154,7 @@ def newton_accel(S: Series, P: dict, q: list[list]) -> list[list]:
 
     Returns
     -------
-    list of two series
-        a_1(q), a_2(q).
+    list of two series: a_1(q), a_2(q).
     """
     q1, q2 = q
     E = S.exp(S.add(S.scale(P["al"], q1), S.scale(P["be"], q2)))
@@ -201,8 +191,7 @@ def exact_flow(S: Series, F: Callable[[list], list], y0: list) -> list[list]:
 
     Returns
     -------
-    list of series
-        y_i(h) to degree N, one per component.
+    list of series: y_i(h) to degree N, one per component.
     """
     y = [S.const(c) for c in y0]
     for _ in range(S.N):
@@ -225,14 +214,12 @@ def splitting_local_error_series(scheme: SplittingScheme, degree: int = 11) -> l
     Parameters
     ----------
     scheme : SplittingScheme
-        The composition.
     degree : int, optional
         The last power of h, 1 to 16 (default 11).
 
     Returns
     -------
-    list of float
-        |e_0|, ..., |e_degree|.
+    list of float: |e_0|, ..., |e_degree|.
     """
     check_type(scheme, "splitting", "scheme")
     degree = check_int(degree, "degree", 1, 16)
@@ -316,14 +303,12 @@ def splitting_order(scheme: SplittingScheme, max_order: int = 10) -> int:
     Parameters
     ----------
     scheme : SplittingScheme
-        The composition.
     max_order : int, optional
         The highest order checked, 1 to 14 (default 10).
 
     Returns
     -------
-    int
-        The order p.
+    int: the order p.
     """
     check_type(scheme, "splitting", "scheme")
     max_order = check_int(max_order, "max_order", 1, 14)
@@ -339,14 +324,12 @@ def rk_order_series(tableau: ButcherTableau, max_order: int = 8) -> int:
     Parameters
     ----------
     tableau : ButcherTableau
-        The method.
     max_order : int, optional
         The highest order checked, 1 to 12 (default 8).
 
     Returns
     -------
-    int
-        The order p (`max_order` when every coefficient up to h^(max_order+1) vanishes).
+    int: the order p (`max_order` when every coefficient up to h^(max_order+1) vanishes).
     """
     check_type(tableau, "runge-kutta", "tableau")
     max_order = check_int(max_order, "max_order", 1, 12)
