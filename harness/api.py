@@ -368,29 +368,20 @@ def check(
     ----------
     stepper : Stepper, str or callable
         A stepper, a registered name, or a step function (wrapped as a `FunctionStepper`).
-    problems : sequence of str or Problem
-        Registered names or `Problem` objects (a non-empty sequence).
-    order : int, optional
-        The convergence order claimed on every problem.
-    symmetric : bool, optional
-        True (returns to its start within rounding) or False.
-    energy : str, optional
-        'bounded', 'sqrt' or 'linear'.
+    problems : sequence of str or Problem, registered names or `Problem` objects (a non-empty sequence).
+    order : int, optional, the convergence order claimed on every problem.
+    symmetric : bool, optional, true (returns to its start within rounding) or False.
+    energy : str, optional, 'bounded', 'sqrt' or 'linear'.
     symplectic : bool, optional
         True or False, judged by the symplecticity experiment (the one-step map's Jacobian).
-    quick : bool, optional
-        Start from the experiments' quick settings (default True).
+    quick : bool, optional, start from the experiments' quick settings (default True).
     configs : mapping, optional
         Experiment name ('convergence', 'reversibility', 'energy', 'symplecticity') -> setting
         overrides.
-    jobs : int, optional
-        Worker processes (default 1: in this process).
-    cache : bool, optional
-        Read and write the cell cache (default False).
-    cell_timeout : float, optional
-        Seconds per cell.
-    raise_on_failure : bool, optional
-        Raise `ClaimError` when a claim is false (default True).
+    jobs : int, optional, worker processes (default 1: in this process).
+    cache : bool, optional, read and write the cell cache (default False).
+    cell_timeout : float, optional, seconds per cell.
+    raise_on_failure : bool, optional, raise `ClaimError` when a claim is false (default True).
 
     Returns
     -------

@@ -140,8 +140,7 @@ class ButcherTableau:
 
         Parameters
         ----------
-        name : str, optional
-            The new tableau's name; default ``"<name>@embedded"``.
+        name : str, optional, the new tableau's name; default ``"<name>@embedded"``.
 
         Returns
         -------
@@ -166,8 +165,7 @@ class ButcherTableau:
 
         Parameters
         ----------
-        z : array_like
-            Points of the complex plane, any shape.
+        z : array_like, points of the complex plane, any shape.
 
         Returns
         -------
@@ -396,12 +394,9 @@ class SplittingScheme:
 
         Parameters
         ----------
-        name : str
-            The new scheme's name.
-        base : SplittingScheme
-            The scheme composed.
-        weights : sequence of numbers
-            w_1, ..., w_m; the result is exact when `base` and every weight are.
+        name : str, the new scheme's name.
+        base : SplittingScheme, the scheme composed.
+        weights : sequence of numbers, w_1, ..., w_m; the result is exact when `base` and every weight are.
 
         Returns
         -------

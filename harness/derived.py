@@ -80,14 +80,10 @@ def remembered(module: str, function: str, parts: Sequence[Any], compute: Callab
 
     Parameters
     ----------
-    module : str
-        The dotted module whose code version the value depends on.
-    function : str
-        A name for the value within the module.
-    parts : sequence
-        What else the value depends on (their `repr` enters the key).
-    compute : callable
-        Makes the value (JSON-serialisable) when it is not kept yet.
+    module : str, the dotted module whose code version the value depends on.
+    function : str, A name for the value within the module.
+    parts : sequence, what else the value depends on (their `repr` enters the key).
+    compute : callable, makes the value (JSON-serialisable) when it is not kept yet.
 
     Returns
     -------

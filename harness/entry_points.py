@@ -32,8 +32,7 @@ def group_entry_points(group: str) -> tuple[list, list]:
 
     Parameters
     ----------
-    group : str
-        The entry-point group, e.g. 'harness.steppers'.
+    group : str, the entry-point group, e.g. 'harness.steppers'.
 
     Returns
     -------
@@ -50,10 +49,8 @@ def missing_builtins(kind: str, group: str) -> str:
 
     Parameters
     ----------
-    kind : str
-        What the group registers ('stepper', 'problem', 'experiment', 'step loop').
-    group : str
-        The entry-point group.
+    kind : str, what the group registers ('stepper', 'problem', 'experiment', 'step loop').
+    group : str, the entry-point group.
 
     Returns
     -------

@@ -48,10 +48,8 @@ def class_key(nystrom: bool, degree: int | None) -> str | None:
 
     Parameters
     ----------
-    nystrom : bool
-        The problem is x'' = g(x) written as a first-order system.
-    degree : int or None
-        The polynomial degree of the right-hand side in the state.
+    nystrom : bool, the problem is x'' = g(x) written as a first-order system.
+    degree : int or None, the polynomial degree of the right-hand side in the state.
 
     Returns
     -------
@@ -122,8 +120,7 @@ def method_facts(stepper: Stepper) -> MethodFacts:
 
     Parameters
     ----------
-    stepper : Stepper
-        Any stepper.
+    stepper : Stepper, any stepper.
 
     Returns
     -------

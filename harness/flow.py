@@ -32,10 +32,8 @@ def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> fl
     Parameters
     ----------
     problem : Problem
-    span : float
-        The time the flow runs.
-    y0 : ndarray, shape (dim,), optional
-        The start (default `problem.y0`).
+    span : float, the time the flow runs.
+    y0 : ndarray, shape (dim,), optional, the start (default `problem.y0`).
 
     Returns
     -------

@@ -62,10 +62,8 @@ def sample_orbit(problem, y0: np.ndarray | None = None, t_end: float | None = No
     Parameters
     ----------
     problem : Problem
-    y0 : ndarray, shape (dim,), optional
-        The start (default `problem.y0`).
-    t_end : float, optional
-        The end time (default `problem.t_end`).
+    y0 : ndarray, shape (dim,), optional, the start (default `problem.y0`).
+    t_end : float, optional, the end time (default `problem.t_end`).
 
     Returns
     -------
@@ -115,10 +113,8 @@ def jacobian_eigenvalues(problem, jac: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    problem : Problem
-        The problem the Jacobians belong to (for its Newtonian structure).
-    jac : ndarray, shape (dim, dim, n)
-        Jacobians, one per sample.
+    problem : Problem, the problem the Jacobians belong to (for its Newtonian structure).
+    jac : ndarray, shape (dim, dim, n), jacobians, one per sample.
 
     Returns
     -------
@@ -139,10 +135,8 @@ def states_at(problem, times: np.ndarray, y0: np.ndarray | None = None) -> np.nd
     Parameters
     ----------
     problem : Problem
-    times : array_like, shape (m,)
-        Increasing times >= t0.
-    y0 : ndarray, shape (dim,), optional
-        The start (default `problem.y0`).
+    times : array_like, shape (m,), increasing times >= t0.
+    y0 : ndarray, shape (dim,), optional, the start (default `problem.y0`).
 
     Returns
     -------
@@ -168,8 +162,7 @@ def fastest_times(problem, n: int) -> np.ndarray:
 
     Parameters
     ----------
-    problem, n : Problem, int
-        The problem (its orbit over its own span) and how many times at most.
+    problem, n : Problem, int, the problem (its orbit over its own span) and how many times at most.
 
     Returns
     -------
@@ -201,10 +194,8 @@ def orbit_rates(problem, orbit: Orbit, *, candidates: int | None = None) -> dict
     Parameters
     ----------
     problem : Problem
-    orbit : Orbit
-        An orbit of it (`sample_orbit`); thinned to ORBIT_MAX_SAMPLES samples.
-    candidates : int, optional
-        How many samples get their spectrum taken (default all).
+    orbit : Orbit, an orbit of it (`sample_orbit`); thinned to ORBIT_MAX_SAMPLES samples.
+    candidates : int, optional, how many samples get their spectrum taken (default all).
 
     Returns
     -------

@@ -30,8 +30,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
     Parameters
     ----------
-    parser : pytest.Parser
-        pytest's option parser.
+    parser : pytest.Parser, pytest's option parser.
     """
     group = parser.getgroup("integrator-claims", "integrator claims checked by the harness")
     group.addoption(
@@ -50,8 +49,7 @@ def integrator_claims(request: pytest.FixtureRequest) -> Callable[..., Any]:
 
     Parameters
     ----------
-    request : pytest.FixtureRequest
-        The requesting test (its config tells quick or full settings).
+    request : pytest.FixtureRequest, the requesting test (its config tells quick or full settings).
 
     Returns
     -------

@@ -35,8 +35,7 @@ def regime_end(problem, t_end: float) -> tuple[float, str]:
     Parameters
     ----------
     problem : Problem
-    t_end : float
-        Where the long run is meant to end (past the span or not).
+    t_end : float, where the long run is meant to end (past the span or not).
 
     Returns
     -------
@@ -103,8 +102,7 @@ def fastest_approach(problem, t_end: float) -> tuple[float, float, float] | None
     Parameters
     ----------
     problem : Problem
-    t_end : float
-        The end of the orbit followed.
+    t_end : float, the end of the orbit followed.
 
     Returns
     -------

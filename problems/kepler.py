@@ -61,8 +61,7 @@ def orbital_elements(y0: np.ndarray) -> dict[str, np.ndarray]:
 
     Parameters
     ----------
-    y0 : ndarray, shape (4, N)
-        States (x, y, vx, vy) with GM = 1.
+    y0 : ndarray, shape (4, N), states (x, y, vx, vy) with GM = 1.
 
     Returns
     -------
@@ -84,14 +83,10 @@ def kepler_exact(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None = 
 
     Parameters
     ----------
-    t : float
-        The time.
-    y0 : ndarray, shape (4, N)
-        Bound starts (x, y, vx, vy), GM = 1; `InputError` for an unbound one.
-    t0 : float
-        Their time.
-    pars : ndarray, optional
-        Unused (the problem has no parameters).
+    t : float, the time.
+    y0 : ndarray, shape (4, N), bound starts (x, y, vx, vy), GM = 1; `InputError` for an unbound one.
+    t0 : float, their time.
+    pars : ndarray, optional, unused (the problem has no parameters).
 
     Returns
     -------
@@ -198,8 +193,7 @@ def pericentre_start(e: float) -> list[float]:
 
     Parameters
     ----------
-    e : float
-        Eccentricity, in [0, 1).
+    e : float, eccentricity, in [0, 1).
 
     Returns
     -------

@@ -33,10 +33,8 @@ def henon_heiles_start(energy: float, y0: float) -> list[float]:
 
     Parameters
     ----------
-    energy : float
-        The energy H.
-    y0 : float
-        The start's y.
+    energy : float, the energy H.
+    y0 : float, the start's y.
 
     Returns
     -------

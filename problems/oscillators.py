@@ -79,10 +79,8 @@ def pendulum_period(theta0: float, omega0: float = 0.0) -> float:
 
     Parameters
     ----------
-    theta0 : float
-        Start angle.
-    omega0 : float, optional
-        Start angular velocity (default 0).
+    theta0 : float, start angle.
+    omega0 : float, optional, start angular velocity (default 0).
 
     Returns
     -------
@@ -105,14 +103,10 @@ def pendulum_exact(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None 
 
     Parameters
     ----------
-    t : float
-        The time.
-    y0 : ndarray, shape (2, N)
-        Librating starts (theta, omega).
-    t0 : float
-        Their time.
-    pars : ndarray, optional
-        Unused.
+    t : float, the time.
+    y0 : ndarray, shape (2, N), librating starts (theta, omega).
+    t0 : float, their time.
+    pars : ndarray, optional, unused.
 
     Returns
     -------
@@ -150,14 +144,10 @@ def small_angle(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None = N
 
     Parameters
     ----------
-    t : float
-        The time.
-    y0 : ndarray, shape (2, N)
-        Starts (theta, omega).
-    t0 : float
-        Their time.
-    pars : ndarray, optional
-        Unused.
+    t : float, the time.
+    y0 : ndarray, shape (2, N), starts (theta, omega).
+    t0 : float, their time.
+    pars : ndarray, optional, unused.
 
     Returns
     -------

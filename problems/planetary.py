@@ -54,10 +54,8 @@ def elements_to_cartesian(
 
     Parameters
     ----------
-    mu : float
-        Gravitational parameter G (M + m).
-    a, e, inc, f : float
-        Semi-major axis, eccentricity, inclination and true anomaly.
+    mu : float, gravitational parameter G (M + m).
+    a, e, inc, f : float, semi-major axis, eccentricity, inclination and true anomaly.
 
     Returns
     -------

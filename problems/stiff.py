@@ -35,8 +35,7 @@ def smooth_start(eps: float) -> list[float]:
 
     Parameters
     ----------
-    eps : float
-        Van der Pol's eps (the stiff eigenvalue is about (1 - y1^2) / eps).
+    eps : float, van der Pol's eps (the stiff eigenvalue is about (1 - y1^2) / eps).
 
     Returns
     -------

@@ -40,10 +40,8 @@ def report_error(message: str, code: int) -> int:
 
     Parameters
     ----------
-    message : str
-        The message (put on one line).
-    code : int
-        The exit status.
+    message : str, the message (put on one line).
+    code : int, the exit status.
 
     Returns
     -------
@@ -58,8 +56,7 @@ def os_error_status(exc: OSError) -> tuple[str, int]:
 
     Parameters
     ----------
-    exc : OSError
-        The error.
+    exc : OSError, the error.
 
     Returns
     -------
@@ -83,8 +80,7 @@ def write_stdout(text: str) -> int:
 
     Parameters
     ----------
-    text : str
-        The output (control characters escaped).
+    text : str, the output (control characters escaped).
 
     Returns
     -------
@@ -117,10 +113,8 @@ def explain_skips(skips: Sequence[dict], as_json: bool) -> None:
 
     Parameters
     ----------
-    skips : sequence of dict
-        Skip records (stepper, problem, reason, ...).
-    as_json : bool
-        Print JSON records instead of a table.
+    skips : sequence of dict, skip records (stepper, problem, reason, ...).
+    as_json : bool, print JSON records instead of a table.
     """
     if as_json:
         print_json([dict(r, verdict="not-applicable", passed=False) for r in skips])
@@ -138,8 +132,7 @@ def one_line(text: str) -> str:
 
     Parameters
     ----------
-    text : str
-        The text.
+    text : str, the text.
 
     Returns
     -------
@@ -159,8 +152,7 @@ def escape_controls(text: str) -> str:
 
     Parameters
     ----------
-    text : str
-        The text.
+    text : str, the text.
 
     Returns
     -------
@@ -191,8 +183,7 @@ class EscapingStream(io.TextIOBase):
 
         Parameters
         ----------
-        text : str
-            The text.
+        text : str, the text.
 
         Returns
         -------
@@ -252,8 +243,7 @@ def print_json(records: Any) -> None:
 
     Parameters
     ----------
-    records : any
-        JSON-able data (NumPy and pandas values converted).
+    records : any, JSON-able data (NumPy and pandas values converted).
     """
     print(json.dumps(_jsonable(records), indent=2), file=output_buffer())
 
@@ -264,8 +254,7 @@ def print_table(frame, columns: Sequence[str]) -> None:
     Parameters
     ----------
     frame : DataFrame
-    columns : sequence of str
-        The columns shown.
+    columns : sequence of str, the columns shown.
     """
     import pandas as pd
 

@@ -217,16 +217,11 @@ def reference(
 
     Parameters
     ----------
-    problem : Problem or str
-        The problem, or its registered name.
-    times : float or array_like
-        Output times, increasing, >= t0.
-    y0 : array_like, optional
-        Initial states, shape (dim,) or (dim, N) (default the problem's start).
-    t0 : float, optional
-        Initial time (default the problem's).
-    pars : ndarray or mapping, optional
-        Parameter values, as in `Problem.pars_for`.
+    problem : Problem or str, the problem, or its registered name.
+    times : float or array_like, output times, increasing, >= t0.
+    y0 : array_like, optional, initial states, shape (dim,) or (dim, N) (default the problem's start).
+    t0 : float, optional, initial time (default the problem's).
+    pars : ndarray or mapping, optional, parameter values, as in `Problem.pars_for`.
     required_error : float, optional
         The certified error the reference must meet (None: the default level pair).
 

@@ -83,12 +83,9 @@ def cache_path(problem: Problem, level: str, key: str) -> Path:
 
     Parameters
     ----------
-    problem : Problem
-        The problem (its name, made file-safe, starts the file name).
-    level : str
-        The precision level.
-    key : str
-        The request's hash.
+    problem : Problem, the problem (its name, made file-safe, starts the file name).
+    level : str, the precision level.
+    key : str, the request's hash.
 
     Returns
     -------
@@ -104,12 +101,9 @@ def load_reference(path: Path, times: np.ndarray, shape: tuple[int, int, int]):
 
     Parameters
     ----------
-    path : Path
-        The cached file.
-    times : ndarray
-        The output times it must hold.
-    shape : (int, int, int)
-        The states' shape (nt, dim, N).
+    path : Path, the cached file.
+    times : ndarray, the output times it must hold.
+    shape : (int, int, int), the states' shape (nt, dim, N).
 
     Returns
     -------
@@ -141,8 +135,7 @@ def store_reference(path: Path, **arrays: Any) -> None:
 
     Parameters
     ----------
-    path : Path
-        The file to write.
+    path : Path, the file to write.
     **arrays
         Named arrays (and scalars), as for `numpy.savez`.
     """

@@ -66,8 +66,7 @@ class Level:
 
         Parameters
         ----------
-        a : array_like
-            float64 values.
+        a : array_like, float64 values.
 
         Returns
         -------
@@ -88,8 +87,7 @@ class Level:
 
         Parameters
         ----------
-        values : sequence
-            Decimal numbers (strings or anything whose `str` is one).
+        values : sequence, decimal numbers (strings or anything whose `str` is one).
 
         Returns
         -------
@@ -157,8 +155,7 @@ def certifier_of(level: str) -> str:
 
     Parameters
     ----------
-    level : str
-        A level name of `available_levels`.
+    level : str, A level name of `available_levels`.
 
     Returns
     -------
@@ -238,14 +235,10 @@ def certify(values: np.ndarray, level: Level, higher: np.ndarray, cert: Level):
 
     Parameters
     ----------
-    values : ndarray, shape (nt, dim, N)
-        States at `level`.
-    level : Level
-        Their level.
-    higher : ndarray, shape (nt, dim, N)
-        The same states at the certifying level.
-    cert : Level
-        The certifying level.
+    values : ndarray, shape (nt, dim, N), states at `level`.
+    level : Level, their level.
+    higher : ndarray, shape (nt, dim, N), the same states at the certifying level.
+    cert : Level, the certifying level.
 
     Returns
     -------

@@ -84,16 +84,11 @@ def stiff_check(problem: Problem, level: Level, ta: Any, t_end: float, member: i
     Parameters
     ----------
     problem : Problem
-    level : Level
-        The integrator's precision level (for the message).
-    ta : heyoka taylor_adaptive
-        The integrator, at its current time and state.
-    t_end : float
-        The end of the span.
-    member : int
-        The ensemble member (for the message).
-    step : float, optional
-        The mean step of the last chunk (None at the start).
+    level : Level, the integrator's precision level (for the message).
+    ta : heyoka taylor_adaptive, the integrator, at its current time and state.
+    t_end : float, the end of the span.
+    member : int, the ensemble member (for the message).
+    step : float, optional, the mean step of the last chunk (None at the start).
     """
     now = float(ta.time)
     pars = np.array([float(v) for v in ta.pars]) if len(ta.pars) else np.zeros(0)
@@ -191,8 +186,7 @@ def reference_tol(level: Level) -> float:
 
     Parameters
     ----------
-    level : Level
-        The level.
+    level : Level, the level.
 
     Returns
     -------
@@ -206,10 +200,8 @@ def certifier_tol(cert: Level, level: Level) -> float:
 
     Parameters
     ----------
-    cert : Level
-        The certifying level.
-    level : Level
-        The level certified.
+    cert : Level, the certifying level.
+    level : Level, the level certified.
 
     Returns
     -------
@@ -236,20 +228,13 @@ def propagate(
     Parameters
     ----------
     problem : Problem
-    level : Level
-        The precision level.
-    tol : float
-        heyoka's tolerance.
-    times : ndarray
-        Output times, increasing, > t0 or starting at t0.
-    y0 : ndarray, shape (dim, N)
-        Initial states (float64).
-    t0 : float
-        Initial time.
-    pars : ndarray, shape (P, N)
-        Parameter values.
-    published : bool, optional
-        Start from the published exact values (see above).
+    level : Level, the precision level.
+    tol : float, heyoka's tolerance.
+    times : ndarray, output times, increasing, > t0 or starting at t0.
+    y0 : ndarray, shape (dim, N), initial states (float64).
+    t0 : float, initial time.
+    pars : ndarray, shape (P, N), parameter values.
+    published : bool, optional, start from the published exact values (see above).
 
     Returns
     -------

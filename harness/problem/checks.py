@@ -33,8 +33,7 @@ def check_ensemble_size(size: Any) -> int:
 
     Parameters
     ----------
-    size : any
-        The requested ensemble size.
+    size : any, the requested ensemble size.
 
     Returns
     -------
@@ -72,12 +71,9 @@ def check_state(y: Any, dim: int, name: str = "y0") -> np.ndarray:
 
     Parameters
     ----------
-    y : array_like
-        The state or states.
-    dim : int
-        The problem's dimension.
-    name : str, optional
-        The argument's name in the error message (default "y0").
+    y : array_like, the state or states.
+    dim : int, the problem's dimension.
+    name : str, optional, the argument's name in the error message (default "y0").
 
     Returns
     -------

@@ -235,12 +235,9 @@ class Problem:
 
         Parameters
         ----------
-        size : int
-            Ensemble size, 1 to MAX_ENSEMBLE_SIZE.
-        seed : int, optional
-            Seed of the draws (default 0); member j's draws do not depend on `size`.
-        scale : float, optional
-            The relative size of the perturbation (positive and finite).
+        size : int, ensemble size, 1 to MAX_ENSEMBLE_SIZE.
+        seed : int, optional, seed of the draws (default 0); member j's draws do not depend on `size`.
+        scale : float, optional, the relative size of the perturbation (positive and finite).
 
         Returns
         -------
@@ -264,8 +261,7 @@ class Problem:
 
         Parameters
         ----------
-        size : int
-            Ensemble size N.
+        size : int, ensemble size N.
         pars : ndarray or mapping, optional
             None (the defaults), a mapping name -> value (the others default), a (P,) array (the
             same for every member) or a (P, N) array.
@@ -324,10 +320,8 @@ class Problem:
 
         Parameters
         ----------
-        pars : ndarray, optional
-            Parameter values, as in `pars_for`.
-        size : int, optional
-            Ensemble size N (default 1).
+        pars : ndarray, optional, parameter values, as in `pars_for`.
+        size : int, optional, ensemble size N (default 1).
 
         Returns
         -------
@@ -347,10 +341,8 @@ class Problem:
 
         Parameters
         ----------
-        kind : str
-            Which expressions: 'rhs', 'accel', 'accel_q', 'jac' or 'inv'.
-        constants : tuple of float or None
-            Parameter values substituted into the expressions, or None.
+        kind : str, which expressions: 'rhs', 'accel', 'accel_q', 'jac' or 'inv'.
+        constants : tuple of float or None, parameter values substituted into the expressions, or None.
 
         Returns
         -------
@@ -390,12 +382,9 @@ class Problem:
 
         Parameters
         ----------
-        y : ndarray, shape (dim, N)
-            States.
-        t : float, optional
-            Their time (default 0.0).
-        pars : ndarray, optional
-            Parameter values, as in `pars_for`.
+        y : ndarray, shape (dim, N), states.
+        t : float, optional, their time (default 0.0).
+        pars : ndarray, optional, parameter values, as in `pars_for`.
 
         Returns
         -------
@@ -447,10 +436,8 @@ def subs_pars(e: hy.expression, mapping: dict[str, hy.expression]) -> hy.express
 
     Parameters
     ----------
-    e : heyoka expression
-        The expression.
-    mapping : dict
-        "p<i>" -> the expression put in place of ``hy.par[i]``.
+    e : heyoka expression, the expression.
+    mapping : dict, "p<i>" -> the expression put in place of ``hy.par[i]``.
 
     Returns
     -------

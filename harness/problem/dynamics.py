@@ -97,12 +97,9 @@ class Dynamics:
 
         Parameters
         ----------
-        t : float
-            Time.
-        y : ndarray, shape (dim, N)
-            States.
-        out : ndarray, shape (dim, N), optional
-            Where to write the result.
+        t : float, time.
+        y : ndarray, shape (dim, N), states.
+        out : ndarray, shape (dim, N), optional, where to write the result.
 
         Returns
         -------
@@ -116,14 +113,10 @@ class Dynamics:
 
         Parameters
         ----------
-        t : float
-            Time.
-        q : ndarray, shape (nq, N)
-            Positions.
-        v : ndarray, shape (nq, N), optional
-            Velocities.
-        out : ndarray, shape (nq, N), optional
-            Where to write the result.
+        t : float, time.
+        q : ndarray, shape (nq, N), positions.
+        v : ndarray, shape (nq, N), optional, velocities.
+        out : ndarray, shape (nq, N), optional, where to write the result.
 
         Returns
         -------
@@ -151,10 +144,8 @@ class Dynamics:
 
         Parameters
         ----------
-        t : float
-            Time.
-        y : ndarray, shape (dim, N)
-            States.
+        t : float, time.
+        y : ndarray, shape (dim, N), states.
 
         Returns
         -------

@@ -143,14 +143,10 @@ class Published:
 
         Parameters
         ----------
-        problem : str
-            The problem's name (for messages).
-        y0 : sequence of float
-            The problem's float64 start.
-        parameters : mapping
-            Its float64 parameter values by name.
-        t_end : float
-            Its end time.
+        problem : str, the problem's name (for messages).
+        y0 : sequence of float, the problem's float64 start.
+        parameters : mapping, its float64 parameter values by name.
+        t_end : float, its end time.
         """
         if len(self.y0) != len(y0):
             raise InputError(f"problem {problem!r}: `published.y0` needs {len(y0)} values, got "

@@ -39,8 +39,7 @@ def check_jobs(jobs: Any) -> int:
 
     Parameters
     ----------
-    jobs : any
-        The requested worker count.
+    jobs : any, the requested worker count.
 
     Returns
     -------
@@ -64,8 +63,7 @@ def check_scheduler(value: Any) -> Any:
 
     Parameters
     ----------
-    value : any
-        None, a ``tcp://HOST:PORT`` address or a `distributed.Client`.
+    value : any, none, a ``tcp://HOST:PORT`` address or a `distributed.Client`.
 
     Returns
     -------
@@ -101,10 +99,8 @@ def check_names(kind: str, names: Any) -> list[str]:
 
     Parameters
     ----------
-    kind : str
-        'steppers' or 'problems'.
-    names : sequence of str or None
-        The requested names.
+    kind : str, 'steppers' or 'problems'.
+    names : sequence of str or None, the requested names.
 
     Returns
     -------
@@ -133,8 +129,7 @@ def check_plugins(plugins: Any) -> list[str]:
 
     Parameters
     ----------
-    plugins : str, PathLike, sequence of them, or None
-        The plugin files.
+    plugins : str, PathLike, sequence of them, or None, the plugin files.
 
     Returns
     -------
@@ -159,8 +154,7 @@ def resolve_experiment(experiment: Any) -> Experiment:
 
     Parameters
     ----------
-    experiment : Experiment or str
-        The experiment or its name (`UnknownNameError` for an unknown name).
+    experiment : Experiment or str, the experiment or its name (`UnknownNameError` for an unknown name).
 
     Returns
     -------
@@ -181,12 +175,9 @@ def resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
 
     Parameters
     ----------
-    exp : Experiment
-        The experiment.
-    config : mapping or None
-        Overrides of its settings.
-    quick : bool
-        Start from the quick settings.
+    exp : Experiment, the experiment.
+    config : mapping or None, overrides of its settings.
+    quick : bool, start from the quick settings.
 
     Returns
     -------
@@ -211,8 +202,7 @@ def progress_display(progress: Any, desc: str) -> tuple[Progress, bool]:
     ----------
     progress : Progress, bool, str or None
         A shared display, None/True (default display), False (silent) or a mode.
-    desc : str
-        The display's label.
+    desc : str, the display's label.
 
     Returns
     -------

@@ -40,8 +40,7 @@ def time_limit(seconds: float | None):
 
     Parameters
     ----------
-    seconds : float or None
-        The limit.
+    seconds : float or None, the limit.
 
     Yields
     ------
@@ -75,10 +74,8 @@ def call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
 
     Parameters
     ----------
-    fn : callable
-        Called with no arguments.
-    seconds : float or None
-        The limit (None: none).
+    fn : callable, called with no arguments.
+    seconds : float or None, the limit (None: none).
 
     Returns
     -------
@@ -113,8 +110,7 @@ def check_timeout(value: Any) -> float | None:
 
     Parameters
     ----------
-    value : any
-        Seconds, positive, finite and at most MAX_CELL_TIMEOUT_S, or None.
+    value : any, seconds, positive, finite and at most MAX_CELL_TIMEOUT_S, or None.
 
     Returns
     -------

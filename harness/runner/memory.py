@@ -25,14 +25,10 @@ def estimate_bytes(*, dim: int, ensemble: int = 1, saved_states: int = 2,
 
     Parameters
     ----------
-    dim : int
-        State dimension.
-    ensemble : int, optional
-        Ensemble size (default 1).
-    saved_states : int, optional
-        States kept (default 2: start and end).
-    work_arrays : int, optional
-        Working arrays of the state's size (WORK_ARRAYS).
+    dim : int, state dimension.
+    ensemble : int, optional, ensemble size (default 1).
+    saved_states : int, optional, states kept (default 2: start and end).
+    work_arrays : int, optional, working arrays of the state's size (WORK_ARRAYS).
 
     Returns
     -------
@@ -74,14 +70,10 @@ def check_memory(needed: int, *, argument: str, detail: str = "",
 
     Parameters
     ----------
-    needed : int
-        Bytes needed.
-    argument : str
-        The argument named in the error.
-    detail : str, optional
-        Added to the message.
-    available : int, optional
-        Bytes available (default measured now).
+    needed : int, bytes needed.
+    argument : str, the argument named in the error.
+    detail : str, optional, added to the message.
+    available : int, optional, bytes available (default measured now).
     """
     from harness.tolerances import MEMORY_HEADROOM
 
@@ -121,14 +113,10 @@ def guard_memory(experiment: Experiment, cells: Sequence[Cell], config: Mapping[
 
     Parameters
     ----------
-    experiment : Experiment
-        The experiment (its `estimate_bytes(cell, config)` hook when it has one).
-    cells : sequence of Cell
-        The cells to run.
-    config : mapping
-        The experiment's resolved configuration.
-    jobs : int
-        Number of workers running at once.
+    experiment : Experiment, the experiment (its `estimate_bytes(cell, config)` hook when it has one).
+    cells : sequence of Cell, the cells to run.
+    config : mapping, the experiment's resolved configuration.
+    jobs : int, number of workers running at once.
     """
     estimates = []
     for cell in cells:

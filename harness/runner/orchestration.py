@@ -84,12 +84,9 @@ def no_cells_error(experiments: Sequence[str], skips: Sequence[Skip] | pd.DataFr
 
     Parameters
     ----------
-    experiments : sequence of str
-        The experiments run.
-    skips : sequence of Skip or DataFrame
-        Their skip records.
-    steppers, problems : sequence of str
-        The requested names.
+    experiments : sequence of str, the experiments run.
+    skips : sequence of Skip or DataFrame, their skip records.
+    steppers, problems : sequence of str, the requested names.
 
     Returns
     -------
@@ -180,36 +177,26 @@ def run_experiment(
 
     Parameters
     ----------
-    experiment : str or Experiment
-        The experiment, or its registered name.
-    steppers, problems : sequence of str, optional
-        Registered names (None: every one).
-    config : mapping, optional
-        Overrides of the experiment's settings.
+    experiment : str or Experiment, the experiment, or its registered name.
+    steppers, problems : sequence of str, optional, registered names (None: every one).
+    config : mapping, optional, overrides of the experiment's settings.
     options : RunOptions, optional
         Supplies `quick`, `jobs`, `scheduler`, `fresh`, `cache`, `cache_dir`, `plugins` and
         `cell_timeout` in place of those keywords.
-    quick : bool, optional
-        Start from the experiment's quick settings.
-    jobs : int, optional
-        Worker processes (None: all cores; 1: in this process).
+    quick : bool, optional, start from the experiment's quick settings.
+    jobs : int, optional, worker processes (None: all cores; 1: in this process).
     scheduler : str or distributed.Client, optional
         A Dask scheduler (``tcp://HOST:PORT``) or client, instead of local processes.
-    fresh : bool, optional
-        Recompute cached cells.
-    cache : bool, optional
-        False: neither read nor write the cache.
-    cache_dir : str or PathLike, optional
-        The cache root (default `harness.cache.cache_dir()`).
+    fresh : bool, optional, recompute cached cells.
+    cache : bool, optional, false: neither read nor write the cache.
+    cache_dir : str or PathLike, optional, the cache root (default `harness.cache.cache_dir()`).
     plugins : sequence of paths, optional
         .py files loaded here and on every worker before names are looked up.
-    cell_timeout : float, optional
-        Seconds per cell.
+    cell_timeout : float, optional, seconds per cell.
     progress : Progress, bool or str, optional
         None/True (bar on a terminal, plain lines otherwise), False (silent), a mode ('bar',
         'lines', 'off') or a shared `Progress`.
-    allow_empty : bool, optional
-        Return an empty result instead of raising when no cell applies.
+    allow_empty : bool, optional, return an empty result instead of raising when no cell applies.
     _client, _counted, _listed, _versions
         Internal: what `run_experiments` shares between its experiments.
 
@@ -452,8 +439,7 @@ def interleaved(tasks: list[Task]) -> list[Task]:
 
     Parameters
     ----------
-    tasks : list of Task
-        The tasks in cell order.
+    tasks : list of Task, the tasks in cell order.
 
     Returns
     -------

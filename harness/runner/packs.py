@@ -28,12 +28,9 @@ def read_pack(store: CellCache, key: str, keys: Sequence[str]) -> tuple[pd.DataF
 
     Parameters
     ----------
-    store : CellCache
-        The cache.
-    key : str
-        The pack key.
-    keys : sequence of str
-        The cell keys it must list, in order.
+    store : CellCache, the cache.
+    key : str, the pack key.
+    keys : sequence of str, the cell keys it must list, in order.
 
     Returns
     -------
@@ -58,16 +55,11 @@ def write_pack(store: CellCache, key: str, experiment: str, rows: pd.DataFrame,
 
     Parameters
     ----------
-    store : CellCache
-        The cache.
-    key : str
-        The pack key.
-    experiment : str
-        The experiment's name.
-    rows : DataFrame
-        Every cell's rows.
-    records : sequence of mapping
-        One per cell, with key, n_rows, wall_s and worker.
+    store : CellCache, the cache.
+    key : str, the pack key.
+    experiment : str, the experiment's name.
+    rows : DataFrame, every cell's rows.
+    records : sequence of mapping, one per cell, with key, n_rows, wall_s and worker.
 
     Returns
     -------
@@ -85,18 +77,12 @@ def summarize_packed(store: CellCache, pack_key: str, experiment: Experiment, ro
 
     Parameters
     ----------
-    store : CellCache
-        The cache.
-    pack_key : str
-        The pack's key.
-    experiment : Experiment
-        The experiment (its judging code's version keys the summary).
-    rows : DataFrame
-        The run's rows.
-    summarize : callable
-        Makes the summary.
-    fresh : bool, optional
-        Recompute even when cached.
+    store : CellCache, the cache.
+    pack_key : str, the pack's key.
+    experiment : Experiment, the experiment (its judging code's version keys the summary).
+    rows : DataFrame, the run's rows.
+    summarize : callable, makes the summary.
+    fresh : bool, optional, recompute even when cached.
 
     Returns
     -------

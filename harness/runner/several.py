@@ -48,12 +48,9 @@ def run_experiments(
 
     Parameters
     ----------
-    experiments : sequence of str or Experiment, optional
-        The experiments (None: every registered one).
-    steppers, problems : sequence of str, optional
-        Registered names (None: every one).
-    configs : mapping, optional
-        Experiment name -> overrides of its settings.
+    experiments : sequence of str or Experiment, optional, the experiments (None: every registered one).
+    steppers, problems : sequence of str, optional, registered names (None: every one).
+    configs : mapping, optional, experiment name -> overrides of its settings.
     quick, jobs, scheduler, fresh, cache, cache_dir, plugins, cell_timeout, progress
         As in `run_experiment`.
 

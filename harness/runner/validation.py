@@ -37,10 +37,8 @@ def validate_rows(experiment: Experiment, rows: Any) -> pd.DataFrame:
 
     Parameters
     ----------
-    experiment : Experiment
-        The experiment that made the rows.
-    rows : any
-        What its `run_cell` returned.
+    experiment : Experiment, the experiment that made the rows.
+    rows : any, what its `run_cell` returned.
 
     Returns
     -------

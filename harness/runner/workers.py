@@ -44,10 +44,8 @@ def short_traceback(exc: BaseException, frames: int = 6) -> str:
 
     Parameters
     ----------
-    exc : BaseException
-        The exception.
-    frames : int, optional
-        How many of the innermost frames (default 6).
+    exc : BaseException, the exception.
+    frames : int, optional, how many of the innermost frames (default 6).
 
     Returns
     -------
@@ -63,10 +61,8 @@ def one_line(text: str, limit: int = 500) -> str:
 
     Parameters
     ----------
-    text : str
-        The text.
-    limit : int, optional
-        The longest result (default 500), "..." marking a cut.
+    text : str, the text.
+    limit : int, optional, the longest result (default 500), "..." marking a cut.
 
     Returns
     -------
@@ -81,8 +77,7 @@ def plugin_spec(path: str | os.PathLike) -> dict:
 
     Parameters
     ----------
-    path : str or PathLike
-        The plugin file.
+    path : str or PathLike, the plugin file.
 
     Returns
     -------
@@ -122,10 +117,8 @@ def shipped_objects(stepper_names: Sequence[str], problem_names: Sequence[str]) 
 
     Parameters
     ----------
-    stepper_names : sequence of str
-        The run's steppers.
-    problem_names : sequence of str
-        The run's problems.
+    stepper_names : sequence of str, the run's steppers.
+    problem_names : sequence of str, the run's problems.
 
     Returns
     -------
@@ -187,8 +180,7 @@ def claim_verdict(text: str) -> tuple[str, str] | None:
 
     Parameters
     ----------
-    text : str
-        The claim file's content.
+    text : str, the claim file's content.
 
     Returns
     -------

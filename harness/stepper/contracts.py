@@ -65,12 +65,9 @@ def batched_solve(A: Any, b: Any, xp: Any = np) -> Any:
 
     Parameters
     ----------
-    A : array, shape (dim, dim, N)
-        One matrix per member.
-    b : array, shape (dim, N)
-        One right-hand side per member.
-    xp : module, optional
-        The array namespace (numpy, or jax.numpy).
+    A : array, shape (dim, dim, N), one matrix per member.
+    b : array, shape (dim, N), one right-hand side per member.
+    xp : module, optional, the array namespace (numpy, or jax.numpy).
 
     Returns
     -------
@@ -86,12 +83,9 @@ def checked_float64(y: Any, name: str, when: str) -> np.ndarray:
 
     Parameters
     ----------
-    y : array_like
-        A state a library step returned.
-    name : str
-        The stepper's name (for the message).
-    when : str
-        Where in the run (for the message).
+    y : array_like, A state a library step returned.
+    name : str, the stepper's name (for the message).
+    when : str, where in the run (for the message).
 
     Returns
     -------
@@ -125,8 +119,7 @@ class Field:
 
         Parameters
         ----------
-        dyn : Dynamics
-            The problem's dynamics at fixed parameters.
+        dyn : Dynamics, the problem's dynamics at fixed parameters.
 
         Returns
         -------
@@ -141,8 +134,7 @@ class Field:
 
         Parameters
         ----------
-        dyn : Dynamics
-            The problem's dynamics (its problem and parameter values are used).
+        dyn : Dynamics, the problem's dynamics (its problem and parameter values are used).
 
         Returns
         -------

@@ -34,10 +34,8 @@ def made_nan(before: np.ndarray, after: np.ndarray) -> bool:
 
     Parameters
     ----------
-    before : ndarray, shape (dim, N)
-        The state before the step.
-    after : ndarray, shape (dim, N)
-        The state after it.
+    before : ndarray, shape (dim, N), the state before the step.
+    after : ndarray, shape (dim, N), the state after it.
 
     Returns
     -------

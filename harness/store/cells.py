@@ -64,12 +64,9 @@ def encode_cell(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[
 
     Parameters
     ----------
-    key : str
-        The cell's key.
-    rows : DataFrame
-        Its rows.
-    info : mapping
-        Its metadata (made JSON-safe).
+    key : str, the cell's key.
+    rows : DataFrame, its rows.
+    info : mapping, its metadata (made JSON-safe).
 
     Returns
     -------
@@ -89,12 +86,9 @@ def decode_cell(data: bytes, path: str | os.PathLike, key: str | None = None) ->
 
     Parameters
     ----------
-    data : bytes
-        The file's content.
-    path : str or PathLike
-        Where it came from (for messages).
-    key : str, optional
-        The key it must hold.
+    data : bytes, the file's content.
+    path : str or PathLike, where it came from (for messages).
+    key : str, optional, the key it must hold.
 
     Returns
     -------
@@ -150,8 +144,7 @@ class CellCache:
 
         Parameters
         ----------
-        key : str
-            The cell key; `InputError` otherwise.
+        key : str, the cell key; `InputError` otherwise.
 
         Returns
         -------
@@ -166,8 +159,7 @@ class CellCache:
 
         Parameters
         ----------
-        key : str
-            The cell key.
+        key : str, the cell key.
 
         Returns
         -------
@@ -196,10 +188,8 @@ class CellCache:
 
         Parameters
         ----------
-        key : str
-            The cell or pack key.
-        kind : str, optional
-            'cells' (default), 'packs' or 'summaries'.
+        key : str, the cell or pack key.
+        kind : str, optional, 'cells' (default), 'packs' or 'summaries'.
 
         Returns
         -------
@@ -218,10 +208,8 @@ class CellCache:
 
         Parameters
         ----------
-        path : Path
-            The damaged entry.
-        reason : str
-            What is wrong with it (for the warning line).
+        path : Path, the damaged entry.
+        reason : str, what is wrong with it (for the warning line).
         """
         import sys
 
@@ -268,10 +256,8 @@ class CellCache:
 
         Parameters
         ----------
-        experiment : str
-            The experiment's name.
-        keys : sequence of str
-            The cell keys, in order.
+        experiment : str, the experiment's name.
+        keys : sequence of str, the cell keys, in order.
 
         Returns
         -------
@@ -286,10 +272,8 @@ class CellCache:
 
         Parameters
         ----------
-        key : str
-            The pack key (32 lowercase hex digits).
-        kind : str, optional
-            'packs' (default) or 'summaries'.
+        key : str, the pack key (32 lowercase hex digits).
+        kind : str, optional, 'packs' (default) or 'summaries'.
 
         Returns
         -------
@@ -306,10 +290,8 @@ class CellCache:
 
         Parameters
         ----------
-        key : str
-            The pack key.
-        kind : str, optional
-            'packs' (default) or 'summaries'.
+        key : str, the pack key.
+        kind : str, optional, 'packs' (default) or 'summaries'.
 
         Returns
         -------
@@ -323,14 +305,10 @@ class CellCache:
 
         Parameters
         ----------
-        key : str
-            The pack key.
-        rows : DataFrame
-            Every cell's rows.
-        info : mapping
-            The pack's metadata.
-        kind : str, optional
-            'packs' (default) or 'summaries'.
+        key : str, the pack key.
+        rows : DataFrame, every cell's rows.
+        info : mapping, the pack's metadata.
+        kind : str, optional, 'packs' (default) or 'summaries'.
 
         Returns
         -------
@@ -345,12 +323,9 @@ class CellCache:
 
         Parameters
         ----------
-        key : str
-            The cell key.
-        rows : DataFrame
-            Its rows.
-        info : mapping
-            Its metadata.
+        key : str, the cell key.
+        rows : DataFrame, its rows.
+        info : mapping, its metadata.
 
         Returns
         -------
@@ -364,10 +339,8 @@ class CellCache:
 
         Parameters
         ----------
-        key : str
-            The cell key.
-        data : bytes
-            What `encode_cell` returned for it.
+        key : str, the cell key.
+        data : bytes, what `encode_cell` returned for it.
 
         Returns
         -------

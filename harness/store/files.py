@@ -28,8 +28,7 @@ def fsync_dir(path: Path) -> None:
 
     Parameters
     ----------
-    path : Path
-        The directory.
+    path : Path, the directory.
     """
     try:
         fd = os.open(path, os.O_RDONLY)
@@ -51,8 +50,7 @@ def atomic_writer(path: str | os.PathLike) -> Iterator[IO[bytes]]:
 
     Parameters
     ----------
-    path : str or PathLike
-        The file to replace; `OutputError` naming it when its directory cannot be written.
+    path : str or PathLike, the file to replace; `OutputError` naming it when its directory cannot be written.
 
     Yields
     ------
@@ -93,10 +91,8 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
 
     Parameters
     ----------
-    path : str or PathLike
-        The file.
-    data : bytes
-        Its new content.
+    path : str or PathLike, the file.
+    data : bytes, its new content.
     """
     with atomic_writer(path) as fh:
         fh.write(data)
@@ -107,10 +103,8 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
 
     Parameters
     ----------
-    path : str or PathLike
-        The file.
-    obj : any
-        A JSON-able value (after `to_jsonable`).
+    path : str or PathLike, the file.
+    obj : any, A JSON-able value (after `to_jsonable`).
     """
     text = json.dumps(to_jsonable(obj), indent=1, allow_nan=False) + "\n"
     atomic_write_bytes(path, text.encode("utf-8"))
@@ -145,8 +139,7 @@ def table_bytes(table: Any, extra: Mapping[str, Any] | None = None) -> bytes:
     Parameters
     ----------
     table : pyarrow.Table
-    extra : mapping, optional
-        JSON-able metadata stored under the harness's key.
+    extra : mapping, optional, JSON-able metadata stored under the harness's key.
 
     Returns
     -------
@@ -179,8 +172,7 @@ def encode_parquet(df: pd.DataFrame, extra: Mapping[str, Any] | None = None) -> 
     Parameters
     ----------
     df : DataFrame
-    extra : mapping, optional
-        JSON-able metadata.
+    extra : mapping, optional, JSON-able metadata.
 
     Returns
     -------
@@ -195,10 +187,8 @@ def decode_parquet(data: bytes, path: str | os.PathLike = "<bytes>") -> tuple[pd
 
     Parameters
     ----------
-    data : bytes
-        The file's content.
-    path : str or PathLike, optional
-        Where it came from (for messages).
+    data : bytes, the file's content.
+    path : str or PathLike, optional, where it came from (for messages).
 
     Returns
     -------
@@ -231,11 +221,9 @@ def write_parquet(path: str | os.PathLike, df: pd.DataFrame,
 
     Parameters
     ----------
-    path : str or PathLike
-        The file.
+    path : str or PathLike, the file.
     df : DataFrame
-    extra : mapping, optional
-        JSON-able metadata.
+    extra : mapping, optional, JSON-able metadata.
 
     Returns
     -------
@@ -254,10 +242,8 @@ def read_bounded(path: str | os.PathLike, limit: int | None = None) -> bytes:
 
     Parameters
     ----------
-    path : str or PathLike
-        The file.
-    limit : int, optional
-        The largest size accepted, in bytes.
+    path : str or PathLike, the file.
+    limit : int, optional, the largest size accepted, in bytes.
 
     Returns
     -------
@@ -297,14 +283,10 @@ def read_parquet(
 
     Parameters
     ----------
-    path : str or PathLike
-        The file.
-    columns : list of str, optional
-        The exact columns it must have.
-    n_rows : int, optional
-        The row count it must have.
-    sha256 : str, optional
-        The checksum its bytes must have.
+    path : str or PathLike, the file.
+    columns : list of str, optional, the exact columns it must have.
+    n_rows : int, optional, the row count it must have.
+    sha256 : str, optional, the checksum its bytes must have.
 
     Returns
     -------
@@ -333,14 +315,10 @@ def check_frame(path: str | os.PathLike, df: pd.DataFrame, *, columns: list[str]
 
     Parameters
     ----------
-    path : str or PathLike
-        The file `df` came from (for the message).
-    df : DataFrame
-        The table read.
-    columns : list of str, optional
-        The recorded columns.
-    n_rows : int, optional
-        The recorded row count.
+    path : str or PathLike, the file `df` came from (for the message).
+    df : DataFrame, the table read.
+    columns : list of str, optional, the recorded columns.
+    n_rows : int, optional, the recorded row count.
     """
     if columns is not None and list(df.columns) != list(columns):
         raise CorruptResultsError(
@@ -356,8 +334,7 @@ def read_json(path: Path) -> Any:
 
     Parameters
     ----------
-    path : Path
-        The file.
+    path : Path, the file.
 
     Returns
     -------

@@ -65,10 +65,8 @@ class StoredRun:
 
         Parameters
         ----------
-        name : str
-            'rows', 'summary', 'failures', 'skips' or 'cells'.
-        experiment : str, optional
-            One experiment of the run (default all).
+        name : str, 'rows', 'summary', 'failures', 'skips' or 'cells'.
+        experiment : str, optional, one experiment of the run (default all).
 
         Returns
         -------
@@ -220,14 +218,10 @@ def load_run(run: str | os.PathLike | None = None, *, root: str | os.PathLike | 
 
     Parameters
     ----------
-    run : str or PathLike, optional
-        Which run (see above).
-    root : str or PathLike, optional
-        The results root.
-    tables : sequence of str, optional
-        The tables to read.
-    stored_rows : mapping, optional
-        Rows frames already decoded, by experiment.
+    run : str or PathLike, optional, which run (see above).
+    root : str or PathLike, optional, the results root.
+    tables : sequence of str, optional, the tables to read.
+    stored_rows : mapping, optional, rows frames already decoded, by experiment.
 
     Returns
     -------

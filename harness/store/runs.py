@@ -27,10 +27,8 @@ def results_root(root: str | os.PathLike | None = None, *, create: bool = False)
 
     Parameters
     ----------
-    root : str or PathLike, optional
-        The directory.
-    create : bool, optional
-        Create it when missing.
+    root : str or PathLike, optional, the directory.
+    create : bool, optional, create it when missing.
 
     Returns
     -------
@@ -62,12 +60,9 @@ def new_run_id(root: str | os.PathLike | None = None, *, short_sha: str | None =
 
     Parameters
     ----------
-    root : str or PathLike, optional
-        The results root (ids already used there are skipped).
-    short_sha : str, optional
-        The code's short commit hash (default "nogit").
-    now : datetime, optional
-        The time stamped (default now, UTC).
+    root : str or PathLike, optional, the results root (ids already used there are skipped).
+    short_sha : str, optional, the code's short commit hash (default "nogit").
+    now : datetime, optional, the time stamped (default now, UTC).
 
     Returns
     -------
@@ -94,8 +89,7 @@ def list_runs(root: str | os.PathLike | None = None) -> list[str]:
 
     Parameters
     ----------
-    root : str or PathLike, optional
-        The results root.
+    root : str or PathLike, optional, the results root.
 
     Returns
     -------
@@ -114,10 +108,8 @@ def resolve_run(run: str | os.PathLike | None = None, root: str | os.PathLike | 
 
     Parameters
     ----------
-    run : str or PathLike, optional
-        Which run.
-    root : str or PathLike, optional
-        The results root.
+    run : str or PathLike, optional, which run.
+    root : str or PathLike, optional, the results root.
 
     Returns
     -------
@@ -212,14 +204,10 @@ def save_run(
 
     Parameters
     ----------
-    results : iterable or mapping of RunResult
-        One result per experiment.
-    root : str or PathLike, optional
-        The results root.
-    run_id : str, optional
-        The run id (default a fresh one, `new_run_id`).
-    config : mapping, optional
-        The run's own configuration.
+    results : iterable or mapping of RunResult, one result per experiment.
+    root : str or PathLike, optional, the results root.
+    run_id : str, optional, the run id (default a fresh one, `new_run_id`).
+    config : mapping, optional, the run's own configuration.
 
     Returns
     -------

@@ -223,16 +223,12 @@ def stability_boundary(
 
     Parameters
     ----------
-    amplification : callable
-        Positions x (float array) -> amplification factors (array of the same shape).
-    limit : float, optional
-        The end of the search (STABILITY_SEARCH_LIMIT).
-    scan_step : float, optional
-        The linear scan's step, in (0, min(limit, 1)] (STABILITY_SCAN_STEP).
+    amplification : callable, positions x (float array) -> amplification factors (array of the same shape).
+    limit : float, optional, the end of the search (STABILITY_SEARCH_LIMIT).
+    scan_step : float, optional, the linear scan's step, in (0, min(limit, 1)] (STABILITY_SCAN_STEP).
     amplification_tol : float, optional
         How far above 1 a factor may be and still count as stable (STABILITY_AMPLIFICATION_TOL).
-    xtol : float, optional
-        The bracket width at which Brent's method stops (STABILITY_XTOL).
+    xtol : float, optional, the bracket width at which Brent's method stops (STABILITY_XTOL).
 
     Returns
     -------
@@ -271,8 +267,7 @@ def real_stability_interval(R: Callable[[np.ndarray], np.ndarray], **kwargs: Any
 
     Parameters
     ----------
-    R : callable
-        Complex z array -> R(z) or |R(z)|.
+    R : callable, complex z array -> R(z) or |R(z)|.
     **kwargs
         Passed to `stability_boundary` (limit, scan_step, amplification_tol, xtol).
 
@@ -288,8 +283,7 @@ def imag_stability_interval(R: Callable[[np.ndarray], np.ndarray], **kwargs: Any
 
     Parameters
     ----------
-    R : callable
-        Complex z array -> R(z) or |R(z)|.
+    R : callable, complex z array -> R(z) or |R(z)|.
     **kwargs
         Passed to `stability_boundary`.
 
@@ -305,8 +299,7 @@ def hw_stability_limit(amplification: Callable[[np.ndarray], np.ndarray], **kwar
 
     Parameters
     ----------
-    amplification : callable
-        h omega array -> spectral radius of the one-step map (array of the same shape).
+    amplification : callable, h omega array -> spectral radius of the one-step map (array of the same shape).
     **kwargs
         Passed to `stability_boundary`.
 

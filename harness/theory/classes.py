@@ -77,8 +77,7 @@ def tree_symmetry(tree: RootedTree, max_order: int | None = None) -> int:
 
     Parameters
     ----------
-    tree : RootedTree
-        A tree of `rooted_trees`.
+    tree : RootedTree, A tree of `rooted_trees`.
     max_order : int, optional
         The `rooted_trees` table the tree's children index into (default: the tree's order).
 
@@ -101,12 +100,9 @@ def tree_survives(tree: RootedTree, *, nystrom: bool = False, degree: int | None
 
     Parameters
     ----------
-    tree : RootedTree
-        A tree of `rooted_trees`.
-    nystrom : bool, optional
-        The problem is x'' = g(x) written as a first-order system.
-    degree : int or None, optional
-        The right-hand side is a polynomial of this degree in the state.
+    tree : RootedTree, A tree of `rooted_trees`.
+    nystrom : bool, optional, the problem is x'' = g(x) written as a first-order system.
+    degree : int or None, optional, the right-hand side is a polynomial of this degree in the state.
 
     Returns
     -------
@@ -128,8 +124,7 @@ def rk_class_order(tableau: ButcherTableau, *, nystrom: bool = False, degree: in
     Parameters
     ----------
     tableau : ButcherTableau
-    nystrom : bool
-        The class x'' = g(x) (acceleration free of velocities) written as a first-order system.
+    nystrom : bool, the class x'' = g(x) (acceleration free of velocities) written as a first-order system.
     degree : int or None
         The right-hand side is a polynomial of this degree in the state (None: not known to be).
     max_order : int, optional
@@ -159,8 +154,7 @@ def rk_class_orders(tableau: ButcherTableau, classes: list[tuple[bool, int | Non
     Parameters
     ----------
     tableau : ButcherTableau
-    classes : list of (bool, int or None)
-        (nystrom, degree) pairs, as in `tree_survives`.
+    classes : list of (bool, int or None), (nystrom, degree) pairs, as in `tree_survives`.
     max_order : int, optional
         The highest order checked (default: s for explicit s-stage methods, 2s otherwise,
         capped at MAX_TREE_ORDER).
@@ -193,8 +187,7 @@ def rk_error_defects(tableau: ButcherTableau, order: int) -> tuple[list[RootedTr
     Parameters
     ----------
     tableau : ButcherTableau
-    order : int
-        The number of vertices, 1 to MAX_TREE_ORDER.
+    order : int, the number of vertices, 1 to MAX_TREE_ORDER.
 
     Returns
     -------

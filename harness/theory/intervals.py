@@ -289,8 +289,7 @@ def lmm_real_interval(method: LinearMultistep, scanned: float) -> float:
     Parameters
     ----------
     method : LinearMultistep
-    scanned : float
-        The interval found by scanning the amplification (`real_stability_interval`).
+    scanned : float, the interval found by scanning the amplification (`real_stability_interval`).
 
     Returns
     -------
@@ -339,10 +338,8 @@ def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH
 
     Parameters
     ----------
-    coefficients : coefficient object
-        Any object; read by the `family` it declares.
-    limit : float, optional
-        The scan limit of the multistep intervals (STABILITY_SEARCH_LIMIT).
+    coefficients : coefficient object, any object; read by the `family` it declares.
+    limit : float, optional, the scan limit of the multistep intervals (STABILITY_SEARCH_LIMIT).
 
     Returns
     -------

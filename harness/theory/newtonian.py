@@ -144,8 +144,7 @@ def splitting_trace_exact(scheme: SplittingScheme) -> Poly:
 
     Parameters
     ----------
-    scheme : SplittingScheme
-        The composition (its exact form when it has one).
+    scheme : SplittingScheme, the composition (its exact form when it has one).
 
     Returns
     -------
@@ -171,8 +170,7 @@ def splitting_hw_bands(scheme: SplittingScheme, hw_max: float = tol.STABILITY_HW
     Parameters
     ----------
     scheme : SplittingScheme
-    hw_max : float, optional
-        The end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+    hw_max : float, optional, the end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
 
     Returns
     -------
@@ -219,8 +217,7 @@ def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW
     Parameters
     ----------
     method : SecondOrderMultistep
-    hw_max : float, optional
-        The end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+    hw_max : float, optional, the end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
 
     Returns
     -------
@@ -282,10 +279,8 @@ def hw_bands(coefficients, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwB
 
     Parameters
     ----------
-    coefficients : coefficient object
-        Any object; read by the `family` it declares.
-    hw_max : float, optional
-        The end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+    coefficients : coefficient object, any object; read by the `family` it declares.
+    hw_max : float, optional, the end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
 
     Returns
     -------
@@ -305,8 +300,7 @@ def velocity_weights(m: int) -> list[Fraction]:
 
     Parameters
     ----------
-    m : int
-        Number of weights.
+    m : int, number of weights.
 
     Returns
     -------

@@ -61,8 +61,7 @@ def rooted_trees(max_order: int = 8) -> tuple[RootedTree, ...]:
 
     Parameters
     ----------
-    max_order : int, optional
-        The largest number of vertices, 1 to MAX_TREE_ORDER (default 8).
+    max_order : int, optional, the largest number of vertices, 1 to MAX_TREE_ORDER (default 8).
 
     Returns
     -------
@@ -112,10 +111,8 @@ def elementary_weights(tableau: ButcherTableau, max_order: int,
     Parameters
     ----------
     tableau : ButcherTableau
-    max_order : int
-        The largest tree order.
-    weights : ndarray, optional
-        Weights used in place of b (an embedded method).
+    max_order : int, the largest tree order.
+    weights : ndarray, optional, weights used in place of b (an embedded method).
 
     Returns
     -------
@@ -146,10 +143,8 @@ def condition_tolerance(t: RootedTree, size: float, precision: float = 0.0) -> f
 
     Parameters
     ----------
-    t : RootedTree
-        The tree of the condition.
-    size : float
-        Phi(t) taken over |b| and |A| (`elementary_weights`).
+    t : RootedTree, the tree of the condition.
+    size : float, phi(t) taken over |b| and |A| (`elementary_weights`).
     precision : float, optional
         The coefficients' printed precision (0 for exact or full float64 coefficients).
 
@@ -170,8 +165,7 @@ def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondit
     Parameters
     ----------
     tableau : ButcherTableau
-    order : int
-        The order whose conditions are listed, 1 to MAX_TREE_ORDER.
+    order : int, the order whose conditions are listed, 1 to MAX_TREE_ORDER.
 
     Returns
     -------
@@ -204,10 +198,8 @@ def rk_order(tableau: ButcherTableau, max_order: int | None = None,
     Parameters
     ----------
     tableau : ButcherTableau
-    max_order : int, optional
-        The highest order checked, 1 to MAX_TREE_ORDER.
-    weights : ndarray, optional
-        Weights used in place of b.
+    max_order : int, optional, the highest order checked, 1 to MAX_TREE_ORDER.
+    weights : ndarray, optional, weights used in place of b.
 
     Returns
     -------
@@ -231,8 +223,7 @@ def rk_stability_coefficients(tableau: ButcherTableau, degree: int) -> tuple[np.
     Parameters
     ----------
     tableau : ButcherTableau
-    degree : int
-        The last k.
+    degree : int, the last k.
 
     Returns
     -------
@@ -296,8 +287,7 @@ def lmm_error_constants(method: LinearMultistep, q_max: int | None = None) -> np
     Parameters
     ----------
     method : LinearMultistep
-    q_max : int, optional
-        The last constant, 0 to 40.
+    q_max : int, optional, the last constant, 0 to 40.
 
     Returns
     -------
@@ -338,8 +328,7 @@ def second_order_lmm_error_constants(method: SecondOrderMultistep, q_max: int | 
     Parameters
     ----------
     method : SecondOrderMultistep
-    q_max : int, optional
-        The last constant, 0 to 40.
+    q_max : int, optional, the last constant, 0 to 40.
 
     Returns
     -------
@@ -372,8 +361,7 @@ def order_from_coefficients(stepper: Any) -> int | None:
 
     Parameters
     ----------
-    stepper : Stepper
-        Any stepper; only its `coefficients` attribute is read.
+    stepper : Stepper, any stepper; only its `coefficients` attribute is read.
 
     Returns
     -------

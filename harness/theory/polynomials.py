@@ -22,8 +22,7 @@ def poly(coefficients: Sequence) -> Poly:
 
     Parameters
     ----------
-    coefficients : sequence of int, Fraction or float
-        a_0, a_1, ... in ascending powers.
+    coefficients : sequence of int, Fraction or float, a_0, a_1, ... in ascending powers.
 
     Returns
     -------
@@ -56,8 +55,7 @@ def pscale(a: Poly, c) -> Poly:
     Parameters
     ----------
     a : Poly
-    c : int, Fraction or float
-        The factor (a float is taken exactly).
+    c : int, Fraction or float, the factor (a float is taken exactly).
 
     Returns
     -------
@@ -137,8 +135,7 @@ def pdivmod(a: Poly, b: Poly) -> tuple[Poly, Poly]:
 
     Parameters
     ----------
-    a, b : Poly
-        Dividend and divisor; a zero `b` raises ZeroDivisionError.
+    a, b : Poly, dividend and divisor; a zero `b` raises ZeroDivisionError.
 
     Returns
     -------
@@ -183,8 +180,7 @@ def det_exact(rows: list[list[Fraction]]) -> Fraction:
 
     Parameters
     ----------
-    rows : list of list of Fraction
-        The matrix, row by row.
+    rows : list of list of Fraction, the matrix, row by row.
 
     Returns
     -------

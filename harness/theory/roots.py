@@ -47,8 +47,7 @@ def squarefree(a: Poly) -> Poly:
 
     Parameters
     ----------
-    a : Poly
-        A non-zero polynomial.
+    a : Poly, A non-zero polynomial.
 
     Returns
     -------
@@ -113,8 +112,7 @@ def sturm_sequence(a: Poly) -> list[tuple[int, ...]]:
 
     Parameters
     ----------
-    a : Poly
-        A non-zero polynomial (square-free for Sturm's count of distinct roots).
+    a : Poly, A non-zero polynomial (square-free for Sturm's count of distinct roots).
 
     Returns
     -------
@@ -163,14 +161,10 @@ def count_roots_between(a: Poly, lo: Fraction, hi: Fraction | None,
 
     Parameters
     ----------
-    a : Poly
-        A non-zero polynomial.
-    lo : Fraction
-        Left end (excluded).
-    hi : Fraction or None
-        Right end (included); None for infinity.
-    seq : list of Poly, optional
-        The Sturm sequence of a's square-free part, when already computed.
+    a : Poly, A non-zero polynomial.
+    lo : Fraction, left end (excluded).
+    hi : Fraction or None, right end (included); None for infinity.
+    seq : list of Poly, optional, the Sturm sequence of a's square-free part, when already computed.
 
     Returns
     -------
@@ -185,8 +179,7 @@ def root_bound(a: Poly) -> Fraction:
 
     Parameters
     ----------
-    a : Poly
-        A polynomial of degree >= 1.
+    a : Poly, A polynomial of degree >= 1.
 
     Returns
     -------
@@ -219,12 +212,9 @@ def isolate_real_roots(a: Poly, lo: Fraction, hi: Fraction | None = None, *,
     Parameters
     ----------
     a : Poly
-    lo : Fraction
-        Left end of the search (excluded).
-    hi : Fraction or None, optional
-        Right end (included); None for Cauchy's bound (`root_bound`).
-    rel_width : Fraction, optional
-        The relative width each interval is refined to (default 2^-60).
+    lo : Fraction, left end of the search (excluded).
+    hi : Fraction or None, optional, right end (included); None for Cauchy's bound (`root_bound`).
+    rel_width : Fraction, optional, the relative width each interval is refined to (default 2^-60).
 
     Returns
     -------
@@ -325,12 +315,9 @@ def resultant_in_x(p_of: Callable[[Fraction], Poly], q_of: Callable[[Fraction], 
 
     Parameters
     ----------
-    p_of, q_of : callable
-        ``p_of(x)`` -> Poly in zeta at a rational x (and likewise `q_of`).
-    degree_bound : int
-        An upper bound on the resultant's degree in x.
-    zeta_degrees : (int, int)
-        The nominal degrees (m, n) of p and q in zeta.
+    p_of, q_of : callable, ``p_of(x)`` -> Poly in zeta at a rational x (and likewise `q_of`).
+    degree_bound : int, an upper bound on the resultant's degree in x.
+    zeta_degrees : (int, int), the nominal degrees (m, n) of p and q in zeta.
 
     Returns
     -------
@@ -353,8 +340,7 @@ def schur_all_inside(a: Poly) -> bool:
 
     Parameters
     ----------
-    a : Poly or sequence
-        The polynomial, ascending powers.
+    a : Poly or sequence, the polynomial, ascending powers.
 
     Returns
     -------

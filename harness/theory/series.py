@@ -56,8 +56,7 @@ class Series:
 
         Parameters
         ----------
-        c : number or str
-            The constant (converted with ``mp.mpf``).
+        c : number or str, the constant (converted with ``mp.mpf``).
 
         Returns
         -------
@@ -70,8 +69,7 @@ class Series:
 
         Parameters
         ----------
-        *terms : list
-            Series of degree N.
+        *terms : list, series of degree N.
 
         Returns
         -------
@@ -84,8 +82,7 @@ class Series:
 
         Parameters
         ----------
-        c : mpmath number
-            The factor.
+        c : mpmath number, the factor.
         a : list
 
         Returns
@@ -99,8 +96,7 @@ class Series:
 
         Parameters
         ----------
-        a, b : list
-            Series of degree N.
+        a, b : list, series of degree N.
 
         Returns
         -------
@@ -145,12 +141,9 @@ def newton_accel(S: Series, P: dict, q: list[list]) -> list[list]:
 
     Parameters
     ----------
-    S : Series
-        The series arithmetic.
-    P : dict
-        The coefficients of U by name (`NEWTON_COEFFS`, as mpmath numbers).
-    q : list of two series
-        The positions q1, q2.
+    S : Series, the series arithmetic.
+    P : dict, the coefficients of U by name (`NEWTON_COEFFS`, as mpmath numbers).
+    q : list of two series, the positions q1, q2.
 
     Returns
     -------
@@ -182,12 +175,9 @@ def exact_flow(S: Series, F: Callable[[list], list], y0: list) -> list[list]:
 
     Parameters
     ----------
-    S : Series
-        The series arithmetic (degree N).
-    F : callable
-        The vector field on lists of series.
-    y0 : list
-        The initial state (numbers).
+    S : Series, the series arithmetic (degree N).
+    F : callable, the vector field on lists of series.
+    y0 : list, the initial state (numbers).
 
     Returns
     -------
@@ -214,8 +204,7 @@ def splitting_local_error_series(scheme: SplittingScheme, degree: int = 11) -> l
     Parameters
     ----------
     scheme : SplittingScheme
-    degree : int, optional
-        The last power of h, 1 to 16 (default 11).
+    degree : int, optional, the last power of h, 1 to 16 (default 11).
 
     Returns
     -------
@@ -303,8 +292,7 @@ def splitting_order(scheme: SplittingScheme, max_order: int = 10) -> int:
     Parameters
     ----------
     scheme : SplittingScheme
-    max_order : int, optional
-        The highest order checked, 1 to 14 (default 10).
+    max_order : int, optional, the highest order checked, 1 to 14 (default 10).
 
     Returns
     -------
@@ -324,8 +312,7 @@ def rk_order_series(tableau: ButcherTableau, max_order: int = 8) -> int:
     Parameters
     ----------
     tableau : ButcherTableau
-    max_order : int, optional
-        The highest order checked, 1 to 12 (default 8).
+    max_order : int, optional, the highest order checked, 1 to 12 (default 8).
 
     Returns
     -------
