@@ -38,7 +38,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
-import inspect
 import textwrap
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -51,13 +50,14 @@ from harness.errors import InputError
 from harness.problem import Dynamics, Problem
 from harness.problem.checks import check_positive
 from harness.sources import source_of
-from harness.stepper import FORMS, Carry, Stepper, StepperInfo
+from harness.stepper import FORMS, Carry, Stepper
 from harness.stepper.contracts import (
     AdaptiveStateStepper,
     Field,
     StateStepper,
     batched_solve,
     checked_float64,
+    user_step_info,
 )
 
 __all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "StateStepper", "Field",
@@ -150,22 +150,10 @@ class FunctionStepper(Stepper):
         if form not in FORMS:
             raise InputError(f"`form` must be one of {FORMS}, got {form!r}")
         evals = check_positive(evals_per_step, "`evals_per_step`")
-        where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
         self.step_function = step
-        self.info = StepperInfo(
-            name=name or getattr(step, "__name__", "user-step"),
-            family="user",
-            claimed_order=order,
-            explicit=not implicit,
-            symplectic=bool(symplectic),
-            symmetric=bool(symmetric),
-            evals_per_step=evals,
-            form=form,
-            velocity_dependent=False,
-            reference=reference or f"user-supplied step function {where}",
-            description=description or (inspect.getdoc(step) or "").split("\n")[0],
-            implementation="user function",
-        )
+        claims = {"implicit": implicit, "symplectic": symplectic, "symmetric": symmetric, "form": form,
+                  "velocity_dependent": False, "reference": reference, "description": description}
+        self.info = user_step_info(step, name, order, evals, claims, "step function", "user function")
 
     def fingerprint(self) -> str:
         """`Stepper.fingerprint` plus a hash of the step function's source (or, without source, its

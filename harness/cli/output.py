@@ -152,11 +152,11 @@ def escape_controls(text: str) -> str:
 
     Parameters
     ----------
-    text : str, the text.
+    text : str
 
     Returns
     -------
-    str
+    str: `text` itself when it has nothing to escape.
     """
     import unicodedata
 

@@ -55,7 +55,8 @@ from harness.problem.checks import check_positive
 from harness.sources import source_of
 from harness.stepper import FORMS, AdaptiveStepper, Carry, Stepper, StepperInfo
 
-__all__ = ["Field", "StateStepper", "AdaptiveStateStepper", "BACKENDS", "checked_float64", "batched_solve"]
+__all__ = ["Field", "StateStepper", "AdaptiveStateStepper", "BACKENDS", "checked_float64", "batched_solve",
+           "user_step_info"]
 
 BACKENDS = ("numpy", "jax")
 
@@ -102,6 +103,40 @@ def checked_float64(y: Any, name: str, when: str) -> np.ndarray:
         raise StepperOutputError(f"stepper {name!r} returned a complex state {when}; expected real "
                                  "numbers (complex values are not cast to real)")
     return np.asarray(y, dtype=np.float64)
+
+
+def user_step_info(step: Callable, name: str | None, order: int, evals: int, claims: dict,
+                   what: str, implementation: str) -> StepperInfo:
+    """The `StepperInfo` of a stepper made from user functions, as `FunctionStepper` and
+    `StateStepper` declare it (family "user", its claims taken as given).
+
+    Parameters
+    ----------
+    step : the step function (its name, module, qualified name and docstring fill the blanks).
+    name, order, evals : the stepper's name (None: the function's), claimed order and
+        evaluations per step; claims : implicit, symplectic, symmetric, form,
+        velocity_dependent, reference and description as the constructor took them.
+    what, implementation : how the reference and `implementation` name the functions.
+
+    Returns
+    -------
+    StepperInfo
+    """
+    where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
+    return StepperInfo(
+        name=name or getattr(step, "__name__", "user-step"),
+        family="user",
+        claimed_order=order,
+        explicit=not claims["implicit"],
+        symplectic=bool(claims["symplectic"]),
+        symmetric=bool(claims["symmetric"]),
+        evals_per_step=evals,
+        form=claims["form"],
+        velocity_dependent=bool(claims["velocity_dependent"]),
+        reference=claims["reference"] or f"user-supplied {what} {where}",
+        description=claims["description"] or (inspect.getdoc(step) or "").split("\n")[0],
+        implementation=implementation,
+    )
 
 
 class Field:
@@ -230,21 +265,10 @@ class StateStepper(Stepper):
                         "velocity_dependent": velocity_dependent, "backend": backend}
         self._loops: dict[Any, Callable] = {}
         self._fields: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # one per Dynamics
-        where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
-        self.info = StepperInfo(
-            name=name or getattr(step, "__name__", "user-state-step"),
-            family="user",
-            claimed_order=order,
-            explicit=not implicit,
-            symplectic=bool(symplectic),
-            symmetric=bool(symmetric),
-            evals_per_step=evals,
-            form=form,
-            velocity_dependent=bool(velocity_dependent),
-            reference=reference or f"user-supplied init/step functions {where}",
-            description=description or (inspect.getdoc(step) or "").split("\n")[0],
-            implementation=f"user init/step ({backend})",
-        )
+        self.info = user_step_info(
+            step, name or getattr(step, "__name__", "user-state-step"), order, evals,
+            dict(self._claims, reference=reference, description=description),
+            "init/step functions", f"user init/step ({backend})")
 
     def embedded(self) -> StateStepper:
         """The embedded method of a pair as a stepper of its own (rule 7), claiming

@@ -216,12 +216,11 @@ def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW
 
     Parameters
     ----------
-    method : SecondOrderMultistep
-    hw_max : float, optional, the end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+    method : SecondOrderMultistep; hw_max : as for `splitting_hw_bands`.
 
     Returns
     -------
-    HwBands: the exact unstable bands that start at or below `hw_max`.
+    HwBands: as for `splitting_hw_bands`.
     """
     check_type(method, "second-order multistep", "method")
     k = method.steps

@@ -293,9 +293,15 @@ def lmm_error_constants(method: LinearMultistep, q_max: int | None = None) -> np
     -------
     ndarray: C_0 ... C_{q_max}.
     """
-    check_type(method, "multistep", "method")
-    q_max = 2 * method.steps + 1 if q_max is None else check_int(q_max, "q_max", 0, 40)
-    return _constants(method.alpha, method.beta, q_max, 1)[0]
+    return _lmm_constants(method, "multistep", 1, q_max)[0]
+
+
+def _lmm_constants(method: Any, kind: str, derivative: int, q_max: int | None):
+    # (C, scale) of a multistep method for y' = f (derivative 1) or x'' = a (2), up to q_max
+    # (default 2k + derivative), after checking that `method` is of `kind`
+    check_type(method, kind, "method")
+    q_max = 2 * method.steps + derivative if q_max is None else check_int(q_max, "q_max", 0, 40)
+    return _constants(method.alpha, method.beta, q_max, derivative)
 
 
 def _order_from_constants(C: np.ndarray, scale: np.ndarray, offset: int) -> int:
@@ -317,9 +323,7 @@ def lmm_order(method: LinearMultistep) -> int:
     -------
     int: the order p.
     """
-    check_type(method, "multistep", "method")
-    C, scale = _constants(method.alpha, method.beta, 2 * method.steps + 1, 1)
-    return _order_from_constants(C, scale, 1)
+    return _order_from_constants(*_lmm_constants(method, "multistep", 1, None), 1)
 
 
 def second_order_lmm_error_constants(method: SecondOrderMultistep, q_max: int | None = None):
@@ -327,16 +331,13 @@ def second_order_lmm_error_constants(method: SecondOrderMultistep, q_max: int | 
 
     Parameters
     ----------
-    method : SecondOrderMultistep
-    q_max : int, optional, the last constant, 0 to 40.
+    method : SecondOrderMultistep; q_max : as for `lmm_error_constants`.
 
     Returns
     -------
     ndarray: C_0 ... C_{q_max}.
     """
-    check_type(method, "second-order multistep", "method")
-    q_max = 2 * method.steps + 2 if q_max is None else check_int(q_max, "q_max", 0, 40)
-    return _constants(method.alpha, method.beta, q_max, 2)[0]
+    return _lmm_constants(method, "second-order multistep", 2, q_max)[0]
 
 
 def second_order_lmm_order(method: SecondOrderMultistep) -> int:
@@ -351,9 +352,7 @@ def second_order_lmm_order(method: SecondOrderMultistep) -> int:
     -------
     int: the order p.
     """
-    check_type(method, "second-order multistep", "method")
-    C, scale = _constants(method.alpha, method.beta, 2 * method.steps + 2, 2)
-    return _order_from_constants(C, scale, 2)
+    return _order_from_constants(*_lmm_constants(method, "second-order multistep", 2, None), 2)
 
 def order_from_coefficients(stepper: Any) -> int | None:
     """The order implied by a stepper's coefficient object (`stepper.coefficients`), or None

@@ -15,14 +15,28 @@ from implementations.kernels.common import (
     EXACT,
     INLINE,
     is_finite,
-    newton_converged,
-    newton_factor_members,
-    newton_solve_members,
+    newton_members_step,
+    newton_start,
     newton_stats,
-    newton_update,
+    rhs_members,
 )
 
 __all__ = ["lmm_explicit_single", "lmm_explicit_advance", "lmm_implicit_advance"]
+
+
+@njit(**INLINE)
+def lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p):
+    # f at the history points (index jj at time t - (k - 1 - jj) h, in ring slot slots[jj]) that
+    # a nonzero beta needs and whose f is not known yet; the number of evaluations
+    k = H.shape[0]
+    evals = 0
+    for jj in range(k):
+        slot = slots[jj]
+        if beta[jj] != 0.0 and not fvalid[slot]:
+            rhs_members(f_rhs, t - (k - 1 - jj) * h, H[slot], P, F[slot], y, out, p)
+            fvalid[slot] = True
+            evals += 1
+    return evals
 
 
 # Linear multistep, shared part: f at the history points a beta needs (each evaluated once, when
@@ -34,21 +48,7 @@ def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slo
     for jj in range(k):
         slot = head + jj
         slots[jj] = slot - k if slot >= k else slot
-    evals = 0
-    for jj in range(k):
-        slot = slots[jj]
-        if beta[jj] != 0.0 and not fvalid[slot]:
-            tj = t - (k - 1 - jj) * h
-            for m in range(N):
-                for d in range(dim):
-                    y[d] = H[slot, d, m]
-                for q in range(P.shape[0]):
-                    p[q] = P[q, m]
-                call_state(f_rhs, tj, y, p, out)
-                for d in range(dim):
-                    F[slot, d, m] = out[d]
-            fvalid[slot] = True
-            evals += 1
+    evals = lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p)
     for m in range(N):
         for d in range(dim):
             acc = 0.0
@@ -264,20 +264,7 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
                     H[slot, d, m] = np.nan
             fvalid[slot] = False
             continue
-        for jj in range(k):
-            sl = slots[jj]
-            if beta[jj] != 0.0 and not fvalid[sl]:
-                tj = t - (k - 1 - jj) * h
-                for m in range(N):
-                    for d in range(dim):
-                        y[d] = H[sl, d, m]
-                    for q in range(npar):
-                        p[q] = P[q, m]
-                    call_state(f_rhs, tj, y, p, out)
-                    for d in range(dim):
-                        F[sl, d, m] = out[d]
-                fvalid[sl] = True
-                evals += 1
+        evals += lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p)
         for m in range(N):
             for d in range(dim):
                 acc = 0.0
@@ -335,12 +322,7 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                 for q in range(k):
                     acc += wpred[q] * H[slots[q], d, j]
                 X[d, j] = acc
-        previous = np.inf
-        norm = np.inf
-        theta = np.nan
-        res_norm = np.nan
-        converged = False
-        status = 1
+        previous, norm, theta, res_norm, converged, status = newton_start()
         it = 0
         for it in range(1, max_iter + 1):
             res_norm = 0.0
@@ -376,17 +358,10 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                                 v += 1.0
                             Mats[j, a, bb] = v
                 n_jac += 1
-                if not newton_factor_members(Mats, Piv):
-                    n_iter += 1
-                    status = 2
-                    break
             n_iter += 1
-            newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
-            norm = newton_update(X, DX, inv_scale)
-            if norm != norm:
-                break
-            converged, theta = newton_converged(norm, previous, tol, theta)
-            if converged:
+            norm, converged, theta, status = newton_members_step(
+                it == 1 or full, Mats, Piv, G, DX, rhs_w, sol, X, inv_scale, norm, previous, tol, theta)
+            if converged or status == 2 or norm != norm:
                 break
             previous = norm
         if not converged:
