@@ -46,7 +46,7 @@ class Level:
 
         Parameters
         ----------
-        x : float
+        x : float, converted exactly.
 
         Returns
         -------

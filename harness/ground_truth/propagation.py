@@ -186,7 +186,7 @@ def reference_tol(level: Level) -> float:
 
     Parameters
     ----------
-    level : Level, the level.
+    level : Level (its `eps` is read).
 
     Returns
     -------

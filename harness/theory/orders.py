@@ -346,7 +346,7 @@ def second_order_lmm_order(method: SecondOrderMultistep) -> int:
 
     Parameters
     ----------
-    method : SecondOrderMultistep
+    method : SecondOrderMultistep, a table for x'' = a.
 
     Returns
     -------

@@ -121,7 +121,7 @@ def pderiv(a: Poly) -> Poly:
 
     Parameters
     ----------
-    a : Poly, differentiated term by term.
+    a : Poly (differentiated term by term: i a_i x^(i-1)).
 
     Returns
     -------

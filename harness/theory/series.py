@@ -109,7 +109,7 @@ class Series:
 
         Parameters
         ----------
-        a : list
+        a : list, a series (its coefficient of degree N drops out).
 
         Returns
         -------
