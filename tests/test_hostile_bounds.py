@@ -159,13 +159,20 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def _start_slow_run(tmp_path):
+def _slow_setup(tmp_path):
+    # the slow plugin, a private TMPDIR (where workers leave their claims) and an environment
+    # with its own cache and results
     plugin = tmp_path / "slow.py"
     plugin.write_text(SLOW_PLUGIN)
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     env = dict(os.environ, TMPDIR=str(tmp), HARNESS_CACHE_DIR=str(tmp_path / "cache"),
                HARNESS_RESULTS_DIR=str(tmp_path / "results"))
+    return plugin, tmp, env
+
+
+def _start_slow_run(tmp_path):
+    plugin, tmp, env = _slow_setup(tmp_path)
     proc = subprocess.Popen([sys.executable, "-m", "harness", "run", "convergence", "--plugin",
                              str(plugin), "--stepper", "slow-euler", "--problem", "dahlquist",
                              "--problem", "gaussian", "--jobs", "2", "--quick"], cwd=ROOT, env=env,
@@ -309,12 +316,7 @@ def _cli_err(argv):
                                              (signal.SIGTERM, 143, "harness: terminated")])
 def test_a_double_signal_to_the_group_during_a_pool_run_is_one_line_and_its_status(sig, status,
                                                                                   line, tmp_path):
-    plugin = tmp_path / "slow.py"
-    plugin.write_text(SLOW_PLUGIN)
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
-    env = dict(os.environ, TMPDIR=str(tmp), HARNESS_CACHE_DIR=str(tmp_path / "cache"),
-               HARNESS_RESULTS_DIR=str(tmp_path / "results"))
+    plugin, tmp, env = _slow_setup(tmp_path)
     proc = subprocess.Popen([sys.executable, "-m", "harness", "gate", "--plugin", str(plugin),
                              "--stepper", "slow-euler", "--problem", "dahlquist", "--problem",
                              "gaussian", "--jobs", "2"], cwd=ROOT, env=env,

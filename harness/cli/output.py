@@ -183,7 +183,7 @@ class EscapingStream(io.TextIOBase):
 
         Parameters
         ----------
-        text : str, the text.
+        text : str (any characters).
 
         Returns
         -------

@@ -33,7 +33,7 @@ def check_ensemble_size(size: Any) -> int:
 
     Parameters
     ----------
-    size : any, the requested ensemble size.
+    size : any, the requested ensemble size (checked by `check_count`).
 
     Returns
     -------

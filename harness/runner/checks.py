@@ -39,7 +39,7 @@ def check_jobs(jobs: Any) -> int:
 
     Parameters
     ----------
-    jobs : any, the requested worker count.
+    jobs : int or None, the requested worker count; None for the default.
 
     Returns
     -------

@@ -39,16 +39,11 @@ import numpy as np
 
 from harness import tolerances as tol
 from harness.theory.checks import check_int, check_type
-from harness.theory.orders import (
-    MAX_TREE_ORDER,
-    RootedTree,
-    condition_tolerance,
-    elementary_weights,
-    rooted_trees,
-)
+from harness.theory.orders import MAX_TREE_ORDER, condition_tolerance, elementary_weights, rooted_trees
 
 if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
     from harness.coefficients import ButcherTableau
+    from harness.theory.orders import RootedTree
 
 __all__ = ["tree_symmetry", "tree_survives", "rk_class_order", "rk_class_orders", "rk_error_defects",
            "rk_stage_order", "rk_stiffly_accurate"]

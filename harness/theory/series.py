@@ -312,7 +312,7 @@ def rk_order_series(tableau: ButcherTableau, max_order: int = 8) -> int:
     Parameters
     ----------
     tableau : ButcherTableau
-    max_order : int, optional, the highest order checked, 1 to 12 (default 8).
+    max_order : int, optional, as for `splitting_order` but 1 to 12 (default 8).
 
     Returns
     -------

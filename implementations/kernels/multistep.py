@@ -25,6 +25,29 @@ __all__ = ["lmm_explicit_single", "lmm_explicit_advance", "lmm_implicit_advance"
 
 
 @njit(**INLINE)
+def lmm_terms(alpha, beta, h, k, alpha_sign, beta_kind):
+    # the explicit formula's nonzero terms over j < k in the NumPy loop's order (j ascending,
+    # alpha before beta): (kind, index j, coefficient, count), an alpha term of kind 0 with
+    # coefficient alpha_sign * alpha_j (exact for a sign), a beta term of kind `beta_kind` with h beta_j
+    kind = np.empty(2 * k, dtype=np.int64)
+    index = np.empty(2 * k, dtype=np.int64)
+    coef = np.empty(2 * k)
+    nt = 0
+    for jj in range(k):
+        if alpha[jj] != 0.0:
+            kind[nt] = 0
+            index[nt] = jj
+            coef[nt] = alpha_sign * alpha[jj]
+            nt += 1
+        if beta[jj] != 0.0:
+            kind[nt] = beta_kind
+            index[nt] = jj
+            coef[nt] = h * beta[jj]
+            nt += 1
+    return kind, index, coef, nt
+
+
+@njit(**INLINE)
 def lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p):
     # f at the history points (index jj at time t - (k - 1 - jj) h, in ring slot slots[jj]) that
     # a nonzero beta needs and whose f is not known yet; the number of evaluations
@@ -121,21 +144,7 @@ def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
     p = np.empty(P.shape[0])
     for q in range(P.shape[0]):
         p[q] = P[q, 0]
-    tkind = np.empty(2 * k, dtype=np.int64)
-    tindex = np.empty(2 * k, dtype=np.int64)
-    tcoef = np.empty(2 * k)
-    nt = 0
-    for jj in range(k):
-        if alpha[jj] != 0.0:
-            tkind[nt] = 0
-            tindex[nt] = jj
-            tcoef[nt] = -alpha[jj]
-            nt += 1
-        if beta[jj] != 0.0:
-            tkind[nt] = k
-            tindex[nt] = jj
-            tcoef[nt] = h * beta[jj]
-            nt += 1
+    tkind, tindex, tcoef, nt = lmm_terms(alpha, beta, h, k, -1.0, k)
     off = np.empty(k * nt, dtype=np.uint64)
     for ph in range(k):
         for q in range(nt):
@@ -226,23 +235,8 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
     out = np.empty(dim)
     p = np.empty(npar)
     slots = np.empty(k, dtype=np.int64)
-    # the formula's nonzero terms in the NumPy loop's order (j ascending, alpha before beta):
-    # kind 0 is -alpha_j y_j, kind 1 is + h beta_j f_j
-    kind = np.empty(2 * k, dtype=np.int64)
-    index = np.empty(2 * k, dtype=np.int64)
-    coef = np.empty(2 * k)
-    nt = 0
-    for jj in range(k):
-        if alpha[jj] != 0.0:
-            kind[nt] = 0
-            index[nt] = jj
-            coef[nt] = alpha[jj]
-            nt += 1
-        if beta[jj] != 0.0:
-            kind[nt] = 1
-            index[nt] = jj
-            coef[nt] = h * beta[jj]
-            nt += 1
+    # kind 0 is -alpha_j y_j (subtracted with coefficient alpha_j), kind 1 is + h beta_j f_j
+    kind, index, coef, nt = lmm_terms(alpha, beta, h, k, 1.0, 1)
     evals = 0
     head = 0
     for n in range(nsteps):
