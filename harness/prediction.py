@@ -140,7 +140,7 @@ def _propagate(problem: Problem, order: int) -> dict[str, Any]:
             "t_end": float(problem.convergence_t_end)}
 
 
-def predicted_error(tableau: Any, problem: Problem, order: int) -> dict[str, Any]:
+def predicted_error(tableau: Any, problem: Problem, order: int, *, next_term: bool = True) -> dict[str, Any]:
     """The predicted leading global error of `tableau` (a `ButcherTableau`) of order `order` on
     `problem` (its order there: class or linear order where it exceeds the order).
 
@@ -150,6 +150,9 @@ def predicted_error(tableau: Any, problem: Problem, order: int) -> dict[str, Any
     problem : Problem
     order : int
         The order p on this problem; the leading term comes from the trees of p + 1 vertices.
+    next_term : bool
+        Also estimate the order-(p+1) term (the trees of p + 2 vertices: the costlier half,
+        needed only to place the crossover when a slope is to be explained).
 
     Returns
     -------
@@ -162,7 +165,7 @@ def predicted_error(tableau: Any, problem: Problem, order: int) -> dict[str, Any
     out = {"order": order, "coefficient": math.nan, "next_coefficient": math.nan,
            "crossover_h": math.nan, "why": ""}
     sizes = []
-    for k in (order + 1, order + 2):
+    for k in (order + 1, order + 2) if next_term else (order + 1,):
         terms = propagated_tree_terms(problem, k)
         if "why" in terms:
             if k == order + 1:

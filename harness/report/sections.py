@@ -314,7 +314,9 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
             sec.number = number.get(sec.id, sec.number)
         drop_unlinked_row_ids(out)
         failing = verdicts[~verdicts["passed"].astype(bool)] if len(verdicts) else verdicts
-        headline = {"checked": int(len(verdicts)), "failed": int(len(failing)),
+        judged = verdicts[verdicts["judged"].astype(bool)] if len(verdicts) else verdicts
+        headline = {"checked": int(len(judged)), "failed": int(len(failing)),
+                    "informational": int(len(verdicts) - len(judged)),
                     "experiments": int(verdicts["experiment"].nunique()) if len(verdicts) else 0,
                     "verdicts": verdicts}
         return out, statuses, headline

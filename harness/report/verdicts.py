@@ -4,7 +4,9 @@ comparison follows.
 One row per judged row of an experiment's summary (its `passed` column, or the section's own
 `verdicts` function, e.g. the gate for convergence) and per claim of the course material that
 was measured. Columns: experiment, stepper, problem, key (the row's identity, JSON), passed,
-verdict, sentence (why, one sentence), anchor (id of the row in its section's table).
+verdict, sentence (why, one sentence), anchor (id of the row in its section's table), judged
+(the row judges a claim: it can fail; a row with no claim behind it, or one that could not be
+measured, passes without evidence and is informational, so the headline does not count it).
 """
 
 from __future__ import annotations
@@ -25,7 +27,21 @@ from harness.report.sections import (
 
 __all__ = ["VERDICT_COLUMNS", "collect_verdicts", "summary_verdicts", "claim_verdicts"]
 
-VERDICT_COLUMNS = ["experiment", "stepper", "problem", "key", "passed", "verdict", "sentence", "anchor"]
+VERDICT_COLUMNS = ["experiment", "stepper", "problem", "key", "passed", "verdict", "sentence", "anchor",
+                   "judged"]
+
+# Verdicts that pass without judging a claim: no theorem or claim behind the cell (`no-claim`,
+# a stability figure with neither a formula nor a declared claim, `measured`), or a cell the run
+# could not measure (`not-measurable`); the gate says it in its `outcome` column instead.
+INFORMATIONAL_VERDICTS = frozenset({"no-claim", "not-measurable", "measured"})
+JUDGED_OUTCOMES = frozenset({"pass", "fail"})
+
+
+def _judges_a_claim(rec: dict, verdict: str) -> bool:
+    outcome = rec.get("outcome")
+    if isinstance(outcome, str) and outcome:
+        return outcome in JUDGED_OUTCOMES
+    return verdict not in INFORMATIONAL_VERDICTS
 
 
 def _key_text(values: list[Any]) -> str:
@@ -59,7 +75,8 @@ def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
                     "problem": str(rec.get("problem", "")), "key": _key_text(values),
                     "passed": bool(passed), "verdict": verdict, "sentence": sentence,
                     "anchor": anchor(name, *(values if anchor_key is None
-                                             else [rec.get(c, "") for c in anchor_key]))})
+                                             else [rec.get(c, "") for c in anchor_key])),
+                    "judged": bool(not passed or _judges_a_claim(rec, verdict))})
     return pd.DataFrame(out, columns=VERDICT_COLUMNS)
 
 
@@ -75,7 +92,7 @@ def claim_verdicts(view: RunView) -> pd.DataFrame:
                     "passed": r.status == AGREE, "verdict": r.status,
                     "sentence": f"course claim “{first_sentence(r.claim, 140)}” — {r.status}: "
                                 f"{first_sentence(r.measurement)}",
-                    "anchor": anchor("claims", r.key)})
+                    "anchor": anchor("claims", r.key), "judged": True})
     return pd.DataFrame(out, columns=VERDICT_COLUMNS)
 
 
@@ -98,4 +115,5 @@ def collect_verdicts(view: RunView) -> pd.DataFrame:
         return pd.DataFrame(columns=VERDICT_COLUMNS)
     table = pd.concat(frames, ignore_index=True)
     table["passed"] = table["passed"].astype(bool)
+    table["judged"] = table["judged"].astype(bool)
     return table.sort_values("passed", kind="stable").reset_index(drop=True)
