@@ -355,6 +355,59 @@ def test_a_double_signal_to_the_group_during_a_pool_run_is_one_line_and_its_stat
     assert lines == [line], err
 
 
+def _forked_children(pid: int) -> set[int]:
+    """Children that are forks of `pid` (same command line): the report's section workers."""
+    with contextlib.suppress(OSError):
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes()
+        out = set()
+        for child in _children(pid):
+            with contextlib.suppress(OSError):
+                if Path(f"/proc/{child}/cmdline").read_bytes() == cmdline:
+                    out.add(child)
+        return out
+    return set()
+
+
+def test_sigterm_to_the_group_while_the_report_builds_its_sections_is_one_line(tmp_path):
+    """SIGTERM to the process group of `harness report` (a quick run of one stepper on one
+    problem, several experiments) once its forked section workers exist: status 143, the one
+    line `harness: terminated`, no worker's traceback, no worker left, no report written."""
+    env = dict(os.environ, HARNESS_CACHE_DIR=str(tmp_path / "cache"),
+               HARNESS_RESULTS_DIR=str(tmp_path / "results"))
+    out_dir = tmp_path / "reports"
+    proc = subprocess.Popen([sys.executable, "-m", "harness", "report", "--quick", "--stepper", "euler",
+                             "--problem", "harmonic", "--jobs", "1", "--output", str(out_dir)],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    seen = []
+    for line in proc.stderr:  # the measurements (a few seconds), then the run is saved
+        seen.append(line)
+        if line.startswith("report: results saved in"):
+            break
+    workers: set[int] = set()
+    for _ in range(5000):  # the section workers are forked next
+        workers = _forked_children(proc.pid)
+        if workers or proc.poll() is not None:
+            break
+        time.sleep(0.002)
+    assert workers, "no section worker started: " + "".join(seen)
+    os.killpg(proc.pid, signal.SIGTERM)
+    time.sleep(0.2)
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGTERM)
+    out, err = proc.communicate(timeout=120)
+    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("report:")]
+    assert proc.returncode == 143, err
+    assert "harness: terminated" in err.splitlines() and "Traceback" not in err, err
+    assert lines == ["harness: terminated"], err
+    assert not list(out_dir.glob("*/index.html")), out
+    for _ in range(300):
+        if not any(_alive(p) for p in workers):
+            break
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in workers)
+
+
 # -- listing compiles nothing; a compile is interruptible ---------------------------------------------------
 def test_listing_problems_compiles_nothing(plugin_file, monkeypatch):
     import heyoka

@@ -71,25 +71,28 @@ def quiet_worker_signals() -> None:
 
 
 @contextlib.contextmanager
-def workers_born_deaf():
-    """SIGINT ignored in this process while it starts pool workers: an ignored signal stays
-    ignored through fork and exec, and Python then installs no KeyboardInterrupt handler, so a
-    Ctrl-C to the process group while a worker is still importing (up to seconds on a loaded
-    machine, before `quiet_worker_signals` runs) cannot print its traceback (it did: "Fatal
-    Python error: init_import_site" or a KeyboardInterrupt traceback from joblib's import).
-    The cost: a Ctrl-C within the few milliseconds of starting the workers is not seen by this
-    process either (press it again). Outside the main thread a no-op."""
+def workers_born_deaf(signals: Sequence[int] = ()):
+    """`signals` (default SIGINT) ignored in this process while it starts pool workers: an
+    ignored signal stays ignored through fork and exec, and Python then installs no handler,
+    so a Ctrl-C to the process group while a worker is still importing (up to seconds on a
+    loaded machine, before `quiet_worker_signals` runs) cannot print its traceback (it did:
+    "Fatal Python error: init_import_site", or KeyboardInterrupt from joblib's import; a forked
+    worker raised the parent's Terminated in an at-fork hook). The worker's initializer sets
+    its own dispositions. The cost: a signal within the few milliseconds of starting the
+    workers is not seen by this process either (send it again). Outside the main thread a
+    no-op."""
     import signal
     import threading
 
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    saved = [(s, signal.signal(s, signal.SIG_IGN)) for s in (signals or (signal.SIGINT,))]
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in saved:
+            signal.signal(sig, handler)
 
 
 def _quiet_loky() -> None:
