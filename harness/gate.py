@@ -113,7 +113,8 @@ def _leading_term(stepper, problem, expectation) -> tuple[float, str]:
                         "constant does not describe the fitted steps (any order in "
                         f"[{expectation.order_low:g}, {expectation.order:g}] is expected)")
     try:
-        prediction = predicted_error(coeffs, problem, int(expectation.order), next_term=False)
+        prediction = predicted_error(coeffs, problem, int(expectation.order), next_term=False,
+                                     max_work=tol.PREDICTION_ROUTINE_MAX_WORK)
     except Exception as exc:  # a definition heyoka cannot differentiate or integrate
         return np.nan, f"not predicted ({type(exc).__name__}: {exc})"[:500]
     return float(prediction["coefficient"]), prediction["why"]

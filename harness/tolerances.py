@@ -474,6 +474,10 @@ TIMING_TWIN_WORK = 512
 # m vertices grow like dim^(m-1), so they are built only up to this size (12 variables at order
 # 5: ~30 s once, cached; order 6 took ~100 s under load; 4 variables at order 8: ~6 s).
 PREDICTION_MAX_WORK = 12**4
+# The prediction beside every convergence cell (information, not a verdict) keeps to a smaller
+# budget: 12 variables at order 5 cost ~6 s of compile cold, most of the prediction's share of a
+# cold gate; 18 variables at order 4 (18^3) ~1 s.
+PREDICTION_ROUTINE_MAX_WORK = 18**3
 # The variational integration needs only a few digits of E_t(T): the prediction is asymptotic.
 PREDICTION_TAYLOR_TOL = 1e-10
 # A slope above the order is explained when the predicted leading term C h^p is below this
