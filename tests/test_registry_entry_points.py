@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 import harness
-from harness import registry
+from harness import entry_points
 from harness.problem import Problem
 from harness.registry import Registry
 from harness.stepper import Stepper
@@ -44,7 +44,7 @@ def test_the_distribution_named_by_the_registry_is_this_project():
 def test_builtins_are_this_projects_entry_points_in_catalogue_order(group, cls, package, function):
     declared = PYPROJECT["entry-points"][group]
     assert declared == {"builtin": f"{package}:{function}"}
-    installed = [ep for ep in metadata.entry_points(group=group) if registry._is_own(ep)]
+    installed = [ep for ep in metadata.entry_points(group=group) if entry_points._is_own(ep)]
     assert [(ep.name, ep.value) for ep in installed] == list(declared.items()), (
         "the installed metadata is stale: run `make setup`")
     fresh = Registry(group.split(".")[1][:-1], cls, group)
@@ -99,7 +99,7 @@ def test_a_third_party_distribution_registers_after_the_builtins(tmp_path, monke
 
 
 def test_missing_builtin_entry_points_are_said_plainly(monkeypatch):
-    monkeypatch.setattr(registry, "DISTRIBUTION", "not-this-project")
+    monkeypatch.setattr(entry_points, "DISTRIBUTION", "not-this-project")
     fresh = Registry("problem", Problem, "harness.problems")
     fresh.names()
     assert fresh.errors[0] == (

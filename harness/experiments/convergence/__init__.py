@@ -190,7 +190,7 @@ def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
 
 
 def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
-    from implementations.compiled import fastest  # the compiled loop where it is the same method
+    from harness.step_loops import fastest  # the compiled loop where it is the same method
 
     runner = fastest(stepper, problem)
     T0 = problem.t0

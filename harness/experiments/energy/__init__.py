@@ -289,7 +289,7 @@ def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
     y0 = initial_ensemble(problem, config, size)
     period = problem.time_scale.period
     save = save_grid(n, int(config["samples_per_decade"]), int(config["uniform_samples"]))
-    from implementations.compiled import fastest  # the compiled loop where it applies
+    from harness.step_loops import fastest  # the compiled loop where it applies
 
     runner = fastest(stepper, problem)
     started = time.perf_counter()

@@ -202,7 +202,7 @@ def _round_trip(stepper: Stepper, problem, n: int, config: Mapping[str, Any]) ->
     size = int(config["adaptive_ensemble" if isinstance(stepper, AdaptiveStepper) else "ensemble"])
     y0 = initial_ensemble(problem, config, size)
     amplification = flow_amplification(problem, n * h)
-    from implementations.compiled import fastest  # the compiled loop where it applies
+    from harness.step_loops import fastest  # the compiled loop where it applies
 
     runner = fastest(stepper, problem)
     message = ""

@@ -173,7 +173,7 @@ class StepControlExperiment(Experiment):
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
         from harness.registry import get_problem, get_stepper
-        from implementations.compiled import fastest  # the compiled loops where they apply
+        from harness.step_loops import fastest  # the compiled loops where they apply
 
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)

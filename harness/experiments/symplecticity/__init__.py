@@ -271,7 +271,7 @@ def _measure(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFra
     if weights is None:  # checked when the cells were listed, at fewer states
         weights = np.ones(nq)
     S = np.concatenate([np.sqrt(weights) / block[0], np.sqrt(weights) / block[1]])
-    from implementations.compiled import fastest  # the compiled loop where it applies
+    from harness.step_loops import fastest  # the compiled loop where it applies
 
     runner = fastest(stepper, problem)
     started = time.perf_counter()

@@ -85,8 +85,8 @@ def time_points(stepper, problem, frame: pd.DataFrame, config: Mapping[str, Any]
     """
     import time
 
+    from harness.step_loops import fastest
     from harness.timing import baseline_step, machine_info, measure, method_identity
-    from implementations.compiled import fastest
 
     started = time.perf_counter()
     clock = clock or time.perf_counter
