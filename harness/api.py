@@ -168,6 +168,13 @@ class FunctionStepper(Stepper):
         )
 
     def fingerprint(self) -> str:
+        """`Stepper.fingerprint` plus a hash of the step function's source (or, without source, its
+        byte code and constants).
+
+        Returns
+        -------
+        str
+        """
         try:
             source = source_of(self.step_function)
         except (OSError, TypeError):
@@ -357,13 +364,41 @@ def check(
 ) -> ClaimReport:
     """Measure `stepper` on `problems` and judge the stated claims (see the module docstring).
 
-    `order`: the convergence order claimed on every problem; `symmetric`: True (returns to its
-    start within rounding) or False; `energy`: 'bounded', 'sqrt' or 'linear'. `quick` starts from
-    the experiments' quick settings; `symplectic`: True or False, judged by the symplecticity
-    experiment (the one-step map's Jacobian); `configs` maps experiment name ('convergence',
-    'reversibility', 'energy', 'symplecticity') to setting overrides. Raises `ClaimError` (an
-    AssertionError with the measured table) when a claim is false and `raise_on_failure`;
-    `InputError` for bad input.
+    Parameters
+    ----------
+    stepper : Stepper, str or callable
+        A stepper, a registered name, or a step function (wrapped as a `FunctionStepper`).
+    problems : sequence of str or Problem
+        Registered names or `Problem` objects (a non-empty sequence).
+    order : int, optional
+        The convergence order claimed on every problem.
+    symmetric : bool, optional
+        True (returns to its start within rounding) or False.
+    energy : str, optional
+        'bounded', 'sqrt' or 'linear'.
+    symplectic : bool, optional
+        True or False, judged by the symplecticity experiment (the one-step map's Jacobian).
+    quick : bool, optional
+        Start from the experiments' quick settings (default True).
+    configs : mapping, optional
+        Experiment name ('convergence', 'reversibility', 'energy', 'symplecticity') -> setting
+        overrides.
+    jobs : int, optional
+        Worker processes (default 1: in this process).
+    cache : bool, optional
+        Read and write the cell cache (default False).
+    cell_timeout : float, optional
+        Seconds per cell.
+    raise_on_failure : bool, optional
+        Raise `ClaimError` when a claim is false (default True).
+
+    Returns
+    -------
+    ClaimReport
+        One row per (claim, problem) with the measured value and verdict.
+
+    Raises `ClaimError` (an AssertionError with the measured table) when a claim is false and
+    `raise_on_failure`; `InputError` for bad input.
     """
     from harness.errors import NoApplicableCellsError
     from harness.registry import problems as problem_registry

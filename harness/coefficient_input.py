@@ -14,9 +14,13 @@ from fractions import Fraction
 import numpy as np
 
 from harness.errors import CoefficientError
-from harness.tolerances import PUBLISHED_MIN_DIGITS
+from harness.tolerances import COEFFICIENT_TOL, COEFFICIENT_ULPS, EPS, PUBLISHED_MIN_DIGITS
 
-__all__ = ["as_float_array", "exact_value", "exact_rows", "published_precision"]
+__all__ = ["Number", "as_float_array", "close_to_rounding", "exact_value", "exact_rows",
+           "published_precision"]
+
+# A coefficient as it may be typed: a float, an int or an exact rational.
+Number = float | int | Fraction
 
 
 def _real(v) -> float:
@@ -89,3 +93,11 @@ def exact_rows(values, ndim: int):
 # A float with numerator and denominator (a power of two) at most this is taken as exact (0.5,
 # 0.25, 3.0): a rounded decimal such as 0.1 or 1/3 has a 2^52-sized denominator.
 _EXACT_DYADIC = 1 << 20
+
+
+def close_to_rounding(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
+    """a == b up to the rounding of the coefficients that produced them: `size` is the sum of
+    the magnitudes of the `terms` numbers summed (a tableau whose weights sum |b| to 2842 rounds
+    its sum to ~1e-13, and that is no defect)."""
+    scale = max(1.0, abs(a), abs(b), float(size))
+    return abs(a - b) <= max(COEFFICIENT_TOL, COEFFICIENT_ULPS * EPS * (terms + 1) * scale)

@@ -80,7 +80,12 @@ def _common(p: argparse.ArgumentParser, *, grid: bool = True) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the `harness` command (one subparser per command)."""
+    """The argument parser of the `harness` command (one subparser per command).
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     parser = _Parser(prog="harness", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True

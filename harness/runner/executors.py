@@ -48,13 +48,36 @@ class Task:
 
 
 def crash_outcome(task: Task, message: str, kind: str = "crash") -> dict:
-    """The outcome of a task whose worker died (or, with `kind`, another failure outside the cell)."""
+    """The outcome of a task whose worker died (or, with `kind`, another failure outside the cell).
+
+    Parameters
+    ----------
+    task : Task
+        The task.
+    message : str
+        What happened (put on one line).
+    kind : str, optional
+        The failure kind (default "crash").
+
+    Returns
+    -------
+    dict
+        An outcome as `execute` returns one, not ok, with no rows.
+    """
     return {"key": task.key, "ok": False, "kind": kind, "message": one_line(message),
             "traceback": "", "rows": None, "wall_s": 0.0, "worker": ""}
 
 
 def run_serial(tasks: Sequence[Task], accept: Callable[[Task, dict], None]) -> None:
-    """Execute `tasks` one after another in this process, handing each outcome to `accept`."""
+    """Execute `tasks` one after another in this process, handing each outcome to `accept`.
+
+    Parameters
+    ----------
+    tasks : sequence of Task
+        The tasks.
+    accept : callable
+        ``accept(task, outcome)``, called once per task.
+    """
     for t in tasks:
         accept(t, execute(t.payload))
 
@@ -107,7 +130,21 @@ def _quiet_loky() -> None:
 
 
 def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | None, list[Task]]:
-    """Run `batch` on `n` loky workers. Returns (the pool's breakdown or None, unfinished tasks)."""
+    """Run `batch` on `n` loky workers. Returns (the pool's breakdown or None, unfinished tasks).
+
+    Parameters
+    ----------
+    batch : sequence of Task
+        The tasks.
+    n : int
+        Number of workers.
+    accept : callable
+        ``accept(task, outcome)``, called as outcomes arrive.
+
+    Returns
+    -------
+    (BaseException or None, list of Task)
+    """
     from joblib.externals.loky import get_reusable_executor
 
     _quiet_loky()
@@ -179,6 +216,15 @@ def _stop_pool(executor: Any, futures: Mapping[Any, Task]) -> None:
 def run_loky(tasks: Sequence[Task], jobs: int, accept) -> None:
     """Execute `tasks` on `jobs` local loky workers, handing each outcome to `accept` as it
     arrives; a crashed worker's cells are identified by their claim files (package docstring).
+
+    Parameters
+    ----------
+    tasks : sequence of Task
+        The tasks.
+    jobs : int
+        Number of workers.
+    accept : callable
+        ``accept(task, outcome)``, called once per task.
     """
     clean_stale_claims()
     claim_dir = tempfile.mkdtemp(prefix="harness-claims-")
@@ -223,7 +269,17 @@ def run_loky(tasks: Sequence[Task], jobs: int, accept) -> None:
 
 
 def dask_client(scheduler: Any) -> tuple[Any, bool]:
-    """(client, owned) for `scheduler` (an address or a client); `owned` says this call made it."""
+    """(client, owned) for `scheduler` (an address or a client); `owned` says this call made it.
+
+    Parameters
+    ----------
+    scheduler : str or Client
+        An address or a connected client.
+
+    Returns
+    -------
+    (Client, bool)
+    """
     from distributed import Client
 
     if isinstance(scheduler, Client):
@@ -295,7 +351,17 @@ def _handshake(address: str) -> None:
 
 
 def run_dask(tasks: Sequence[Task], client: Any, accept) -> None:
-    """Execute `tasks` as Dask tasks on `client`, handing each outcome to `accept` as it completes."""
+    """Execute `tasks` as Dask tasks on `client`, handing each outcome to `accept` as it completes.
+
+    Parameters
+    ----------
+    tasks : sequence of Task
+        The tasks.
+    client : distributed.Client
+        The connected client.
+    accept : callable
+        ``accept(task, outcome)``, called once per task.
+    """
     import uuid
 
     from distributed import as_completed

@@ -24,7 +24,21 @@ __all__ = ["read_pack", "write_pack", "summarize_packed"]
 def read_pack(store: CellCache, key: str, keys: Sequence[str]) -> tuple[pd.DataFrame, list[dict]] | None:
     """(rows, per-cell records) of the pack `key` holding the cells `keys`, in order, or None
     when there is no such pack; a damaged pack, or one that lists other cells, is discarded
-    with a one-line warning (`CellCache.get_or_discard`) and read as missing."""
+    with a one-line warning (`CellCache.get_or_discard`) and read as missing.
+
+    Parameters
+    ----------
+    store : CellCache
+        The cache.
+    key : str
+        The pack key.
+    keys : sequence of str
+        The cell keys it must list, in order.
+
+    Returns
+    -------
+    (DataFrame, list of dict) or None
+    """
     hit = store.get_or_discard(key, "packs")
     if hit is None:
         return None
@@ -40,7 +54,25 @@ def read_pack(store: CellCache, key: str, keys: Sequence[str]) -> tuple[pd.DataF
 def write_pack(store: CellCache, key: str, experiment: str, rows: pd.DataFrame,
                records: Sequence[Mapping]) -> pd.DataFrame:
     """Write the pack of a finished run (its rows and each cell's key, row count, time and
-    worker) and return the rows as they read back."""
+    worker) and return the rows as they read back.
+
+    Parameters
+    ----------
+    store : CellCache
+        The cache.
+    key : str
+        The pack key.
+    experiment : str
+        The experiment's name.
+    rows : DataFrame
+        Every cell's rows.
+    records : sequence of mapping
+        One per cell, with key, n_rows, wall_s and worker.
+
+    Returns
+    -------
+    DataFrame
+    """
     cells = [{k: r[k] for k in ("key", "n_rows", "wall_s", "worker")} for r in records]
     return store.put_pack(key, rows, {"experiment": experiment, "cells": cells})
 
@@ -49,7 +81,27 @@ def summarize_packed(store: CellCache, pack_key: str, experiment: Experiment, ro
                      summarize: Callable[[], pd.DataFrame], fresh: bool = False) -> pd.DataFrame:
     """The summary of a packed run: cached under the pack and the judging code's version, else
     `summarize()` (then cached, and returned as it reads back). A summary that cannot be stored
-    is returned as computed."""
+    is returned as computed.
+
+    Parameters
+    ----------
+    store : CellCache
+        The cache.
+    pack_key : str
+        The pack's key.
+    experiment : Experiment
+        The experiment (its judging code's version keys the summary).
+    rows : DataFrame
+        The run's rows.
+    summarize : callable
+        Makes the summary.
+    fresh : bool, optional
+        Recompute even when cached.
+
+    Returns
+    -------
+    DataFrame
+    """
     text = f"summary\n{pack_key}\n{judging_version(experiment)}"
     key = hashlib.sha256(text.encode()).hexdigest()[:32]
     hit = None if fresh else store.get_or_discard(key, "summaries")

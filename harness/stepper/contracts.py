@@ -61,14 +61,44 @@ BACKENDS = ("numpy", "jax")
 
 
 def batched_solve(A: Any, b: Any, xp: Any = np) -> Any:
-    """x with A[:, :, k] x[:, k] = b[:, k] for every member k (A (dim, dim, N), b (dim, N))."""
+    """x with A[:, :, k] x[:, k] = b[:, k] for every member k (A (dim, dim, N), b (dim, N)).
+
+    Parameters
+    ----------
+    A : array, shape (dim, dim, N)
+        One matrix per member.
+    b : array, shape (dim, N)
+        One right-hand side per member.
+    xp : module, optional
+        The array namespace (numpy, or jax.numpy).
+
+    Returns
+    -------
+    array, shape (dim, N)
+        The solutions.
+    """
     mats = xp.moveaxis(A, -1, 0)
     rhs = xp.moveaxis(b, -1, 0)[..., None]
     return xp.moveaxis(xp.linalg.solve(mats, rhs)[..., 0], 0, -1)
 
 
 def checked_float64(y: Any, name: str, when: str) -> np.ndarray:
-    """`y` as a float64 array; `StepperOutputError` when it holds fewer than 64-bit floats."""
+    """`y` as a float64 array; `StepperOutputError` when it holds fewer than 64-bit floats.
+
+    Parameters
+    ----------
+    y : array_like
+        A state a library step returned.
+    name : str
+        The stepper's name (for the message).
+    when : str
+        Where in the run (for the message).
+
+    Returns
+    -------
+    ndarray
+        `y` as float64; `StepperOutputError` for a narrower float or a complex state.
+    """
     dtype = getattr(y, "dtype", None)
     if dtype is not None and np.issubdtype(np.dtype(dtype), np.floating) and np.dtype(dtype).itemsize < 8:
         raise StepperOutputError(
@@ -93,13 +123,33 @@ class Field:
 
     @classmethod
     def numpy(cls, dyn: Dynamics) -> Field:
-        """A field over `dyn`'s counted NumPy functions."""
+        """A field over `dyn`'s counted NumPy functions.
+
+        Parameters
+        ----------
+        dyn : Dynamics
+            The problem's dynamics at fixed parameters.
+
+        Returns
+        -------
+        Field
+        """
         accel = dyn.accel if dyn.problem.newtonian is not None else None
         return cls(dyn.f, accel, dyn.jac, batched_solve)
 
     @classmethod
     def jax(cls, dyn: Dynamics) -> Field:
-        """A field over the problem's JAX functions, bound to `dyn`'s parameters."""
+        """A field over the problem's JAX functions, bound to `dyn`'s parameters.
+
+        Parameters
+        ----------
+        dyn : Dynamics
+            The problem's dynamics (its problem and parameter values are used).
+
+        Returns
+        -------
+        Field
+        """
         import jax.numpy as jnp
 
         from harness.jax_problem import jax_functions
@@ -208,7 +258,13 @@ class StateStepper(Stepper):
 
     def embedded(self) -> StateStepper:
         """The embedded method of a pair as a stepper of its own (rule 7), claiming
-        `embedded_order`, named `<name>@embedded`."""
+        `embedded_order`, named `<name>@embedded`.
+
+        Returns
+        -------
+        StateStepper
+            `InputError` when the stepper declares no `error`.
+        """
         if self.error_function is None:
             raise InputError(f"stepper {self.info.name!r} declares no embedded pair (`error`)")
         init, step, read_y, error = self.init_function, self.step_function, self.y_function, \
@@ -236,6 +292,13 @@ class StateStepper(Stepper):
         return hat
 
     def fingerprint(self) -> str:
+        """`Stepper.fingerprint` plus the source of the init/step/y/reverse/error functions, the
+        history length and the parent's fingerprint (an embedded method's).
+
+        Returns
+        -------
+        str
+        """
         parts = []
         for fn in (self.init_function, self.step_function, self.y_function, self.reverse_function,
                    self.error_function):
@@ -398,6 +461,13 @@ class AdaptiveStateStepper(StateStepper, AdaptiveStepper):
         self.info = dataclasses.replace(self.info, adaptive=True, extra=self.extra_info())
 
     def extra_info(self) -> dict:
+        """The tolerance, recorded on the stepper's claims.
+
+        Returns
+        -------
+        dict
+            {"tol": the tolerance}.
+        """
         return {"tol": self.tol}
 
     def _init_options(self) -> dict:

@@ -13,7 +13,7 @@ For one (stepper, problem) cell:
    `t_end`) and `adaptive_ensemble` members (each output step costs a solver call per member).
    A run past the problem's span (unless `t_end` asks for it) stops where its orbit leaves the
    span's dynamical regime (a closer encounter than any within the span, a state that runs
-   off: `harness.scales.regime_end`), and its message says where and why.
+   off: `harness.regimes.regime_end`), and its message says where and why.
 2. The state is saved on a log-spaced grid of step indices (`samples_per_decade`) merged with a
    uniform grid (`uniform_samples`). The relative energy error |E(t) - E0| / |E0| is taken as the
    maximum over members; for problems with an angular momentum invariant the relative error of
@@ -479,7 +479,7 @@ def _last_closest_approach(problem, energy: pd.DataFrame, h: float) -> dict | No
     its maximum over the run, when that is more than ENCOUNTER_RATE_RISE times the rate at the
     start (a close encounter the run meets late); None otherwise (an oscillator, a Kepler orbit
     whose pericentre comes within the first period) or when the orbit cannot be had."""
-    from harness.scales import fastest_approach
+    from harness.regimes import fastest_approach
 
     found = fastest_approach(problem, float(energy.t.iloc[-1]))
     if found is None:  # no float64 orbit: no correction
