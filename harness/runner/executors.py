@@ -103,7 +103,17 @@ def workers_born_deaf(signals: Sequence[int] = ()):
     worker raised the parent's Terminated in an at-fork hook). The worker's initializer sets
     its own dispositions. The cost: a signal within the few milliseconds of starting the
     workers is not seen by this process either (send it again). Outside the main thread a
-    no-op."""
+    no-op.
+
+    Parameters
+    ----------
+    signals : sequence of int
+        The signal numbers to ignore while the block runs (empty: SIGINT alone).
+
+    Yields
+    ------
+    None
+    """
     import signal
     import threading
 
