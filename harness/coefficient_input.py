@@ -49,12 +49,36 @@ def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
     return arr
 
 
-def published_precision(*arrays: np.ndarray) -> float:
+def published_precision(*values) -> float:
     """Half a unit in the last digit of the coarsest coefficient typed as a cut decimal (shortest
-    float text of PUBLISHED_MIN_DIGITS to 15 significant digits), else 0.0."""
+    float text of PUBLISHED_MIN_DIGITS to 15 significant digits), else 0.0. Integers and
+    Fractions are exact rationals, not printed decimals, whatever their float text looks like
+    (an exact extrapolation weight such as 1e8/807 prints as 123915.73729863692): they are
+    passed over.
+
+    Parameters
+    ----------
+    *values : the coefficients as given (arrays, nested sequences or numbers).
+
+    Returns
+    -------
+    float
+        The printing's half unit, or 0.0 when no coefficient is a cut decimal.
+    """
     from decimal import Decimal
 
-    cut = [Decimal(repr(float(x))).as_tuple() for a in arrays for x in np.ravel(a) if x != 0.0]
+    def flat(v):
+        if isinstance(v, np.ndarray):
+            yield from v.ravel().tolist()
+        elif isinstance(v, (list, tuple)):
+            for x in v:
+                yield from flat(x)
+        else:
+            yield v
+
+    typed = [float(Fraction(x)) if isinstance(x, str) else float(x) for v in values for x in flat(v)
+             if not (isinstance(x, (int, Fraction)) and not isinstance(x, bool))]
+    cut = [Decimal(repr(x)).as_tuple() for x in typed if x != 0.0]
     return max([0.5 * 10.0 ** int(e) for _, d, e in cut if PUBLISHED_MIN_DIGITS <= len(d) <= 15],
                default=0.0)
 

@@ -82,8 +82,11 @@ class ButcherTableau:
                 f"`{name}.A` must be {s}x{s} to match {s} weights in `b`, got {A_arr.shape}"
             )
         row_sums = A_arr.sum(axis=1)
-        precision = published_precision(A_arr, b_arr, *[as_float_array(v, f"{name}.{k}", 1) for k, v in
-                                                         (("c", c), ("b_hat", b_hat)) if v is not None])
+        for key, v in (("c", c), ("b_hat", b_hat)):
+            if v is not None:
+                as_float_array(v, f"{name}.{key}", 1)  # a bad c or b_hat is named first
+        # the printing is read from the values as typed (Fractions and integers are exact)
+        precision = published_precision(A, b, *(v for v in (c, b_hat) if v is not None))
         defect = 0.0
 
         def near(total: float, want: float, size: float, terms: int) -> bool:  # rounding, or printing

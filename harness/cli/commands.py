@@ -352,7 +352,7 @@ def cmd_gate(args) -> int:
             dict(f, verdict="failed", passed=False) for f in failures
         ])
     else:
-        print_table(table, GATE_COLUMNS)
+        print_table(table, [c for c in GATE_COLUMNS if c != "prediction_note"])  # the note: --json
         _print_footer(result, failures)
         n_bad = int((table["outcome"] == "fail").sum()) + len(failures)
         n_unmeasured = int((table["outcome"] == "not-measurable").sum())
