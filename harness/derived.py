@@ -81,7 +81,7 @@ def remembered(module: str, function: str, parts: Sequence[Any], compute: Callab
     Parameters
     ----------
     module : str, the dotted module whose code version the value depends on.
-    function : str, A name for the value within the module.
+    function : str, a name for the value within the module.
     parts : sequence, what else the value depends on (their `repr` enters the key).
     compute : callable, makes the value (JSON-serialisable) when it is not kept yet.
 

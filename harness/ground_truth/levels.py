@@ -155,7 +155,7 @@ def certifier_of(level: str) -> str:
 
     Parameters
     ----------
-    level : str, A level name of `available_levels`.
+    level : str, a level name of `available_levels`.
 
     Returns
     -------

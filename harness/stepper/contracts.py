@@ -84,7 +84,7 @@ def checked_float64(y: Any, name: str, when: str) -> np.ndarray:
 
     Parameters
     ----------
-    y : array_like, A state a library step returned.
+    y : array_like, a state a library step returned.
     name : str, the stepper's name (for the message).
     when : str, where in the run (for the message).
 

@@ -72,7 +72,7 @@ def tree_symmetry(tree: RootedTree, max_order: int | None = None) -> int:
 
     Parameters
     ----------
-    tree : RootedTree, A tree of `rooted_trees`.
+    tree : RootedTree, a tree of `rooted_trees`.
     max_order : int, optional
         The `rooted_trees` table the tree's children index into (default: the tree's order).
 
@@ -95,7 +95,7 @@ def tree_survives(tree: RootedTree, *, nystrom: bool = False, degree: int | None
 
     Parameters
     ----------
-    tree : RootedTree, A tree of `rooted_trees`.
+    tree : RootedTree, a tree of `rooted_trees`.
     nystrom : bool, optional, the problem is x'' = g(x) written as a first-order system.
     degree : int or None, optional, the right-hand side is a polynomial of this degree in the state.
 

@@ -47,7 +47,7 @@ def squarefree(a: Poly) -> Poly:
 
     Parameters
     ----------
-    a : Poly, A non-zero polynomial.
+    a : Poly, a non-zero polynomial.
 
     Returns
     -------
@@ -112,7 +112,7 @@ def sturm_sequence(a: Poly) -> list[tuple[int, ...]]:
 
     Parameters
     ----------
-    a : Poly, A non-zero polynomial (square-free for Sturm's count of distinct roots).
+    a : Poly, a non-zero polynomial (square-free for Sturm's count of distinct roots).
 
     Returns
     -------
@@ -161,7 +161,7 @@ def count_roots_between(a: Poly, lo: Fraction, hi: Fraction | None,
 
     Parameters
     ----------
-    a : Poly, A non-zero polynomial.
+    a : Poly, a non-zero polynomial.
     lo : Fraction, left end (excluded).
     hi : Fraction or None, right end (included); None for infinity.
     seq : list of Poly, optional, the Sturm sequence of a's square-free part, when already computed.
@@ -179,7 +179,7 @@ def root_bound(a: Poly) -> Fraction:
 
     Parameters
     ----------
-    a : Poly, A polynomial of degree >= 1.
+    a : Poly, a polynomial of degree >= 1.
 
     Returns
     -------
