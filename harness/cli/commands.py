@@ -52,12 +52,12 @@ def cmd_population(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The parsed command line (`build_parser`).
+        `harness population`'s options: `size`, `seed`, `high_order`, `max_order`, `json`.
 
     Returns
     -------
     int
-        The exit status.
+        EXIT_OK when the gate had no false alarm and no miss on the population, else EXIT_FAILED.
     """
     import time
 
@@ -107,12 +107,12 @@ def cmd_list(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The parsed command line (`build_parser`).
+        `kind` ("steppers" or "problems") and `json` (records instead of a table).
 
     Returns
     -------
     int
-        The exit status.
+        EXIT_OK; plugins that failed to load are listed, not fatal.
     """
     from harness.registry import plugin_errors, problems, steppers
 
@@ -151,12 +151,13 @@ def cmd_reference(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The parsed command line (`build_parser`).
+        `problem`, the times `t` and `json`.
 
     Returns
     -------
     int
-        The exit status.
+        EXIT_OK once the states are printed; a problem without a certifiable reference raises
+        (`main` turns it into its one line and status).
     """
     import numpy as np
 
@@ -280,12 +281,13 @@ def cmd_run(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The parsed command line (`build_parser`).
+        `experiment`, the selection (`stepper`, `problem`, `quick`) and the scheduling options
+        (`jobs`, `scheduler`, `cell_timeout`, `fresh`), `json`.
 
     Returns
     -------
     int
-        The exit status.
+        EXIT_FAILED on a failed cell or a claim found false, else EXIT_OK.
     """
     from harness.experiments import get_experiment
 
@@ -333,12 +335,13 @@ def cmd_gate(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The parsed command line (`build_parser`).
+        The selection and scheduling options as for `cmd_run`, and `json` (the gate table's
+        records, the prediction note included).
 
     Returns
     -------
     int
-        The exit status.
+        EXIT_FAILED, EXIT_NOT_VERIFIED or EXIT_OK, as above.
     """
     from harness.gate import GATE_COLUMNS, NOT_VERIFIED, gate_table
 
@@ -371,12 +374,13 @@ def cmd_report(args) -> int:
     Parameters
     ----------
     args : argparse.Namespace
-        The parsed command line (`build_parser`).
+        `output` (the report directory), `from_run` (re-render a saved run instead of running),
+        `compare` (a previous run to list changed verdicts against) and the grid options.
 
     Returns
     -------
     int
-        The exit status.
+        EXIT_OK once the report is written (its path printed).
     """
     from harness.report import build_report, rerender_report
 
