@@ -30,6 +30,7 @@ SCOPE = (
     "harness/scales.py", "harness/orbit.py", "harness/regimes.py", "harness/flow.py",
     "harness/derived.py", "harness/facts.py", "harness/api.py", "harness/pytest_plugin.py",
     "harness/tolerances.py", "problems",
+    "harness/kit", "harness/report", "harness/experiments",
 )
 _PROPERTIES = {"property", "cached_property", "functools.cached_property", "setter", "deleter"}
 

@@ -102,20 +102,53 @@ class Section:
     blocks: list[Block] = field(default_factory=list)
 
     def note(self, text: str, cls: str = "") -> None:
+        """Append a paragraph of text.
+
+        Parameters
+        ----------
+        text : str, the paragraph (HTML-escaped when written).
+        cls : str, optional, a CSS class for the paragraph (default none).
+        """
         self.blocks.append(Block("note", text=text, cls=cls))
 
     def heading(self, text: str) -> None:
+        """Append a sub-heading.
+
+        Parameters
+        ----------
+        text : str, the heading's words.
+        """
         self.blocks.append(Block("heading", text=text))
 
     def figure(self, fig: Figure | None, caption: str) -> None:
+        """Append a figure with its caption and a CSV download of its data.
+
+        Parameters
+        ----------
+        fig : Figure or None, the figure (None appends nothing: a figure with nothing to draw).
+        caption : str, the text under the figure.
+        """
         if fig is not None:
             dl = csv_download(fig.data, f"{fig.slug}.csv") if fig.data is not None else None
             self.blocks.append(Block("figure", figure=fig, text=caption, download=dl))
 
     def table(self, table: Table) -> None:
+        """Append a table.
+
+        Parameters
+        ----------
+        table : Table, the rows, headers and caption (built by `df_table` or by hand).
+        """
         self.blocks.append(Block("table", table=table))
 
     def details(self, summary: str, text: str) -> None:
+        """Append a folded block, closed until the reader opens it.
+
+        Parameters
+        ----------
+        summary : str, the line shown while folded.
+        text : str, the content shown when opened.
+        """
         self.blocks.append(Block("details", summary=summary, text=text))
 
 
@@ -126,6 +159,17 @@ class SectionTimer:
         self.seconds: dict[str, float] = {}
 
     def run(self, name: str, fn: Callable[[], Any]) -> Any:
+        """Call `fn` and add its wall time to `seconds[name]` (also when it raises).
+
+        Parameters
+        ----------
+        name : str, the key the time accumulates under.
+        fn : callable with no arguments, the work.
+
+        Returns
+        -------
+        Any: what `fn` returns.
+        """
         started = time.perf_counter()
         try:
             return fn()
@@ -135,7 +179,17 @@ class SectionTimer:
 
 # -- formatting -----------------------------------------------------------------------------------
 def fmt(x: Any, digits: int = 3) -> str:
-    """A number for a table: `digits` significant digits, 'inf' spelled out, '—' for missing."""
+    """A number for a table: `digits` significant digits, 'inf' spelled out, '—' for missing.
+
+    Parameters
+    ----------
+    x : Any, a number, bool, string or missing value.
+    digits : int, optional, significant digits (default 3).
+
+    Returns
+    -------
+    str: the cell text ('yes'/'no' for a bool, 'unbounded' for +inf).
+    """
     if x is None:
         return "—"
     if isinstance(x, bool | np.bool_):
@@ -164,6 +218,16 @@ _EXPONENT = re.compile(r"e\+?(-?)0*(\d)")
 
 
 def is_missing(v: Any) -> bool:
+    """Whether `v` is None, NaN or a pandas missing value.
+
+    Parameters
+    ----------
+    v : Any, a cell value.
+
+    Returns
+    -------
+    bool: True when missing; False also for values pandas cannot test.
+    """
     if v is None:
         return True
     try:
@@ -173,10 +237,33 @@ def is_missing(v: Any) -> bool:
 
 
 def yes_no(x: Any) -> str:
+    """A truth value as a cell's text.
+
+    Parameters
+    ----------
+    x : Any, a truth value or a missing value.
+
+    Returns
+    -------
+    str: 'yes', 'no', or '—' when missing.
+    """
     return "—" if is_missing(x) else ("yes" if bool(x) else "no")
 
 
 def text_cell(x: Any, digits: int = 3, cls: str = "", href: str = "") -> TextCell:
+    """A table cell holding `x` formatted by `fmt`.
+
+    Parameters
+    ----------
+    x : Any, the value; a number gets the CSS class 'num' unless `cls` is given.
+    digits : int, optional, significant digits of a number (default 3).
+    cls : str, optional, the cell's CSS class.
+    href : str, optional, a link target for the cell.
+
+    Returns
+    -------
+    TextCell: the formatted cell.
+    """
     numeric = isinstance(x, int | float | np.number) and not isinstance(x, bool | np.bool_)
     return TextCell(fmt(x, digits), cls=cls or ("num" if numeric else ""), href=href)
 
@@ -193,6 +280,17 @@ FOLDED_MARK = {FAIL: MARK[FAIL], PASS: "✓", NONE: "–"}
 
 
 def status_cell(passed: Any, folded: bool = False) -> TextCell:
+    """A pass/fail/missing mark as a table cell.
+
+    Parameters
+    ----------
+    passed : Any, a truth value; missing gives the neutral mark.
+    folded : bool, optional, use the compact marks of a folded table (default False).
+
+    Returns
+    -------
+    TextCell: the mark with its status CSS class.
+    """
     status = NONE if is_missing(passed) else (PASS if bool(passed) else FAIL)
     if folded:
         return TextCell(FOLDED_MARK[status], cls=FOLDED_STATUS_CLASS[status])
@@ -201,14 +299,33 @@ def status_cell(passed: Any, folded: bool = False) -> TextCell:
 
 def anchor(*parts: Any) -> str:
     """A stable, safe HTML id for a table row: a short hash of the exact key (names from
-    plugins may hold any character)."""
+    plugins may hold any character).
+
+    Parameters
+    ----------
+    *parts : Any, the key (experiment, stepper, problem, ...), each turned into text.
+
+    Returns
+    -------
+    str: 'r-' followed by 10 hex digits of the key's SHA-1.
+    """
     key = "\x1f".join(str(p) for p in parts)
     # a short hash only: every link repeats it (hundreds in the scoreboard)
     return f"r-{hashlib.sha1(key.encode()).hexdigest()[:10]}"
 
 
 def first_sentence(text: Any, limit: int = 220) -> str:
-    """The first sentence of a reason, at most `limit` characters."""
+    """The first sentence of a reason, at most `limit` characters.
+
+    Parameters
+    ----------
+    text : Any, the reason (None reads as empty); whitespace runs become one space.
+    limit : int, optional, the longest result in characters (default 220; cut with '…').
+
+    Returns
+    -------
+    str: the text up to its first '. ', trailing punctuation dropped.
+    """
     s = " ".join(str(text or "").split())
     m = re.search(r"(?<=\.)\s", s)
     if m:
@@ -228,7 +345,17 @@ def csv_download(df: pd.DataFrame | None, filename: str) -> Download | None:
     """`df` as an embedded, gzip-compressed CSV link (`<name>.csv.gz`, numbers with CSV_DIGITS
     significant digits): a figure's tidy table costs the page a third of its CSV text or less,
     and every CSV reader opens it (`pandas.read_csv` reads .gz directly). The archive carries
-    no date, so a report's bytes depend on its data only."""
+    no date, so a report's bytes depend on its data only.
+
+    Parameters
+    ----------
+    df : DataFrame or None, the table; wall-time columns are rounded to WALL_DIGITS digits.
+    filename : str, the offered file name (unsafe characters replaced, '.gz' appended).
+
+    Returns
+    -------
+    Download or None: the data-URI link; None when `df` is None or has no columns.
+    """
     if df is None or not len(df.columns):
         return None
     timed = [c for c in df.columns if str(c) == "wall_s" or str(c).endswith("_wall_s")]
@@ -251,7 +378,27 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
     the `status` column (failing rows first when `sort_failing`); each row's id is
     `anchor(experiment, *key values)`; a reason column (NOTE_COLUMNS) holds a reference to a
     numbered note below the table, each distinct reason written once. `links` maps a shown
-    column to a column of `df` holding the href its cell links to."""
+    column to a column of `df` holding the href its cell links to.
+
+    Parameters
+    ----------
+    df : DataFrame, one row per table row.
+    columns : sequence of (column, header), the columns shown, in order.
+    caption : str, the table's caption.
+    experiment : str, optional, the experiment name, first part of each row anchor and of the id.
+    key : sequence of str, optional, the columns naming a row (default stepper, problem).
+    status : str or None, optional, the pass/fail column (None: no status column).
+    digits : int, optional, significant digits of numbers (default 3).
+    sort_failing : bool, optional, failing rows first (default True).
+    folded : bool, optional, long reasons become numbered notes (default True).
+    cls, id : str, optional, the table's CSS class and HTML id (default id from `experiment`
+        and `caption`).
+    links : mapping of str to str, optional, shown column -> column of `df` with its href.
+
+    Returns
+    -------
+    Table: the rows, headers, notes and caption.
+    """
     links = dict(links or {})
     if sort_failing and status and status in df and len(df):
         k = df[status].map(lambda v: 0 if (not is_missing(v) and not bool(v)) else 1)
@@ -310,7 +457,16 @@ def drop_unlinked_row_ids(sections: Sequence[Section]) -> int:
     """Clear the id of every folded table's row that no link of the page points to (a row id
     costs ~20 bytes, over thousands of rows; the rows that the scoreboard, the verdict list or
     the changed-since section link to keep theirs), and blank the cells that repeat the row
-    above (`Table.ditto`). Returns how many ids were cleared."""
+    above (`Table.ditto`). Returns how many ids were cleared.
+
+    Parameters
+    ----------
+    sections : sequence of Section, the whole page (links are looked for in every section).
+
+    Returns
+    -------
+    int: the number of row ids cleared.
+    """
     linked: set[str] = set()
     for sec in sections:
         for b in sec.blocks:

@@ -37,7 +37,16 @@ LOG_CEILING = 1e20
 
 
 def clip_log(y: Any) -> np.ndarray:
-    """Values for a log axis: non-finite -> NaN (a gap), the rest clipped to [floor, ceiling]."""
+    """Values for a log axis: non-finite -> NaN (a gap), the rest clipped to [floor, ceiling].
+
+    Parameters
+    ----------
+    y : array_like, the values.
+
+    Returns
+    -------
+    ndarray of float: same shape as `y`.
+    """
     a = np.asarray(y, dtype=float)
     return np.where(np.isfinite(a), np.clip(a, LOG_FLOOR, LOG_CEILING), np.nan)
 
@@ -83,12 +92,42 @@ class Palette:
         self.families = {n: fam.get(n, "") for n in names}
 
     def colour(self, stepper: str) -> str:
+        """The line colour of a method.
+
+        Parameters
+        ----------
+        stepper : str, the method's name.
+
+        Returns
+        -------
+        str: a hex colour; grey for a method the palette was not built with.
+        """
         return self._style.get(stepper, ("#4d4d4d", "o"))[0]
 
     def marker(self, stepper: str) -> str:
+        """The marker of a method.
+
+        Parameters
+        ----------
+        stepper : str, the method's name.
+
+        Returns
+        -------
+        str: a matplotlib marker code; 'o' for a method the palette was not built with.
+        """
         return self._style.get(stepper, ("#4d4d4d", "o"))[1]
 
     def family(self, stepper: str) -> str:
+        """The family a method was grouped under.
+
+        Parameters
+        ----------
+        stepper : str, the method's name.
+
+        Returns
+        -------
+        str: the family's name; empty when unknown.
+        """
         return self.families.get(stepper, "")
 
 
@@ -96,7 +135,19 @@ def panels(steppers: Iterable[str], group: Mapping[str, str] | Any,
            max_lines: int = MAX_LINES_PER_PANEL, pack: bool = True) -> list[tuple[str, list[str]]]:
     """Split methods into panels of at most `max_lines`: one per group (family, drift class...),
     a large group cut into numbered parts, small groups sharing a panel while they fit (its
-    title names them all). `group` maps a method to its group's name."""
+    title names them all). `group` maps a method to its group's name.
+
+    Parameters
+    ----------
+    steppers : iterable of str, the methods (duplicates dropped, order kept).
+    group : mapping of str to str, or callable, a method's group name (empty reads 'other').
+    max_lines : int, optional, the most methods in one panel (default MAX_LINES_PER_PANEL).
+    pack : bool, optional, let small groups share a panel (default True).
+
+    Returns
+    -------
+    list of (title, methods): one entry per panel.
+    """
     by: dict[str, list[str]] = {}
     for s in dict.fromkeys(steppers):
         by.setdefault(str(group.get(s, "") if hasattr(group, "get") else group(s)) or "other",
@@ -120,7 +171,16 @@ def panels(steppers: Iterable[str], group: Mapping[str, str] | Any,
 def styled(fn):
     """Run a figure function with the report's matplotlib settings (text objects read them
     when they are created, so the whole drawing happens inside); a call drawn before with the
-    same arguments and drawing code comes from the figure cache (`figure_cache`)."""
+    same arguments and drawing code comes from the figure cache (`figure_cache`).
+
+    Parameters
+    ----------
+    fn : callable, a function that draws and returns a matplotlib figure.
+
+    Returns
+    -------
+    callable: `fn` wrapped; same arguments, the figure possibly from the cache.
+    """
     import functools
 
     def draw(*args, **kwargs):
@@ -141,6 +201,18 @@ def styled(fn):
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, size: tuple[float, float] = (7.2, 4.2), **kw: Any):
+    """A matplotlib figure (not tied to pyplot) with a grid of axes and no backgrounds.
+
+    Parameters
+    ----------
+    nrows, ncols : int, optional, the grid's shape (default 1 x 1).
+    size : (float, float), optional, width and height in inches.
+    **kw : passed to `Figure.subplots` (sharex, sharey, ...).
+
+    Returns
+    -------
+    (Figure, ndarray of Axes): the figure and its axes, always 2-D.
+    """
     from matplotlib.figure import Figure as MplFigure
 
     fig = MplFigure(figsize=size)
@@ -176,7 +248,13 @@ LOG_TICKS = 8
 
 
 def loglog_axes(ax: Any, x: bool = True, y: bool = True) -> None:
-    """Log scales with plain-text power-of-ten tick labels."""
+    """Log scales with plain-text power-of-ten tick labels.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes.
+    x, y : bool, optional, which axes become logarithmic (default both).
+    """
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
 
     for on, axis, scale, lim in ((x, ax.xaxis, ax.set_xscale, ax.get_xlim),
@@ -199,7 +277,16 @@ def loglog_axes(ax: Any, x: bool = True, y: bool = True) -> None:
 
 
 def label_text(text: Any) -> str:
-    """A name as it appears in a legend: plain text, bounded length."""
+    """A name as it appears in a legend: plain text, bounded length.
+
+    Parameters
+    ----------
+    text : Any, the name.
+
+    Returns
+    -------
+    str: at most 40 characters ('...' marks a cut).
+    """
     s = str(text)
     return s if len(s) <= 40 else s[:37] + "..."
 
@@ -220,7 +307,15 @@ LEGEND_CHAR_W, _LEGEND_HANDLE_W, _LEGEND_ROW_H = 0.052, 0.6, 0.16
 def legend_outside(ax: Any, handles: list | None = None, *, layout: bool = True,
                     **kw: Any) -> None:
     """Put the legend right of the axes; with `layout`, size a one-panel figure around both
-    (`to_svg` then keeps this layout instead of computing a tight bounding box)."""
+    (`to_svg` then keeps this layout instead of computing a tight bounding box).
+
+    Parameters
+    ----------
+    ax : matplotlib Axes.
+    handles : list of artists, optional, the legend entries (default the axes' labelled lines).
+    layout : bool, optional, resize the figure around axes and legend (default True).
+    **kw : passed to `Axes.legend` (`ncol` also widens the layout).
+    """
     if handles is None:
         handles, _ = ax.get_legend_handles_labels()
     labels = [h.get_label() for h in handles]
@@ -244,7 +339,17 @@ def legend_outside(ax: Any, handles: list | None = None, *, layout: bool = True,
 
 def thin_line(x: np.ndarray, y: np.ndarray, n: int = MAX_POINTS_PER_LINE) -> tuple[np.ndarray, np.ndarray]:
     """Keep about `n` points log-spaced in x (x > 0), keeping the largest y in each bin so an
-    envelope keeps its peaks."""
+    envelope keeps its peaks.
+
+    Parameters
+    ----------
+    x, y : ndarray, the line's points (any order; points with x <= 0 dropped).
+    n : int, optional, the number of bins (default MAX_POINTS_PER_LINE).
+
+    Returns
+    -------
+    (ndarray, ndarray): the kept x and y, sorted by x.
+    """
     order = np.argsort(x)
     x, y = x[order], y[order]
     pos = x > 0
@@ -269,7 +374,20 @@ _PANEL_W, _PANEL_H = 2.9, 2.25
 def small_multiples(n: int, *, ncols: int = 3, panel: tuple[float, float] = (_PANEL_W, _PANEL_H),
                sharex: bool = False, sharey: bool = False, right: float = 0.0) -> tuple[Any, list[Any]]:
     """A grid of `n` panels (unused cells hidden), `ncols` wide at most, laid out by fixed
-    margins in inches (`right`: extra room for a legend), so `to_svg` needs no tight-bbox pass."""
+    margins in inches (`right`: extra room for a legend), so `to_svg` needs no tight-bbox pass.
+
+    Parameters
+    ----------
+    n : int, the number of panels.
+    ncols : int, optional, the most panels in a row (default 3).
+    panel : (float, float), optional, one panel's width and height in inches.
+    sharex, sharey : bool, optional, share axes between panels.
+    right : float, optional, extra width in inches at the right.
+
+    Returns
+    -------
+    (Figure, list of Axes): the figure and its `n` visible panels.
+    """
     ncols = max(1, min(ncols, n))
     nrows = int(math.ceil(n / ncols))
     left, bottom, top, wgap, hgap = 0.75, 0.5, 0.5, 0.35 if sharey else 0.6, 0.45
@@ -287,6 +405,14 @@ def small_multiples(n: int, *, ncols: int = 3, panel: tuple[float, float] = (_PA
 
 
 def panel_legend(ax: Any, handles: list | None = None, **kw: Any) -> None:
+    """A small legend inside a panel (no legend when there are no handles).
+
+    Parameters
+    ----------
+    ax : matplotlib Axes.
+    handles : list of artists, optional, the entries (default the axes' labelled lines).
+    **kw : passed to `Axes.legend` (`loc` defaults to 'best').
+    """
     if handles is None:
         handles, _ = ax.get_legend_handles_labels()
     if handles:
@@ -297,13 +423,28 @@ def panel_legend(ax: Any, handles: list | None = None, **kw: Any) -> None:
 
 def small_ticks(ax: Any) -> None:
     """Small labels; no tick marks and no vertical grid lines (the horizontal grid carries the
-    reading; each mark is a few dozen bytes of SVG, times hundreds of panels)."""
+    reading; each mark is a few dozen bytes of SVG, times hundreds of panels).
+
+    Parameters
+    ----------
+    ax : matplotlib Axes.
+    """
     ax.tick_params(labelsize=6.5, length=0, pad=2)
     ax.grid(False, axis="x")
     ax.title.set_fontsize(8)
 
 
 def finite_or_none(x: Any) -> float | None:
+    """`x` as a float, or None when it is not a finite number.
+
+    Parameters
+    ----------
+    x : Any, a value.
+
+    Returns
+    -------
+    float or None: None for NaN, infinities and values `float` cannot read.
+    """
     try:
         v = float(x)
     except (TypeError, ValueError):
