@@ -72,11 +72,32 @@ class Cell:
         return f"{self.experiment}:{self.stepper}:{self.problem}" + (f"[{extra}]" if extra else "")
 
     def param(self, key: str, default: Any = None) -> Any:
+        """The value of one of the cell's parameters.
+
+        Parameters
+        ----------
+        key : str, the parameter's name.
+        default : Any, optional, returned when the cell has no such parameter (default None).
+
+        Returns
+        -------
+        Any: the value, or `default`.
+        """
         return dict(self.params).get(key, default)
 
     def key(self, code_version: str, config: Mapping[str, Any]) -> str:
         """Cache key: the cell, the experiment's configuration, and the code of its stepper and
-        problem (`code_version`, from their fingerprints)."""
+        problem (`code_version`, from their fingerprints).
+
+        Parameters
+        ----------
+        code_version : str, the hash of the stepper's and problem's code.
+        config : mapping, the experiment's settings (values without a JSON form enter by `repr`).
+
+        Returns
+        -------
+        str: 32 hex digits of a SHA-256.
+        """
         blob = json.dumps(
             {"cell": [self.experiment, self.stepper, self.problem, list(self.params)],
              "config": config, "code": code_version},
@@ -106,6 +127,17 @@ class Experiment(ABC):
     section: SectionSpec | None = None
 
     def config(self, overrides: Mapping[str, Any] | None = None, *, quick: bool = False) -> dict:
+        """The settings of a run: the defaults, the quick ones over them, then `overrides`.
+
+        Parameters
+        ----------
+        overrides : mapping, optional, settings that win over both (already checked).
+        quick : bool, optional, apply `quick_config` (default False).
+
+        Returns
+        -------
+        dict: a new dictionary; the class attributes are not changed.
+        """
         base = dict(self.default_config)
         if quick:
             base.update(self.quick_config)
@@ -115,19 +147,62 @@ class Experiment(ABC):
     @abstractmethod
     def cells(
         self, steppers: Sequence[str], problems: Sequence[str], config: Mapping[str, Any]
-    ) -> tuple[list[Cell], list[Skip]]: ...
+    ) -> tuple[list[Cell], list[Skip]]:
+        """The units of work (contract rule 2).
+
+        Parameters
+        ----------
+        steppers, problems : sequence of str, the registered names asked for.
+        config : mapping, the settings from `config`.
+
+        Returns
+        -------
+        (list of Cell, list of Skip): the cells to run and the pairs left out, with reasons.
+        """
 
     @abstractmethod
-    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame: ...
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """Measure one cell (contract rule 3).
+
+        Parameters
+        ----------
+        cell : Cell, one of `cells`' results.
+        config : mapping, the settings the cells were listed with.
+
+        Returns
+        -------
+        DataFrame: tidy rows, one per measured point, plain data only.
+        """
 
     @abstractmethod
-    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame: ...
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """One record per cell from all cells' rows (contract rule 4).
+
+        Parameters
+        ----------
+        rows : DataFrame, the concatenated rows of `run_cell`.
+        config : mapping, the settings of the run.
+
+        Returns
+        -------
+        DataFrame: the summary, with `verdict` and `passed` where a claim is judged.
+        """
 
 
 EXPERIMENTS: dict[str, Experiment] = {}
 
 
 def register_experiment(exp: Experiment) -> Experiment:
+    """Add `exp` to `EXPERIMENTS` under its name (a later one of the same name replaces it).
+
+    Parameters
+    ----------
+    exp : Experiment, the instance.
+
+    Returns
+    -------
+    Experiment: `exp`, so the call can wrap a module-level instance.
+    """
     EXPERIMENTS[exp.name] = exp
     return exp
 
@@ -171,7 +246,16 @@ def load_experiments() -> None:
 
 def get_experiment(name: str) -> Experiment:
     """The registered experiment `name` (entry points loaded first); `UnknownNameError` with the
-    closest names otherwise."""
+    closest names otherwise.
+
+    Parameters
+    ----------
+    name : str, the experiment's CLI name.
+
+    Returns
+    -------
+    Experiment: the registered instance.
+    """
     from harness.errors import UnknownNameError
 
     load_experiments()
@@ -189,7 +273,20 @@ def failed_record(
     cell: Cell, message: str, *, kind: str = "error", traceback: str = "", key: str = ""
 ) -> dict[str, Any]:
     """The record of a failed cell, as the runner stores it and the report lists it: the cell,
-    what kind of failure (`harness.runner.FAILURE_KINDS`), the message, a short traceback."""
+    what kind of failure (`harness.runner.FAILURE_KINDS`), the message, a short traceback.
+
+    Parameters
+    ----------
+    cell : Cell, the cell that failed.
+    message : str, the failure in one line.
+    kind : str, optional, one of `harness.runner.FAILURE_KINDS` (default 'error').
+    traceback : str, optional, the shortened traceback.
+    key : str, optional, the cell's cache key.
+
+    Returns
+    -------
+    dict: flat, JSON-safe fields (the parameters as a JSON string).
+    """
     return {
         "experiment": cell.experiment,
         "cell": cell.label,

@@ -69,7 +69,14 @@ def check_config(
 ) -> None:
     """Raise `InputError` naming the first setting that breaks its rule: `counts` are whole
     numbers >= 1, `count_lists` non-empty lists of them, `positives` finite numbers > 0,
-    `name_lists` lists of strings, `optional_positives` None or finite numbers > 0."""
+    `name_lists` lists of strings, `optional_positives` None or finite numbers > 0.
+
+    Parameters
+    ----------
+    config : mapping, the settings to check (absent keys are checked as None).
+    counts, count_lists, positives, name_lists, optional_positives : sequence of str, the keys
+        under each rule.
+    """
     for key in counts:
         v = config.get(key)
         if not _is_count(v, 1):
@@ -118,7 +125,18 @@ def check_overrides(experiment, overrides: Mapping[str, Any]) -> dict[str, Any]:
     """The command-line overrides (`h`, `steps`, `t_end`, `perturbation`; None = not given;
     numbers or their text, `steps` possibly comma-separated) as config settings of `experiment`.
     A flag the experiment has no setting for, or a value that breaks its rule, raises
-    `InputError` naming the flag."""
+    `InputError` naming the flag.
+
+    Parameters
+    ----------
+    experiment : Experiment, whose `default_config` says which settings exist.
+    overrides : mapping of str, the flag values by setting name.
+
+    Returns
+    -------
+    dict: setting -> checked value (positive floats; `steps` as int counts, a list when the default
+        is one, copied to `implicit_steps` when that setting exists).
+    """
     given = {k: v for k, v in overrides.items() if v is not None}
     if "steps" in given and "t_end" in given:
         raise InputError("give `--steps` or `--t-end`, not both (the step count follows from "
@@ -151,14 +169,32 @@ def check_overrides(experiment, overrides: Mapping[str, Any]) -> dict[str, Any]:
 
 # -- which problems an experiment applies to ---------------------------------------------------------
 def invariant_reason(problem) -> str | None:
-    """None when the problem declares an invariant to follow, else why not."""
+    """None when the problem declares an invariant to follow, else why not.
+
+    Parameters
+    ----------
+    problem : Problem
+
+    Returns
+    -------
+    str or None: the reason the problem does not apply.
+    """
     if not problem.invariants:
         return f"problem {problem.name!r} declares no invariant (no conserved quantity to follow)"
     return None
 
 
 def primary_invariant(problem) -> str:
-    """The invariant the energy experiment follows: `energy` when declared, else the first one."""
+    """The invariant the energy experiment follows: `energy` when declared, else the first one.
+
+    Parameters
+    ----------
+    problem : Problem, one with at least one invariant.
+
+    Returns
+    -------
+    str: the invariant's name.
+    """
     return "energy" if "energy" in problem.invariants else sorted(problem.invariants)[0]
 
 
@@ -173,7 +209,16 @@ def _plain_newtonian(problem) -> str | None:
 
 
 def reversible_reason(problem) -> str | None:
-    """None when the problem's flow is reversible (q'' = a(q), or declared conservative)."""
+    """None when the problem's flow is reversible (q'' = a(q), or declared conservative).
+
+    Parameters
+    ----------
+    problem : Problem
+
+    Returns
+    -------
+    str or None: why the round trip does not apply, or None.
+    """
     reason = _plain_newtonian(problem)
     if reason is None or problem.conservative:
         return None
@@ -186,7 +231,17 @@ def hamiltonian_weights(problem, states: np.ndarray | None = None) -> np.ndarray
     Jacobian A = da/dq at `states` (dim, S; default: 8 states along the float64 orbit of
     `harness.scales`), or None when no such weighting exists (the force is not a weighted
     gradient). The default states' weights are derived once per problem definition and code
-    version (`harness.derived`): every process that lists or measures symplecticity asks."""
+    version (`harness.derived`): every process that lists or measures symplecticity asks.
+
+    Parameters
+    ----------
+    problem : Problem
+    states : ndarray, shape (dim, S), optional, the states the Jacobian is taken at.
+
+    Returns
+    -------
+    ndarray of float, shape (positions,), or None
+    """
     if states is None:
         from harness.derived import remembered
 
@@ -240,7 +295,16 @@ def _weights(problem, states: np.ndarray) -> np.ndarray | None:
 
 
 def hamiltonian_reason(problem) -> str | None:
-    """None when the problem is q'' = a(q) with a weighted gradient force (see the module doc)."""
+    """None when the problem is q'' = a(q) with a weighted gradient force (see the module doc).
+
+    Parameters
+    ----------
+    problem : Problem
+
+    Returns
+    -------
+    str or None: why the symplecticity test does not apply, or None.
+    """
     reason = _plain_newtonian(problem)
     if reason is not None:
         return f"{reason}: its flow preserves no symplectic form to test against"
@@ -257,7 +321,18 @@ def period_states(problem, n: int, t_end: float | None = None) -> np.ndarray:
     motion is fastest (the largest Jacobian spectral radius along the span: close approaches,
     pericentres), so a map is probed
     where it differs most from the flow (`harness.scales`; float64 Taylor states, which is all
-    a probe point needs)."""
+    a probe point needs).
+
+    Parameters
+    ----------
+    problem : Problem
+    n : int, the number of states asked for.
+    t_end : float, optional, the end of the span (default one natural period after t0).
+
+    Returns
+    -------
+    ndarray, shape (dim, m), m <= n
+    """
     from harness.scales import fastest_times, states_at
 
     n_fast = n // 2
@@ -277,7 +352,18 @@ def problem_cells(
     applicable: Callable[[Any], str | None],
 ) -> tuple[list[Cell], list[Skip]]:
     """Cells for the (stepper, problem) pairs whose problem passes `applicable(problem) -> reason
-    or None` and whose stepper can run it; every other pair becomes a `Skip` with its reason."""
+    or None` and whose stepper can run it; every other pair becomes a `Skip` with its reason.
+
+    Parameters
+    ----------
+    experiment : str, the experiment's name (written into each cell).
+    steppers, problems : sequence of str, the registered names.
+    applicable : callable, Problem -> reason or None.
+
+    Returns
+    -------
+    (list of Cell, list of Skip)
+    """
     from harness.errors import IncompatibleError
     from harness.registry import get_problem, get_stepper
     from harness.stepper import check_compatible
@@ -305,7 +391,19 @@ def summary_per_cell(rows: pd.DataFrame, columns: Sequence[str],
                      summarize_cell: Callable[..., dict], *args: Any) -> pd.DataFrame:
     """The summary table of `rows`: one row per (stepper, problem), in the order they first
     appear, from `summarize_cell(stepper, problem_name, rows_of_that_cell, *args)`; the table
-    has `columns` (and no rows when `rows` is empty)."""
+    has `columns` (and no rows when `rows` is empty).
+
+    Parameters
+    ----------
+    rows : DataFrame, tidy rows with `stepper` and `problem` columns.
+    columns : sequence of str, the summary's columns.
+    summarize_cell : callable, (StepperInfo, problem name, rows, *args) -> dict.
+    *args : passed on to `summarize_cell`.
+
+    Returns
+    -------
+    DataFrame
+    """
     from harness.registry import get_stepper
 
     if rows.empty:
@@ -318,20 +416,52 @@ def summary_per_cell(rows: pd.DataFrame, columns: Sequence[str],
 # -- initial states and the fixed-step plan ------------------------------------------------------------
 def perturbation_used(problem, config: Mapping[str, Any]) -> float:
     """The relative ensemble perturbation a run uses: the config's `perturbation`, else the
-    problem's (declared or derived)."""
+    problem's (declared or derived).
+
+    Parameters
+    ----------
+    problem : Problem
+    config : mapping, the run's settings.
+
+    Returns
+    -------
+    float
+    """
     given = config.get("perturbation")
     return float(given) if given is not None else float(problem.ensemble_perturbation.size)
 
 
 def initial_ensemble(problem, config: Mapping[str, Any], size: int) -> np.ndarray:
-    """`size` initial states of `problem` (seed and perturbation from the config)."""
+    """`size` initial states of `problem` (seed and perturbation from the config).
+
+    Parameters
+    ----------
+    problem : Problem
+    config : mapping, the run's settings (`seed`, default 0; `perturbation`).
+    size : int, the number of members.
+
+    Returns
+    -------
+    ndarray, shape (dim, size)
+    """
     return problem.ensemble(size, seed=int(config.get("seed", 0)), scale=config.get("perturbation"))
 
 
 def fixed_plan(problem, config: Mapping[str, Any], steps: int) -> tuple[float, int]:
     """(h, n_steps) for a fixed-step run: h from the config's `h` or the problem's time scale;
     `steps` steps, or, when the config sets `t_end`, as many as reach it (h then shrinks by less
-    than one step's worth so that n h is exactly the span)."""
+    than one step's worth so that n h is exactly the span).
+
+    Parameters
+    ----------
+    problem : Problem
+    config : mapping, the run's settings (`h`, `t_end`).
+    steps : int, the step count when no `t_end` is set.
+
+    Returns
+    -------
+    (float, int): the step size and the step count; `InputError` when `t_end` is not after t0.
+    """
     h = config.get("h")
     h = float(h) if h is not None else problem.time_scale.h
     t_end = config.get("t_end")
@@ -347,7 +477,18 @@ def fixed_plan(problem, config: Mapping[str, Any], steps: int) -> tuple[float, i
 
 def long_run_steps(problem, h: float, n: int) -> tuple[int, str]:
     """(n, reason): n steps of h, or fewer where the orbit would leave the dynamical regime of
-    the problem's span before n h (`harness.regimes.regime_end`); reason says why ("" if not)."""
+    the problem's span before n h (`harness.regimes.regime_end`); reason says why ("" if not).
+
+    Parameters
+    ----------
+    problem : Problem
+    h : float, the step size.
+    n : int, the steps asked for.
+
+    Returns
+    -------
+    (int, str)
+    """
     from harness.regimes import regime_end
 
     stop, why = regime_end(problem, problem.t0 + n * h)
