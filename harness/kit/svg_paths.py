@@ -24,6 +24,16 @@ _NUMBER = re.compile(r"-?\d+\.\d+")
 
 
 def round_numbers(text: str) -> str:
+    """Every number in `text` rounded to SVG_DECIMALS decimals, trailing zeros dropped.
+
+    Parameters
+    ----------
+    text : str, SVG attribute text.
+
+    Returns
+    -------
+    str: the text with its numbers shortened ('-0' written '0').
+    """
     def one(m: re.Match) -> str:
         s = f"{float(m.group(0)):.{SVG_DECIMALS}f}".rstrip("0").rstrip(".")
         return "0" if s in ("-0", "") else s
@@ -32,13 +42,34 @@ def round_numbers(text: str) -> str:
 
 
 def compact_path(d: str, min_points: int = 3) -> str:
+    """An SVG path's `d` in its shortest form: numbers rounded, spaces around commands dropped,
+    then relative steps thinned within LINE_TOLERANCE points (`relative_path`).
+
+    Parameters
+    ----------
+    d : str, the path data matplotlib wrote.
+    min_points : int, optional, paths with fewer points stay absolute (default 3).
+
+    Returns
+    -------
+    str: the path data.
+    """
     d = round_numbers(" ".join(d.split()))
     return relative_path(re.sub(r"\s*([MLCQZHVAmlcqzhva])\s*", r"\1", d), tolerance=LINE_TOLERANCE,
                           min_points=min_points)
 
 
 def dedupe_style(style: str) -> str:
-    """Each property once, with the value that wins (the last)."""
+    """Each property once, with the value that wins (the last).
+
+    Parameters
+    ----------
+    style : str, a CSS declaration list ('a:1;b:2;a:3').
+
+    Returns
+    -------
+    str: the declarations, the winning one of each property kept in the position it last took.
+    """
     last: dict[str, str] = {}
     for decl in style.split(";"):
         name, _, value = decl.partition(":")
@@ -48,7 +79,17 @@ def dedupe_style(style: str) -> str:
 
 
 def short_number(v: int, scale: int) -> str:
-    """`v / scale` (scale 1 or 10) as its shortest SVG number (15/10 -> 1.5, -5/10 -> -.5)."""
+    """`v / scale` (scale 1 or 10) as its shortest SVG number (15/10 -> 1.5, -5/10 -> -.5).
+
+    Parameters
+    ----------
+    v : int, the value in units of 1/`scale`.
+    scale : int, 1 or 10.
+
+    Returns
+    -------
+    str
+    """
     if scale == 1:
         return str(v)
     sign, a = ("-" if v < 0 else ""), abs(v)
@@ -69,7 +110,17 @@ LINE_TOLERANCE = 0.4
 
 
 def simplify(points: list[tuple[int, int]], tolerance: float) -> list[tuple[int, int]]:
-    """Douglas-Peucker: the points whose omission moves the line by more than `tolerance`."""
+    """Douglas-Peucker: the points whose omission moves the line by more than `tolerance`.
+
+    Parameters
+    ----------
+    points : list of (int, int), the line's vertices.
+    tolerance : float, the largest distance a dropped point may lie off the line.
+
+    Returns
+    -------
+    list of (int, int): the kept points, the ends always among them.
+    """
     if len(points) < 3:
         return points
     keep = [False] * len(points)
@@ -103,7 +154,16 @@ CLOSED_SCALE = 10
 
 def subpaths(d: str) -> list[tuple[list[tuple[float, float]], bool]] | None:
     """`d` as (points, closed) sub-paths when it holds only absolute moves, lines (one point
-    each) and closes; None otherwise."""
+    each) and closes; None otherwise.
+
+    Parameters
+    ----------
+    d : str, compacted path data (no spaces around commands).
+
+    Returns
+    -------
+    list of (list of (float, float), bool), or None
+    """
     out: list[tuple[list[tuple[float, float]], bool]] = []
     covered = 0
     for m in _COMMAND.finditer(d):
@@ -135,7 +195,19 @@ def relative_path(d: str, scale: int = LINE_SCALE, tolerance: float = 0.0, min_p
     1/CLOSED_SCALE point), horizontal and vertical steps as `h`/`v`: the points rounded first,
     so no error accumulates; about half the bytes. With `tolerance` (points), each sub-path is
     thinned by `simplify`. Any other path, or one of fewer than `min_points` points, is
-    returned unchanged."""
+    returned unchanged.
+
+    Parameters
+    ----------
+    d : str, compacted path data.
+    scale : int, optional, steps per point of an open sub-path (default LINE_SCALE).
+    tolerance : float, optional, the thinning tolerance in points (default 0: none).
+    min_points : int, optional, the fewest points worth rewriting (default 3).
+
+    Returns
+    -------
+    str: the path data.
+    """
     subs = subpaths(d) if d.startswith("M") else None
     if subs is None or sum(len(p) for p, _ in subs) < min_points:
         return d

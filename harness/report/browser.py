@@ -30,6 +30,12 @@ TIMEOUT_S = 60.0
 
 
 def chromium_binary() -> str | None:
+    """The path of the Chromium executable on PATH.
+
+    Returns
+    -------
+    str or None: the path of `chromium` or `chromium-browser`; None when neither is installed.
+    """
     return shutil.which("chromium") or shutil.which("chromium-browser")
 
 
@@ -78,6 +84,19 @@ class DevTools:
         return json.loads(raw)
 
     def send(self, method: str, params: dict | None = None, *, session: bool = True) -> dict:
+        """Send one DevTools command and wait for its reply (events read meanwhile are kept).
+
+        Parameters
+        ----------
+        method : str, the protocol method ('Page.navigate', ...).
+        params : dict, optional, its parameters.
+        session : bool, optional, address the attached page rather than the browser (default True).
+
+        Returns
+        -------
+        dict: the reply's result; RuntimeError when the browser answers with an error, or no reply
+            comes within TIMEOUT_S seconds.
+        """
         self._id += 1
         msg: dict[str, Any] = {"id": self._id, "method": method, "params": params or {}}
         if session and self.session:
@@ -93,6 +112,16 @@ class DevTools:
             self.events.append(reply)
 
     def wait_for(self, method: str) -> dict:
+        """Wait for an event, taking it from those already read when it came before.
+
+        Parameters
+        ----------
+        method : str, the event's name ('Page.loadEventFired', ...).
+
+        Returns
+        -------
+        dict: the event message; RuntimeError after TIMEOUT_S seconds without it.
+        """
         for i, ev in enumerate(self.events):
             if ev.get("method") == method:
                 return self.events.pop(i)
@@ -104,6 +133,13 @@ class DevTools:
             self.events.append(ev)
 
     def open(self, url: str, width: int = 1280, height: int = 1800) -> None:
+        """Open `url` in a new page of the given window size and wait until it has loaded.
+
+        Parameters
+        ----------
+        url : str, the page (a file:// URL for a report).
+        width, height : int, optional, the window in CSS pixels (default 1280 x 1800).
+        """
         target = self.send("Target.createTarget", {"url": "about:blank"}, session=False)
         attached = self.send("Target.attachToTarget",
                              {"targetId": target["targetId"], "flatten": True}, session=False)
@@ -118,12 +154,29 @@ class DevTools:
         self.wait_for("Page.loadEventFired")
 
     def evaluate(self, expression: str) -> Any:
+        """Evaluate a JavaScript expression in the open page.
+
+        Parameters
+        ----------
+        expression : str, the JavaScript.
+
+        Returns
+        -------
+        Any: its value, as JSON gives it back; RuntimeError when the expression throws.
+        """
         result = self.send("Runtime.evaluate", {"expression": expression, "returnByValue": True})
         if "exceptionDetails" in result:
             raise RuntimeError(f"evaluation failed: {result['exceptionDetails']}")
         return result["result"].get("value")
 
     def screenshot(self, path: Path, clip: dict | None = None) -> None:
+        """Write a PNG of the open page (its folders made as needed).
+
+        Parameters
+        ----------
+        path : Path, the file written.
+        clip : dict, optional, the region (x, y, width, height in CSS pixels); default the viewport.
+        """
         params: dict[str, Any] = {"format": "png"}
         if clip:
             params.update(clip=dict(clip, scale=1), captureBeyondViewport=True)
@@ -132,10 +185,17 @@ class DevTools:
         path.write_bytes(base64.b64decode(data))
 
     def requests(self) -> list[str]:
+        """The network requests the page made since it was opened.
+
+        Returns
+        -------
+        list of str: the requested URLs, in order.
+        """
         return [ev["params"]["request"]["url"] for ev in self.events
                 if ev.get("method") == "Network.requestWillBeSent"]
 
     def close(self) -> None:
+        """Close the browser (killed when it does not exit within 10 s) and the pipes."""
         try:
             self.send("Browser.close", session=False)
         except Exception:

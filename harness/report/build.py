@@ -46,7 +46,12 @@ __all__ = ["build_report", "write_report", "rerender_report", "report_experiment
 def report_experiments() -> list[str]:
     """The experiments a report runs, in the order of its sections: the one experiment list
     (`harness.experiments.EXPERIMENT_NAMES`), then those other distributions registered through
-    the `harness.experiments` entry points."""
+    the `harness.experiments` entry points.
+
+    Returns
+    -------
+    list of str: experiment names.
+    """
     from harness.experiments.base import ENTRY_POINT_EXPERIMENTS
 
     return [*REPORT_EXPERIMENTS, *ENTRY_POINT_EXPERIMENTS]
@@ -55,7 +60,16 @@ TEMPLATE = "report.html.j2"
 
 
 def reports_root(output: str | os.PathLike | None = None) -> Path:
-    """Where reports are written: `output`, `HARNESS_REPORTS_DIR`, or `<project>/reports`."""
+    """Where reports are written: `output`, `HARNESS_REPORTS_DIR`, or `<project>/reports`.
+
+    Parameters
+    ----------
+    output : path, optional, the directory asked for.
+
+    Returns
+    -------
+    Path: not created here; `InputError` for an empty path, a NUL byte or an existing file.
+    """
     output = default_directory(output, "HARNESS_REPORTS_DIR", "reports")
     if not isinstance(output, str | os.PathLike) or not os.fspath(output) or "\x00" in os.fspath(output):
         raise InputError(f"`output` must be a directory path, got {output!r}")
@@ -74,7 +88,16 @@ def _say(progress: Progress, message: str) -> None:
 
 def render_html(context: dict[str, Any]) -> str:
     """Render the report template with autoescaping on (every text is escaped; only figure SVG,
-    checked by `figures.check_svg`, is inserted as markup)."""
+    checked by `figures.check_svg`, is inserted as markup).
+
+    Parameters
+    ----------
+    context : dict, the template's variables (all must be present: undefined ones raise).
+
+    Returns
+    -------
+    str: the HTML page.
+    """
     import jinja2
 
     env = jinja2.Environment(
@@ -172,16 +195,26 @@ def build_report(
     progress: Progress | bool | str | None = None,
     compare: str | os.PathLike | None = None,
 ) -> Path:
-    """Run every report experiment over `steppers` x `problems` (None: the whole registry), save
-    the run, and write the HTML report; return the path of its index.html.
+    """Run every report experiment over `steppers` x `problems`, save the run, and write the
+    HTML report. Failed cells do not stop the report: they are listed in it.
 
-    `quick` uses every experiment's CI-sized settings (every section is still there); `jobs`,
-    `scheduler`, `fresh`, `plugins`, `cell_timeout` are as in `harness.runner.run_experiment`;
-    `output` is the reports directory; `cache_dir` the cell cache, `results_root` where runs are
-    saved; `progress` as in the runner (None: a bar on a terminal, plain lines otherwise);
-    `compare` the earlier run the "what changed" section compares with (default: the newest
-    older run in the results directory). Failed cells do not stop the report: they are listed
-    in it."""
+    Parameters
+    ----------
+    steppers, problems : sequence of str, optional, registered names (None: the whole registry).
+    quick : bool, optional, every experiment's CI-sized settings (every section is still there).
+    jobs, scheduler, fresh, plugins, cell_timeout : as in `harness.runner.run_experiment`.
+    output : path, optional, the reports directory (see `reports_root`).
+    cache_dir : path, optional, the cell cache.
+    results_root : path, optional, where runs are saved.
+    progress : Progress, bool or str, optional, as in the runner (None: a bar on a terminal,
+        plain lines otherwise).
+    compare : str or path, optional, the earlier run "what changed" compares with (default the
+        newest older run in the results directory).
+
+    Returns
+    -------
+    Path: the report's index.html.
+    """
     started = time.perf_counter()
     quick = _check_flag("quick", quick)
     fresh = _check_flag("fresh", fresh)
@@ -244,7 +277,19 @@ def rerender_report(run: str | os.PathLike | None, *, output: str | os.PathLike 
                     compare: str | os.PathLike | None = None, grid_options: Sequence[str] = ()) -> Path:
     """`harness report --from RUN`: write the report of a saved run again (id, path, 'latest'),
     nothing measured; the steppers, problems and mode are the run's own, so `grid_options` (the
-    measuring options given with it) are refused."""
+    measuring options given with it) are refused.
+
+    Parameters
+    ----------
+    run : str, path or None, the saved run (None: the newest).
+    output : path, optional, the reports directory.
+    compare : str or path, optional, the earlier run to compare with (resolved beside `run`).
+    grid_options : sequence of str, the measuring options given (any is an `InputError`).
+
+    Returns
+    -------
+    Path: the report's index.html.
+    """
     if grid_options:
         raise InputError(f"`--from` re-renders a saved run as it was measured; it takes no "
                          f"{', '.join(grid_options)}")
@@ -263,7 +308,17 @@ def run_view(stored: Any, *, need_steppers: bool = True) -> Any:
     configuration. Plugin files its meta.json names are never imported (opening someone else's
     results directory must not run their code): a plugin's steppers are shown when this process
     loaded it (the run it just measured, or `harness report --from RUN --plugin FILE`); with
-    `need_steppers`, a run whose plugin steppers are not loaded is an `InputError` saying so."""
+    `need_steppers`, a run whose plugin steppers are not loaded is an `InputError` saying so.
+
+    Parameters
+    ----------
+    stored : StoredRun, the loaded run.
+    need_steppers : bool, optional, keyword-only (default True).
+
+    Returns
+    -------
+    RunView
+    """
     from harness import registry
     from harness.kit import Palette, RunView
 
@@ -302,7 +357,22 @@ def write_report(
     None for the newest) into the reports directory; return its index.html path. The steppers,
     problems, plugins and mode are the run's own (from its meta.json). `compare` names the
     earlier run for "what changed"; without it, with `compare_default`, the newest older run
-    in the same results directory."""
+    in the same results directory.
+
+    Parameters
+    ----------
+    run : StoredRun, str, path or None, the run.
+    output : path, optional, the reports directory.
+    progress : Progress, optional, where build phases are reported.
+    build_s : dict of str to float, optional, seconds already spent (measuring), shown in
+        Provenance.
+    compare : str or path, optional, the earlier run.
+    compare_default : bool, optional, fall back to the newest older run (default True).
+
+    Returns
+    -------
+    Path: the report's index.html.
+    """
     from harness import __version__
     from harness.report.compare import VERDICTS_FILE, load_previous
     from harness.report.sections import build_sections

@@ -44,7 +44,18 @@ MAX_FAILURES_LISTED = 12
 def verdicts_section(view: RunView, verdicts: pd.DataFrame, experiments: list[str]
                      ) -> tuple[Section, dict[str, str]]:
     """How many claims were checked and failed, the failing ones in a sentence each (linked to
-    their rows), then the scoreboard: one row per stepper, every number linked to its row."""
+    their rows), then the scoreboard: one row per stepper, every number linked to its row.
+
+    Parameters
+    ----------
+    view : RunView, the run.
+    verdicts : DataFrame, one row per judged cell (experiment, judged, passed, ...).
+    experiments : list of str, the experiments of the report, in section order.
+
+    Returns
+    -------
+    (Section, dict of str to str): the section, and each stepper's scoreboard status.
+    """
     sec = Section("verdicts", 1, "Verdicts")
     judged = verdicts[verdicts["judged"].astype(bool)] if len(verdicts) else verdicts
     n, bad = len(judged), verdicts[~verdicts["passed"]] if len(verdicts) else verdicts
@@ -124,7 +135,18 @@ def verdicts_section(view: RunView, verdicts: pd.DataFrame, experiments: list[st
 # -- what changed -------------------------------------------------------------------------------------
 def changes_section(view: RunView, verdicts: pd.DataFrame, previous: Any) -> Section:
     """Verdicts that changed and measured figures that moved since `previous` (a
-    `harness.report.compare.Previous`, or None)."""
+    `harness.report.compare.Previous`, or None).
+
+    Parameters
+    ----------
+    view : RunView, this run.
+    verdicts : DataFrame, this run's verdicts.
+    previous : Previous or None, the earlier run.
+
+    Returns
+    -------
+    Section
+    """
     from harness.report.compare import compare_runs
 
     sec = Section("changes", 2, "What changed since the last run")
@@ -165,7 +187,16 @@ def changes_section(view: RunView, verdicts: pd.DataFrame, previous: Any) -> Sec
 
 def ground_truth(view: RunView) -> Section:
     """Per problem: the reference used by the convergence cells (the same call, so the disk cache
-    answers), its precision and certified error, and its difference from the exact solution."""
+    answers), its precision and certified error, and its difference from the exact solution.
+
+    Parameters
+    ----------
+    view : RunView, the run (its convergence configuration and summary).
+
+    Returns
+    -------
+    Section
+    """
     from harness.ground_truth import reference
     from harness.registry import get_problem
 
@@ -226,6 +257,16 @@ def ground_truth(view: RunView) -> Section:
 
 # -- 8 claims -------------------------------------------------------------------------------------
 def claims(view: RunView) -> Section:
+    """The course material's claims, each with its source and what this run measured.
+
+    Parameters
+    ----------
+    view : RunView, the run (all summaries are passed to `check_claims`).
+
+    Returns
+    -------
+    Section
+    """
     sec = Section("claims", 0, "Claims from the course material, checked")
     sec.intro = ("Statements from the four course texts the project grew from "
                  "(../shared/course-material/), paraphrased, each with its source and what this "
@@ -254,7 +295,17 @@ def claims(view: RunView) -> Section:
 # -- how much to trust the gate ------------------------------------------------------------------
 def gate_trust(view: RunView, results_dir: Any) -> Section:
     """The gate's own error rates from the newest `harness population` run saved beside this
-    run: per family of generated methods, false alarms on correct ones and misses on mutants."""
+    run: per family of generated methods, false alarms on correct ones and misses on mutants.
+
+    Parameters
+    ----------
+    view : RunView, this run.
+    results_dir : path, the results directory searched for population runs.
+
+    Returns
+    -------
+    Section: a note saying so when no population run is saved.
+    """
     import json
     from pathlib import Path
 
@@ -294,6 +345,21 @@ def gate_trust(view: RunView, results_dir: Any) -> Section:
 # -- 9 provenance ---------------------------------------------------------------------------------
 def provenance(view: RunView, *, run_id: str, results_path: str, timer: SectionTimer,
                build_s: Mapping[str, float]) -> Section:
+    """Where the run comes from and how it went: run id, commit, machine, versions, timings,
+    the failed cells.
+
+    Parameters
+    ----------
+    view : RunView, the run (its meta.json).
+    run_id : str, the run's id.
+    results_path : str, the run's directory, as shown.
+    timer : SectionTimer, the time each section took to build.
+    build_s : mapping of str to float, other build phases' seconds.
+
+    Returns
+    -------
+    Section
+    """
     sec = Section("provenance", 0, "Provenance")
     meta = view.meta
     prov = meta.get("provenance", {})
@@ -350,6 +416,12 @@ def provenance(view: RunView, *, run_id: str, results_path: str, timer: SectionT
 
 # -- 10 performance history -----------------------------------------------------------------------
 def performance_history() -> Section:
+    """Speed and tracked accuracy over commits, from asv's result files.
+
+    Returns
+    -------
+    Section: a note instead when there are no asv results or they cannot be read.
+    """
     sec = Section("performance-history", 0, "Performance history")
     sec.intro = ("Speed and tracked accuracy over commits, from asv's result files "
                  "(drawn here because asv's own dashboard loads its scripts from the internet).")
