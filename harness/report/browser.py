@@ -94,8 +94,8 @@ class DevTools:
 
         Returns
         -------
-        dict: the reply's result; RuntimeError when the browser answers with an error, or no reply
-            comes within TIMEOUT_S seconds.
+        dict: the reply's result; RuntimeError when the browser answers with an error or closes
+            the pipe, TimeoutError when no reply comes within TIMEOUT_S seconds.
         """
         self._id += 1
         msg: dict[str, Any] = {"id": self._id, "method": method, "params": params or {}}
@@ -120,7 +120,7 @@ class DevTools:
 
         Returns
         -------
-        dict: the event message; RuntimeError after TIMEOUT_S seconds without it.
+        dict: the event message; TimeoutError after TIMEOUT_S seconds without it.
         """
         for i, ev in enumerate(self.events):
             if ev.get("method") == method:

@@ -345,8 +345,8 @@ def gate_trust(view: RunView, results_dir: Any) -> Section:
 # -- 9 provenance ---------------------------------------------------------------------------------
 def provenance(view: RunView, *, run_id: str, results_path: str, timer: SectionTimer,
                build_s: Mapping[str, float]) -> Section:
-    """Where the run comes from and how it went: run id, commit, machine, versions, timings,
-    the failed cells.
+    """Where the run comes from and how it went: run id, commit, machine, the time per
+    experiment and per build step, the failed cells, the full configuration.
 
     Parameters
     ----------
