@@ -213,7 +213,7 @@ def reversible_reason(problem) -> str | None:
 
     Parameters
     ----------
-    problem : Problem
+    problem : Problem, read for its force's form and its `conservative` flag.
 
     Returns
     -------
@@ -299,7 +299,7 @@ def hamiltonian_reason(problem) -> str | None:
 
     Parameters
     ----------
-    problem : Problem
+    problem : Problem, read for its force's form and Jacobian.
 
     Returns
     -------
