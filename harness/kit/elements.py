@@ -106,8 +106,7 @@ class Section:
 
         Parameters
         ----------
-        text : str, the paragraph (HTML-escaped when written).
-        cls : str, optional, a CSS class for the paragraph (default none).
+        text, cls : str, the paragraph (HTML-escaped when written) and an optional CSS class.
         """
         self.blocks.append(Block("note", text=text, cls=cls))
 
@@ -146,8 +145,7 @@ class Section:
 
         Parameters
         ----------
-        summary : str, the line shown while folded.
-        text : str, the content shown when opened.
+        summary, text : str, the line shown while folded, and the content shown when opened.
         """
         self.blocks.append(Block("details", summary=summary, text=text))
 
@@ -257,8 +255,7 @@ def text_cell(x: Any, digits: int = 3, cls: str = "", href: str = "") -> TextCel
     ----------
     x : Any, the value; a number gets the CSS class 'num' unless `cls` is given.
     digits : int, optional, significant digits of a number (default 3).
-    cls : str, optional, the cell's CSS class.
-    href : str, optional, a link target for the cell.
+    cls, href : str, optional, the cell's CSS class and link target.
 
     Returns
     -------
@@ -389,10 +386,9 @@ def df_table(df: pd.DataFrame, columns: Sequence[tuple[str, str]], caption: str,
     key : sequence of str, optional, the columns naming a row (default stepper, problem).
     status : str or None, optional, the pass/fail column (None: no status column).
     digits : int, optional, significant digits of numbers (default 3).
-    sort_failing : bool, optional, failing rows first (default True).
-    folded : bool, optional, long reasons become numbered notes (default True).
-    cls, id : str, optional, the table's CSS class and HTML id (default id from `experiment`
-        and `caption`).
+    sort_failing, folded : bool, optional, failing rows first; reasons as numbered notes (both
+        default True).
+    cls, id : str, optional, the table's CSS class and HTML id (default: hash of experiment, caption).
     links : mapping of str to str, optional, shown column -> column of `df` with its href.
 
     Returns

@@ -82,6 +82,11 @@ from harness.experiments.common import (
     problem_cells,
     summary_per_cell,
 )
+from harness.experiments.energy.judge import (
+    classify_drift,
+    conserves_quadratic_invariants,
+    rounding_growth,
+)
 from harness.experiments.energy.section import SECTION
 from harness.invariant_checks import check_invariants_along_flow
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
@@ -102,82 +107,6 @@ SUMMARY_COLUMNS = [
     "angular_momentum_rounding", "angular_momentum_expected", "angular_momentum_conserved",
     "verdict", "passed", "ensemble_size", "wall_s", "message",
 ]
-
-
-def conserves_quadratic_invariants(stepper: Stepper) -> bool:
-    """True for methods whose structure conserves quadratic first integrals such as the angular
-    momentum of a central force: symplectic Runge-Kutta methods (b_i a_ij + b_j a_ji = b_i b_j,
-    HLW IV.2.1), drift/kick splittings (each drift and kick keeps q x v when a is parallel to q,
-    HLW IV.2.2) and Stormer's rule (velocity Verlet in two-step form, HLW I.1.4)."""
-    from harness.facts import method_facts
-
-    return bool(method_facts(stepper).symplectic)
-
-
-# -- classification -------------------------------------------------------------------------------
-def classify_drift(steps: np.ndarray, t: np.ndarray, error: np.ndarray, *, fit_start: int,
-                   checkpoints_per_decade: int = 20, min_decades: float = 1.0,
-                   period_steps: float = 0.0) -> dict[str, Any]:
-    """Classify the envelope of a relative error sampled at step indices `steps` (times `t`);
-    `period_steps` (steps per natural period, 0: unknown) lets an error of ENERGY_BLOWUP_ERROR
-    or more that was as large in the first period be classified by growth (module item 3).
-
-    Returns drift_class, drift_exponent (log-log slope of the running maximum over the fit
-    window), drift_slope (slope of the running maximum against t, per unit time),
-    secular_growth (rise of the running maximum across the fit window), max_error and the
-    checkpoints (step, running max) used."""
-    steps = np.asarray(steps, dtype=float)
-    t = np.asarray(t, dtype=float)
-    error = np.asarray(error, dtype=float)
-    out: dict[str, Any] = {
-        "drift_class": "unstable", "drift_exponent": float("nan"), "drift_slope": float("nan"),
-        "secular_growth": float("nan"), "max_error": float("nan"), "fit_start": int(fit_start),
-    }
-    finite = np.isfinite(error)
-    if not np.all(finite):
-        out["max_error"] = float("inf")
-        return out
-    out["max_error"] = float(np.max(error)) if error.size else float("nan")
-    first = error[(steps >= 1) & (steps <= math.ceil(max(period_steps, 1.0)))] if period_steps > 0 else []
-    early = float(np.max(first)) if len(first) else 0.0  # a bounded oscillation's size (docstring)
-    late = error[steps >= fit_start]  # a bounded oscillation swings back (docstring)
-    swings = late.size > 0 and np.min(late) <= tol.ENERGY_RETURN_FRACTION * np.max(late)
-    if error.size == 0 or (out["max_error"] >= tol.ENERGY_BLOWUP_ERROR and not (
-            early > 0 and out["max_error"] <= tol.ENERGY_BOUNDED_RISE * early and swings)):
-        return out
-    running = np.maximum.accumulate(np.maximum(error, tol.ENERGY_ERROR_FLOOR))
-    n_end = float(steps[-1])
-    start = float(min(max(fit_start, 1), n_end / 10.0**min_decades))
-    decades = math.log10(n_end / start)
-    points = max(5, int(round(decades * checkpoints_per_decade)) + 1)
-    marks = np.unique(np.geomspace(start, n_end, points))
-    idx = np.searchsorted(steps, marks, side="right") - 1
-    idx = np.unique(idx[idx >= 0])
-    if idx.size < 3:
-        out["drift_class"] = "bounded"
-        return out
-    from scipy import stats
-
-    x, m = steps[idx], running[idx]
-    exponent = float(stats.theilslopes(np.log(m), np.log(x))[0])
-    slope = float(stats.theilslopes(m, t[idx])[0])
-    out.update(drift_exponent=exponent, drift_slope=slope,
-               secular_growth=float(m[-1] - m[0]), fit_start=int(x[0]))
-    if exponent > tol.DRIFT_UNSTABLE_EXPONENT:
-        out["drift_class"] = "unstable"
-    elif exponent >= tol.DRIFT_LINEAR_EXPONENT:
-        out["drift_class"] = "linear"
-    elif exponent >= tol.DRIFT_SQRT_EXPONENT:
-        out["drift_class"] = "sqrt"
-    else:
-        out["drift_class"] = "bounded"
-    return out
-
-
-def rounding_growth(n_steps: float) -> float:
-    """What rounding alone can add to a relative invariant error over n steps: a random walk of
-    ENERGY_ROUNDING_ULPS ulps per step (Brouwer's law), ENERGY_ROUNDING_ULPS * sqrt(n) * eps."""
-    return tol.ENERGY_ROUNDING_ULPS * math.sqrt(max(n_steps, 1.0)) * tol.EPS
 
 
 # -- the experiment -------------------------------------------------------------------------------
@@ -210,6 +139,16 @@ class EnergyExperiment(Experiment):
     }
 
     def cells(self, steppers, problems, config):
+        """The pairs whose problem declares an invariant, the settings checked first.
+
+        Parameters
+        ----------
+        steppers, problems, config : as in `Experiment.cells`.
+
+        Returns
+        -------
+        (list of Cell, list of Skip)
+        """
         check_config(config, counts=("steps", "implicit_steps", "adaptive_outputs", "ensemble",
                                      "adaptive_ensemble", "samples_per_decade", "uniform_samples"),
                      positives=("fit_decades", "adaptive_periods"),
@@ -217,6 +156,17 @@ class EnergyExperiment(Experiment):
         return problem_cells(self.name, steppers, problems, invariant_reason)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The invariant errors of one long run (module items 1-2); the problem's invariants are
+        first checked along its exact flow.
+
+        Parameters
+        ----------
+        cell, config : as in `Experiment.run_cell`.
+
+        Returns
+        -------
+        DataFrame: ROW_COLUMNS, one row per saved step and quantity.
+        """
         from harness.registry import get_problem, get_stepper
 
         stepper = get_stepper(cell.stepper)
@@ -225,6 +175,16 @@ class EnergyExperiment(Experiment):
         return _run(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """Drift classes and verdicts, one row per cell (module items 3-4).
+
+        Parameters
+        ----------
+        rows, config : as in `Experiment.summarize`.
+
+        Returns
+        -------
+        DataFrame: SUMMARY_COLUMNS.
+        """
         return summary_per_cell(rows, SUMMARY_COLUMNS, _summarize_cell, config)
 
 
@@ -246,7 +206,18 @@ def _plan(stepper: Stepper, problem, config: Mapping[str, Any]) -> tuple[float, 
 
 
 def save_grid(n: int, per_decade: int, uniform: int) -> np.ndarray:
-    """Step indices 0..n: log-spaced (`per_decade` per decade) merged with `uniform` even ones."""
+    """Step indices 0..n: log-spaced (`per_decade` per decade) merged with `uniform` even ones.
+
+    Parameters
+    ----------
+    n : int, the last step index.
+    per_decade : int, log-spaced indices per decade.
+    uniform : int, evenly spaced intervals (at most n).
+
+    Returns
+    -------
+    ndarray of int64: sorted and unique, 0 and n included.
+    """
     logs = np.round(np.logspace(0.0, math.log10(n), max(2, int(per_decade * math.log10(max(n, 10))))))
     even = np.round(np.linspace(0, n, min(uniform, n) + 1))
     return np.unique(np.concatenate([[0, n], logs, even]).astype(np.int64))
