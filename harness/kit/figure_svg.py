@@ -52,7 +52,12 @@ class Figure:
     css: str = field(default="", compare=False, repr=False)
 
     def standalone(self) -> str:
-        """The SVG with its style rules inside (for use outside the report page)."""
+        """The SVG with its style rules inside (for use outside the report page).
+
+        Returns
+        -------
+        str: an SVG document with an `xmlns` and a <style> element (when the figure has rules).
+        """
         svg = self.svg if "xmlns=" in self.svg.split(">", 1)[0] else \
             self.svg.replace("<svg", '<svg xmlns="http://www.w3.org/2000/svg"', 1)
         if not self.css:
@@ -63,7 +68,16 @@ class Figure:
 
 def page_css(figures: Iterable[Figure]) -> str:
     """The style rules of `figures`, each once: classes are named by a hash of their rule, so
-    the same line style in two figures is one rule of the page."""
+    the same line style in two figures is one rule of the page.
+
+    Parameters
+    ----------
+    figures : iterable of Figure, the page's figures.
+
+    Returns
+    -------
+    str: the rules, in first-seen order; `UnsafeFigureError` when they hold a '<'.
+    """
     rules: dict[str, None] = {}
     for fig in figures:
         for rule in re.findall(r"[^{}]+\{[^{}]*\}", fig.css):
@@ -93,7 +107,17 @@ def _short_name(i: int) -> str:
 def short_classes(svgs: Sequence[str], css: str) -> tuple[list[str], str]:
     """The page's figures and their style rules with each hashed class name (`k` + 7 hex
     digits, thousands of uses) replaced by a short one, the most used shortest: `z` and one to
-    three letters or digits (no class of the page's own stylesheet starts with `z`)."""
+    three letters or digits (no class of the page's own stylesheet starts with `z`).
+
+    Parameters
+    ----------
+    svgs : sequence of str, the figures' SVG text.
+    css : str, the page's figure rules (`page_css`).
+
+    Returns
+    -------
+    (list of str, str): the SVG texts and the rules, renamed alike.
+    """
     counts: dict[str, int] = {}
     for text in svgs:
         for m in _CLASS.finditer(text):
@@ -114,7 +138,16 @@ _FIGURE_ID = re.compile(r'(id="|href="#|url\(#)(f[0-9a-f]{5}i\d+)(?=[")])')
 def short_ids(html: str) -> str:
     """The page with every figure's ids (salted per figure so they are unique on the page:
     `f` + 5 hex digits + `i` + a number, repeated by every marker and clip reference) replaced
-    by short page-wide ones (`y` + letters or digits), none taken by another id of the page."""
+    by short page-wide ones (`y` + letters or digits), none taken by another id of the page.
+
+    Parameters
+    ----------
+    html : str, the whole page.
+
+    Returns
+    -------
+    str: the page, ids and their references renamed.
+    """
     found = list(dict.fromkeys(m.group(2) for m in _FIGURE_ID.finditer(html) if m.group(1) == 'id="'))
     taken = set(re.findall(r'\bid="([^"]+)"', html)) - set(found)
     names: dict[str, str] = {}
@@ -134,7 +167,16 @@ def _local(tag: str) -> str:
 
 def check_svg(svg: str) -> str:
     """Return `svg` when it is a plain drawing: well-formed, only drawing elements, no script,
-    no event attribute, no link outside the figure. Raise `UnsafeFigureError` otherwise."""
+    no event attribute, no link outside the figure. Raise `UnsafeFigureError` otherwise.
+
+    Parameters
+    ----------
+    svg : str, one figure's SVG text.
+
+    Returns
+    -------
+    str: `svg` unchanged.
+    """
     try:
         root = ET.fromstring(svg)
     except ET.ParseError as exc:
@@ -161,7 +203,20 @@ def check_svg(svg: str) -> str:
 
 def to_svg(fig: Any, slug: str, alt: str, data: pd.DataFrame | None = None) -> Figure:
     """Render a matplotlib figure (made without pyplot, so no global state) to checked,
-    deterministic inline SVG."""
+    deterministic inline SVG.
+
+    Parameters
+    ----------
+    fig : matplotlib Figure; laid out by fixed margins when it has `harness_layout` set, else
+        cropped to a tight bounding box.
+    slug : str, the figure's name, unique in the report (salts its ids and class names).
+    alt : str, the text read in place of the picture.
+    data : DataFrame, optional, the tidy table of what it draws (offered as a download).
+
+    Returns
+    -------
+    Figure: checked by `check_svg`; `UnsafeFigureError` when matplotlib wrote no drawing.
+    """
     buf = io.StringIO()
     tight = not getattr(fig, "harness_layout", False)
     with _rc(slug):

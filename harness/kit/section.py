@@ -99,14 +99,30 @@ class SectionSpec:
 
 def generic_spec(experiment: str, description: str = "") -> SectionSpec:
     """The section of an experiment that names none: its summary as one table, introduced by
-    the experiment's own description."""
+    the experiment's own description.
+
+    Parameters
+    ----------
+    experiment : str, the experiment's name (also the section id; its title, capitalised).
+    description : str, optional, the experiment's description (its first sentence leads).
+
+    Returns
+    -------
+    SectionSpec: drawn by `generic_section`.
+    """
     intro = (f"{description.rstrip('.') or 'The ' + experiment + ' experiment'}. One row per cell "
              "of the experiment; the first column is its verdict against the stepper's claim.")
     return SectionSpec(experiment, experiment.replace("-", " ").capitalize(), intro, generic_section)
 
 
 def generic_section(view: RunView, sec: Section) -> None:
-    """The fallback: the experiment's summary as one folded table, every column."""
+    """The fallback: the experiment's summary as one folded table, every column.
+
+    Parameters
+    ----------
+    view : RunView, the run.
+    sec : Section, the section to fill (its id is the experiment's name).
+    """
     name = sec.id
     summ = view.summary(name)
     key = generic_key(summ)
@@ -117,7 +133,16 @@ def generic_section(view: RunView, sec: Section) -> None:
 
 def generic_key(summ: pd.DataFrame) -> tuple[str, ...]:
     """The columns that identify a row of a summary no section describes: stepper and problem,
-    then the first of steps, kind, quantity, h, tol that makes them unique."""
+    then the first of steps, kind, quantity, h, tol that makes them unique.
+
+    Parameters
+    ----------
+    summ : DataFrame, an experiment's summary.
+
+    Returns
+    -------
+    tuple of str: column names, empty when there is no stepper or problem column.
+    """
     key = [c for c in ("stepper", "problem") if c in summ]
     for extra in ("steps", "kind", "quantity", "h", "tol"):
         if key and len(summ) and summ.duplicated(key).any() and extra in summ:
@@ -126,7 +151,18 @@ def generic_key(summ: pd.DataFrame) -> tuple[str, ...]:
 
 
 def missing(sec: Section, view: RunView, name: str) -> bool:
-    """Add a note and return True when experiment `name` has no results in this run."""
+    """Add a note and return True when experiment `name` has no results in this run.
+
+    Parameters
+    ----------
+    sec : Section, where the note goes (a note also names failed cells when some results exist).
+    view : RunView, the run.
+    name : str, the experiment.
+
+    Returns
+    -------
+    bool: True when the section has nothing to draw (not run, or no results).
+    """
     if not view.has(name):
         sec.note(f"The {name} experiment is not part of this run, so this section has no "
                  "measurements.", cls="warning")
@@ -143,7 +179,14 @@ def missing(sec: Section, view: RunView, name: str) -> bool:
 
 
 def skip_note(sec: Section, view: RunView, name: str) -> None:
-    """Fold the pairs experiment `name` did not apply to, counted by reason, into `sec`."""
+    """Fold the pairs experiment `name` did not apply to, counted by reason, into `sec`.
+
+    Parameters
+    ----------
+    sec : Section, the section written to (nothing when no pair was skipped).
+    view : RunView, the run.
+    name : str, the experiment.
+    """
     skips = view.skips(name)
     if skips:
         reasons: dict[str, int] = {}
@@ -154,7 +197,16 @@ def skip_note(sec: Section, view: RunView, name: str) -> None:
 
 
 def key_text(values: list[Any]) -> str:
-    """The identity of a judged row as JSON text: its key values, numbers as floats."""
+    """The identity of a judged row as JSON text: its key values, numbers as floats.
+
+    Parameters
+    ----------
+    values : list, the row's key (strings and integers kept; missing values null).
+
+    Returns
+    -------
+    str: a JSON array.
+    """
     return json.dumps([v if isinstance(v, str | int) else (None if is_missing(v) else float(v))
                        for v in values])
 
@@ -206,7 +258,21 @@ def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
 
 def claimed_measured(view: RunView, name: str, stepper: str, claimed: bool,
                       within: Iterable[tuple[bool, str]]) -> tuple[list[tuple[str, str]], bool]:
-    """'claimed / measured' with the measured part linked to a row that shows it."""
+    """'claimed / measured' with the measured part linked to a row that shows it.
+
+    Parameters
+    ----------
+    view : RunView, the run.
+    name : str, the experiment the measurement comes from.
+    stepper : str, the method.
+    claimed : bool, what the method claims.
+    within : iterable of (bool, str), per judged row: measured yes/no and the row's anchor.
+
+    Returns
+    -------
+    (list of (text, href), bool): the cell's parts (the measured part links to a row against the
+        claim when there is one), and whether anything was measured.
+    """
     w = list(within)
     if not w:
         return [(f"{yes_no(claimed)} / —", "")], False
