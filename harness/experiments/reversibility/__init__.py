@@ -84,7 +84,17 @@ SUMMARY_COLUMNS = [
 
 def rounding_bound_ulps(n_steps: int, amplification: float) -> float:
     """What rounding explains for a symmetric method's N-step round trip, in ulps of the state:
-    REVERSIBILITY_ULPS_PER_STEP ulps per step, carried by the flow's sensitivity A(N) >= 1."""
+    REVERSIBILITY_ULPS_PER_STEP ulps per step, carried by the flow's sensitivity A(N) >= 1.
+
+    Parameters
+    ----------
+    n_steps : int, N, the steps each way.
+    amplification : float, the flow's sensitivity A(N) (non-finite read as 1).
+
+    Returns
+    -------
+    float: ulps of the state.
+    """
     a = amplification if np.isfinite(amplification) else 1.0
     return tol.REVERSIBILITY_ULPS_PER_STEP * n_steps * max(1.0, a)
 
@@ -98,7 +108,17 @@ def one_sided_reason(stepper) -> str | None:
     measure the reconstruction (its error ~ h^(p+1)). The recurrence itself is reversible as a
     map of its k-point position history (a symmetric table, alpha_j = alpha_(k-j), beta_j =
     beta_(k-j), is its own adjoint: run with -h from the reversed history it retraces it; HNW I,
-    III.10; HLW XV.1), so the positions come back to rounding."""
+    III.10; HLW XV.1), so the positions come back to rounding.
+
+    Parameters
+    ----------
+    stepper : Stepper
+
+    Returns
+    -------
+    str or None: the reason, for a symmetric second-order multistep stepper with a starter; None
+        for any other.
+    """
     if (getattr(stepper, "history_length", 1) > 1 and getattr(stepper, "starter", None) is not None
             and stepper.info.symmetric and isinstance(stepper.coefficients, SecondOrderMultistep)):
         return (f"positions only: stepper {stepper.info.name!r} reconstructs its velocities from past "
@@ -136,6 +156,17 @@ class ReversibilityExperiment(Experiment):
     }
 
     def cells(self, steppers, problems, config):
+        """One cell per reversible pair and step count N; a one-sided stepper that starts more
+        positions than its steps is skipped, saying why.
+
+        Parameters
+        ----------
+        steppers, problems, config : as in `Experiment.cells`.
+
+        Returns
+        -------
+        (list of Cell, list of Skip)
+        """
         from harness.registry import get_problem, get_stepper
 
         check_config(config, counts=("ensemble", "adaptive_ensemble"),
@@ -159,6 +190,17 @@ class ReversibilityExperiment(Experiment):
         return cells, skips
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """One round trip of N steps each way (module item 1).
+
+        Parameters
+        ----------
+        cell, config : as in `Experiment.run_cell` (the cell's `steps` parameter is N).
+
+        Returns
+        -------
+        DataFrame: ROW_COLUMNS, one row (return error, relative and in ulps, the flow's
+            amplification, the rounding bound).
+        """
         from harness.registry import get_problem, get_stepper
 
         stepper = get_stepper(cell.stepper)
@@ -166,6 +208,17 @@ class ReversibilityExperiment(Experiment):
         return _round_trip(stepper, problem, int(cell.param("steps")), config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """One row per (stepper, problem, N) with the growth exponent over N and the verdict
+        on the symmetry claim.
+
+        Parameters
+        ----------
+        rows, config : as in `Experiment.summarize`.
+
+        Returns
+        -------
+        DataFrame: SUMMARY_COLUMNS.
+        """
         from harness.registry import get_stepper
 
         if rows.empty:

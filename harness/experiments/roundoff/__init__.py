@@ -59,7 +59,17 @@ SUMMARY_COLUMNS = [
 
 
 def step_sizes(h_max: float, h_min: float, points_per_decade: int) -> np.ndarray:
-    """Geometric step sizes from `h_max` down to `h_min`, `points_per_decade` per decade."""
+    """Geometric step sizes from `h_max` down to `h_min`, `points_per_decade` per decade.
+
+    Parameters
+    ----------
+    h_max, h_min : float, the largest and smallest step (positive, h_min < h_max).
+    points_per_decade : int, at least 1.
+
+    Returns
+    -------
+    ndarray of float: decreasing; `InputError` for an argument that breaks its rule.
+    """
     for name, v in (("h_max", h_max), ("h_min", h_min)):
         if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
             raise InputError(f"`{name}` must be a positive finite number, got {v!r}")
@@ -94,7 +104,17 @@ class RoundoffExperiment(Experiment):
         self, steppers: Sequence[str], problems: Sequence[str], config: Mapping[str, Any]
     ) -> tuple[list[Cell], list[Skip]]:
         """Cells for the configured steppers x problems among those selected; one `Skip` per
-        other selected stepper or problem, saying why."""
+        other selected stepper or problem, saying why.
+
+        Parameters
+        ----------
+        steppers, problems : sequence of str, the selection.
+        config : mapping, with the `steppers` and `problems` the experiment compares.
+
+        Returns
+        -------
+        (list of Cell, list of Skip)
+        """
         from harness.errors import IncompatibleError
         from harness.registry import get_problem, get_stepper
         from harness.stepper import check_compatible
@@ -134,6 +154,16 @@ class RoundoffExperiment(Experiment):
         return cells, skips
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The error at the fixed step count for each step size, against the reference.
+
+        Parameters
+        ----------
+        cell, config : as in `Experiment.run_cell`; `n_steps` < 2 is an `InputError`.
+
+        Returns
+        -------
+        DataFrame: one row per step size.
+        """
         from harness.ground_truth import reference
         from harness.registry import get_problem, get_stepper
 
@@ -179,6 +209,17 @@ class RoundoffExperiment(Experiment):
         return rows[ROW_COLUMNS]
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The roundoff floor per cell (the smallest error and its step) and whether the smallest
+        step is rounding-limited; verdict 'measured', or 'failed' when no error is finite.
+
+        Parameters
+        ----------
+        rows, config : as in `Experiment.summarize`.
+
+        Returns
+        -------
+        DataFrame: SUMMARY_COLUMNS.
+        """
         if rows.empty:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         out = []

@@ -42,7 +42,16 @@ SUMMARY_COLUMNS = ["stepper", "problem", "implementation", "h", "t_end", "steps"
 
 
 def nbody_reason(problem) -> str | None:
-    """Why `problem` is not compared here (None: it is a gravitational N-body problem)."""
+    """Why `problem` is not compared here (None: it is a gravitational N-body problem).
+
+    Parameters
+    ----------
+    problem : Problem, read for its `structure`.
+
+    Returns
+    -------
+    str or None
+    """
     if isinstance(getattr(problem, "structure", None), NBody):
         return None
     return "not a gravitational N-body problem (no `structure=NBody(...)`)"
@@ -57,9 +66,29 @@ class SideBySideExperiment(Experiment):
     quick_config: Mapping[str, Any] = {}
 
     def cells(self, steppers, problems, config):
+        """One cell per stepper on each gravitational N-body problem.
+
+        Parameters
+        ----------
+        steppers, problems, config : as in `Experiment.cells` (no setting is read).
+
+        Returns
+        -------
+        (list of Cell, list of Skip)
+        """
         return problem_cells(self.name, steppers, problems, nbody_reason)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """One work-precision point: the relative error at T, the evaluations and the wall time.
+
+        Parameters
+        ----------
+        cell, config : as in `Experiment.run_cell`.
+
+        Returns
+        -------
+        DataFrame: one row.
+        """
         from harness.ground_truth import reference
         from harness.registry import get_problem, get_stepper
 
@@ -99,6 +128,16 @@ class SideBySideExperiment(Experiment):
         return pd.DataFrame([rec], columns=SUMMARY_COLUMNS)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The rows as they are, in SUMMARY_COLUMNS (nothing is judged).
+
+        Parameters
+        ----------
+        rows, config : as in `Experiment.summarize`.
+
+        Returns
+        -------
+        DataFrame
+        """
         if rows.empty:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         return rows.reindex(columns=SUMMARY_COLUMNS).reset_index(drop=True)

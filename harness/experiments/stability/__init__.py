@@ -186,7 +186,18 @@ class StabilityExperiment(Experiment):
     def cells(
         self, steppers: Sequence[str], problems: Sequence[str], config: Mapping[str, Any]
     ) -> tuple[list[Cell], list[Skip]]:
-        """One cell per stepper; `problems` is ignored (the test equations are fixed)."""
+        """One cell per stepper; `problems` is ignored (the test equations are fixed).
+
+        Parameters
+        ----------
+        steppers : sequence of str, the methods.
+        problems : sequence of str, not used.
+        config : mapping, the settings.
+
+        Returns
+        -------
+        (list of Cell, list of Skip)
+        """
         from harness.registry import get_stepper
         from harness.registry import problems as problem_registry
 
@@ -216,7 +227,17 @@ class StabilityExperiment(Experiment):
         return cells, skips
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
-        """Probe one stepper (first-order or Newtonian, by its form) and compare with its formula."""
+        """Probe one stepper (first-order or Newtonian, by its form) and compare with its formula.
+
+        Parameters
+        ----------
+        cell : Cell
+        config : mapping, checked here (over the defaults).
+
+        Returns
+        -------
+        DataFrame: the probed grid's rows and one row of kind 'summary'.
+        """
         from harness.registry import get_problem, get_stepper
 
         config = _check_config({**self.default_config, **dict(config)})
@@ -234,7 +255,17 @@ class StabilityExperiment(Experiment):
         return pd.concat([grid, pd.DataFrame([summary])], ignore_index=True)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
-        """One summary record per cell, with its verdict."""
+        """One summary record per cell, with its verdict.
+
+        Parameters
+        ----------
+        rows : DataFrame, all cells' rows (only kind 'summary' is kept).
+        config : mapping, not used.
+
+        Returns
+        -------
+        DataFrame: SUMMARY_COLUMNS.
+        """
         if rows.empty or "kind" not in rows:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         out = rows[rows["kind"] == "summary"].reset_index(drop=True)

@@ -65,13 +65,31 @@ FIT_MIN_STEPS = 1000
 
 def is_step_controlled(stepper) -> bool:
     """A stepper whose h is a control parameter: its clock is its own (`uniform_time` False)
-    and its record wraps a splitting scheme."""
+    and its record wraps a splitting scheme.
+
+    Parameters
+    ----------
+    stepper : Stepper
+
+    Returns
+    -------
+    bool
+    """
     scheme = getattr(getattr(stepper, "record", None), "scheme", None)
     return (not stepper.info.extra.get("uniform_time", True)) and isinstance(scheme, SplittingScheme)
 
 
 def fixed_peer(stepper):
-    """The registered fixed-step stepper with the same splitting coefficients, or None."""
+    """The registered fixed-step stepper with the same splitting coefficients, or None.
+
+    Parameters
+    ----------
+    stepper : Stepper, a step-controlled one (its record holds the scheme).
+
+    Returns
+    -------
+    Stepper or None: found by the scheme's fingerprint, never by name.
+    """
     from harness.registry import steppers
 
     fingerprint = stepper.record.scheme.fingerprint()
@@ -137,6 +155,17 @@ class StepControlExperiment(Experiment):
     }
 
     def cells(self, steppers, problems, config):
+        """One cell per step-controlled stepper with a registered fixed-step peer, on each
+        conservative problem of the config's `problems`; every other pair a `Skip` with its reason.
+
+        Parameters
+        ----------
+        steppers, problems, config : as in `Experiment.cells`.
+
+        Returns
+        -------
+        (list of Cell, list of Skip)
+        """
         from harness.errors import IncompatibleError
         from harness.registry import get_problem, get_stepper
         from harness.stepper import check_compatible
@@ -172,6 +201,17 @@ class StepControlExperiment(Experiment):
         return cells, skips
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The energy rows of the controlled stepper and its fixed peer at equal work, and the
+        controlled stepper's order sweep (module items 1-2).
+
+        Parameters
+        ----------
+        cell, config : as in `Experiment.run_cell`.
+
+        Returns
+        -------
+        DataFrame: ROW_COLUMNS and `peer`.
+        """
         from harness.registry import get_problem, get_stepper
         from harness.step_loops import fastest  # the compiled loops where they apply
 
@@ -193,6 +233,16 @@ class StepControlExperiment(Experiment):
         return out[ROW_COLUMNS + ["peer"]]
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """Drift classes of both runs and the measured order, one row per cell.
+
+        Parameters
+        ----------
+        rows, config : as in `Experiment.summarize`.
+
+        Returns
+        -------
+        DataFrame: SUMMARY_COLUMNS.
+        """
         return summary_per_cell(rows, SUMMARY_COLUMNS, _summarize_cell, config)
 
 

@@ -93,7 +93,16 @@ SUMMARY_COLUMNS = [
 
 
 def canonical_form(dim: int) -> np.ndarray:
-    """Omega = [[0, I], [-I, 0]] for a state ordered (q..., v...)."""
+    """Omega = [[0, I], [-I, 0]] for a state ordered (q..., v...).
+
+    Parameters
+    ----------
+    dim : int, the state's dimension (even: positions, then velocities).
+
+    Returns
+    -------
+    ndarray, shape (dim, dim)
+    """
     n = dim // 2
     omega = np.zeros((dim, dim))
     omega[:n, n:] = np.eye(n)
@@ -102,7 +111,16 @@ def canonical_form(dim: int) -> np.ndarray:
 
 
 def symplectic_deviation(J: np.ndarray) -> tuple[float, float]:
-    """(||J^T Omega J - Omega||_F / ||J||_F^2, ||J^T Omega J - Omega||_max) of one Jacobian."""
+    """(||J^T Omega J - Omega||_F / ||J||_F^2, ||J^T Omega J - Omega||_max) of one Jacobian.
+
+    Parameters
+    ----------
+    J : ndarray, shape (dim, dim), a one-step map's Jacobian in scaled coordinates.
+
+    Returns
+    -------
+    (float, float): the relative Frobenius deviation and the largest entry's deviation.
+    """
     omega = canonical_form(J.shape[0])
     D = J.T @ omega @ J - omega
     return float(np.linalg.norm(D) / np.linalg.norm(J) ** 2), float(np.max(np.abs(D)))
@@ -114,7 +132,22 @@ def one_step_jacobians(
 ) -> np.ndarray:
     """Jacobians (S, dim, dim) of the stepper's one-step map at the states (dim, S), by
     fourth-order central differences, all perturbations as one ensemble. `delta` (dim,) gives
-    each component's difference step; by default one step for every component."""
+    each component's difference step; by default one step for every component.
+
+    Parameters
+    ----------
+    stepper : Stepper, a one-step method.
+    problem : Problem
+    states : ndarray, shape (dim, S), the base states.
+    h : float, the step.
+    delta_rel : float, optional, the difference step relative to the states' scale (default
+        SYMPLECTIC_FD_DELTA).
+    delta : ndarray, shape (dim,), optional, per-component difference steps (override `delta_rel`).
+
+    Returns
+    -------
+    ndarray, shape (S, dim, dim)
+    """
     delta_rel = tol.SYMPLECTIC_FD_DELTA if delta_rel is None else delta_rel
     dim, S = states.shape
     if delta is None:
@@ -155,6 +188,17 @@ class SymplecticityExperiment(Experiment):
     quick_config: Mapping[str, Any] = {"states": 4, "adaptive_states": 1}
 
     def cells(self, steppers, problems, config):
+        """The pairs whose force is a weighted gradient, run by a one-step map (a multistep loop
+        with a starter is skipped, saying why); the settings checked first.
+
+        Parameters
+        ----------
+        steppers, problems, config : as in `Experiment.cells`.
+
+        Returns
+        -------
+        (list of Cell, list of Skip)
+        """
         from harness.registry import get_stepper
 
         check_config(config, counts=("states", "adaptive_states"),
@@ -171,11 +215,32 @@ class SymplecticityExperiment(Experiment):
         return kept, skips
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The Jacobian's deviation from symplecticity at each base state (module item 1 on).
+
+        Parameters
+        ----------
+        cell, config : as in `Experiment.run_cell`.
+
+        Returns
+        -------
+        DataFrame: one row per base state.
+        """
         from harness.registry import get_problem, get_stepper
 
         return _measure(get_stepper(cell.stepper), get_problem(cell.problem), config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The largest deviation per cell against its threshold, and the verdict on the
+        method's symplecticity claim.
+
+        Parameters
+        ----------
+        rows, config : as in `Experiment.summarize`.
+
+        Returns
+        -------
+        DataFrame: SUMMARY_COLUMNS.
+        """
         from harness.registry import get_stepper
 
         if rows.empty:
