@@ -143,11 +143,12 @@ class EnergyExperiment(Experiment):
 
         Parameters
         ----------
-        steppers, problems, config : as in `Experiment.cells`.
+        steppers, problems : sequence of str, the selection.
+        config : mapping, its counts and sizes checked by `check_config`.
 
         Returns
         -------
-        (list of Cell, list of Skip)
+        (list of Cell, list of Skip): a Skip for each problem without an invariant.
         """
         check_config(config, counts=("steps", "implicit_steps", "adaptive_outputs", "ensemble",
                                      "adaptive_ensemble", "samples_per_decade", "uniform_samples"),
@@ -161,7 +162,8 @@ class EnergyExperiment(Experiment):
 
         Parameters
         ----------
-        cell, config : as in `Experiment.run_cell`.
+        cell : Cell, one (stepper, problem) pair.
+        config : mapping, the plan (`steps`, `h`, `t_end`, ensemble sizes, sampling).
 
         Returns
         -------
@@ -179,11 +181,12 @@ class EnergyExperiment(Experiment):
 
         Parameters
         ----------
-        rows, config : as in `Experiment.summarize`.
+        rows : DataFrame, all cells' rows (ROW_COLUMNS).
+        config : mapping, read for `fit_decades`.
 
         Returns
         -------
-        DataFrame: SUMMARY_COLUMNS.
+        DataFrame: SUMMARY_COLUMNS, one record per cell.
         """
         return summary_per_cell(rows, SUMMARY_COLUMNS, _summarize_cell, config)
 

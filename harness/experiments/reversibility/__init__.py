@@ -161,11 +161,12 @@ class ReversibilityExperiment(Experiment):
 
         Parameters
         ----------
-        steppers, problems, config : as in `Experiment.cells`.
+        steppers, problems : sequence of str, the selection asked for.
+        config : mapping, the step-count lists and ensemble sizes (checked).
 
         Returns
         -------
-        (list of Cell, list of Skip)
+        (list of Cell, list of Skip): one cell per N, each with its `steps`.
         """
         from harness.registry import get_problem, get_stepper
 
@@ -194,7 +195,8 @@ class ReversibilityExperiment(Experiment):
 
         Parameters
         ----------
-        cell, config : as in `Experiment.run_cell` (the cell's `steps` parameter is N).
+        cell : Cell, with its `steps` parameter N.
+        config : mapping, `h`, ensemble and adaptive settings.
 
         Returns
         -------
@@ -213,7 +215,8 @@ class ReversibilityExperiment(Experiment):
 
         Parameters
         ----------
-        rows, config : as in `Experiment.summarize`.
+        rows : DataFrame, one row per round trip.
+        config : mapping, unused.
 
         Returns
         -------

@@ -158,7 +158,8 @@ class RoundoffExperiment(Experiment):
 
         Parameters
         ----------
-        cell, config : as in `Experiment.run_cell`; `n_steps` < 2 is an `InputError`.
+        cell : Cell, a configured (stepper, problem) pair.
+        config : mapping, `n_steps` (< 2 is an `InputError`), `h_max`, `h_min`, `points_per_decade`.
 
         Returns
         -------
@@ -214,7 +215,8 @@ class RoundoffExperiment(Experiment):
 
         Parameters
         ----------
-        rows, config : as in `Experiment.summarize`.
+        rows : DataFrame, one row per step size of each cell.
+        config : mapping, not read.
 
         Returns
         -------

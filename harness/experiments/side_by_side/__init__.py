@@ -70,7 +70,8 @@ class SideBySideExperiment(Experiment):
 
         Parameters
         ----------
-        steppers, problems, config : as in `Experiment.cells` (no setting is read).
+        steppers, problems : sequence of str, the names; only N-body problems apply.
+        config : mapping, no setting is read.
 
         Returns
         -------
@@ -83,7 +84,8 @@ class SideBySideExperiment(Experiment):
 
         Parameters
         ----------
-        cell, config : as in `Experiment.run_cell`.
+        cell : Cell, a stepper on an N-body problem.
+        config : mapping, not read (T and h are the problem's).
 
         Returns
         -------
@@ -132,7 +134,8 @@ class SideBySideExperiment(Experiment):
 
         Parameters
         ----------
-        rows, config : as in `Experiment.summarize`.
+        rows : DataFrame, every cell's one row.
+        config : mapping, not read.
 
         Returns
         -------

@@ -160,11 +160,12 @@ class StepControlExperiment(Experiment):
 
         Parameters
         ----------
-        steppers, problems, config : as in `Experiment.cells`.
+        steppers, problems : sequence of str, the names asked for.
+        config : mapping, the budgets and targets (checked), and the problem set `problems`.
 
         Returns
         -------
-        (list of Cell, list of Skip)
+        (list of Cell, list of Skip): with the reason of each pair left out.
         """
         from harness.errors import IncompatibleError
         from harness.registry import get_problem, get_stepper
@@ -206,7 +207,8 @@ class StepControlExperiment(Experiment):
 
         Parameters
         ----------
-        cell, config : as in `Experiment.run_cell`.
+        cell : Cell, a step-controlled stepper and its problem.
+        config : mapping, the energy run's and the sweep's settings.
 
         Returns
         -------
@@ -237,7 +239,8 @@ class StepControlExperiment(Experiment):
 
         Parameters
         ----------
-        rows, config : as in `Experiment.summarize`.
+        rows : DataFrame, energy and sweep rows of all cells.
+        config : mapping, read for the fit window, the control and the target error.
 
         Returns
         -------

@@ -193,11 +193,12 @@ class SymplecticityExperiment(Experiment):
 
         Parameters
         ----------
-        steppers, problems, config : as in `Experiment.cells`.
+        steppers, problems : sequence of str, the names asked for.
+        config : mapping, the state counts and adaptive settings (checked).
 
         Returns
         -------
-        (list of Cell, list of Skip)
+        (list of Cell, list of Skip): kept pairs, and skipped ones with the reason.
         """
         from harness.registry import get_stepper
 
@@ -219,7 +220,8 @@ class SymplecticityExperiment(Experiment):
 
         Parameters
         ----------
-        cell, config : as in `Experiment.run_cell`.
+        cell : Cell, a (stepper, problem) pair.
+        config : mapping, `states`, `h` and the adaptive settings.
 
         Returns
         -------
@@ -235,7 +237,8 @@ class SymplecticityExperiment(Experiment):
 
         Parameters
         ----------
-        rows, config : as in `Experiment.summarize`.
+        rows : DataFrame, one row per base state of every cell.
+        config : mapping, unused.
 
         Returns
         -------
