@@ -39,7 +39,12 @@ for _name, _module in EXPERIMENT_MODULES.items():
 
 def builtin_experiments() -> list[Experiment]:
     """The built-in experiments, in report order: this project's entry in the entry-point group
-    `harness.experiments` (pyproject.toml), through which other distributions add theirs."""
+    `harness.experiments` (pyproject.toml), through which other distributions add theirs.
+
+    Returns
+    -------
+    list of Experiment: the registered instances, in the order of EXPERIMENT_NAMES.
+    """
     return [EXPERIMENTS[name] for name in EXPERIMENT_NAMES]
 
 

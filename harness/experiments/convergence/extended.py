@@ -23,7 +23,16 @@ __all__ = ["floor_bound", "extended_if_floor_bound"]
 
 def floor_bound(g: pd.DataFrame) -> bool:
     """The float64 sweep ended at the rounding floor (or the reference's accuracy) with too few
-    asymptotic points, and not every point is at the floor (that is `exact`)."""
+    asymptotic points, and not every point is at the floor (that is `exact`).
+
+    Parameters
+    ----------
+    g : DataFrame, one cell's global-error rows (h, in_fit, excluded).
+
+    Returns
+    -------
+    bool
+    """
     g = g.sort_values("h", ascending=False)
     if len(g) == 0 or int(g.in_fit.sum()) >= tol.MIN_FIT_POINTS:
         return False
@@ -37,7 +46,20 @@ def extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, conf
     run again in real128 on the problem's own start (`harness.extended`), and those rows replace
     the float64 global rows, with a message saying so; where they cannot (coefficients given
     only to float64, an implicit method, ...), the float64 rows stay and the message says why.
-    `amplification(T)` is the flow's error amplification over the horizon ending at T."""
+    `amplification(T)` is the flow's error amplification over the horizon ending at T.
+
+    Parameters
+    ----------
+    stepper : Stepper, whose coefficients are rerun.
+    problem : Problem
+    frame : DataFrame, the cell's float64 rows.
+    config : mapping, the convergence settings.
+    amplification : callable, T -> the flow's error amplification up to T.
+
+    Returns
+    -------
+    DataFrame: `frame`, or with its global rows replaced by the real128 ones.
+    """
     from harness.extended import NotMeasurable, extended_sweep
 
     bound = order_bound(stepper)

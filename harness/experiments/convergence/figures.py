@@ -34,7 +34,16 @@ SAME_CURVE_DIGITS = 6
 def same_curves(rows: pd.DataFrame) -> dict[str, list[str]]:
     """Methods whose (h, error, used-by-the-fit) points agree to SAME_CURVE_DIGITS digits — the
     same coefficients run by another implementation — are drawn as one curve: first method ->
-    the others, in the order given (a method drawn by another maps to nothing, is not a key)."""
+    the others, in the order given (a method drawn by another maps to nothing, is not a key).
+
+    Parameters
+    ----------
+    rows : DataFrame, one problem's global-error rows of every method.
+
+    Returns
+    -------
+    dict of str to list of str
+    """
     keys: dict[tuple, str] = {}
     out: dict[str, list[str]] = {}
     if rows.empty:
@@ -60,7 +69,19 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     """Global error against h (log-log) on one problem, one panel per family (at most
     MAX_LINES_PER_PANEL methods each): points used by the order fit marked, excluded points on
     the thin line only (the CSV says why each was excluded), the fitted slope drawn over exactly
-    the range it used, the reference's certified error as the floor every panel shares."""
+    the range it used, the reference's certified error as the floor every panel shares.
+
+    Parameters
+    ----------
+    problem : str, the problem's name (the figure's slug and title).
+    rows : DataFrame, that problem's convergence rows (global ones of finite h are drawn).
+    palette : Palette, the methods' colours and markers.
+    reference_error : float or None, the reference's certified error (None: no floor drawn).
+
+    Returns
+    -------
+    Figure or None: None when no global row has a finite h.
+    """
     from matplotlib.lines import Line2D
 
     g = rows[(rows["kind"] == "global") & np.isfinite(rows["h"].astype(float))]

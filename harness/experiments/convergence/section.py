@@ -89,7 +89,13 @@ def _evals_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], bo
 
 
 def convergence(view: RunView, sec: Section) -> None:
-    """Add the convergence figures and tables to `sec`, read from `view`."""
+    """Add the convergence figures and tables to `sec`, read from `view`.
+
+    Parameters
+    ----------
+    view : RunView, the run whose convergence rows, summary and gate are shown.
+    sec : Section, the convergence section, appended to.
+    """
     rows = view.rowtable("convergence")
     judged = _convergence_judged(view)
     sec.note("Each figure: error against h, markers at the two ends of the range the order fit "

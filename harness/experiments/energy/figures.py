@@ -24,7 +24,21 @@ def energy_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette,
     """Relative error of an invariant against t (log-log), one panel per drift class (the class
     the experiment measured, `classes`: stepper -> class), at most MAX_LINES_PER_PANEL lines
     each; symplectic steppers solid, others dashed; lines thinned to the envelope of log-spaced
-    bins."""
+    bins.
+
+    Parameters
+    ----------
+    problem : str, the problem's name.
+    rows : DataFrame, its energy rows (all quantities; `quantity` picks one).
+    palette : Palette, the methods' colours.
+    symplectic : mapping of str to bool, which steppers draw solid.
+    quantity : str, optional, 'energy' (default) or 'angular_momentum'.
+    classes : mapping of str to str, optional, the measured drift classes (the panels).
+
+    Returns
+    -------
+    Figure or None: None when no row has `quantity`.
+    """
     g = rows[rows["quantity"] == quantity]
     if g.empty:
         return None
@@ -80,6 +94,16 @@ def _rounding_bound(ax: Any, g: pd.DataFrame) -> None:
 def angular_momentum_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette,
                             symplectic: Mapping[str, bool],
                             classes: Mapping[str, str] | None = None) -> Figure | None:
+    """`energy_figure` for the angular momentum error.
+
+    Parameters
+    ----------
+    problem, rows, palette, symplectic, classes : as in `energy_figure`.
+
+    Returns
+    -------
+    Figure or None
+    """
     return energy_figure(problem, rows, palette, symplectic, quantity="angular_momentum",
                          classes=classes)
 

@@ -22,7 +22,13 @@ def _energy_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]], b
 
 
 def energy(view: RunView, sec: Section) -> None:
-    """Add the energy figures and tables to `sec`, read from `view`."""
+    """Add the energy figures and tables to `sec`, read from `view`.
+
+    Parameters
+    ----------
+    view : RunView, the run: the energy rows and summary, and which steppers are symplectic.
+    sec : Section, the energy section, written per problem.
+    """
     rows = view.rowtable("energy")
     summ = view.summary("energy")
     symplectic = view.flag("symplectic")

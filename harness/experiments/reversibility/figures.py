@@ -20,7 +20,18 @@ def reversibility_figure(table: pd.DataFrame, palette: fs.Palette,
     figure, one panel per family: for each method the worst case against its claim over the
     problems (the largest ratio for a method claimed symmetric, solid, which must stay at or
     below 1; the smallest for one not claimed, dashed, which must stay above). The per-problem
-    values are in the figure's CSV and the section's table."""
+    values are in the figure's CSV and the section's table.
+
+    Parameters
+    ----------
+    table : DataFrame, the reversibility summary (one row per stepper, problem and N).
+    palette : Palette
+    symmetric : mapping of str to bool, each stepper's symmetry claim.
+
+    Returns
+    -------
+    Figure or None: None when the table is empty or lacks the columns drawn.
+    """
     need = {"stepper", "steps", "return_error_ulps", "rounding_bound_ulps"}
     if table.empty or not need <= set(table.columns):
         return None

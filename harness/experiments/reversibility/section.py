@@ -26,7 +26,13 @@ def _reversible_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
 
 
 def reversibility(view: RunView, sec: Section) -> None:
-    """Add the reversibility figures and tables to `sec`, read from `view`."""
+    """Add the reversibility figures and tables to `sec`, read from `view`.
+
+    Parameters
+    ----------
+    view : RunView, the run (reversibility summary, symmetry flags).
+    sec : Section, receives one figure and the folded table.
+    """
     summ = view.summary("reversibility")
     symmetric = view.flag("symmetric")
     sec.figure(reversibility_figure(summ, view.palette, symmetric),
@@ -60,7 +66,16 @@ def fold_per_n(summ: pd.DataFrame) -> pd.DataFrame:
     """Reversibility rows folded to one per (stepper, problem): the per-N figures listed in the
     order of N (`steps`), one verdict word when every N has the same, the reasons of the Ns
     joined; `passed` False when any N failed, True when all that were judged passed. Every
-    value of every round trip stays (and each is in the figure's CSV at full precision)."""
+    value of every round trip stays (and each is in the figure's CSV at full precision).
+
+    Parameters
+    ----------
+    summ : DataFrame, the reversibility summary.
+
+    Returns
+    -------
+    DataFrame: one row per (stepper, problem); `summ` itself when it lacks those columns.
+    """
     if summ.empty or not {"stepper", "problem", "steps"} <= set(summ.columns):
         return summ
     groups: dict[tuple, list[dict]] = {}

@@ -14,7 +14,17 @@ __all__ = ['roundoff_figure']
 @fs.styled
 def roundoff_figure(rows: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     """Position error against h at a fixed step count, one panel per problem, with the
-    truncation error extrapolated from the largest step."""
+    truncation error extrapolated from the largest step.
+
+    Parameters
+    ----------
+    rows : DataFrame, the roundoff rows (one per stepper, problem and h).
+    palette : Palette
+
+    Returns
+    -------
+    Figure or None: None for no rows.
+    """
     if rows.empty:
         return None
     problems = list(dict.fromkeys(rows["problem"]))

@@ -7,7 +7,13 @@ from harness.kit import RunView, Section, SectionSpec, df_table
 
 
 def roundoff(view: RunView, sec: Section) -> None:
-    """Add the roundoff figures and tables to `sec`, read from `view`."""
+    """Add the roundoff figures and tables to `sec`, read from `view`.
+
+    Parameters
+    ----------
+    view : RunView, whose roundoff rows draw the figure and whose summary fills the table.
+    sec : Section, the one written to.
+    """
     ro = view.rowtable("roundoff")
     if len(ro):
         sec.figure(roundoff_figure(ro, view.palette),

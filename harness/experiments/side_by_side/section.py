@@ -48,7 +48,13 @@ def _joined(view: RunView) -> pd.DataFrame:
 
 
 def build(view: RunView, sec: Section) -> None:
-    """One table per N-body problem: each stepper's point beside its other experiments' verdicts."""
+    """One table per N-body problem: each stepper's point beside its other experiments' verdicts.
+
+    Parameters
+    ----------
+    view : RunView, the run; the other experiments' summaries are joined in.
+    sec : Section, where the tables go (a warning note when there are no results).
+    """
     table = _joined(view)
     if table.empty:
         sec.note("The side-by-side experiment has no results in this run.", cls="warning")

@@ -27,7 +27,17 @@ def _grid(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray] | Non
 @fs.styled
 def stability_overlay_figure(rows: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     """Boundaries |R(z)| = 1 of the first-order methods, overlaid one panel per family; the
-    stable side is shaded lightly for each method."""
+    stable side is shaded lightly for each method.
+
+    Parameters
+    ----------
+    rows : DataFrame, the stability grid rows of the first-order steppers.
+    palette : Palette
+
+    Returns
+    -------
+    Figure or None: None when no stepper has a grid.
+    """
     from matplotlib.lines import Line2D
 
     names = [s for s, g in rows.groupby("stepper", sort=False) if _grid(g) is not None]
@@ -68,7 +78,17 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: fs.Palette) -> Figure 
 @fs.styled
 def hw_limits_figure(summary: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     """Bar chart of the h omega stability limits of the Newtonian steppers (unbounded: hatched
-    bar to the search limit)."""
+    bar to the search limit).
+
+    Parameters
+    ----------
+    summary : DataFrame, the stability summary (only form 'newtonian' rows are drawn).
+    palette : Palette
+
+    Returns
+    -------
+    Figure or None: None without Newtonian steppers.
+    """
     s = summary[summary["form"] == "newtonian"]
     if s.empty:
         return None
