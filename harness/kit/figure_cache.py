@@ -34,7 +34,12 @@ _DISABLE_ENV = "HARNESS_FIGURE_CACHE"  # "off": always draw
 
 @functools.lru_cache(maxsize=1)
 def code_version() -> str:
-    """A hash of everything a figure's drawing depends on besides its arguments."""
+    """A hash of everything a figure's drawing depends on besides its arguments.
+
+    Returns
+    -------
+    str: 20 hex digits of a SHA-256 over matplotlib's version and every module of `harness`.
+    """
     from importlib.metadata import version  # without importing matplotlib (a second)
 
     h = hashlib.sha256(version("matplotlib").encode())
@@ -46,7 +51,12 @@ def code_version() -> str:
 
 
 def figure_cache_dir() -> Path | None:
-    """`<harness cache>/figures`, or None when caching is off or the directory is unusable."""
+    """`<harness cache>/figures`, or None when caching is off or the directory is unusable.
+
+    Returns
+    -------
+    Path or None: the directory, created if needed.
+    """
     if os.environ.get(_DISABLE_ENV, "").lower() in ("off", "0", "no"):
         return None
     try:
@@ -76,14 +86,33 @@ def keep_figures_of(cls: type) -> type:
     """Register the figure class whose results the cache keeps (`harness.kit.figure_svg`
     registers its `Figure`; this module imports no drawing code, so the two stay acyclic). Its
     objects have `slug`, `svg`, `alt`, `css` and `data` (a DataFrame or None) and are rebuilt
-    from those fields. Until a class is registered nothing is cached."""
+    from those fields. Until a class is registered nothing is cached.
+
+    Parameters
+    ----------
+    cls : type, the figure class.
+
+    Returns
+    -------
+    type: `cls`, so it can decorate the class.
+    """
     global _figure_type
     _figure_type = cls
     return cls
 
 
 def cached_call(fn: Callable, args: tuple, kwargs: dict) -> Any:
-    """`fn(*args, **kwargs)`, from the cache when the same call was drawn before."""
+    """`fn(*args, **kwargs)`, from the cache when the same call was drawn before.
+
+    Parameters
+    ----------
+    fn : callable, the drawing function.
+    args, kwargs : tuple, dict, its arguments (part of the cache key).
+
+    Returns
+    -------
+    Any: what `fn` returns, or the result stored for the same call.
+    """
     directory = figure_cache_dir()
     key = _key(fn, args, kwargs) if directory is not None else None
     if key is None or directory is None:

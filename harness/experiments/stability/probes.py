@@ -24,7 +24,16 @@ STEP_FAILURES = (StepFailure, np.linalg.LinAlgError)
 
 def block_companion(C: np.ndarray) -> np.ndarray:
     """Companion matrix of y_k = sum_j C_j y_j: C shaped (M, k, d, d) -> (M, k d, k d) acting
-    on the stacked history (y_0, ..., y_{k-1})."""
+    on the stacked history (y_0, ..., y_{k-1}).
+
+    Parameters
+    ----------
+    C : ndarray, shape (M, k, d, d), the recurrence blocks at M points.
+
+    Returns
+    -------
+    ndarray, shape (M, k d, k d)
+    """
     M, k, d, _ = C.shape
     out = np.zeros((M, k * d, k * d))
     for i in range(k - 1):
@@ -95,7 +104,16 @@ class FirstOrderProbe:
         return y.reshape(d, m, k, d).transpose(1, 2, 0, 3)
 
     def blocks(self, z: Any) -> np.ndarray:
-        """C_j at each z: shape (M, k, 2, 2); NaN where the step failed."""
+        """C_j at each z: shape (M, k, 2, 2); NaN where the step failed.
+
+        Parameters
+        ----------
+        z : array_like of complex, the points h lambda (flattened).
+
+        Returns
+        -------
+        ndarray, shape (M, k, 2, 2)
+        """
         z = np.asarray(z, dtype=complex).reshape(-1)
         out = np.empty((z.size, self.k, 2, 2))
         for start in range(0, z.size, self.chunk_points):
@@ -104,7 +122,16 @@ class FirstOrderProbe:
         return out
 
     def amplification(self, z: Any) -> np.ndarray:
-        """Spectral radius of the block companion matrix (|R(z)| for one-step methods)."""
+        """Spectral radius of the block companion matrix (|R(z)| for one-step methods).
+
+        Parameters
+        ----------
+        z : array_like of complex, the points h lambda.
+
+        Returns
+        -------
+        ndarray of float: same shape as `z`; NaN where a step failed.
+        """
         z = np.asarray(z, dtype=complex)
         C = self.blocks(z)
         if self.k == 1:
@@ -146,7 +173,16 @@ class NewtonianProbe:
     def matrix(self, hw: float) -> np.ndarray:
         """The propagator at step h omega = `hw`: (x, v) -> (x, v) for 'one-step'; the block
         companion for 'history'; [[0, 1], [c_0, c_1]] on (x_(n-1), x_n) for
-        'position-recurrence'."""
+        'position-recurrence'.
+
+        Parameters
+        ----------
+        hw : float, h omega on x'' = -omega^2 x.
+
+        Returns
+        -------
+        ndarray: 2 x 2, or 2k x 2k for 'history'; a step failure propagates.
+        """
         s, p = self.stepper, self.problem
         if self.mode == "one-step":
             return s.step_from_history(p, h=hw, history=[np.eye(2)], t0=p.t0)
@@ -170,7 +206,16 @@ class NewtonianProbe:
         return np.array([[0.0, 1.0], [c[0], c[1]]])
 
     def amplification(self, hw: Any) -> np.ndarray:
-        """The probe's spectral radius at each h omega in `hw` (inf where a step fails)."""
+        """The probe's spectral radius at each h omega in `hw` (inf where a step fails).
+
+        Parameters
+        ----------
+        hw : array_like of float, the values of h omega.
+
+        Returns
+        -------
+        ndarray of float: same shape as `hw`.
+        """
         hw = np.asarray(hw, dtype=float)
         out = np.empty(hw.size)
         for i, x in enumerate(hw.reshape(-1)):

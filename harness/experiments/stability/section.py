@@ -28,7 +28,13 @@ def _stability_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]]
 
 
 def stability(view: RunView, sec: Section) -> None:
-    """Add the stability figures and tables to `sec`, read from `view`."""
+    """Add the stability figures and tables to `sec`, read from `view`.
+
+    Parameters
+    ----------
+    view : RunView, the run: its stability grid rows draw the overlay, its summary the rest.
+    sec : Section, the stability section, filled here.
+    """
     rows = view.rowtable("stability")
     summ = view.summary("stability")
     first = rows[rows["kind"] == "grid"] if "kind" in rows else pd.DataFrame()

@@ -43,7 +43,17 @@ _STYLE = {"fixed": "-", "naive": "--", "reversible": "-."}
 def energy_control_figure(problem: str, rows: pd.DataFrame) -> Figure | None:
     """Relative energy error against t (log-log) of the fixed-step peer and each controlled
     stepper on one problem; the fixed peer is drawn once. The figure's data is what it draws
-    (each line thinned to the envelope of log-spaced bins)."""
+    (each line thinned to the envelope of log-spaced bins).
+
+    Parameters
+    ----------
+    problem : str, the problem drawn.
+    rows : DataFrame, the step-control rows (kind 'energy' of `problem` are drawn).
+
+    Returns
+    -------
+    Figure or None: None when the problem has no energy rows.
+    """
     g = rows[(rows["problem"] == problem) & (rows["kind"] == "energy")]
     if g.empty:
         return None
@@ -103,7 +113,13 @@ INTRO = ("Each step-controlled stepper (Δθ ≈ const, the course's Kepler prac
 
 
 def build(view: Any, sec: Section) -> None:
-    """Figures and tables of the step-control experiment into `sec`."""
+    """Figures and tables of the step-control experiment into `sec`.
+
+    Parameters
+    ----------
+    view : RunView, or any object with `rowtable` and `summary` (missing: no results).
+    sec : Section, a warning note goes here when the experiment has no summary.
+    """
     rows = view.rowtable(EXPERIMENT) if hasattr(view, "rowtable") else pd.DataFrame()
     summ = view.summary(EXPERIMENT) if hasattr(view, "summary") else pd.DataFrame()
     if summ is None or summ.empty:
@@ -132,7 +148,17 @@ def build(view: Any, sec: Section) -> None:
 
 
 def section(view: Any, number: int = 0) -> Section:
-    """The section from a `RunView` (rows and summary of the step-control experiment)."""
+    """The section from a `RunView` (rows and summary of the step-control experiment).
+
+    Parameters
+    ----------
+    view : RunView, or an object with `rowtable` and `summary`.
+    number : int, optional, the section's number (default 0).
+
+    Returns
+    -------
+    Section
+    """
     sec = Section("step-control", number, TITLE)
     sec.intro = INTRO
     build(view, sec)
@@ -152,7 +178,16 @@ class _Tables:
 
 def build_section(run_tables: Mapping[str, pd.DataFrame] | Any) -> str:
     """The section as an HTML fragment; `run_tables` is {"rows": ..., "summary": ...} of the
-    step-control experiment, or a RunView. Text is escaped; figures are checked SVG."""
+    step-control experiment, or a RunView. Text is escaped; figures are checked SVG.
+
+    Parameters
+    ----------
+    run_tables : mapping or RunView, the experiment's rows and summary.
+
+    Returns
+    -------
+    str: a <section> element.
+    """
     if isinstance(run_tables, Mapping):
         view = _Tables(run_tables.get("rows", pd.DataFrame()), run_tables.get("summary", pd.DataFrame()))
     else:

@@ -15,7 +15,17 @@ __all__ = ['symplecticity_figure']
 def symplecticity_figure(summary: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     """Deviation from symplecticity per stepper (x, grouped by family) and problem (one point
     each), log scale, with the finite-difference threshold the verdict uses; claimed-symplectic
-    steppers filled, the others hollow."""
+    steppers filled, the others hollow.
+
+    Parameters
+    ----------
+    summary : DataFrame, the symplecticity summary (`deviation`, `threshold`, the claim).
+    palette : Palette, also groups the steppers by family.
+
+    Returns
+    -------
+    Figure or None: None for an empty summary or one without deviations.
+    """
     if summary.empty or "deviation" not in summary:
         return None
     s = summary.assign(_d=summary["deviation"].astype(float))

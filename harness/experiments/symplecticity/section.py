@@ -22,7 +22,13 @@ def _symplectic_score(view: RunView, stepper: str) -> tuple[list[tuple[str, str]
 
 
 def symplecticity(view: RunView, sec: Section) -> None:
-    """Add the symplecticity figures and tables to `sec`, read from `view`."""
+    """Add the symplecticity figures and tables to `sec`, read from `view`.
+
+    Parameters
+    ----------
+    view : RunView, the run; only the symplecticity summary is read.
+    sec : Section, gets the figure and the per-cell table.
+    """
     summ = view.summary("symplecticity")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("h", "h"), ("states", "states"),
             ("deviation", "deviation"), ("threshold", "threshold"),
