@@ -53,7 +53,12 @@ class ClaimResult:
 
 
 def course_material_dir() -> Path:
-    """Where the course texts live: `../shared/course-material/` beside the project."""
+    """Where the course texts live: `../shared/course-material/` beside the project.
+
+    Returns
+    -------
+    Path: not checked for existence.
+    """
     return PROJECT_ROOT.parent / "shared" / "course-material"
 
 
@@ -104,7 +109,16 @@ STORMER = SecondOrderMultistep("two-step Verlet form (Stormer)", alpha=[1, -2, 1
 
 def steppers_with(*records: object) -> list[str]:
     """The registered steppers whose coefficients are one of `records` (same kind, same
-    values as run in float64, whether given exactly or not)."""
+    values as run in float64, whether given exactly or not).
+
+    Parameters
+    ----------
+    *records : coefficient objects (tableaus, multistep tables, splittings).
+
+    Returns
+    -------
+    list of str: stepper names, in registry order.
+    """
     from harness import registry
 
     def identity(c) -> tuple:
@@ -346,7 +360,16 @@ CLAIMS: tuple[ClaimSpec, ...] = (
 
 def check_claims(tables: Tables) -> list[ClaimResult]:
     """Judge every claim against `tables` (experiment name -> summary DataFrame). A judge that
-    fails on unexpected data gives `not measured` with the error, never an exception."""
+    fails on unexpected data gives `not measured` with the error, never an exception.
+
+    Parameters
+    ----------
+    tables : mapping of str to DataFrame, the run's summaries by experiment.
+
+    Returns
+    -------
+    list of ClaimResult: one per claim of CLAIMS, in order, with its source line.
+    """
     out = []
     for spec in CLAIMS:
         try:

@@ -54,7 +54,20 @@ def load_previous(run: str | os.PathLike | None, *, results_root: str | os.PathL
                   view_factory: Any) -> Previous | None:
     """The run to compare with: `run` (an id or path), else the newest saved run older than
     `current` (None when there is none). `view_factory(stored)` builds its RunView when its
-    verdicts have to be judged again."""
+    verdicts have to be judged again.
+
+    Parameters
+    ----------
+    run : str, path or None, the earlier run asked for.
+    results_root : path or None, the results directory (None: the default).
+    reports_root : path or None, where the earlier run's report (and its recorded verdicts) may be.
+    current : str, this run's id (never compared with itself).
+    view_factory : callable, StoredRun -> RunView.
+
+    Returns
+    -------
+    Previous or None
+    """
     from harness.store import list_runs, load_run
 
     if run is None:
@@ -140,6 +153,20 @@ def _where(key: str) -> str:
 
 
 def compare_runs(view: RunView, verdicts: pd.DataFrame, previous: Previous) -> Comparison:
+    """What changed between `previous` and this run: the verdicts that differ (pairs judged in
+    both runs) and the measured figures that moved beyond their confidence interval or tolerance.
+
+    Parameters
+    ----------
+    view : RunView, this run.
+    verdicts : DataFrame, this run's verdicts (`collect_verdicts`).
+    previous : Previous, the earlier run with its verdicts.
+
+    Returns
+    -------
+    Comparison: a headline, the changed verdicts, the moved figures, both runs' provenance side
+        by side, and notes.
+    """
     now_p, then_p = _provenance(view.meta), _provenance(previous.meta)
     provenance = [(k, then_p[k], now_p[k]) for k in now_p]
     provenance.append(("verdicts", previous.verdicts_source, "judged by this report"))

@@ -22,7 +22,17 @@ __all__ = ['perf_history_figure']
 def perf_history_figure(history: pd.DataFrame, max_panels: int = 12,
                         max_lines: int = 8) -> Figure | None:
     """Benchmark value against commit date: one panel per benchmark (up to `max_panels`), one
-    line per parameter set (up to `max_lines`)."""
+    line per parameter set (up to `max_lines`).
+
+    Parameters
+    ----------
+    history : DataFrame, asv results (benchmark, params, date, value, unit); None or empty: None.
+    max_panels, max_lines : int, optional, the most benchmarks and parameter sets drawn.
+
+    Returns
+    -------
+    Figure or None: None when no value is finite.
+    """
     if history is None or history.empty:
         return None
     h = history.copy()

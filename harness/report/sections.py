@@ -44,7 +44,16 @@ FIXED_AFTER = (("ground-truth", "Ground truth"), ("test-sets", "Published test s
 
 
 def section_titles(experiments: Iterable[str]) -> list[tuple[str, str]]:
-    """(id, title) of every section, in order, for a run of `experiments`."""
+    """(id, title) of every section, in order, for a run of `experiments`.
+
+    Parameters
+    ----------
+    experiments : iterable of str, the run's experiments, in report order.
+
+    Returns
+    -------
+    list of (str, str): the fixed sections before and after the experiments' own.
+    """
     return ([*FIXED_BEFORE] + [(e, section_spec(e).title) for e in experiments] + [*FIXED_AFTER])
 
 
@@ -52,7 +61,22 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
                    previous: Any = None, progress: Callable[[str], None] | None = None
                    ) -> tuple[list[Section], dict[str, str], dict[str, Any]]:
     """Every section in order, each stepper's scoreboard status, and the headline counts
-    (claims checked, failed, failing list) the page's first screen shows."""
+    (claims checked, failed, failing list) the page's first screen shows.
+
+    Parameters
+    ----------
+    view : RunView, the run.
+    run_id : str, its id.
+    results_path : str, its directory, as shown in Provenance.
+    build_s : mapping of str to float, seconds of the build phases so far.
+    previous : Previous, optional, the earlier run for "what changed" (None: the first run).
+    progress : callable, optional, receives a line per section built.
+
+    Returns
+    -------
+    (list of Section, dict of str to str, dict): the sections, the scoreboard statuses, the
+        headline counts.
+    """
     timer = SectionTimer()
     say = progress or (lambda _msg: None)
     experiments = _in_registry_order(list(view.meta.get("experiments", {})))
@@ -233,4 +257,14 @@ def _guarded(fn: Callable[[RunView], Section], view: RunView, name: str,
 
 
 def json_text(obj: Any) -> str:
+    """`obj` as indented JSON with sorted keys (values JSON cannot hold written as text).
+
+    Parameters
+    ----------
+    obj : Any, the value.
+
+    Returns
+    -------
+    str
+    """
     return json.dumps(obj, indent=2, sort_keys=True, default=str)

@@ -31,7 +31,16 @@ _TABLE_ID = re.compile(r'<table[^>]*\bid="([^"]+)"')
 
 def report_sizes(html: str) -> pd.DataFrame:
     """One row per item of each section: kind ('figure', 'csv', 'table', 'other' for the
-    section's remaining text), name (figure slug or table id), bytes (UTF-8)."""
+    section's remaining text), name (figure slug or table id), bytes (UTF-8).
+
+    Parameters
+    ----------
+    html : str, a written report page.
+
+    Returns
+    -------
+    DataFrame: columns section, kind, name, bytes.
+    """
     rows = []
 
     def size(text: str) -> int:
@@ -59,7 +68,16 @@ def report_sizes(html: str) -> pd.DataFrame:
 
 
 def section_totals(sizes: pd.DataFrame) -> pd.DataFrame:
-    """Bytes per section and kind (columns figure, csv, table, other, total), in page order."""
+    """Bytes per section and kind (columns figure, csv, table, other, total), in page order.
+
+    Parameters
+    ----------
+    sizes : DataFrame, as `report_sizes` returns it.
+
+    Returns
+    -------
+    DataFrame: indexed by section.
+    """
     order = list(dict.fromkeys(sizes["section"]))
     t = sizes.pivot_table(index="section", columns="kind", values="bytes", aggfunc="sum", fill_value=0)
     for k in ("figure", "csv", "table", "other"):
@@ -70,6 +88,17 @@ def section_totals(sizes: pd.DataFrame) -> pd.DataFrame:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """`python -m harness.report.sizes REPORT.html`: print the page's size against its budget,
+    the bytes per section and the 15 largest items.
+
+    Parameters
+    ----------
+    argv : list of str, optional, the arguments (default `sys.argv[1:]`); exactly one path.
+
+    Returns
+    -------
+    int: 0, or 2 for a wrong argument count.
+    """
     args = list(sys.argv[1:] if argv is None else argv)
     if len(args) != 1:
         print("usage: python -m harness.report.sizes REPORT.html", file=sys.stderr)

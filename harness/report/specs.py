@@ -12,7 +12,16 @@ __all__ = ["section_spec", "experiment_key"]
 
 def section_spec(experiment: str) -> SectionSpec:
     """The section `experiment` names (`Experiment.section`), or the generic table section
-    built from the experiment's own description (also for one no longer registered)."""
+    built from the experiment's own description (also for one no longer registered).
+
+    Parameters
+    ----------
+    experiment : str, the experiment's name.
+
+    Returns
+    -------
+    SectionSpec
+    """
     exp = EXPERIMENTS.get(experiment)
     spec = getattr(exp, "section", None)
     if spec is not None:
@@ -21,6 +30,16 @@ def section_spec(experiment: str) -> SectionSpec:
 
 
 def experiment_key(name: str, summ: pd.DataFrame) -> tuple[str, ...]:
-    """The columns that identify one judged row of experiment `name`'s summary `summ`."""
+    """The columns that identify one judged row of experiment `name`'s summary `summ`.
+
+    Parameters
+    ----------
+    name : str, the experiment.
+    summ : DataFrame, its summary (read only when its section declares no key).
+
+    Returns
+    -------
+    tuple of str
+    """
     spec = getattr(EXPERIMENTS.get(name), "section", None)
     return spec.key if spec is not None else generic_key(summ)

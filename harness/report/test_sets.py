@@ -66,7 +66,16 @@ def _stiff_over(problem, T: float) -> dict[str, Any]:
 
 
 def test_sets_section(view: Any) -> Section:
-    """The section from a `RunView`: the work-precision rows of test-set problems."""
+    """The section from a `RunView`: the work-precision rows of test-set problems.
+
+    Parameters
+    ----------
+    view : RunView, the run (work-precision rows; a note when no test-set problem ran).
+
+    Returns
+    -------
+    Section
+    """
     from harness.ground_truth import reference
 
     sec = Section("test-sets", 0, TITLE)

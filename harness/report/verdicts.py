@@ -21,7 +21,16 @@ __all__ = ["VERDICT_COLUMNS", "collect_verdicts", "summary_verdicts", "claim_ver
 
 
 def claim_verdicts(view: RunView) -> pd.DataFrame:
-    """The course material's claims that this run measured (agree = passed)."""
+    """The course material's claims that this run measured (agree = passed).
+
+    Parameters
+    ----------
+    view : RunView, the run (its summaries).
+
+    Returns
+    -------
+    DataFrame: one judged row per claim that agreed or disagreed.
+    """
     from harness.report.claims import AGREE, DISAGREE, check_claims
 
     out = []
@@ -37,7 +46,17 @@ def claim_verdicts(view: RunView) -> pd.DataFrame:
 
 
 def collect_verdicts(view: RunView) -> pd.DataFrame:
-    """Every judged claim of the run, failing first, in section order."""
+    """Every judged claim of the run, failing first, in section order.
+
+    Parameters
+    ----------
+    view : RunView, the run.
+
+    Returns
+    -------
+    DataFrame: one row per verdict (experiment, stepper, problem, key, passed, verdict, sentence,
+        anchor, judged).
+    """
     frames = []
     for name in view.meta.get("experiments", {}):
         if not view.has(name):
