@@ -48,6 +48,11 @@ Verdicts that say "not measurable here" rather than "wrong" (`tolerated`):
   STIFF_STEP_COUNT steps over the horizon, where the error is already near the rounding floor;
 - `exact` when not predicted: the error was at the rounding floor even at the coarsest step
   sizes the sweep tried, so no order can be read off (an order-8 method on a short smooth span).
+- `failed` of an implicit method whose every step size failed in its implicit solve, when even
+  the finest of them has h x stiffness >= NEWTON_GUARANTEE_STEPS: the stage equations' iteration
+  is guaranteed to converge only for h L |a| < 1 (L a Lipschitz constant, at least the
+  stiffness; |a| the implicit coefficient; HNW I, II.7, Theorem 7.2, and Hairer & Wanner II,
+  IV.8 for Newton's iteration), so a failure beyond it says nothing about the method's order.
 The gate also needs at least one cell per stepper that measures the claim: a stepper judged on
 nothing does not pass.
 
@@ -92,7 +97,7 @@ theorem backs it; elsewhere the cell is informational (`no-claim`):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from harness import tolerances as tol
 from harness.facts import MethodFacts, ProblemFacts, class_key
@@ -112,6 +117,7 @@ class Expectation:
     tolerated: tuple[str, ...]
     reason: str
     order_low: float | None = None
+    implicit_stiffness: float | None = None  # the problem's stiffness, for an implicit method
 
 
 def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
@@ -127,6 +133,13 @@ def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
 
 def convergence_expectation(method: MethodFacts, problem: ProblemFacts) -> Expectation:
     """The expected convergence verdict of a (method, problem) pair; see the module docstring."""
+    expectation = _expectation(method, problem)
+    if not method.explicit and not method.adaptive and problem.stiffness > 0:
+        return replace(expectation, implicit_stiffness=float(problem.stiffness))
+    return expectation
+
+
+def _expectation(method: MethodFacts, problem: ProblemFacts) -> Expectation:
     if method.adaptive or method.order is None:
         return Expectation("meets-tolerance", None, (), "adaptive: judged by its tolerance sweep")
     tolerated = ["insufficient-range", "exact"]
@@ -228,9 +241,29 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
         }[verdict]
         detail = "; ".join(x for x in (msg, expectation.reason) if x)
         return "not-measurable", f"{why}" + (f": {detail}" if detail else "")
+    unguaranteed = _unguaranteed_solve(record, expectation)
+    if unguaranteed:
+        return "not-measurable", "; ".join(x for x in (unguaranteed, msg) if x)
     expected = expectation.verdict + (f" at order {expectation.order:g}" if expectation.order else "")
     return "fail", (f"expected {expected}, got {verdict}" + (f": {msg}" if msg else "")
                     + (f" ({expectation.reason})" if expectation.reason else ""))
+
+
+def _unguaranteed_solve(record: dict, expectation: Expectation) -> str:
+    """Why a `failed` implicit cell is not measurable (module docstring), or '' when it stands:
+    every step size failed in its implicit solve and even the finest one lies where no theorem
+    guarantees that the stage equations' iteration converges."""
+    stiffness = expectation.implicit_stiffness
+    h = float(record.get("finest_h", math.nan))
+    if record["verdict"] != "failed" or not stiffness or not math.isfinite(h):
+        return ""
+    if h * stiffness < tol.NEWTON_GUARANTEE_STEPS:
+        return ""
+    return (f"the implicit solve failed at every step size the work budget allowed, down to h = "
+            f"{h:.3g}, where h x stiffness = {h * stiffness:.3g} >= {tol.NEWTON_GUARANTEE_STEPS:g}: "
+            f"the stage equations' iteration is guaranteed to converge only for h L |a| < 1 (HNW I, "
+            f"II.7, Theorem 7.2; Hairer & Wanner II, IV.8), so the failure says nothing about the "
+            f"method's order")
 
 
 def tolerance_allowance(steps_per_trajectory: float, amplification: float) -> tuple[float, str]:

@@ -66,6 +66,7 @@ SUMMARY_COLUMNS = [
     "fit_residual", "fit_points", "fit_h_min", "fit_h_max", "fit_error_min", "fit_error_max",
     "local_exponent", "local_exponent_q", "verdict", "reference_error", "reference_precision",
     "points", "total_steps", "perturbation", "implementation", "wall_s", "message",
+    "finest_h", "t_end",
 ]
 
 

@@ -54,6 +54,10 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         if "implementation" in g and g["implementation"].notna().any() else "numpy",
         "perturbation": float(g["perturbation"].iloc[0]) if "perturbation" in g else np.nan,
         "message": "",
+        # the sweep's finest step and its horizon (a shortened one included): the judge reads a
+        # step failure and the stiffness over the measured span against them
+        "finest_h": float(g.loc[g.kind == "global", "h"].min()) if (g.kind == "global").any() else np.nan,
+        "t_end": float(g["t_end"].iloc[0]) if "t_end" in g and len(g) else np.nan,
     }
     messages = [m for m in g.get("message", pd.Series(dtype=str)).fillna("") if m]
     not_run = g[g.kind == "tolerance-not-run"]

@@ -1,0 +1,83 @@
+"""Stiff test-set problems judged fairly: an implicit method whose solve fails where no theorem
+guarantees it converges is not measurable (not failed), and a gate row says when a problem stiff
+over its declared span was measured over a span where it is not.
+
+Swept over the registry's fixed-step steppers: the verdict follows from the method's facts
+(explicit or not) and the problem's stiffness, never from a name.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from harness import tolerances as tol
+from harness.experiments.convergence_verdicts import summarize_cell
+from harness.facts import ProblemFacts, method_facts
+from harness.gate import stiff_span_flag
+from harness.registry import steppers
+from harness.rules import convergence_expectation, judge_convergence
+
+FIXED_STEP = [s for s in steppers.all() if not s.info.adaptive and s.info.form == "first-order"]
+STIFFNESS = 1e6
+FAILURE = ("stepper 'x': Newton iteration did not converge at t=0.5 after 20 iteration(s) (full): "
+           "scaled increment 7.9e-07, contraction 1")
+
+
+def _stiff_facts() -> ProblemFacts:
+    return ProblemFacts(linear=False, polynomial_degree=None, newtonian=False, velocity_free=False,
+                        time_dependent=False, stiffness=STIFFNESS, horizon=1.0, rhs_degree=2)
+
+
+def _failed_rows(finest_h: float) -> pd.DataFrame:
+    """A sweep whose every step size failed in its solve (error NaN, the failure as message)."""
+    hs = finest_h * 2.0 ** np.arange(4)[::-1]
+    return pd.DataFrame({
+        "kind": ["global"] * 4, "h": hs, "error": [np.nan] * 4, "excluded": ["blow-up"] * 4,
+        "in_fit": [False] * 4, "n_steps": np.round(1.0 / hs).astype(int), "reference_error": [1e-20] * 4,
+        "reference_precision": ["float64"] * 4, "rounding_level": [1e-16] * 4, "wall_s": [0.0] * 4,
+        "message": [FAILURE] * 4, "t_end": [1.0] * 4,
+    })
+
+
+@pytest.mark.parametrize("stepper", FIXED_STEP, ids=[s.info.name for s in FIXED_STEP])
+@pytest.mark.parametrize("h_times_stiffness", [1e3, tol.NEWTON_GUARANTEE_STEPS, 1.0])
+def test_a_solve_failing_where_no_theorem_guarantees_it_is_not_measurable(stepper, h_times_stiffness):
+    """Implicit: failed at every step size down to h with h x stiffness >= NEWTON_GUARANTEE_STEPS
+    is not measurable (HNW I, II.7, Thm 7.2 needs h L |a| < 1); below it the failure stands.
+    Explicit: a failed step is always a failure (no solve to excuse it)."""
+    h = h_times_stiffness / STIFFNESS
+    record = summarize_cell(stepper, "stiff", _failed_rows(h))
+    assert record["verdict"] == "failed"
+    assert record["finest_h"] == pytest.approx(h) and record["t_end"] == 1.0
+    outcome, reason = judge_convergence(record, convergence_expectation(method_facts(stepper), _stiff_facts()))
+    excused = (not stepper.info.explicit) and h_times_stiffness >= tol.NEWTON_GUARANTEE_STEPS
+    assert outcome == ("not-measurable" if excused else "fail"), reason
+    if excused:
+        assert "Theorem 7.2" in reason and f"h = {h:.3g}" in reason and FAILURE in reason
+
+
+def test_the_excuse_needs_a_stiff_problem():
+    """A non-stiff problem (stiffness 0) gives an implicit method's failed solve no excuse."""
+    bdf = next(s for s in FIXED_STEP if not s.info.explicit)
+    facts = ProblemFacts(linear=False, polynomial_degree=None, newtonian=False, velocity_free=False,
+                         time_dependent=False, stiffness=0.0, horizon=1.0)
+    record = summarize_cell(bdf, "mild", _failed_rows(1e-1))
+    outcome, _ = judge_convergence(record, convergence_expectation(method_facts(bdf), facts))
+    assert outcome == "fail"
+
+
+@pytest.mark.parametrize("stiffness, span, measured, flagged", [
+    (1e6, 1.0, 1e-4, True),      # stiff over the span (1e6), the layer only where measured (100)
+    (1e6, 1.0, 1e-2, False),     # stiff where measured (1e4)
+    (1e2, 1.0, 1.0, False),      # not stiff over its span (100): nothing to flag
+    (1e6, 1.0, np.nan, False),   # no measured span: no flag
+    (1e6, 1.0, None, False),
+])
+def test_a_stiff_problem_measured_where_it_is_not_stiff_is_flagged(stiffness, span, measured, flagged):
+    flag = stiff_span_flag(stiffness, 0.0, span, measured)
+    assert bool(flag) == flagged
+    if flagged:
+        assert flag.startswith("stiff problem not stiff over the measured span")
+        assert f"{stiffness * measured:.3g}" in flag and f"{stiffness * span:.3g}" in flag
