@@ -81,3 +81,30 @@ def test_a_stiff_problem_measured_where_it_is_not_stiff_is_flagged(stiffness, sp
     if flagged:
         assert flag.startswith("stiff problem not stiff over the measured span")
         assert f"{stiffness * measured:.3g}" in flag and f"{stiffness * span:.3g}" in flag
+
+
+@pytest.mark.parametrize("problem, config_t_end", [
+    ("detest-a1", None), ("bari-hires", None), ("harmonic", None), ("bari-hires", 7.5)])
+def test_work_precision_runs_a_test_set_to_its_published_end(monkeypatch, problem, config_t_end):
+    """A test-set problem's work-precision sweep ends at the published end point (the test set's
+    own reports measure the error there); others at their convergence horizon; a t_end the user
+    set wins."""
+    import harness.experiments.work_precision as wp
+    from harness.experiments.base import Cell
+    from harness.registry import get_problem
+
+    seen = {}
+
+    def fake_sweep(stepper, prob, cfg):
+        seen["t_end"] = cfg.get("t_end")
+        return pd.DataFrame({"kind": ["global"], "h": [0.1], "tol": [np.nan], "n_steps": [10],
+                             "t_end": [1.0], "error": [1e-3], "rhs_evals": [40.0],
+                             "force_evals": [0.0], "wall_s": [0.0], "message": [""]})
+
+    monkeypatch.setattr(wp, "step_sweep", fake_sweep)
+    monkeypatch.setattr(wp, "time_points", lambda stepper, prob, frame, cfg: frame)
+    config = {**wp.WorkPrecisionExperiment.default_config, "t_end": config_t_end}
+    wp.WorkPrecisionExperiment().run_cell(Cell("work-precision", "rk4", problem), config)
+    p = get_problem(problem)
+    expected = config_t_end if config_t_end is not None else (p.t_end if p.published is not None else None)
+    assert seen["t_end"] == expected
