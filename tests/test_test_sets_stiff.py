@@ -108,3 +108,37 @@ def test_work_precision_runs_a_test_set_to_its_published_end(monkeypatch, proble
     p = get_problem(problem)
     expected = config_t_end if config_t_end is not None else (p.t_end if p.published is not None else None)
     assert seen["t_end"] == expected
+
+
+def test_the_orbit_sampler_keeps_its_step_cap_and_its_samples(monkeypatch):
+    """The orbit is heyoka's steps plus ORBIT_DENSE_POINTS points inside each; the step cap
+    ends it as incomplete, not singular (a stiff span), and the samples lie on the flow."""
+    from harness import scales
+    from harness.registry import get_problem
+
+    problem = get_problem("harmonic")
+    full = scales.sample_orbit(problem)
+    assert full.complete and full.singular == "" and full.t[0] == problem.t0 and full.t[-1] == problem.t_end
+    steps = (full.t.size - 1) // (tol.ORBIT_DENSE_POINTS + 1)
+    assert full.t.size == 1 + steps * (tol.ORBIT_DENSE_POINTS + 1) and np.all(np.diff(full.t) > 0)
+    monkeypatch.setattr(tol, "ORBIT_MAX_STEPS", 5)
+    capped = scales.sample_orbit(problem)
+    assert not capped.complete and capped.singular == ""
+    assert capped.t.size == 1 + 5 * (tol.ORBIT_DENSE_POINTS + 1)
+    np.testing.assert_allclose(capped.t, full.t[:capped.t.size], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(capped.y, full.y[:, :capped.t.size], rtol=0, atol=1e-12)
+
+
+def test_an_orbit_that_blows_up_is_singular():
+    """y' = y^2 from 1 is singular at t = 1: the orbit ends before it, incomplete, with a reason."""
+    import heyoka as hy
+
+    from harness.problem import Problem
+    from harness.scales import sample_orbit
+
+    y = hy.make_vars("y")
+    p = Problem("blow-up", variables=[y], rhs=[y * y], y0=[1.0], t_span=(0.0, 2.0),
+                description="d", reference="r")
+    orbit = sample_orbit(p)
+    assert not orbit.complete and orbit.singular and orbit.t[-1] < 1.0
+    assert np.all(np.isfinite(orbit.y))
