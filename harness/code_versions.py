@@ -20,7 +20,8 @@ from harness.memo import kept
 from harness.provenance import PROJECT_ROOT
 
 __all__ = ["experiment_modules", "measuring_modules", "module_version", "project_files", "tolerance_values",
-           "JUDGING_MODULES", "LISTING_MODULES", "MEASURING_MODULES", "PROJECT_PACKAGES", "TOLERANCES"]
+           "JUDGING_MODULES", "PRESENTING_PARTS", "LISTING_MODULES", "MEASURING_MODULES",
+           "PROJECT_PACKAGES", "TOLERANCES"]
 
 PROJECT_PACKAGES = ("harness", "problems", "implementations")
 # Modules every cell steps through via objects (a stepper's carry, a problem's dynamics and
@@ -34,8 +35,8 @@ JUDGING_MODULES = (
     "harness.rules",
     "harness.facts",
     "harness.populations",
-    "harness.experiments.convergence_verdicts",
     "harness.report",
+    "harness.kit",
     "harness.registry",
     "harness.experiments",
     "harness.runner",
@@ -46,12 +47,18 @@ JUDGING_MODULES = (
     "harness.progress",
 )
 TOLERANCES = "harness.tolerances"
+# The modules of an experiment's folder (`harness/experiments/<name>/`) that only judge or present
+# its results: never part of a cell's key.
+PRESENTING_PARTS = ("judge", "section", "figures", "timing_section")
 
 
 def _excluded(name: str) -> bool:
     """A judging-only or listing module (a package in JUDGING_MODULES excludes its submodules,
     except `harness.experiments`, whose experiment modules are measuring code)."""
     if name == "harness.experiments":
+        return True
+    parts = name.split(".")
+    if parts[:2] == ["harness", "experiments"] and len(parts) >= 4 and parts[-1] in PRESENTING_PARTS:
         return True
     return any(name == m or name.startswith(m + ".") for m in JUDGING_MODULES
                if m != "harness.experiments")

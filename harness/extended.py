@@ -312,7 +312,7 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     the fit (order, points, h range) or None, and the reference error. Raises NotMeasurable
     with the reason."""
     from harness.coefficient_floors import mark_above_order
-    from harness.experiments.convergence_fit import classify_points, fit_order
+    from harness.order_fit import classify_points, fit_order
 
     runner = _runner(coefficients, problem)
     T = float(problem.convergence_t_end if T is None else T)

@@ -2,8 +2,12 @@
 
 A cell's key (`cell_key`) hashes the cell, the experiment's resolved configuration, the cell
 file schema and two code versions:
-- `code_version(stepper, problem)`: the fingerprints of the cell's stepper and problem
-  (coefficients, class source, symbolic definition): a changed method changes only its cells;
+- `code_version(stepper, problem)`: the fingerprints of the cell's stepper and of the faster
+  implementations the registry may run in its place (`harness.step_loops.fastest`), each with the
+  source of the module its class is defined in and of what that imports (a family's helpers; a
+  compiled variant's kernels), and of the problem (coefficients, class source, symbolic
+  definition): a changed method changes its cells and those of the steppers its family module
+  (or a module importing it) defines, never another family's;
 - `experiment_fingerprint(experiment)`: the measuring code of the experiment, found by reading
   the source (never by importing anything new):
   1. the experiment's own module, minus the top-level functions and methods that only its
@@ -78,11 +82,19 @@ def experiment_fingerprint(experiment: Experiment) -> str:
 
 
 def code_version(stepper: str, problem: str) -> str:
-    """Hash of the fingerprints of a stepper and a problem (looked up in the registry); an
-    empty name stands for 'none' (a cell that uses no stepper, or no problem)."""
+    """Hash of the fingerprints of a stepper (with those of its faster implementations, which
+    the experiments may run in its place: `harness.step_loops.fastest`) and a problem (looked up
+    in the registry); an empty name stands for 'none' (a cell that uses no stepper, or no
+    problem)."""
     from harness.registry import get_problem, get_stepper
+    from harness.step_loops import implementations_of
 
-    s = get_stepper(stepper).fingerprint() if stepper else ""
+    # every implementation a cell of the stepper may run (`fastest`), each with the code of the
+    # module its class is defined in and what that imports (module-level helpers of a family's
+    # loop; a compiled variant's kernels): a change to either changes the key of each cell it
+    # could have measured
+    s = "\n".join(f"{i.fingerprint()}\n{module_version(type(i).__module__)}"
+                  for i in implementations_of(get_stepper(stepper))) if stepper else ""
     p = get_problem(problem).fingerprint() if problem else ""
     if not isinstance(s, str) or not isinstance(p, str):
         raise HarnessError(

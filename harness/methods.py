@@ -3,10 +3,10 @@
 `Method` is the single source of truth for a method: its coefficient object (frozen and
 self-checking), its claims (order, stability figures where declared), its literature reference
 and, rarely, options of its family's step loop. Every built-in method is one `Method` entry in
-its family module's `METHODS` list; `Method.stepper()` picks the family's one step loop
-(`implementations.builder.build_stepper`), and the registry, gate, experiments, compiled loops,
-benchmarks and report all start from there. Symmetry and symplecticity are never typed: they
-are asked of the coefficients.
+its family module's `METHODS` list; `Method.stepper()` asks the registry for the family's step
+loop (`harness.step_loops.build_stepper`: families register their loops as entry points), and
+the registry, gate, experiments, compiled loops, benchmarks and report all start from there.
+Symmetry and symplecticity are never typed: they are asked of the coefficients.
 
 A plugin may give the same record as a plain mapping (`from_record`):
 
@@ -84,7 +84,7 @@ class Method:
 
     def stepper(self) -> Stepper:
         """The stepper running this method with its family's step loop."""
-        from implementations.builder import build_stepper
+        from harness.step_loops import build_stepper
 
         return build_stepper(self)
 

@@ -28,18 +28,16 @@ import difflib
 import hashlib
 import importlib.util
 import os
-import re
 import signal
 import subprocess
 import sys
 import tempfile
 import threading
 from collections.abc import Iterable
-from importlib import metadata
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
-from harness import DISTRIBUTION
+from harness.entry_points import group_entry_points, missing_builtins
 from harness.errors import InputError, PluginError, UnknownNameError
 from harness.problem import Problem
 from harness.stepper import Stepper
@@ -226,37 +224,6 @@ def expand(loaded: Any, cls: type) -> list:
     raise PluginError(
         f"expected a {cls.__name__}, a list of them, or a callable; got {type(loaded).__name__}"
     )
-
-
-def _dist_name(ep: metadata.EntryPoint) -> str:
-    """The normalized name of the distribution declaring `ep` ('' when unknown)."""
-    dist = getattr(ep, "dist", None)
-    return re.sub(r"[-_.]+", "-", dist.name).lower() if dist is not None and dist.name else ""
-
-
-def _is_own(ep: metadata.EntryPoint) -> bool:
-    """Declared by this project's own distribution: a built-in."""
-    return _dist_name(ep) == DISTRIBUTION
-
-
-def group_entry_points(group: str) -> tuple[list, list]:
-    """The installed entry points of `group`.
-
-    Returns
-    -------
-    (this project's own, sorted by name; every other distribution's, sorted by distribution
-    and name)
-    """
-    eps = list(metadata.entry_points(group=group))
-    own = sorted((ep for ep in eps if _is_own(ep)), key=lambda ep: ep.name)
-    others = sorted((ep for ep in eps if not _is_own(ep)), key=lambda ep: (_dist_name(ep), ep.name))
-    return own, others
-
-
-def missing_builtins(kind: str, group: str) -> str:
-    """The error of a registry whose built-in entry points are not installed."""
-    return (f"no built-in {kind}s: the {group!r} entry points of {DISTRIBUTION} are not "
-            "installed; install the project (`make setup`, or `pip install -e .`)")
 
 
 steppers: Registry[Stepper] = Registry("stepper", Stepper, "harness.steppers")

@@ -1,8 +1,8 @@
-"""The intrinsics through which the generated family kernels call a problem's functions: heyoka's
-compiled code at an address (`implementations.native_functions`), called as a C loop calls through
-a function pointer. Kept apart from `implementations.compiled_kernels` so that numba is imported
-only when a kernel is compiled or loaded, not by every process that lists the steppers; the
-family module's text carries a hash of this file, so numba's cache follows its changes.
+"""The intrinsics through which the family kernels (`implementations.kernels`) call a problem's
+functions: heyoka's compiled code at an address (`implementations.native_functions`), called as a
+C loop calls through a function pointer. Imported only with the kernels, when a kernel is
+compiled or loaded, not by every process that lists the steppers; the kernels' cache directory
+is named by a digest that includes this file, so numba's cache follows its changes.
 """
 
 from __future__ import annotations

@@ -61,7 +61,7 @@ def test_judging_modules_and_thresholds_are_not_in_any_key(monkeypatch):
     before = _fingerprints()
     for name, exp in EXPERIMENTS.items():
         counted, names = keys.measuring_modules(exp)
-        assert not {"harness.gate", "harness.experiments.convergence_verdicts"} & set(counted), name
+        assert not {"harness.gate", "harness.experiments.convergence.judge"} & set(counted), name
         assert "GATE_ORDER_TOL" not in names, name
     monkeypatch.setattr(tol, "GATE_ORDER_TOL", tol.GATE_ORDER_TOL * 3)
     _edited(monkeypatch, "harness.gate", lambda text: text + "\n# a new verdict rule\n")

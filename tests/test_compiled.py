@@ -28,6 +28,7 @@ from harness.coefficients import ButcherTableau, LinearMultistep, SplittingSchem
 from harness.errors import IncompatibleError, InputError
 from harness.problem import NewtonianForm, Problem
 from harness.registry import get_problem, get_stepper, problems, steppers
+from harness.step_loops import fastest
 from harness.stepper import StepFailure, check_compatible
 from harness.tolerances import COMPILED_AGREEMENT_ULPS, EPS
 from implementations import FAMILY_MODULES
@@ -38,11 +39,10 @@ from implementations.compiled import (
     SUFFIX,
     UnsupportedExpression,
     compiled_variant,
-    fastest,
     problem_functions,
 )
-from implementations.compiled_kernels import COLUMN_BLOCK, family_module
 from implementations.implicit_rk import ImplicitRungeKutta
+from implementations.kernels.one_step import COLUMN_BLOCK
 from implementations.multistep import LinearMultistepStepper
 from implementations.native_functions import NAMES, native_function
 from implementations.runge_kutta import ExplicitRungeKutta
@@ -402,14 +402,19 @@ def test_every_problem_function_loads_and_is_heyokas_own(problem):
             assert np.array_equal(out, expected, equal_nan=True), (problem.name, name)
 
 
-def test_the_family_module_is_cached_in_the_code_cache_dir():
+def test_the_kernels_are_cached_in_the_code_cache_dir_named_by_their_code():
+    """numba's cache of the kernels lies under code_dir()/numba, in a directory named by a digest
+    of every kernel module and the call intrinsics (numba's own index sees only the stamp of a
+    function's file); a kernel run there leaves its index, and no problem is named in a kernel."""
     from harness.cache import code_dir
+    from implementations import kernels
 
-    family = family_module()
-    assert Path(family.__file__).parent == code_dir() / "numba"
-    assert family is family_module()
-    # one family module for every problem: no problem's name or function is in it
-    assert "kepler" not in Path(family.__file__).read_text()
+    assert kernels.CACHE_DIRECTORY.parent == code_dir() / "numba"
+    assert kernels.CACHE_DIRECTORY == kernels.cache_directory()
+    get_stepper("rk4@compiled").integrate(get_problem("harmonic"), h=0.01, n_steps=3)
+    assert list(kernels.CACHE_DIRECTORY.rglob("one_step.rk_advance-*.nbi"))
+    for module in kernels.MODULES:
+        assert "kepler" not in Path(kernels.__file__).with_name(f"{module}.py").read_text()
 
 
 def test_loader_failures_are_reasons_not_crashes():
@@ -516,7 +521,7 @@ def test_fastest_runs_a_step_controller_compiled_with_the_numpy_bookkeeping(cont
     """The step-control experiment's long runs take `fastest`: the compiled controller, a subclass
     of the NumPy loop (same carry, reversal and clocks), whose run and round trip are the NumPy
     loop's to rounding, clocks included."""
-    from implementations.compiled import CompiledControlledSplitting, fastest
+    from implementations.compiled import CompiledControlledSplitting
     from implementations.step_control import ControlledSplittingStepper
 
     stepper = get_stepper(f"velocity-verlet+dtheta-{controller}")
@@ -567,7 +572,6 @@ def test_a_compile_holds_a_lock_other_processes_wait_on(tmp_path, monkeypatch):
 def test_fastest_never_replaces_a_changed_loop():
     """A subclass that changes the step (here: the last stage silently reuses the third) is run
     as written: its coefficients alone do not say what it computes."""
-    from implementations.compiled import fastest
     from implementations.runge_kutta import ExplicitRungeKutta
 
     class Changed(ExplicitRungeKutta):

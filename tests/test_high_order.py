@@ -17,8 +17,8 @@ import pytest
 
 from harness import tolerances as tol
 from harness.coefficients import ButcherTableau
-from harness.experiments.convergence_fit import classify_points
 from harness.methods import method_from_record
+from harness.order_fit import classify_points
 from harness.theory.defects import condition_defects
 
 sys.path.insert(0, str(Path(__file__).parent / "plugins"))

@@ -28,10 +28,6 @@ PACKAGES = ("harness", "implementations", "problems")
 # allowed only where a heavy optional library is imported on first use, which is never a module
 # of this project.
 EXCEPTIONS: dict[tuple[str, str], str] = {
-    # -- the catalogue named by the framework ---------------------------------------------------------
-    ("harness.methods", "implementations.builder"):
-        "a method record is built into a stepper by the family step loops of `implementations` "
-        "(`build_stepper`); fix: families register their step loop with the registry",
     # -- a problem's derived scales -------------------------------------------------------------------
     ("harness.problem.definition", "harness.scales"):
         "`Problem` offers its time scales and perturbations, derived by `harness.scales` from the "
@@ -40,27 +36,6 @@ EXCEPTIONS: dict[tuple[str, str], str] = {
     ("harness.coefficients", "harness.theory"):
         "a coefficient object answers order and stability questions (NodePy style) through the "
         "theory functions, which take coefficient objects; fix: theory works on arrays only",
-    # -- experiments reaching their neighbours ------------------------------------------------------
-    ("harness.extended", "harness.experiments.convergence_fit"):
-        "extended precision fits its real128 sweep with the convergence experiment's order fit; "
-        "fix: the fit (it needs only the thresholds) moves below both",
-    ("harness.experiments.convergence", "implementations.compiled"):
-        "runs the fastest correct implementation of a method by asking the compiled family module; "
-        "fix: 'the fastest implementation' becomes a registry question",
-    ("harness.experiments.energy", "implementations.compiled"): "as above",
-    ("harness.experiments.reversibility", "implementations.compiled"): "as above",
-    ("harness.experiments.step_control", "implementations.compiled"): "as above",
-    ("harness.experiments.symplecticity", "implementations.compiled"): "as above",
-    ("harness.experiments.timed_runs", "implementations.compiled"): "as above (which loop is timed)",
-    ("harness.experiments.side_by_side", "harness.report.sections"):
-        "the experiment registers its own report section; fix: one folder per experiment with "
-        "its section, over a presentation kit below the experiments",
-    # -- report sections registered by importing them ---------------------------------------------
-    ("harness.report.sections", "harness.report.experiment_sections"):
-        "the section registry imports the modules that register sections into it; fix: sections "
-        "register through one list (or entry points), not by import side effect",
-    ("harness.report.sections", "harness.report.fixed_sections"): "as above",
-    ("harness.report.sections", "harness.report.verdicts"): "as above",
 }
 
 

@@ -127,9 +127,14 @@ def test_every_module_is_listed_in_the_layout_note():
 
 
 def test_every_package_is_listed_in_pyproject():
-    """A package directory missing from pyproject.toml's explicit list is left out of the wheel."""
+    """A package directory that pyproject.toml's package search does not find is left out of the
+    wheel (the search is what setuptools runs when it builds one)."""
     import tomllib
 
-    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    from setuptools import find_packages
+
+    search = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]["find"]
+    listed = set(find_packages(where=str(ROOT), include=search["include"], exclude=search.get("exclude", ())))
     found = {_rel(p.parent).replace("/", ".") for p in _modules(*PACKAGES) if p.name == "__init__.py"}
-    assert found <= listed, sorted(found - listed)
+    assert found and found <= listed, sorted(found - listed)
+    assert not {p for p in listed if p.split(".")[0] not in PACKAGES}, "the search takes in other packages"

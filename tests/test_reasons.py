@@ -13,7 +13,7 @@ import pytest
 
 from harness import tolerances as tol
 from harness.experiments import EXPERIMENTS, get_experiment
-from harness.experiments.convergence_verdicts import summarize_cell
+from harness.experiments.convergence.judge import summarize_cell
 from harness.registry import problems, steppers
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 import harness
-from harness import registry
+from harness import entry_points
 from harness.problem import Problem
 from harness.registry import Registry
 from harness.stepper import Stepper
@@ -44,7 +44,7 @@ def test_the_distribution_named_by_the_registry_is_this_project():
 def test_builtins_are_this_projects_entry_points_in_catalogue_order(group, cls, package, function):
     declared = PYPROJECT["entry-points"][group]
     assert declared == {"builtin": f"{package}:{function}"}
-    installed = [ep for ep in metadata.entry_points(group=group) if registry._is_own(ep)]
+    installed = [ep for ep in metadata.entry_points(group=group) if entry_points._is_own(ep)]
     assert [(ep.name, ep.value) for ep in installed] == list(declared.items()), (
         "the installed metadata is stale: run `make setup`")
     fresh = Registry(group.split(".")[1][:-1], cls, group)
@@ -99,7 +99,7 @@ def test_a_third_party_distribution_registers_after_the_builtins(tmp_path, monke
 
 
 def test_missing_builtin_entry_points_are_said_plainly(monkeypatch):
-    monkeypatch.setattr(registry, "DISTRIBUTION", "not-this-project")
+    monkeypatch.setattr(entry_points, "DISTRIBUTION", "not-this-project")
     fresh = Registry("problem", Problem, "harness.problems")
     fresh.names()
     assert fresh.errors[0] == (
@@ -141,9 +141,10 @@ def _experiment_site(tmp_path: Path) -> dict:
 
 
 def test_an_experiment_from_another_distribution_is_listed_run_and_reported(tmp_path):
-    """The tests/plugins experiment, registered only by a fake installed distribution's entry
-    point: listed after the built-ins, in the report's experiments with a section, run by the
-    CLI; a broken entry point is a warning naming it."""
+    """The tests/plugins experiment (one folder, as a built-in's), registered only by a fake
+    installed distribution's entry point: listed after the built-ins, run by the CLI, and in the
+    report with the section it names and its scoreboard column; a broken entry point is a
+    warning naming it."""
     import json
     import subprocess
 
@@ -154,14 +155,15 @@ def test_an_experiment_from_another_distribution_is_listed_run_and_reported(tmp_
     seen = json.loads(out.stdout)
     assert seen["listed"] == [*seen["builtin"], "evals-per-step"]
     assert seen["report"] == [*seen["builtin"], "evals-per-step"]
-    assert ["evals-per-step", "Evals per step"] in seen["titles"]  # the generic section
+    assert ["evals-per-step", "Evaluations per step"] in seen["titles"]  # its own section
     assert len(seen["errors"]) == 1 and "'broken'" in seen["errors"][0]
     harness_cli = str(Path(sys.executable).with_name("harness"))
     listed = subprocess.run([harness_cli, "list", "experiments"], env=env, capture_output=True,
                             text=True, timeout=300)
     assert listed.returncode == 0 and "evals-per-step" in listed.stdout.splitlines()[-1]
     assert "warning: entry point 'broken'" in listed.stderr
-    env["HARNESS_CACHE_DIR"] = str(tmp_path / "cache")
+    env.update(HARNESS_CACHE_DIR=str(tmp_path / "cache"), HARNESS_RESULTS_DIR=str(tmp_path / "results"),
+               HARNESS_REPORTS_DIR=str(tmp_path / "reports"))
     ran = subprocess.run([harness_cli, "run", "evals-per-step", "--stepper", "rk4", "--stepper",
                           "leapfrog", "--problem", "harmonic", "--quick", "--jobs", "1", "--json"],
                          env=env, capture_output=True, text=True, timeout=300)
@@ -169,3 +171,12 @@ def test_an_experiment_from_another_distribution_is_listed_run_and_reported(tmp_
     rows = {r["stepper"]: r for r in json.loads(ran.stdout)}
     assert rows["rk4"]["evals"] == 80 and rows["leapfrog"]["evals"] == 21
     assert all(r["passed"] for r in rows.values())
+    report = subprocess.run([harness_cli, "report", "--from", "latest"], env=env, capture_output=True,
+                            text=True, timeout=600)
+    assert report.returncode == 0, report.stderr
+    page = Path(report.stdout.strip().splitlines()[-1]).read_text(encoding="utf-8")
+    section = page.split('<section id="evals-per-step"', 1)[1].split("</section>", 1)[0]
+    assert "Evaluations per step" in section and "evaluations counted" in section
+    assert "could not be built" not in section
+    assert all(f">{name}<" in section for name in ("rk4", "leapfrog"))
+    assert "evaluations per step (counted)" in page  # its scoreboard column

@@ -25,10 +25,11 @@ from helpers import loaded_plugin
 from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.roundoff import RoundoffExperiment, step_sizes
+from harness.kit.figure_style import MAX_LINES_PER_PANEL
+from harness.kit.figure_svg import UnsafeFigureError, check_svg
 from harness.report import build_report, report_experiments, write_report
 from harness.report.claims import CLAIMS
-from harness.report.figures import MAX_LINES_PER_PANEL, UnsafeFigureError, check_svg
-from harness.report.sections import SECTION_BUILDERS, section_titles
+from harness.report.sections import section_titles
 from harness.store import load_run
 
 HOSTILE = "<script>alert(1)</script>"
@@ -191,7 +192,7 @@ def test_every_figure_offers_its_data_as_an_embedded_csv(report):
 def test_small_multiples_hold_at_most_eight_methods_a_panel_and_every_method_once():
     """Panels per family: a large family is cut into parts of at most MAX_LINES_PER_PANEL,
     small families share a panel while they fit, no method is lost or repeated."""
-    from harness.report.figures import panels
+    from harness.kit.figure_style import panels
 
     family = {f"s{i}": "splitting" for i in range(15)}
     family.update({"bdf2": "multistep", "ab2": "multistep", "taylor": "taylor", "gl4": "implicit-rk"})
@@ -206,14 +207,18 @@ def test_small_multiples_hold_at_most_eight_methods_a_panel_and_every_method_onc
     assert len(panels(["a", "b"], {"a": "bounded", "b": "linear"}, pack=False)) == 2
 
 
-def test_every_registered_experiment_has_a_section_builder():
-    """Built-in experiments each have a registered section (a new one without falls back to the
-    generic table, which works but is not what a reader should get for a built-in)."""
-    from harness.report.sections import section_spec
+def test_every_registered_experiment_names_its_section():
+    """Built-in experiments each name their section (a new one without falls back to the
+    generic table, which works but is not what a reader should get for a built-in), and the
+    report takes that one."""
+    from harness.experiments import EXPERIMENTS, builtin_experiments
+    from harness.kit import SectionSpec
+    from harness.report.specs import section_spec
 
-    for name in report_experiments():
-        section_spec(name)
-        assert name in SECTION_BUILDERS, name
+    for exp in builtin_experiments():
+        assert isinstance(exp.section, SectionSpec), exp.name
+        assert exp.section.experiment == exp.name
+        assert section_spec(exp.name) is exp.section is EXPERIMENTS[exp.name].section
 
 
 def test_scoreboard_has_one_row_per_stepper_failing_first_and_marked_in_text(report):
@@ -436,12 +441,14 @@ def _view_with_extra_experiment(report, name: str):
 
 
 def test_an_experiment_without_a_registered_section_gets_the_generic_table(report):
+    from harness.experiments import EXPERIMENTS
+    from harness.kit import generic_section
     from harness.report.sections import _experiment_section, section_spec
     from harness.report.verdicts import collect_verdicts
 
     name = "made-up-step-control"
     view = _view_with_extra_experiment(report, name)
-    assert name not in SECTION_BUILDERS
+    assert name not in EXPERIMENTS and section_spec(name).build is generic_section
     sec = _experiment_section(view, name, 99)
     assert sec.title == section_spec(name).title and sec.intro
     tables = [b.table for b in sec.blocks if b.kind == "table"]
@@ -454,9 +461,14 @@ def test_an_experiment_without_a_registered_section_gets_the_generic_table(repor
     assert any("too-many-steps" in s for s in mine["sentence"])
 
 
-def test_one_registration_gives_an_experiment_its_own_section_and_scoreboard_column(report):
+def test_the_section_an_experiment_names_is_its_section_and_scoreboard_column(report, monkeypatch):
+    """An experiment's `section` attribute is all it takes: its title, builder and scoreboard
+    column appear in the report."""
+    from harness.experiments import EXPERIMENTS
+    from harness.experiments.roundoff import RoundoffExperiment
+    from harness.kit import ScoreColumn, SectionSpec
     from harness.report.fixed_sections import verdicts_section
-    from harness.report.sections import ScoreColumn, _experiment_section, register_section
+    from harness.report.sections import _experiment_section
     from harness.report.verdicts import collect_verdicts
 
     name = "made-up-step-control"
@@ -467,27 +479,29 @@ def test_one_registration_gives_an_experiment_its_own_section_and_scoreboard_col
         s = s[s["stepper"] == stepper]
         return ([(str(int(s["accepted_steps"].iloc[0])), "")], True) if len(s) else ([("—", "")], False)
 
-    @register_section(name, title="Step-size control", intro="Accepted steps. Fewer is better.",
-                      score=(ScoreColumn("accepted steps", steps),))
     def build(view, sec):
-        sec.note("built by the registered builder")
+        sec.note("built by the experiment's own section")
 
-    try:
-        sec = _experiment_section(view, name, 99)
-        assert sec.title == "Step-size control"
-        assert [b.text for b in sec.blocks if b.kind == "note"] == ["built by the registered builder"]
-        head, _ = verdicts_section(view, collect_verdicts(view), [*view.meta["experiments"]])
-        board = next(b.table for b in head.blocks if b.kind == "table")
-        assert "accepted steps" in board.columns
-        col = board.columns.index("accepted steps")
-        cells = {r.stepper: r.cells[col].text for r in board.rows}
-        assert cells["euler"] == "120" and cells["rk4"] == "40"
-    finally:
-        SECTION_BUILDERS.pop(name, None)
+    class MadeUp(RoundoffExperiment):
+        section = SectionSpec(name, title="Step-size control", intro="Accepted steps. Fewer is better.",
+                              build=build, score=[ScoreColumn("accepted steps", steps)])
+
+    made_up = MadeUp()
+    made_up.name = name
+    monkeypatch.setitem(EXPERIMENTS, name, made_up)
+    sec = _experiment_section(view, name, 99)
+    assert sec.title == "Step-size control"
+    assert [b.text for b in sec.blocks if b.kind == "note"] == ["built by the experiment's own section"]
+    head, _ = verdicts_section(view, collect_verdicts(view), [*view.meta["experiments"]])
+    board = next(b.table for b in head.blocks if b.kind == "table")
+    assert "accepted steps" in board.columns
+    col = board.columns.index("accepted steps")
+    cells = {r.stepper: r.cells[col].text for r in board.rows}
+    assert cells["euler"] == "120" and cells["rk4"] == "40"
 
 
 def test_methods_with_the_same_error_curve_are_drawn_once_whatever_their_row_order():
-    from harness.report.figures_convergence import same_curves
+    from harness.experiments.convergence.figures import same_curves
 
     h = [0.1, 0.05, 0.025]
     err = [1e-3, 1.25e-4, 1.5625e-5]

@@ -16,12 +16,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from harness.report import figure_cache
-from harness.report.elements import Block, Row, Section, TextCell, df_table, drop_unlinked_row_ids
-from harness.report.experiment_sections import _work_table, fold_per_n
-from harness.report.figure_style import styled
-from harness.report.figure_svg import short_ids
-from harness.report.figures import WORK_TARGET_ERROR
+from harness.experiments.reversibility.section import fold_per_n
+from harness.experiments.work_precision.figures import WORK_TARGET_ERROR
+from harness.experiments.work_precision.section import _work_table
+from harness.kit import figure_cache
+from harness.kit.elements import Block, Row, Section, TextCell, df_table, drop_unlinked_row_ids
+from harness.kit.figure_style import styled
+from harness.kit.figure_svg import short_ids
 
 CALLS: list[float] = []
 
@@ -30,7 +31,7 @@ CALLS: list[float] = []
 def _line_figure(slope: float):
     from matplotlib.figure import Figure as MplFigure
 
-    from harness.report.figure_svg import to_svg
+    from harness.kit.figure_svg import to_svg
 
     CALLS.append(slope)
     fig = MplFigure(figsize=(2, 2))
@@ -203,6 +204,6 @@ def test_the_grouped_work_table_equals_the_row_by_row_one():
 @pytest.mark.parametrize("value, text", [(4.63e-4, "4.63e-4"), (1.31e5, "1.31e5"), (1e-10, "1e-10"),
                                           (10000.0, "1e4"), (0.0581, "0.0581"), (16, "16")])
 def test_numbers_are_written_short(value, text):
-    from harness.report.elements import fmt
+    from harness.kit.elements import fmt
 
     assert fmt(value) == text

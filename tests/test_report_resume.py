@@ -56,7 +56,7 @@ def _run_to_end(base: Path) -> Path:
 def _comparable(df: pd.DataFrame) -> pd.DataFrame:
     """A table without the columns that measure time (wall clock differs between runs), the timed
     columns of the timing protocol and the Pareto marks of time among them."""
-    from harness.experiments.timed_runs import TIMING_COLUMNS
+    from harness.experiments.work_precision.timed_runs import TIMING_COLUMNS
 
     timed = {*TIMING_COLUMNS, "pareto_time"}
     drop = [c for c in df.columns if "wall" in c or c in timed]

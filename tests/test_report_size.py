@@ -19,11 +19,11 @@ import pandas as pd
 import pytest
 from matplotlib.figure import Figure as MplFigure
 
-from harness.report.figure_style import styled
-from harness.report.figure_svg import check_svg, page_css, to_svg
-from harness.report.sections import csv_download
+from harness.kit import csv_download
+from harness.kit.figure_style import styled
+from harness.kit.figure_svg import check_svg, page_css, to_svg
+from harness.kit.svg_paths import relative_path
 from harness.report.sizes import report_sizes, section_totals
-from harness.report.svg_paths import relative_path
 
 
 def _absolute_points(d: str) -> list[tuple[float, float]]:

@@ -115,7 +115,7 @@ def test_fifteen_digit_weights_do_not_reach_order_8_in_real128():
 
 
 def test_floor_bound_sweeps_are_rerun_only_with_exact_coefficients():
-    from harness.experiments.convergence_extended import floor_bound as _floor_bound
+    from harness.experiments.convergence.extended import floor_bound as _floor_bound
 
     g = pd.DataFrame({"h": [1.0, 0.5, 0.25, 0.125], "in_fit": [False, True, True, False],
                       "excluded": ["pre-asymptotic", "", "", "roundoff"]})
@@ -250,7 +250,7 @@ def test_tolerance_allowance_is_steps_times_flow_amplification():
     ([1e8, 1e8, 1e8], [10, 20, 40], 7e4, "misses-tolerance"),
 ])
 def test_adaptive_verdict_uses_the_derived_allowance(errors, steps, amplification, verdict):
-    from harness.experiments.convergence_verdicts import summarize_cell
+    from harness.experiments.convergence.judge import summarize_cell
 
     rec = summarize_cell(get_stepper("scipy-rk45"), "p", _tolerance_rows(errors, steps, amplification))
     assert rec["verdict"] == verdict, rec["message"]

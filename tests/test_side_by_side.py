@@ -11,7 +11,8 @@ import pytest
 
 from harness.experiments import get_experiment
 from harness.experiments.base import Cell
-from harness.report.sections import SECTION_BUILDERS, Section
+from harness.experiments.side_by_side.section import SECTION
+from harness.kit import Section
 
 HAVE_REBOUND = importlib.util.find_spec("rebound") is not None
 EXP = get_experiment("side-by-side")
@@ -66,7 +67,7 @@ def test_the_section_joins_order_drift_and_round_trip_per_stepper():
     view = _View({"side-by-side": side, "convergence": pd.DataFrame(), "energy": energy,
                   "reversibility": rev})
     sec = Section("side-by-side", 1, "t")
-    SECTION_BUILDERS["side-by-side"].build(view, sec)
+    SECTION.build(view, sec)
     [table] = [b.table for b in sec.blocks if b.kind == "table"]
     text = repr(table)
     for shown in ("2.01", "bounded", "100000", "reversible", "9", "lib"):

@@ -152,7 +152,7 @@ def test_the_experiment_summary_has_its_columns_on_a_tiny_run():
     assert rec.work_ratio > 1.0
     assert set(rows.role) == {"controlled", "fixed"}
 
-    from harness.report.step_control import build_section
+    from harness.experiments.step_control.section import build_section
 
     fragment = build_section({"rows": rows, "summary": summ})
     assert fragment.startswith('<section id="step-control">') and "<svg" in fragment

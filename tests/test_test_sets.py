@@ -281,7 +281,7 @@ def test_without_test_set_problems_the_section_says_how_to_ask_for_them():
 
 
 def test_a_clause_repeated_with_other_numbers_is_said_once():
-    from harness.experiments.convergence_verdicts import summarise_clauses
+    from harness.experiments.convergence.judge import summarise_clauses
 
     clauses = [f"horizon cut to t = {t:g} at h = {h:.3g}" for t, h in ((8, 0.1), (2, 0.05), (0.5, 1e-3))]
     out = summarise_clauses(["too few points", *clauses, "too few points", ""])
@@ -311,7 +311,7 @@ def test_a_sweep_whose_every_tolerance_is_outside_the_library_range_is_not_measu
     zero points nor a failure."""
     import pandas as pd
 
-    from harness.experiments.convergence_verdicts import summarize_cell
+    from harness.experiments.convergence.judge import summarize_cell
     from harness.registry import steppers
     from harness.rules import Expectation, judge_convergence
 
@@ -339,7 +339,7 @@ def test_a_shortened_horizon_note_is_no_failure_but_a_step_that_could_not_be_com
     still `failed` with that message."""
     import pandas as pd
 
-    from harness.experiments.convergence_verdicts import summarize_cell
+    from harness.experiments.convergence.judge import summarize_cell
     from harness.registry import steppers
 
     note = "work budget spent with 0 asymptotic point(s) up to t = 60; horizon shortened to t = 15"

@@ -86,7 +86,7 @@ def test_time_points_ratio_uses_the_same_cells_baseline(monkeypatch):
     lasts 4 ns: the ratio columns follow from these two numbers and from nothing else. The
     sweep's first run (1.5 s, it compiled) is reported apart and not a sample; its second (2 ms,
     warm) is the second point's first sample, so that point is run twice more, not three times."""
-    from harness.experiments import timed_runs
+    from harness.experiments.work_precision import timed_runs
     from harness.registry import get_problem, get_stepper
 
     class Tick:
@@ -281,7 +281,7 @@ def test_work_precision_is_exclusive():
 
 # -- the report's tables ---------------------------------------------------------------------------
 def test_fastest_table_names_the_fastest_and_the_runners_up():
-    from harness.report.timing_section import fastest_table
+    from harness.experiments.work_precision.timing_section import fastest_table
 
     rows = pd.DataFrame({
         "problem": "p", "stepper": ["a"] * 2 + ["b"] * 2 + ["c"] * 2,
@@ -294,7 +294,7 @@ def test_fastest_table_names_the_fastest_and_the_runners_up():
 
 
 def test_twin_rows_and_group_summary():
-    from harness.report.timing_section import group_summary, twin_rows
+    from harness.experiments.work_precision.timing_section import group_summary, twin_rows
 
     rows = pd.DataFrame({
         "stepper": ["m", "m", "lib"], "implementation": ["compiled", "compiled", "scipy"],

@@ -3,10 +3,11 @@
 `EXPERIMENT_MODULES` maps each experiment's CLI name to its module in this package. The CLI
 (`harness run NAME`, `harness list experiments`), the runner (`run_experiments()` with no names)
 and the report (its sections, in this order) are all built from it: adding an experiment is one
-entry here plus its module. A listed module that fails to import raises (a deleted or broken
-experiment is never silently dropped). Importing this package also registers the experiments of
-other distributions' `harness.experiments` entry points (`base.load_experiments`), listed and
-reported after the built-ins.
+entry here plus its folder (`<module>/__init__.py` measures, `<module>/section.py` presents; the
+experiment names its section, see `base.Experiment`). A listed module that fails to import
+raises (a deleted or broken experiment is never silently dropped). Importing this package also
+registers the experiments of other distributions' `harness.experiments` entry points
+(`base.load_experiments`), listed and reported after the built-ins.
 """
 
 from importlib import import_module

@@ -12,6 +12,15 @@ Contract for an experiment (a subclass of `Experiment`, registered in `EXPERIMEN
    judges a claim.
 5. Failures stay in their cell: the runner turns an exception in `run_cell` into a failed-cell
    record (`harness.experiments.base.failed_record`), and the run goes on.
+6. `section` names its report section, a `harness.kit.SectionSpec` (title, intro, the function
+   that draws it from the saved run, its scoreboard columns): the one way a section is
+   registered. None: the report shows the summary as one generic table.
+
+A built-in experiment is one folder, `harness/experiments/<name>/`: `__init__.py` measures (the
+`Experiment` subclass, registered), `section.py` presents (its `SECTION`, over the presentation
+kit `harness.kit`), `figures.py` draws, and `judge.py` holds verdict code that is not a rule of
+`harness.rules`; the modules that only judge or present are never part of a cell's cache key
+(`harness.code_versions.PRESENTING_PARTS`).
 
 Experiments come in through the entry-point group `harness.experiments`, as steppers and
 problems do (`load_experiments`): this project's own entry is the built-in list
@@ -27,9 +36,12 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
+
+if TYPE_CHECKING:
+    from harness.kit.section import SectionSpec
 
 __all__ = [
     "Cell",
@@ -91,6 +103,7 @@ class Experiment(ABC):
     description: str = ""
     default_config: Mapping[str, Any] = MappingProxyType({})
     quick_config: Mapping[str, Any] = MappingProxyType({})
+    section: SectionSpec | None = None
 
     def config(self, overrides: Mapping[str, Any] | None = None, *, quick: bool = False) -> dict:
         base = dict(self.default_config)

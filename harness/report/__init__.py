@@ -2,12 +2,14 @@
 saves the run and writes one self-contained `reports/<run id>/index.html` (inline SVG figures,
 HTML tables, no script, no network), then points `reports/latest` at it.
 
-Modules: `build` (the command), `sections` (the page's model, the table helpers and the
-section registry), `experiment_sections` (one registered section per built-in experiment),
-`fixed_sections` (verdicts and scoreboard, what changed, ground truth, claims, provenance,
-performance history), `verdicts` (every judged claim as one table), `compare` (what changed
-since an earlier run), `figures` (matplotlib to checked inline SVG), `claims` (the course
-material's claims, judged), `templates/report.html.j2`.
+The assembler only: `build` (the command), `sections` (every section in order, the experiment
+sections built in forked workers), `specs` (the section each experiment names, or the generic
+table), `fixed_sections` (verdicts and scoreboard, what changed, ground truth, claims, gate
+trust, provenance, performance history), `verdicts` (every judged claim as one table),
+`compare` (what changed since an earlier run), `claims` (the course material's claims,
+judged), `test_sets`, `history_figure`, `templates/report.html.j2`. An experiment's section and
+figures live in its folder (`harness/experiments/<name>/`), over the presentation kit
+`harness.kit`.
 """
 
 from harness.report.build import (

@@ -265,8 +265,7 @@ def run_view(stored: Any, *, need_steppers: bool = True) -> Any:
     loaded it (the run it just measured, or `harness report --from RUN --plugin FILE`); with
     `need_steppers`, a run whose plugin steppers are not loaded is an `InputError` saying so."""
     from harness import registry
-    from harness.report import figures as F
-    from harness.report.sections import RunView
+    from harness.kit import Palette, RunView
 
     meta = stored.meta
     cfg = meta.get("config", {}).get("run", {})
@@ -286,7 +285,7 @@ def run_view(stored: Any, *, need_steppers: bool = True) -> Any:
         steppers=known, problems=[p for p in problem_names if p in registry.problems],
         infos=infos, origins={n: registry.steppers.origin(n) for n in known},
         quick=bool(cfg.get("quick", False)),
-        palette=F.Palette(known, {n: i.family for n, i in infos.items()}), run_id=stored.run_id,
+        palette=Palette(known, {n: i.family for n, i in infos.items()}), run_id=stored.run_id,
     )
 
 
@@ -335,7 +334,7 @@ def write_report(
                 f"{len(meta.get('experiments', {}))} experiments.")
     import dataclasses
 
-    from harness.report.figure_svg import page_css, short_classes, short_ids
+    from harness.kit.figure_svg import page_css, short_classes, short_ids
 
     blocks = [b for sec in sections for b in sec.blocks if b.figure is not None]
     svgs, figure_css = short_classes([b.figure.svg for b in blocks], page_css(b.figure for b in blocks))

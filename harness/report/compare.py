@@ -22,7 +22,8 @@ from typing import Any
 
 import pandas as pd
 
-from harness.report.sections import RunView, anchor, experiment_key, is_missing, section_spec
+from harness.kit import RunView, anchor, is_missing
+from harness.report.specs import experiment_key, section_spec
 
 __all__ = ["Previous", "Comparison", "load_previous", "compare_runs", "VERDICTS_FILE"]
 

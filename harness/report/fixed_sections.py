@@ -12,9 +12,7 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.report import figures as F
-from harness.report.claims import AGREE, DISAGREE, check_claims
-from harness.report.sections import (
+from harness.kit import (
     FAIL,
     MARK,
     NONE,
@@ -29,9 +27,11 @@ from harness.report.sections import (
     anchor,
     df_table,
     fmt,
-    section_spec,
     text_cell,
 )
+from harness.report.claims import AGREE, DISAGREE, check_claims
+from harness.report.history_figure import perf_history_figure
+from harness.report.specs import section_spec
 
 __all__ = ["verdicts_section", "changes_section", "ground_truth", "claims", "gate_trust", "provenance",
            "performance_history"]
@@ -364,7 +364,7 @@ def performance_history() -> Section:
     if history is None or len(history) == 0:
         sec.note("No asv results yet (run `make nightly`).")
         return sec
-    sec.figure(F.perf_history_figure(history),
+    sec.figure(perf_history_figure(history),
                "Benchmark values against commit date (one panel per benchmark, one line per "
                "parameter set; at most 12 panels).")
     latest = history.sort_values("date").groupby(["benchmark", "params"], sort=False).tail(1)

@@ -1,18 +1,17 @@
-"""The report's sections, built from a saved run: tables as data, figures as checked SVG.
+"""The report's sections in order, built from a saved run: the assembler.
 
 `build_sections(view, ...)` returns the sections the template renders in order:
 - Verdicts: how many claims were checked and which failed (one sentence each), then the
   scoreboard, each of whose numbers links to the table row it comes from;
 - What changed since the last run (`harness.report.compare`), when an earlier run is given;
 - one section per experiment of the registry (`harness.experiments.EXPERIMENTS`), in its order,
-  each built by the builder registered for it with `register_section` (built-ins in
-  `harness.report.experiment_sections`) or, for an experiment nobody registered a builder for,
-  by the generic table section;
-- Ground truth, Claims from the course material, Provenance, Performance history.
+  each the one its experiment names (`Experiment.section`, a `harness.kit.SectionSpec`) or, for
+  an experiment that names none, the generic table section (`harness.kit.section`);
+- Ground truth, Published test sets, Claims from the course material, How much to trust the
+  gate, Provenance, Performance history (`harness.report.fixed_sections`).
 
 Every text here is plain text; the template escapes it. Only figure SVG is embedded as markup,
-after `figures.check_svg` has passed it. Per-cell tables are folded in `<details>`; a reason
-shared by many rows is written once as a numbered note below its table and referred to.
+after `harness.kit.figure_svg.check_svg` has passed it.
 """
 
 from __future__ import annotations
@@ -23,232 +22,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
+from harness.experiments import EXPERIMENTS
+from harness.kit.elements import Block, Section, SectionTimer, drop_unlinked_row_ids
+from harness.kit.section import missing, skip_note
+from harness.kit.view import RunView
+from harness.report import fixed_sections as X
+from harness.report.specs import section_spec
+from harness.report.test_sets import test_sets_section
+from harness.report.verdicts import collect_verdicts
 
-from harness.report import figures as F
-from harness.report.elements import (  # noqa: F401  (re-exported: the sections' vocabulary)
-    CSV_DIGITS,
-    FAIL,
-    HIDDEN_COLUMNS,
-    MARK,
-    NONE,
-    NOTE_COLUMNS,
-    PASS,
-    Block,
-    Download,
-    Row,
-    Section,
-    SectionTimer,
-    Table,
-    TextCell,
-    anchor,
-    csv_download,
-    df_table,
-    drop_unlinked_row_ids,
-    first_sentence,
-    fmt,
-    is_missing,
-    status_cell,
-    text_cell,
-    yes_no,
-)
-
-__all__ = ["Section", "Table", "Row", "TextCell", "Block", "Download", "RunView", "SectionSpec",
-           "Measure", "ScoreColumn", "SECTION_BUILDERS", "register_section", "section_spec",
-           "build_sections", "section_titles", "anchor", "df_table", "csv_download", "fmt",
-           "SectionTimer"]
-
-
-# -- inputs -----------------------------------------------------------------------------------------
-@dataclass
-class RunView:
-    """What the sections read: per-experiment rows and summaries, failures, the stepper infos."""
-
-    rows: dict[str, pd.DataFrame]
-    summaries: dict[str, pd.DataFrame]
-    meta: dict
-    steppers: list[str]
-    problems: list[str]
-    infos: dict[str, Any]
-    origins: dict[str, str]
-    quick: bool
-    palette: F.Palette
-    run_id: str = ""
-
-    def gate(self) -> pd.DataFrame:
-        """The CI gate's judgement of every convergence cell (computed once per report)."""
-        cached = self.__dict__.get("_gate")
-        if cached is None:
-            from harness.gate import gate_table
-
-            conv = self.summary("convergence")
-            cached = gate_table(conv) if len(conv) and "stepper" in conv else pd.DataFrame(
-                columns=["stepper", "problem", "passed", "reason", "verdict", "expected"])
-            self.__dict__["_gate"] = cached
-        return cached
-
-    def has(self, name: str) -> bool:
-        return name in self.summaries and name in self.meta.get("experiments", {})
-
-    def summary(self, name: str) -> pd.DataFrame:
-        return self.summaries.get(name, pd.DataFrame())
-
-    def rowtable(self, name: str) -> pd.DataFrame:
-        return self.rows.get(name, pd.DataFrame())
-
-    def failures(self, name: str | None = None) -> list[dict]:
-        exps = self.meta.get("experiments", {})
-        names = [name] if name else list(exps)
-        out = []
-        for n in names:
-            out.extend(exps.get(n, {}).get("failures", []))
-        return out
-
-    def skips(self, name: str) -> list[dict]:
-        return self.meta.get("experiments", {}).get(name, {}).get("skips", [])
-
-    def flag(self, attr: str) -> dict[str, bool]:
-        """stepper -> a boolean of its info (symmetric, symplectic, adaptive...)."""
-        return {n: bool(getattr(i, attr, False)) for n, i in self.infos.items()}
-
-
-# -- the section registry ---------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Measure:
-    """A measured figure of an experiment's summary that the changed-since comparison follows:
-    its column, how to name it, and its confidence interval (two columns), or else the relative
-    change (`rtol`) or the factor (`factor`) beyond which it counts as moved."""
-
-    column: str
-    label: str
-    ci: tuple[str, str] | None = None
-    rtol: float | None = None
-    factor: float | None = None
-
-
-@dataclass(frozen=True)
-class ScoreColumn:
-    """A scoreboard column an experiment contributes: its header, and per stepper the cell as
-    (text, anchor) parts (each number linked to the row it comes from, "" for plain text) and
-    whether anything was measured."""
-
-    header: str
-    value: Callable[[RunView, str], tuple[list[tuple[str, str]], bool]]
-
-
-@dataclass(frozen=True)
-class SectionSpec:
-    """How an experiment's section is built: `build(view, section)` adds the figures and tables;
-    `intro` is two sentences (what is measured, how to read it); `key` the summary columns that
-    identify one judged row; `measures` the figures the changed-since comparison follows;
-    `verdicts(view)` overrides the judged rows (default: the summary's `passed` column);
-    `score` the scoreboard columns this experiment fills; `row_key` the columns that identify a
-    row of the section's table when it folds several judged rows into one (links to a judged
-    row go to the row holding it; default: `key`)."""
-
-    experiment: str
-    title: str
-    intro: str
-    build: Callable[[RunView, Section], None]
-    key: tuple[str, ...] = ("stepper", "problem")
-    measures: tuple[Measure, ...] = ()
-    verdicts: Callable[[RunView], pd.DataFrame] | None = None
-    score: tuple[ScoreColumn, ...] = ()
-    row_key: tuple[str, ...] | None = None
-
-    @property
-    def anchor_key(self) -> tuple[str, ...]:
-        return self.row_key or self.key
-
-
-SECTION_BUILDERS: dict[str, SectionSpec] = {}
-
-
-def register_section(experiment: str, *, title: str, intro: str,
-                     key: Sequence[str] = ("stepper", "problem"), measures: Sequence[Measure] = (),
-                     verdicts: Callable[[RunView], pd.DataFrame] | None = None,
-                     score: Sequence[ScoreColumn] = (),
-                     row_key: Sequence[str] | None = None) -> Callable:
-    """Decorator: register `build(view, section)` as the section of `experiment`."""
-
-    def deco(build: Callable[[RunView, Section], None]) -> Callable[[RunView, Section], None]:
-        SECTION_BUILDERS[experiment] = SectionSpec(experiment, title, intro, build, tuple(key),
-                                                   tuple(measures), verdicts, tuple(score),
-                                                   tuple(row_key) if row_key else None)
-        return build
-
-    return deco
-
-
-def section_spec(experiment: str) -> SectionSpec:
-    """The registered spec of `experiment`, or the generic table section built from the
-    experiment's own description."""
-    from harness.report import experiment_sections  # noqa: F401  (registers the built-ins)
-
-    spec = SECTION_BUILDERS.get(experiment)
-    if spec is not None:
-        return spec
-    description = ""
-    try:
-        from harness.experiments import get_experiment
-
-        description = get_experiment(experiment).description
-    except Exception:
-        pass
-    intro = (f"{description.rstrip('.') or 'The ' + experiment + ' experiment'}. One row per cell "
-             "of the experiment; the first column is its verdict against the stepper's claim.")
-    return SectionSpec(experiment, experiment.replace("-", " ").capitalize(), intro, generic_section)
-
-
-def generic_section(view: RunView, sec: Section) -> None:
-    """The fallback: the experiment's summary as one folded table, every column."""
-    name = sec.id
-    summ = view.summary(name)
-    spec = SECTION_BUILDERS.get(name)
-    key = spec.key if spec else _generic_key(summ)
-    cols = [(c, c.replace("_", " ")) for c in summ.columns if c not in ("passed", *HIDDEN_COLUMNS)]
-    sec.table(df_table(summ, cols, f"{name}: one row per cell", experiment=name, key=key,
-                       status="passed" if "passed" in summ else None))
-
-
-def _generic_key(summ: pd.DataFrame) -> tuple[str, ...]:
-    key = [c for c in ("stepper", "problem") if c in summ]
-    for extra in ("steps", "kind", "quantity", "h", "tol"):
-        if key and len(summ) and summ.duplicated(key).any() and extra in summ:
-            key.append(extra)
-    return tuple(key)
-
-
-def experiment_key(name: str, summ: pd.DataFrame) -> tuple[str, ...]:
-    spec = SECTION_BUILDERS.get(name)
-    return spec.key if spec is not None else _generic_key(summ)
-
-
-def missing(sec: Section, view: RunView, name: str) -> bool:
-    """Add a note and return True when experiment `name` has no results in this run."""
-    if not view.has(name):
-        sec.note(f"The {name} experiment is not part of this run, so this section has no "
-                 "measurements.", cls="warning")
-        return True
-    fails = view.failures(name)
-    if view.summary(name).empty:
-        why = f" All {len(fails)} of its cells failed (see Provenance)." if fails else ""
-        sec.note(f"The {name} experiment produced no results for this selection.{why}", cls="warning")
-        return True
-    if fails:
-        sec.note(f"{len(fails)} cell(s) of the {name} experiment failed and are missing here; "
-                 "they are listed with their messages under Provenance.", cls="warning")
-    return False
-
-
-def skip_note(sec: Section, view: RunView, name: str) -> None:
-    skips = view.skips(name)
-    if skips:
-        reasons: dict[str, int] = {}
-        for s in skips:
-            reasons[s.get("reason", "")] = reasons.get(s.get("reason", ""), 0) + 1
-        sec.details(f"{len(skips)} pairs not applicable to the {name} experiment, and why",
-                    "\n".join(f"{n} × {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1])))
+__all__ = ["build_sections", "section_titles", "section_spec"]
 
 
 # -- the sections in order ---------------------------------------------------------------------------
@@ -269,9 +52,6 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
                    ) -> tuple[list[Section], dict[str, str], dict[str, Any]]:
     """Every section in order, each stepper's scoreboard status, and the headline counts
     (claims checked, failed, failing list) the page's first screen shows."""
-    from harness.report import fixed_sections as X
-    from harness.report.verdicts import collect_verdicts
-
     timer = SectionTimer()
     say = progress or (lambda _msg: None)
     experiments = _in_registry_order(list(view.meta.get("experiments", {})))
@@ -298,8 +78,6 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
             say(name)
             out.append(_finish_experiment_section(pending, view, name, number, names, timer))
         trust = lambda v: X.gate_trust(v, Path(results_path).parent)  # noqa: E731
-        from harness.report.test_sets import test_sets_section
-
         for key, fn in (("ground-truth", X.ground_truth), ("test-sets", test_sets_section),
                         ("claims", X.claims), ("gate-population", trust)):
             say(key)
@@ -325,8 +103,6 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
 def _in_registry_order(names: list[str]) -> list[str]:
     """The run's experiments in the registry's order (the order they finished in the run is
     not the reader's), any the registry does not know at the end."""
-    from harness.experiments import EXPERIMENTS
-
     order = {n: i for i, n in enumerate(EXPERIMENTS)}
     return sorted(names, key=lambda n: (order.get(n, len(order)), names.index(n)))
 

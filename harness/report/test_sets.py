@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.report.elements import Section, df_table
+from harness.kit.elements import Section, df_table
 
 __all__ = ["test_sets_section", "TITLE"]
 

@@ -9,58 +9,13 @@ verdict, sentence (why, one sentence), anchor (id of the row in its section's ta
 
 from __future__ import annotations
 
-import json
-from typing import Any
-
 import pandas as pd
 
-from harness.report.sections import (
-    RunView,
-    anchor,
-    experiment_key,
-    first_sentence,
-    is_missing,
-    section_spec,
-)
+from harness.kit import VERDICT_COLUMNS, RunView, anchor, first_sentence, summary_verdicts
+from harness.kit.section import key_text
+from harness.report.specs import experiment_key, section_spec
 
 __all__ = ["VERDICT_COLUMNS", "collect_verdicts", "summary_verdicts", "claim_verdicts"]
-
-VERDICT_COLUMNS = ["experiment", "stepper", "problem", "key", "passed", "verdict", "sentence", "anchor"]
-
-
-def _key_text(values: list[Any]) -> str:
-    return json.dumps([v if isinstance(v, str | int) else (None if is_missing(v) else float(v))
-                       for v in values])
-
-
-def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
-                     reason: str = "message", anchor_key: tuple[str, ...] | None = None) -> pd.DataFrame:
-    """The judged rows of one summary table (rows whose `passed` is missing are not judged);
-    each links to the table row identified by `anchor_key` (default `key`)."""
-    out = []
-    if table.empty or "passed" not in table:
-        return pd.DataFrame(columns=VERDICT_COLUMNS)
-    for rec in table.to_dict("records"):
-        passed = rec.get("passed")
-        if is_missing(passed):
-            continue
-        values = [rec.get(c, "") for c in key]
-        verdict = str(rec.get("verdict") or ("pass" if passed else "fail"))
-        why = first_sentence(rec.get(reason)) if not is_missing(rec.get(reason)) else ""
-        if why.startswith(f"verdict {verdict}"):  # the reason only repeats the verdict
-            why = why[len(f"verdict {verdict}"):].lstrip(":; ")
-        if not why and not passed and rec.get("expected") and str(rec.get("expected")) != verdict:
-            why = f"the claim needs {rec.get('expected')}"
-        where = " on ".join(x for x in (str(rec.get("stepper", "")), str(rec.get("problem", ""))) if x)
-        extra = ", ".join(f"{c}={rec.get(c)}" for c in key if c not in ("stepper", "problem"))
-        sentence = (f"{name}: {where}{f' ({extra})' if extra else ''} — {verdict}"
-                    + (f": {why}" if why else "."))
-        out.append({"experiment": name, "stepper": str(rec.get("stepper", "")),
-                    "problem": str(rec.get("problem", "")), "key": _key_text(values),
-                    "passed": bool(passed), "verdict": verdict, "sentence": sentence,
-                    "anchor": anchor(name, *(values if anchor_key is None
-                                             else [rec.get(c, "") for c in anchor_key]))})
-    return pd.DataFrame(out, columns=VERDICT_COLUMNS)
 
 
 def claim_verdicts(view: RunView) -> pd.DataFrame:
@@ -71,7 +26,7 @@ def claim_verdicts(view: RunView) -> pd.DataFrame:
     for r in check_claims(dict(view.summaries)):
         if r.status not in (AGREE, DISAGREE):
             continue
-        out.append({"experiment": "claims", "stepper": "", "problem": "", "key": _key_text([r.key]),
+        out.append({"experiment": "claims", "stepper": "", "problem": "", "key": key_text([r.key]),
                     "passed": r.status == AGREE, "verdict": r.status,
                     "sentence": f"course claim “{first_sentence(r.claim, 140)}” — {r.status}: "
                                 f"{first_sentence(r.measurement)}",

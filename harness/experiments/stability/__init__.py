@@ -80,6 +80,7 @@ from harness.experiments.stability.probes import (
     NewtonianProbe,
     block_companion,
 )
+from harness.experiments.stability.section import SECTION
 from harness.stepper import AdaptiveStepper, Stepper
 
 __all__ = [
@@ -166,6 +167,7 @@ def _check_config(config: Mapping[str, Any]) -> dict:
 class StabilityExperiment(Experiment):
     """The lambda h test for every fixed-step stepper (see the module docstring)."""
     name = "stability"
+    section = SECTION  # its report section: section.py beside this module
     description = (
         "Linear stability: |R(z)| over the complex lambda h plane, real/imaginary intervals and "
         "h omega limits by root finding, probe against the coefficients' formula."

@@ -1,0 +1,213 @@
+"""Roundoff floors at very small steps: the position-only (two-step) Verlet form against leapfrog.
+
+The claim checked (course-material file 002_b3abae41bf42a307.txt, the lecture on Verlet and
+leapfrog): the original Verlet recurrence x_(n+1) = 2 x_n - x_(n-1) + h^2 a_n adds the tiny
+h^2 a_n to numbers of the size of the positions, so it loses more to rounding than leapfrog, which
+only ever adds h v to x and h a to v.
+
+A rounding error d made in x_n propagates through the two-step recurrence as through a double
+integrator (its characteristic polynomial has the double root 1), so n steps accumulate about
+n^(3/2) eps |x| as a random walk; in leapfrog a rounding error in x stays put (~ n^(1/2) eps |x|)
+and one in v is multiplied by h before it reaches x (~ h n^(3/2) eps |v|). At fixed n and h -> 0
+the first stays while the second vanishes with h: the floors differ by about 1/(h omega).
+
+For one (stepper, problem) cell: an ensemble of `ensemble` starts (member 0 is the problem's own)
+is integrated for `n_steps` steps of each size h in a geometric sweep from `h_max` down to `h_min`
+(`points_per_decade` per decade). At fixed n the truncation error falls like h^3 (global error
+C T h^2 with T = n h), so at the small end only rounding is left. Each point records the
+position error relative to max |q| (max over components and members) against the certified
+ground truth (`harness.ground_truth.reference`) at t0 + n h, and the truncation error predicted
+at that h from the largest step (error(h_max) (h / h_max)^3).
+
+Summary per cell: `floor_error`, the smallest error over the sweep (the best accuracy any h
+reaches: below it rounding wins) and the h where it occurs; `error_at_h_min`; whether the
+smallest step is rounding-limited (its error more than ROUNDOFF_TRUNCATION_FACTOR times the
+predicted truncation); the floor in units of eps.
+
+References: Verlet, Phys. Rev. 159, 98 (1967) (the two-step form); Hairer, Lubich & Wanner,
+*Geometric Numerical Integration*, 2nd ed., VIII.5 (rounding errors, Brouwer's law);
+course-material file 002_b3abae41bf42a307.txt (the rounding argument about h^2).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+from harness.errors import InputError
+from harness.experiments.base import Cell, Experiment, Skip, register_experiment
+from harness.experiments.roundoff.section import SECTION
+from harness.stepper import AdaptiveStepper, StepFailure
+
+__all__ = ["RoundoffExperiment", "ROW_COLUMNS", "SUMMARY_COLUMNS", "step_sizes"]
+
+ROW_COLUMNS = [
+    "stepper", "problem", "h", "n_steps", "t_end", "error", "state_error", "reference_error",
+    "truncation_estimate", "ensemble_size", "wall_s", "message",
+]
+SUMMARY_COLUMNS = [
+    "stepper", "problem", "n_steps", "h_min", "h_max", "floor_error", "floor_h", "floor_eps",
+    "error_at_h_min", "truncation_at_h_min", "rounding_limited", "reference_error", "verdict",
+    "wall_s", "message",
+]
+
+
+def step_sizes(h_max: float, h_min: float, points_per_decade: int) -> np.ndarray:
+    """Geometric step sizes from `h_max` down to `h_min`, `points_per_decade` per decade."""
+    for name, v in (("h_max", h_max), ("h_min", h_min)):
+        if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
+            raise InputError(f"`{name}` must be a positive finite number, got {v!r}")
+    if h_min >= h_max:
+        raise InputError(f"`h_min` must be smaller than `h_max` ({h_max!r}), got {h_min!r}")
+    if isinstance(points_per_decade, bool) or not isinstance(points_per_decade, int) or points_per_decade < 1:
+        raise InputError(f"`points_per_decade` must be a whole number >= 1, got {points_per_decade!r}")
+    decades = math.log10(h_max / h_min)
+    count = int(round(decades * points_per_decade)) + 1
+    return np.geomspace(h_max, h_min, count)
+
+
+class RoundoffExperiment(Experiment):
+    name = "roundoff"
+    section = SECTION  # its report section: section.py beside this module
+    description = ("Roundoff floor at very small steps (fixed step count): two-step Verlet "
+                   "against leapfrog and velocity Verlet.")
+    default_config: Mapping[str, Any] = {
+        "steppers": ["stormer-verlet", "leapfrog", "velocity-verlet"],
+        "problems": ["harmonic", "kepler-circular"],
+        "n_steps": 10_000,
+        "h_max": 1e-2,
+        "h_min": 1e-6,
+        "points_per_decade": 2,
+        "ensemble": 4,
+        "seed": 0,
+    }
+    quick_config: Mapping[str, Any] = {"n_steps": 5_000, "points_per_decade": 1}
+    finite_columns = ("h", "n_steps", "t_end")
+
+    def cells(
+        self, steppers: Sequence[str], problems: Sequence[str], config: Mapping[str, Any]
+    ) -> tuple[list[Cell], list[Skip]]:
+        """Cells for the configured steppers x problems among those selected; one `Skip` per
+        other selected stepper or problem, saying why."""
+        from harness.errors import IncompatibleError
+        from harness.registry import get_problem, get_stepper
+        from harness.stepper import check_compatible
+
+        want_s, want_p = list(config["steppers"]), list(config["problems"])
+        cells: list[Cell] = []
+        skips: list[Skip] = []
+        for s in steppers:
+            if s not in want_s:
+                skips.append(Skip(self.name, s, "", f"stepper {s!r} is not in this experiment's "
+                                  f"stepper set ({', '.join(want_s)}; config `steppers`)"))
+        for p in problems:
+            if p not in want_p:
+                skips.append(Skip(self.name, "", p, f"problem {p!r} is not in this experiment's "
+                                  f"problem set ({', '.join(want_p)}; config `problems`)"))
+        for s in steppers:
+            if s not in want_s:
+                continue
+            stepper = get_stepper(s)
+            for p in problems:
+                if p not in want_p:
+                    continue
+                problem = get_problem(p)
+                if isinstance(stepper, AdaptiveStepper):
+                    skips.append(Skip(self.name, s, p, "adaptive stepper: it chooses its own steps"))
+                    continue
+                if problem.newtonian is None:
+                    skips.append(Skip(self.name, s, p, f"problem {p!r} has no positions "
+                                      "(not Newtonian)"))
+                    continue
+                try:
+                    check_compatible(stepper, problem)
+                except IncompatibleError as exc:
+                    skips.append(Skip(self.name, s, p, str(exc)))
+                    continue
+                cells.append(Cell(self.name, s, p))
+        return cells, skips
+
+    def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        from harness.ground_truth import reference
+        from harness.registry import get_problem, get_stepper
+
+        stepper = get_stepper(cell.stepper)
+        problem = get_problem(cell.problem)
+        n = int(config["n_steps"])
+        if n < 2:
+            raise InputError(f"`n_steps` must be at least 2, got {n}")
+        hs = step_sizes(float(config["h_max"]), float(config["h_min"]),
+                        int(config["points_per_decade"]))
+        y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
+        nq = len(problem.newtonian.positions)
+        times = problem.t0 + n * hs[::-1]  # increasing
+        ref = reference(problem, times, y0)
+        records = []
+        for h in hs:
+            i = int(np.argmin(np.abs(times - (problem.t0 + n * h))))
+            exact = ref.y[i]
+            q_scale = max(float(np.max(np.abs(exact[:nq]))), tol.EPS)
+            y_scale = max(float(np.max(np.abs(exact))), tol.EPS)
+            started = time.perf_counter()
+            message = ""
+            try:
+                tr = stepper.integrate(problem, h=float(h), n_steps=n, y0=y0)
+                with np.errstate(all="ignore"):
+                    d = np.abs(tr.final - exact)
+                err = float(np.max(d[:nq])) / q_scale if np.all(np.isfinite(d)) else math.inf
+                state_err = float(np.max(d)) / y_scale if np.all(np.isfinite(d)) else math.inf
+            except StepFailure as exc:
+                err = state_err = math.nan
+                message = f"step failure: {exc}"
+            records.append({
+                "h": float(h), "n_steps": n, "t_end": float(problem.t0 + n * h), "error": err,
+                "state_error": state_err, "reference_error": float(np.max(ref.error[i])) / q_scale,
+                "wall_s": time.perf_counter() - started, "message": message,
+            })
+        rows = pd.DataFrame(records)
+        first = rows.error.iloc[0]
+        rows["truncation_estimate"] = first * (rows.h / rows.h.iloc[0]) ** 3
+        rows["stepper"] = stepper.info.name
+        rows["problem"] = problem.name
+        rows["ensemble_size"] = y0.shape[1]
+        return rows[ROW_COLUMNS]
+
+    def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        if rows.empty:
+            return pd.DataFrame(columns=SUMMARY_COLUMNS)
+        out = []
+        for (s, p), g in rows.groupby(["stepper", "problem"], sort=False):
+            g = g.sort_values("h", ascending=False)
+            finite = g[np.isfinite(g.error)]
+            messages = [m for m in g.message.fillna("") if m]
+            rec: dict[str, Any] = {
+                "stepper": s, "problem": p, "n_steps": int(g.n_steps.iloc[0]),
+                "h_min": float(g.h.min()), "h_max": float(g.h.max()),
+                "floor_error": math.nan, "floor_h": math.nan, "floor_eps": math.nan,
+                "error_at_h_min": float(g.error.iloc[-1]),
+                "truncation_at_h_min": float(g.truncation_estimate.iloc[-1]),
+                "rounding_limited": False,
+                "reference_error": float(g.reference_error.max()),
+                "verdict": "failed" if finite.empty else "measured",
+                "wall_s": float(g.wall_s.sum()), "message": "; ".join(messages[:1]),
+            }
+            if not finite.empty:
+                k = int(np.argmin(finite.error.values))
+                rec.update(floor_error=float(finite.error.iloc[k]), floor_h=float(finite.h.iloc[k]),
+                           floor_eps=float(finite.error.iloc[k]) / tol.EPS)
+                last = g.iloc[-1]
+                rec["rounding_limited"] = bool(
+                    np.isfinite(last.error)
+                    and last.error > tol.ROUNDOFF_TRUNCATION_FACTOR * last.truncation_estimate
+                )
+            out.append(rec)
+        return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+
+
+register_experiment(RoundoffExperiment())

@@ -1,0 +1,188 @@
+"""What the family kernels share: a problem function over every member, the finiteness test,
+and the ensemble Newton steps (LU factor and solve per member, the update, the convergence test
+and the failure record) of the implicit families.
+
+Compile options, one name each (Lam, Pitrou & Seibert, *Numba: a LLVM-based Python JIT
+compiler*, LLVM-HPC 2015): `error_model="numpy"` everywhere (a division by zero gives inf/NaN as
+in NumPy, and no check blocks vectorisation); `cache=True` (numba's disk cache, kept under
+`harness.cache.code_dir()` by `implementations.kernels`).
+"""
+
+import numpy as np
+from numba import njit
+
+from implementations.kernel_calls import call_state
+
+__all__ = ["CONTRACT", "EXACT", "INLINE", "is_finite", "rhs_all", "accel_all", "lu_factor", "lu_apply",
+           "newton_factor_members", "newton_solve_members", "newton_update", "newton_converged",
+           "newton_stats"]
+
+#: The explicit one-step and Stormer loops: a*b + c may become one fused multiply-add, as in
+#: heyoka's compiled functions and the BLAS axpy updates of the NumPy loops; no other fast-math
+#: licence.
+CONTRACT = {"cache": True, "error_model": "numpy", "fastmath": {"contract"}}
+#: The multistep and implicit Runge-Kutta loops, whose NumPy loops are plain array expressions
+#: (one rounding per operation, no BLAS), contract nothing. Also the ensemble Newton steps
+#: (factor, solve, update over all members; called once per iteration whatever the ensemble
+#: size) and the scalar convergence test and failure record: compiled once and called, not
+#: inlined into each kernel.
+EXACT = {"cache": True, "error_model": "numpy"}
+#: Helpers called once per step or per member, inlined into the kernels (numba's IR inlining):
+#: a call between compiled functions passes each array with its reference counts.
+INLINE = {"cache": True, "error_model": "numpy", "inline": "always"}
+
+
+@njit(**INLINE)
+def is_finite(x):
+    # np.isfinite on a scalar: the same test, without the per-element library call it compiles to
+    return abs(x) <= 1.7976931348623157e308
+
+
+@njit(**INLINE)
+def rhs_all(f_rhs, t, Y, P, Out):
+    dim = Y.shape[0]
+    y = np.empty(dim)
+    out = np.empty(dim)
+    p = np.empty(P.shape[0])
+    for j in range(Y.shape[1]):
+        for d in range(dim):
+            y[d] = Y[d, j]
+        for k in range(P.shape[0]):
+            p[k] = P[k, j]
+        call_state(f_rhs, t, y, p, out)
+        for d in range(dim):
+            Out[d, j] = out[d]
+
+
+@njit(**CONTRACT)
+def accel_all(f_accel, t, Q, P, Out):
+    # the acceleration of every member: the same member loop as the right-hand side's
+    rhs_all(f_accel, t, Q, P, Out)
+
+
+# Newton's method on the ensemble axis, as `implementations.implicit_rk.newton_solve`: the
+# increment's max-norm over members and components (scaled by 1 + |y_n|) at most `tol`, or the
+# contraction estimate theta / (1 - theta) |dx| at most `tol` (Hairer & Wanner II, IV.8, eq.
+# (8.10)); LU with partial pivoting per member. Status 1: no convergence; 2: singular matrix.
+@njit(**INLINE)
+def lu_factor(M, piv):
+    # M = P L U in place (Gaussian elimination with partial pivoting, whole rows swapped, the
+    # multipliers stored below the diagonal); False on an exactly zero pivot
+    m = M.shape[0]
+    for col in range(m):
+        p = col
+        best = abs(M[col, col])
+        for r in range(col + 1, m):
+            if abs(M[r, col]) > best:
+                best = abs(M[r, col])
+                p = r
+        piv[col] = p
+        if M[p, col] == 0.0:
+            return False
+        if p != col:
+            for q in range(m):
+                tmp = M[col, q]
+                M[col, q] = M[p, q]
+                M[p, q] = tmp
+        inv = 1.0 / M[col, col]
+        for r in range(col + 1, m):
+            multiplier = M[r, col] * inv
+            M[r, col] = multiplier
+            if multiplier != 0.0:
+                for q in range(col + 1, m):
+                    M[r, q] -= multiplier * M[col, q]
+    return True
+
+
+@njit(**INLINE)
+def lu_apply(M, piv, b, x):
+    # x = M^-1 b from `lu_factor`'s factors: every row swap first, then the two substitutions (each
+    # entry sees the same operations in the same order as elimination interleaved with the swaps)
+    m = b.shape[0]
+    for i in range(m):
+        x[i] = b[i]
+    for col in range(m):
+        p = piv[col]
+        if p != col:
+            tmp = x[col]
+            x[col] = x[p]
+            x[p] = tmp
+    for col in range(m):
+        for r in range(col + 1, m):
+            multiplier = M[r, col]
+            if multiplier != 0.0:
+                x[r] -= multiplier * x[col]
+    for i in range(m - 1, -1, -1):
+        acc = x[i]
+        for q in range(i + 1, m):
+            acc -= M[i, q] * x[q]
+        x[i] = acc / M[i, i]
+
+
+@njit(**EXACT)
+def newton_factor_members(Mats, Piv):
+    # every member's Newton matrix factored in place (once per matrix, whatever the number of
+    # iterations that solve with it); False on a singular matrix
+    for j in range(Mats.shape[0]):
+        if not lu_factor(Mats[j], Piv[j]):
+            return False
+    return True
+
+
+@njit(**EXACT)
+def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
+    # DX[:, j] = -Mats[j]^-1 G[:, j] for every member, from the factors of `newton_factor_members`
+    m = rhs_w.shape[0]
+    for j in range(G.shape[1]):
+        for r in range(m):
+            rhs_w[r] = -G[r, j]
+        lu_apply(Mats[j], Piv[j], rhs_w, sol)
+        for r in range(m):
+            DX[r, j] = sol[r]
+
+
+@njit(**EXACT)
+def newton_update(X, DX, inv_scale):
+    # X += DX; the increment's max-norm scaled by inv_scale (rows i * dim + d use row d), NaN
+    # when any scaled entry is not finite
+    dim = inv_scale.shape[0]
+    norm = 0.0
+    nan_seen = False
+    for i in range(X.shape[0] // dim):
+        for d in range(dim):
+            r = i * dim + d
+            for j in range(X.shape[1]):
+                X[r, j] += DX[r, j]
+                e = abs(DX[r, j] * inv_scale[d, j])
+                if e != e:
+                    nan_seen = True
+                elif e > norm:
+                    norm = e
+    if nan_seen or not is_finite(norm):
+        return np.nan
+    return norm
+
+
+@njit(**EXACT)
+def newton_converged(norm, previous, tol, theta):
+    # (converged, contraction): the increment at most tol, or theta / (1 - theta) |dx| at most tol
+    if norm <= tol:
+        return True, theta
+    if is_finite(previous):
+        theta = norm / previous
+        if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
+            return True, theta
+    return False, theta
+
+
+@njit(**EXACT)
+def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, theta, status):
+    stats[0] = n
+    stats[1] = n_rhs
+    stats[2] = n_jac
+    stats[3] = n_iter
+    stats[4] = iteration
+    stats[5] = norm
+    stats[6] = res_norm
+    stats[7] = theta
+    stats[8] = status

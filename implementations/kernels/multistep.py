@@ -1,0 +1,408 @@
+"""The linear multistep kernels (y' = f): explicit, one member or the ensemble in lockstep, and
+implicit by Newton's method with the problem's Jacobian.
+
+The history is a ring of k states and derivatives per member; which derivatives are known is
+kept as bits (`fvalid`), so a derivative is evaluated once, when a beta first needs it. The
+ensemble kernels sweep all members per step ("lockstep"): a non-finite state stops every member,
+as in the NumPy loop, and Newton's convergence is a maximum over members.
+"""
+
+import numpy as np
+from numba import njit
+
+from implementations.kernel_calls import call_state, call_state_into
+from implementations.kernels.common import (
+    EXACT,
+    INLINE,
+    is_finite,
+    newton_converged,
+    newton_factor_members,
+    newton_solve_members,
+    newton_stats,
+    newton_update,
+)
+
+__all__ = ["lmm_explicit_single", "lmm_explicit_advance", "lmm_implicit_advance"]
+
+
+# Linear multistep, shared part: f at the history points a beta needs (each evaluated once, when
+# first needed) and psi = -sum_j alpha_j y_{n+j} + h sum_j beta_j f_{n+j} over j < k.
+@njit(**INLINE)
+def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slots):
+    # history index jj (0 = oldest) lives in ring slot (head + jj) % k
+    k, dim, N = H.shape
+    for jj in range(k):
+        slot = head + jj
+        slots[jj] = slot - k if slot >= k else slot
+    evals = 0
+    for jj in range(k):
+        slot = slots[jj]
+        if beta[jj] != 0.0 and not fvalid[slot]:
+            tj = t - (k - 1 - jj) * h
+            for m in range(N):
+                for d in range(dim):
+                    y[d] = H[slot, d, m]
+                for q in range(P.shape[0]):
+                    p[q] = P[q, m]
+                call_state(f_rhs, tj, y, p, out)
+                for d in range(dim):
+                    F[slot, d, m] = out[d]
+            fvalid[slot] = True
+            evals += 1
+    for m in range(N):
+        for d in range(dim):
+            acc = 0.0
+            for jj in range(k):
+                slot = slots[jj]
+                if alpha[jj] != 0.0:
+                    acc -= alpha[jj] * H[slot, d, m]
+                if beta[jj] != 0.0:
+                    acc += (h * beta[jj]) * F[slot, d, m]
+            psi[d, m] = acc
+    return evals
+
+
+@njit(**INLINE)
+def lmm_finite(H, slot):
+    k, dim, N = H.shape
+    for d in range(dim):
+        for m in range(N):
+            if not is_finite(H[slot, d, m]):
+                return False
+    return True
+
+
+@njit(**INLINE)
+def lmm_blow_up(H, fvalid, slot):
+    k, dim, N = H.shape
+    for d in range(dim):
+        for m in range(N):
+            H[slot, d, m] = np.nan
+    fvalid[slot] = False
+
+
+@njit(**EXACT)
+def lmm_unroll(H, F, fvalid, head):
+    # the ring back in history order, oldest first
+    # (element loops: an array-slice assignment compiles to ~5 s of broadcasting code)
+    k, dim, N = H.shape
+    if head == 0:
+        return
+    Hc = H.copy()
+    Fc = F.copy()
+    vc = fvalid.copy()
+    for jj in range(k):
+        slot = (head + jj) % k
+        for d in range(dim):
+            for m in range(N):
+                H[jj, d, m] = Hc[slot, d, m]
+                F[jj, d, m] = Fc[slot, d, m]
+        fvalid[jj] = vc[slot]
+
+
+# Explicit linear multistep (Hairer, Norsett & Wanner I, III.2): y_{n+k} = psi. A non-finite
+# newest state makes every member NaN with no further evaluation, as in the NumPy loop. The
+# history is a ring of k slots: a step writes one slot instead of shifting k.
+@njit(**EXACT)
+def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
+    # One member. The history ring lies flat in W in rows of w = dim rounded up to whole blocks
+    # of four (the padding stays zero): states in rows 0..k-1, derivatives in rows k..2k-1. The
+    # formula's terms are (signed coefficient, row) in the NumPy loop's order, their rows
+    # tabulated once for each position of the ring; offsets are unsigned (no negative-index
+    # handling per access). Which derivatives are known is a bit mask over the ring (k <= 62).
+    k, dim, N = H.shape
+    w = (dim + 3) // 4 * 4
+    nb = w // 4
+    W = np.zeros(2 * k * w)
+    for sl in range(k):
+        for d in range(dim):
+            W[sl * w + d] = H[sl, d, 0]
+            W[(k + sl) * w + d] = F[sl, d, 0]
+    p = np.empty(P.shape[0])
+    for q in range(P.shape[0]):
+        p[q] = P[q, 0]
+    tkind = np.empty(2 * k, dtype=np.int64)
+    tindex = np.empty(2 * k, dtype=np.int64)
+    tcoef = np.empty(2 * k)
+    nt = 0
+    for jj in range(k):
+        if alpha[jj] != 0.0:
+            tkind[nt] = 0
+            tindex[nt] = jj
+            tcoef[nt] = -alpha[jj]
+            nt += 1
+        if beta[jj] != 0.0:
+            tkind[nt] = k
+            tindex[nt] = jj
+            tcoef[nt] = h * beta[jj]
+            nt += 1
+    off = np.empty(k * nt, dtype=np.uint64)
+    for ph in range(k):
+        for q in range(nt):
+            off[ph * nt + q] = (tkind[q] + (ph + tindex[q]) % k) * w
+    # per position of the ring: the slots whose derivative the formula needs
+    need = np.zeros(k, dtype=np.int64)
+    for ph in range(k):
+        for jj in range(k):
+            if beta[jj] != 0.0:
+                need[ph] |= 1 << ((ph + jj) % k)
+    have = 0
+    for sl in range(k):
+        if fvalid[sl]:
+            have |= 1 << sl
+    U1 = np.uint64(1)
+    U2 = np.uint64(2)
+    U3 = np.uint64(3)
+    evals = 0
+    head = 0
+    # whether the newest state is finite: tested here, then on each new state as it is formed
+    # (0 * x is 0 for finite x, NaN for inf or NaN)
+    finite = True
+    for d in range(dim):
+        finite &= is_finite(W[(k - 1) * w + d])
+    for n in range(nsteps):
+        oldest = head
+        newest = oldest + k - 1 if oldest > 0 else k - 1
+        head = head + 1 if head + 1 < k else 0
+        if not finite:
+            for d in range(dim):
+                W[oldest * w + d] = np.nan
+            have &= ~(1 << oldest)
+            continue
+        t = t0 + (n0 + n) * h
+        missing = need[oldest] & ~have
+        if missing == 1 << newest:  # the usual step: only the newest state's derivative
+            call_state_into(f_rhs, t, W, newest * w, p, W, (k + newest) * w)
+            evals += 1
+            have |= missing
+        elif missing != 0:
+            for jj in range(k):
+                sl = oldest + jj
+                if sl >= k:
+                    sl -= k
+                if missing & (1 << sl):
+                    call_state_into(f_rhs, t - (k - 1 - jj) * h, W, sl * w, p, W, (k + sl) * w)
+                    evals += 1
+            have |= missing
+        dst = np.uint64(oldest * w)
+        row = np.uint64(oldest * nt)
+        zero = 0.0
+        for bb in range(nb):
+            e = np.uint64(4) * np.uint64(bb)
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            a3 = 0.0
+            for q in range(nt):
+                cq = tcoef[q]
+                o = off[row + np.uint64(q)] + e
+                a0 += cq * W[o]
+                a1 += cq * W[o + U1]
+                a2 += cq * W[o + U2]
+                a3 += cq * W[o + U3]
+            zero += (a0 * 0.0 + a1 * 0.0) + (a2 * 0.0 + a3 * 0.0)
+            W[dst + e] = a0
+            W[dst + e + U1] = a1
+            W[dst + e + U2] = a2
+            W[dst + e + U3] = a3
+        have &= ~(1 << oldest)
+        finite = zero == 0.0
+    for jj in range(k):
+        sl = (head + jj) % k
+        for d in range(dim):
+            H[jj, d, 0] = W[sl * w + d]
+            F[jj, d, 0] = W[(k + sl) * w + d]
+        fvalid[jj] = (have >> sl) & 1 != 0
+    return evals
+
+
+@njit(**EXACT)
+def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
+    k, dim, N = H.shape
+    if N == 1:
+        return lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
+    npar = P.shape[0]
+    y = np.empty(dim)
+    out = np.empty(dim)
+    p = np.empty(npar)
+    slots = np.empty(k, dtype=np.int64)
+    # the formula's nonzero terms in the NumPy loop's order (j ascending, alpha before beta):
+    # kind 0 is -alpha_j y_j, kind 1 is + h beta_j f_j
+    kind = np.empty(2 * k, dtype=np.int64)
+    index = np.empty(2 * k, dtype=np.int64)
+    coef = np.empty(2 * k)
+    nt = 0
+    for jj in range(k):
+        if alpha[jj] != 0.0:
+            kind[nt] = 0
+            index[nt] = jj
+            coef[nt] = alpha[jj]
+            nt += 1
+        if beta[jj] != 0.0:
+            kind[nt] = 1
+            index[nt] = jj
+            coef[nt] = h * beta[jj]
+            nt += 1
+    evals = 0
+    head = 0
+    for n in range(nsteps):
+        t = t0 + (n0 + n) * h
+        for jj in range(k):
+            sl = head + jj
+            slots[jj] = sl - k if sl >= k else sl
+        newest = slots[k - 1]
+        finite = True
+        for d in range(dim):
+            for m in range(N):
+                if not is_finite(H[newest, d, m]):
+                    finite = False
+        head = head + 1 if head + 1 < k else 0
+        slot = slots[0]  # the oldest slot takes the new state
+        if not finite:
+            for d in range(dim):
+                for m in range(N):
+                    H[slot, d, m] = np.nan
+            fvalid[slot] = False
+            continue
+        for jj in range(k):
+            sl = slots[jj]
+            if beta[jj] != 0.0 and not fvalid[sl]:
+                tj = t - (k - 1 - jj) * h
+                for m in range(N):
+                    for d in range(dim):
+                        y[d] = H[sl, d, m]
+                    for q in range(npar):
+                        p[q] = P[q, m]
+                    call_state(f_rhs, tj, y, p, out)
+                    for d in range(dim):
+                        F[sl, d, m] = out[d]
+                fvalid[sl] = True
+                evals += 1
+        for m in range(N):
+            for d in range(dim):
+                acc = 0.0
+                for q in range(nt):
+                    sl = slots[index[q]]
+                    if kind[q] == 0:
+                        acc -= coef[q] * H[sl, d, m]
+                    else:
+                        acc += coef[q] * F[sl, d, m]
+                H[slot, d, m] = acc
+        fvalid[slot] = False
+    lmm_unroll(H, F, fvalid, head)
+    return evals
+
+
+# Implicit linear multistep: y_{n+k} - h beta_k f(t_{n+k}, y_{n+k}) = psi by Newton's method from
+# the polynomial extrapolation of the history; f at the new point recovered as (y - psi) / h beta_k.
+@njit(**EXACT)
+def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, t0, n0, h, nsteps, H, F,
+                         fvalid, P, stats):
+    k, dim, N = H.shape
+    npar = P.shape[0]
+    psi = np.empty((dim, N))
+    X = np.empty((dim, N))
+    G = np.empty((dim, N))
+    DX = np.empty((dim, N))
+    Mats = np.empty((N, dim, dim))
+    Piv = np.empty((N, dim), dtype=np.int64)
+    inv_scale = np.empty((dim, N))
+    y = np.empty(dim)
+    out = np.empty(dim)
+    Jb = np.empty(dim * dim)
+    rhs_w = np.empty(dim)
+    sol = np.empty(dim)
+    p = np.empty(npar)
+    hb = h * beta[k]
+    slots = np.empty(k, dtype=np.int64)
+    n_rhs = 0
+    n_jac = 0
+    n_iter = 0
+    head = 0
+    for n in range(nsteps):
+        t = t0 + (n0 + n) * h
+        newest = (head + k - 1) % k
+        if not lmm_finite(H, newest):
+            head = (head + 1) % k
+            lmm_blow_up(H, fvalid, (head + k - 1) % k)
+            continue
+        n_rhs += lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slots)
+        t_new = t + h
+        for d in range(dim):
+            for j in range(N):
+                inv_scale[d, j] = 1.0 / (1.0 + abs(H[newest, d, j]))
+                acc = 0.0
+                for q in range(k):
+                    acc += wpred[q] * H[slots[q], d, j]
+                X[d, j] = acc
+        previous = np.inf
+        norm = np.inf
+        theta = np.nan
+        res_norm = np.nan
+        converged = False
+        status = 1
+        it = 0
+        for it in range(1, max_iter + 1):
+            res_norm = 0.0
+            for j in range(N):
+                for d in range(dim):
+                    y[d] = X[d, j]
+                for q in range(npar):
+                    p[q] = P[q, j]
+                call_state(f_rhs, t_new, y, p, out)
+                for d in range(dim):
+                    g = X[d, j] - psi[d, j] - hb * out[d]
+                    G[d, j] = g
+                    r = abs(g * inv_scale[d, j])
+                    if not (r <= res_norm):
+                        res_norm = r
+            n_rhs += 1
+            if it == 1 or full:
+                for j in range(N):
+                    for q in range(npar):
+                        p[q] = P[q, j]
+                    if full:
+                        for d in range(dim):
+                            y[d] = X[d, j]
+                        call_state(f_jac, t_new, y, p, Jb)
+                    else:
+                        for d in range(dim):
+                            y[d] = H[newest, d, j]
+                        call_state(f_jac, t, y, p, Jb)
+                    for a in range(dim):
+                        for bb in range(dim):
+                            v = -hb * Jb[a * dim + bb]
+                            if a == bb:
+                                v += 1.0
+                            Mats[j, a, bb] = v
+                n_jac += 1
+                if not newton_factor_members(Mats, Piv):
+                    n_iter += 1
+                    status = 2
+                    break
+            n_iter += 1
+            newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
+            norm = newton_update(X, DX, inv_scale)
+            if norm != norm:
+                break
+            converged, theta = newton_converged(norm, previous, tol, theta)
+            if converged:
+                break
+            previous = norm
+        if not converged:
+            newton_stats(stats, n, n_rhs, n_jac, n_iter, it, norm, res_norm, theta, status)
+            lmm_unroll(H, F, fvalid, head)
+            return
+        head = (head + 1) % k
+        slot = (head + k - 1) % k
+        for d in range(dim):
+            for j in range(N):
+                H[slot, d, j] = X[d, j]
+                F[slot, d, j] = (X[d, j] - psi[d, j]) / hb
+        fvalid[slot] = True
+    lmm_unroll(H, F, fvalid, head)
+    stats[0] = nsteps
+    stats[1] = n_rhs
+    stats[2] = n_jac
+    stats[3] = n_iter
+    stats[8] = 0

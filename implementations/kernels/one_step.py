@@ -1,0 +1,395 @@
+"""The explicit one-step families' kernels: explicit Runge-Kutta, drift/kick splitting, the
+staggered leapfrog, Stormer's two-step rule, a splitting under a step controller, and the column
+forms of the first three for ensembles.
+
+One trajectory is the common case of the long runs, so the explicit Runge-Kutta kernel keeps it
+in flat rows padded to whole blocks of four values (each block formed in registers, unsigned
+offsets, no per-access negative-index handling). A kernel runs each member through all its steps
+with the state in registers, calling the problem's function through its address
+(`implementations.kernel_calls`).
+"""
+
+import numpy as np
+from numba import njit
+
+from implementations.kernel_calls import call_columns, call_state, call_state_into
+from implementations.kernels.common import CONTRACT, EXACT, INLINE
+
+__all__ = ["rk_advance", "rk_advance_cols", "split_advance", "split_advance_cols", "leapfrog_advance",
+           "leapfrog_advance_cols", "stormer_advance", "controlled_advance", "COLUMN_BLOCK"]
+
+# Ensemble forms of the three explicit one-step families: blocks of COLUMN_BLOCK members advance
+# together, every update a loop along the members (vectorisable), the right-hand side or force
+# evaluated by the problem's column function. Per member the arithmetic is that of the kernels
+# of one member, operation for operation.
+COLUMN_BLOCK = 256
+
+
+# Explicit Runge-Kutta (Hairer, Norsett & Wanner I, II.1, eq. (1.8)):
+# k_i = f(t + c_i h, y + h sum_j a_ij k_j), y <- y + h sum_i b_i k_i; zero coefficients skipped.
+@njit(**CONTRACT)
+def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
+    # One member at a time. W holds rows of w = dim rounded up to whole blocks of four (the
+    # padding stays zero): the state, the stage argument, then k_0 .. k_(s-1). The nonzero terms
+    # of each stage (start[i] .. start[i + 1]) and of the update are (coefficient, row offset);
+    # offsets are unsigned (no negative-index handling per access) and each block of four
+    # entries is formed in registers, the terms added in order.
+    s = b.shape[0]
+    dim = Y.shape[0]
+    npar = P.shape[0]
+    w = (dim + 3) // 4 * 4
+    nb = w // 4
+    hA = A * h
+    hb = b * h
+    hc = c * h
+    start = np.zeros(s + 1, dtype=np.int64)
+    term = np.empty(s * s, dtype=np.uint64)
+    coef = np.empty(s * s)
+    nz = 0
+    for i in range(s):
+        start[i] = nz
+        for m in range(i):
+            if hA[i, m] != 0.0:
+                term[nz] = (m + 2) * w
+                coef[nz] = hA[i, m]
+                nz += 1
+    start[s] = nz
+    wterm = np.empty(s, dtype=np.uint64)
+    wcoef = np.empty(s)
+    nw = 0
+    for m in range(s):
+        if hb[m] != 0.0:
+            wterm[nw] = (m + 2) * w
+            wcoef[nw] = hb[m]
+            nw += 1
+    W = np.zeros((s + 2) * w)
+    p = np.empty(npar)
+    uw = np.uint64(w)
+    U1 = np.uint64(1)
+    U2 = np.uint64(2)
+    U3 = np.uint64(3)
+    for j in range(Y.shape[1]):
+        for d in range(dim):
+            W[d] = Y[d, j]
+        for k in range(npar):
+            p[k] = P[k, j]
+        for n in range(nsteps):
+            t = t0 + (n0 + n) * h
+            for i in range(s):
+                q0 = start[i]
+                q1 = start[i + 1]
+                if q0 == q1:  # a stage at y itself (the first): no copy
+                    call_state_into(f_rhs, t + hc[i], W, 0, p, W, (i + 2) * w)
+                    continue
+                for bb in range(nb):
+                    e = np.uint64(4) * np.uint64(bb)
+                    a0 = W[e]
+                    a1 = W[e + U1]
+                    a2 = W[e + U2]
+                    a3 = W[e + U3]
+                    for q in range(q0, q1):
+                        cq = coef[q]
+                        o = term[q] + e
+                        a0 += cq * W[o]
+                        a1 += cq * W[o + U1]
+                        a2 += cq * W[o + U2]
+                        a3 += cq * W[o + U3]
+                    W[uw + e] = a0
+                    W[uw + e + U1] = a1
+                    W[uw + e + U2] = a2
+                    W[uw + e + U3] = a3
+                call_state_into(f_rhs, t + hc[i], W, w, p, W, (i + 2) * w)
+            for bb in range(nb):
+                e = np.uint64(4) * np.uint64(bb)
+                a0 = W[e]
+                a1 = W[e + U1]
+                a2 = W[e + U2]
+                a3 = W[e + U3]
+                for q in range(nw):
+                    cq = wcoef[q]
+                    o = wterm[q] + e
+                    a0 += cq * W[o]
+                    a1 += cq * W[o + U1]
+                    a2 += cq * W[o + U2]
+                    a3 += cq * W[o + U3]
+                W[e] = a0
+                W[e + U1] = a1
+                W[e + U2] = a2
+                W[e + U3] = a3
+        for d in range(dim):
+            Y[d, j] = W[d]
+    return s * nsteps
+
+
+@njit(**CONTRACT)
+def rk_advance_cols(f_rhs_cols, A, b, c, t0, n0, h, nsteps, Y, K, Stage, P):
+    s = b.shape[0]
+    dim, N = Y.shape
+    hA = A * h
+    hb = b * h
+    hc = c * h
+    for j0 in range(0, N, COLUMN_BLOCK):
+        j1 = min(N, j0 + COLUMN_BLOCK)
+        for n in range(nsteps):
+            t = t0 + (n0 + n) * h
+            for i in range(s):
+                for d in range(dim):
+                    for j in range(j0, j1):
+                        Stage[d, j] = Y[d, j]
+                    for m in range(i):
+                        coef = hA[i, m]
+                        if coef != 0.0:
+                            for j in range(j0, j1):
+                                Stage[d, j] += coef * K[m, d, j]
+                call_columns(f_rhs_cols, t + hc[i], Stage, P, K[i], j0, j1)
+            for d in range(dim):
+                for m in range(s):
+                    coef = hb[m]
+                    if coef != 0.0:
+                        for j in range(j0, j1):
+                            Y[d, j] += coef * K[m, d, j]
+    return s * nsteps
+
+
+# Drift/kick splitting (Hairer, Lubich & Wanner, GNI, II.5): drifts q += a_i h v, kicks
+# v += b_i h a(q, t + tau_i h); a scheme that begins and ends with a kick reuses the last force.
+@njit(**CONTRACT)
+def split_advance(f_accel, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
+    nops = kick.shape[0]
+    nq = Acc.shape[0]
+    npar = P.shape[0]
+    q = np.empty(nq)
+    v = np.empty(nq)
+    a = np.empty(nq)
+    p = np.empty(npar)
+    evals = 0
+    for j in range(Y.shape[1]):
+        for d in range(nq):
+            q[d] = Y[d, j]
+            v[d] = Y[nq + d, j]
+            a[d] = Acc[d, j]
+        for k in range(npar):
+            p[k] = P[k, j]
+        valid = valid0
+        e = 0
+        for n in range(nsteps):
+            t = t0 + (n0 + n) * h
+            for i in range(nops):
+                if kick[i]:
+                    if not (i == 0 and valid):
+                        call_state(f_accel, t + htau[i], q, p, a)
+                        e += 1
+                    for d in range(nq):
+                        v[d] += a[d] * hcoef[i]
+                else:
+                    for d in range(nq):
+                        q[d] += v[d] * hcoef[i]
+            valid = fsal
+        for d in range(nq):
+            Y[d, j] = q[d]
+            Y[nq + d, j] = v[d]
+            Acc[d, j] = a[d]
+        evals = e
+    return evals
+
+
+@njit(**CONTRACT)
+def split_advance_cols(f_accel_cols, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
+    nops = kick.shape[0]
+    nq, N = Acc.shape
+    evals = 0
+    for j0 in range(0, N, COLUMN_BLOCK):
+        j1 = min(N, j0 + COLUMN_BLOCK)
+        valid = valid0
+        e = 0
+        for n in range(nsteps):
+            t = t0 + (n0 + n) * h
+            for i in range(nops):
+                coef = hcoef[i]
+                if kick[i]:
+                    if not (i == 0 and valid):
+                        call_columns(f_accel_cols, t + htau[i], Y, P, Acc, j0, j1)
+                        e += 1
+                    for d in range(nq):
+                        for j in range(j0, j1):
+                            Y[nq + d, j] += Acc[d, j] * coef
+                else:
+                    for d in range(nq):
+                        for j in range(j0, j1):
+                            Y[d, j] += Y[nq + d, j] * coef
+            valid = fsal
+        evals = e
+    return evals
+
+
+# Staggered leapfrog: x += d h v_{n+1/2}, v_{n+3/2} = v_{n+1/2} + k h a(x_{n+1}, t_{n+1}).
+@njit(**CONTRACT)
+def leapfrog_advance(f_accel, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
+    nq = Acc.shape[0]
+    npar = P.shape[0]
+    q = np.empty(nq)
+    v = np.empty(nq)
+    a = np.empty(nq)
+    p = np.empty(npar)
+    for j in range(Y.shape[1]):
+        for d in range(nq):
+            q[d] = Y[d, j]
+            v[d] = Y[nq + d, j]
+            a[d] = Acc[d, j]
+        for k in range(npar):
+            p[k] = P[k, j]
+        for n in range(nsteps):
+            t = t0 + (n0 + n + 1) * h
+            for d in range(nq):
+                q[d] += v[d] * hdrift
+            call_state(f_accel, t, q, p, a)
+            for d in range(nq):
+                v[d] += a[d] * hkick
+        for d in range(nq):
+            Y[d, j] = q[d]
+            Y[nq + d, j] = v[d]
+            Acc[d, j] = a[d]
+    return nsteps
+
+
+@njit(**CONTRACT)
+def leapfrog_advance_cols(f_accel_cols, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
+    nq, N = Acc.shape
+    for j0 in range(0, N, COLUMN_BLOCK):
+        j1 = min(N, j0 + COLUMN_BLOCK)
+        for n in range(nsteps):
+            t = t0 + (n0 + n + 1) * h
+            for d in range(nq):
+                for j in range(j0, j1):
+                    Y[d, j] += Y[nq + d, j] * hdrift
+            call_columns(f_accel_cols, t, Y, P, Acc, j0, j1)
+            for d in range(nq):
+                for j in range(j0, j1):
+                    Y[nq + d, j] += Acc[d, j] * hkick
+    return nsteps
+
+
+# Stormer's two-step form (Hairer, Norsett & Wanner I, III.10):
+# x_{n+1} = -alpha_1 x_n - alpha_0 x_{n-1} + h^2 beta_1 a(x_n, t_n). Prev/Cur/Nxt hold
+# (x_{n-1}, x_n, x_{n+1}); a step shifts them and forms the new x_{n+1} at t = t_n + h.
+@njit(**CONTRACT)
+def stormer_advance(f_accel, alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur, Nxt, Acc, P):
+    nq = Cur.shape[0]
+    npar = P.shape[0]
+    xp = np.empty(nq)
+    xc = np.empty(nq)
+    xn = np.empty(nq)
+    a = np.empty(nq)
+    p = np.empty(npar)
+    for j in range(Cur.shape[1]):
+        for d in range(nq):
+            xp[d] = Prev[d, j]
+            xc[d] = Cur[d, j]
+            xn[d] = Nxt[d, j]
+            a[d] = Acc[d, j]
+        for k in range(npar):
+            p[k] = P[k, j]
+        for n in range(nsteps):
+            for d in range(nq):
+                xp[d] = xc[d]
+                xc[d] = xn[d]
+            t = (t0 + (n0 + n) * h) + h
+            call_state(f_accel, t, xc, p, a)
+            for d in range(nq):
+                x = xp[d] * (-alpha0)
+                x += xc[d] * (-alpha1)
+                x += a[d] * b1hh
+                xn[d] = x
+        for d in range(nq):
+            Prev[d, j] = xp[d]
+            Cur[d, j] = xc[d]
+            Nxt[d, j] = xn[d]
+            Acc[d, j] = a[d]
+    return nsteps
+
+
+# A drift/kick splitting under a step controller (`implementations.step_control`): per member a
+# physical step hs = h sigma(q, v) (naive) or hs = h / z with z_{n+1/2} = z_{n-1/2} + h G(y_n),
+# G = -position_power (q.v) / |q|^2 (reversible; Huang & Leimkuhler 1997; Hairer, Lubich & Wanner,
+# GNI, VIII.3.2); sigma = |q|^position_power |L|^momentum_power with |L| frozen at the start for
+# the reversible controller. Powers as NumPy evaluates `array ** scalar` (exact fast paths for the
+# exponents -1, 0, 1/2, 1, 2). Each member keeps its own clock Time.
+@njit(**INLINE)
+def numpy_power(x, e):
+    if e == 1.0:
+        return x
+    if e == -1.0:
+        return 1.0 / x
+    if e == 2.0:
+        return x * x
+    if e == 0.5:
+        return np.sqrt(x)
+    if e == 0.0:
+        return 1.0
+    return x ** e
+
+
+@njit(**EXACT)
+def controlled_advance(f_accel, kick, coef, fsal, valid0, reversible, pos_power, mom_power, t0, h,
+                       nsteps, Y, Acc, Time, Z, P):
+    nops = kick.shape[0]
+    nq = Acc.shape[0]
+    npar = P.shape[0]
+    q = np.empty(nq)
+    v = np.empty(nq)
+    a = np.empty(nq)
+    p = np.empty(npar)
+    half = 0.5 * pos_power
+    evals = 0
+    for j in range(Y.shape[1]):
+        for d in range(nq):
+            q[d] = Y[d, j]
+            v[d] = Y[nq + d, j]
+            a[d] = Acc[d, j]
+        for k in range(npar):
+            p[k] = P[k, j]
+        time = Time[j]
+        z = Z[j]
+        valid = valid0
+        e = 0
+        for _n in range(nsteps):
+            if reversible:
+                hs = h / z if z > 0.0 else np.inf
+            else:
+                r2 = 0.0
+                qv = 0.0
+                v2 = 0.0
+                for d in range(nq):
+                    r2 += q[d] * q[d]
+                    qv += q[d] * v[d]
+                    v2 += v[d] * v[d]
+                L = np.sqrt(max(r2 * v2 - qv * qv, 0.0))
+                hs = h * (numpy_power(r2, half) * numpy_power(L, mom_power))
+            for i in range(nops):
+                ch = coef[i] * hs
+                if kick[i]:
+                    if not (i == 0 and valid):
+                        call_state(f_accel, t0, q, p, a)
+                        e += 1
+                    for d in range(nq):
+                        v[d] += ch * a[d]
+                else:
+                    for d in range(nq):
+                        q[d] += ch * v[d]
+            valid = fsal
+            time += hs
+            if reversible:
+                r2 = 0.0
+                qv = 0.0
+                for d in range(nq):
+                    r2 += q[d] * q[d]
+                    qv += q[d] * v[d]
+                z += h * ((-pos_power) * qv / r2)
+        for d in range(nq):
+            Y[d, j] = q[d]
+            Y[nq + d, j] = v[d]
+            Acc[d, j] = a[d]
+        Time[j] = time
+        Z[j] = z
+        evals = e
+    return evals
