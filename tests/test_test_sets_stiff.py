@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from harness import tolerances as tol
-from harness.experiments.convergence_verdicts import summarize_cell
+from harness.experiments.convergence.judge import summarize_cell
 from harness.facts import ProblemFacts, method_facts
 from harness.gate import stiff_span_flag
 from harness.registry import steppers

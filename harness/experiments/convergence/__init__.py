@@ -66,8 +66,7 @@ SUMMARY_COLUMNS = [
     "stepper", "problem", "claimed_order", "measured_order", "order_ci_low", "order_ci_high",
     "fit_residual", "fit_points", "fit_h_min", "fit_h_max", "fit_error_min", "fit_error_max",
     "local_exponent", "local_exponent_q", "verdict", "reference_error", "reference_precision",
-    "points", "total_steps", "perturbation", "implementation", "wall_s", "message",
-    "finest_h", "t_end",
+    "points", "total_steps", "perturbation", "implementation", "wall_s", "message", "finest_h", "t_end",
 ]
 
 
