@@ -143,3 +143,27 @@ def test_an_orbit_that_blows_up_is_singular():
     orbit = sample_orbit(p)
     assert not orbit.complete and orbit.singular and orbit.t[-1] < 1.0
     assert np.all(np.isfinite(orbit.y))
+
+
+def test_a_numpy_twin_whose_step_fails_leaves_the_cell_standing():
+    """Where the compiled loop ran a point and the NumPy twin's Newton fails there (bdf2 on
+    bari-hires at coarse steps), the twin is untimed at that point with the failure in the row's
+    message; the work-precision cell is not turned into an error."""
+    from harness.experiments.work_precision import timed_runs
+    from harness.registry import get_problem, get_stepper
+    from harness.stepper import StepFailure
+
+    stepper, problem = get_stepper("bdf2"), get_problem("harmonic")
+    out = pd.DataFrame({"error": [1e-3, 1e-5], "t_min_s": [1e-3, 2e-3], "n_steps": [8, 16],
+                        "t_end": [1.0, 1.0], "message": ["", ""]})
+
+    def call(s, i):
+        def run():
+            raise StepFailure(f"stepper 'bdf2': Newton iteration did not converge at point {i}")
+        return run
+
+    settings = {"min_repeats": 1, "max_repeats": 1, "budget_s": 1.0}
+    timed_runs._time_twin(stepper, object(), problem, out, problem.y0.reshape(-1, 1), call, settings,
+                          clock=iter(np.arange(0.0, 100.0, 0.5)).__next__)
+    assert out["twin_min_s"].isna().all()
+    assert "NumPy twin not timed" in out.at[1, "message"] and "point 1" in out.at[1, "message"]
