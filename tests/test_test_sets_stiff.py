@@ -167,3 +167,28 @@ def test_a_numpy_twin_whose_step_fails_leaves_the_cell_standing():
                           clock=iter(np.arange(0.0, 100.0, 0.5)).__next__)
     assert out["twin_min_s"].isna().all()
     assert "NumPy twin not timed" in out.at[1, "message"] and "point 1" in out.at[1, "message"]
+
+
+def test_a_solve_the_harness_would_not_pay_for_is_not_run_not_failed(monkeypatch):
+    """The harness's evaluation cap (`WorkLimitFailure`: CVODE Adams on POLLU, projected 8.9e8
+    evaluations) leaves that tolerance not run, with the reason; a sweep where no tolerance ran
+    is not measurable. A solver's own failure (`StepFailure`) is still a failed cell."""
+    from harness.experiments import convergence
+    from harness.experiments.base import get_experiment
+    from harness.registry import get_problem, get_stepper
+    from harness.rules import Expectation
+    from harness.stepper import StepFailure, WorkLimitFailure
+
+    stepper, problem = get_stepper("scipy-radau"), get_problem("harmonic")
+    config = {**get_experiment("convergence").default_config, "tolerances": [1e-3, 1e-5]}
+    adaptive = Expectation("meets-tolerance", None, (), "adaptive")
+    for failure, outcome in ((WorkLimitFailure, "not-measurable"), (StepFailure, "fail")):
+        class Refused:
+            def integrate(self, *args, failure=failure, **kwargs):
+                raise failure("stepper 'scipy-radau': would need about 8.86e+08 evaluations")
+
+        monkeypatch.setattr(type(stepper), "with_tolerance", lambda self, t: Refused())
+        rows = convergence._tolerance_sweep(stepper, problem, config)
+        record = summarize_cell(stepper, "harmonic", rows)
+        got, reason = judge_convergence(record, adaptive)
+        assert got == outcome and "8.86e+08" in reason, reason
