@@ -192,3 +192,26 @@ def test_a_solve_the_harness_would_not_pay_for_is_not_run_not_failed(monkeypatch
         record = summarize_cell(stepper, "harmonic", rows)
         got, reason = judge_convergence(record, adaptive)
         assert got == outcome and "8.86e+08" in reason, reason
+
+
+@pytest.mark.parametrize("errors, verdict", [
+    ([8e11, 6e13, 1e21, 8e13, 3e-13], "insufficient-range"),  # ab4 x detest-b2: stable only at the floor
+    ([8e11, 6e13, 1e21, 8e13, np.inf], "unstable"),           # the finest step blew up too
+    ([8e11, 6e13, 1e-4, 6e-6, 4e-7], "insufficient-range"),   # a stable range above the floor
+])
+def test_stable_only_at_the_floor_is_no_evidence_but_a_finest_blow_up_is(errors, verdict):
+    """A decaying problem at its end point (DETEST B2, C2): every coarse step blew up and the first
+    stable one is already at the rounding floor; nothing to read an order from (not measurable),
+    unlike a sweep whose finest step blew up (`unstable`)."""
+    hs = 2.5 * 0.5 ** np.arange(5)
+    err = np.array(errors)
+    excluded = np.where(~np.isfinite(err) | (err > 1e6), "blow-up",
+                        np.where(err < 1e-12, "roundoff", "pre-asymptotic"))
+    g = pd.DataFrame({"kind": ["global"] * 5, "h": hs, "error": err, "excluded": excluded,
+                      "in_fit": [False] * 5, "n_steps": (20 / hs).astype(int), "reference_error": [4e-16] * 5,
+                      "reference_precision": ["longdouble"] * 5, "rounding_level": [7e-15] * 5,
+                      "wall_s": [0.0] * 5, "message": [""] * 5, "t_end": [20.0] * 5})
+    record = summarize_cell(steppers.get("ab4"), "detest-b2", g)
+    assert record["verdict"] == verdict, record["message"]
+    if excluded[-1] == "roundoff":
+        assert "already at the floor" in record["message"]
