@@ -458,10 +458,18 @@ class SecondOrderMultistep(_MultistepFacts):
                     f"`{name}`: consistency needs {rule}, got {float(lhs)!r} vs {float(rhs)!r}"
                 )
         _set_multistep(self, name, a, b)
+        exact_a, exact_b = exact_rows(alpha, 1), exact_rows(beta, 1)
+        object.__setattr__(self, "exact", (exact_a, exact_b) if exact_a and exact_b else None)
+
+    #: (alpha, beta) as Fractions when given exactly (extended-precision runs need them), else None
+    exact: tuple | None = field(init=False, repr=False)
 
     def fingerprint(self) -> str:
-        """alpha and beta, exactly, as text (what a cell key records of the method)."""
-        return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}"
+        """alpha and beta, exactly, as text (what a cell key records of the method), and the exact
+        form or that there is none (an extended-precision run differs between the two)."""
+        exact = ("float64" if self.exact is None
+                 else "exact:" + hashlib.sha256(repr(self.exact).encode()).hexdigest())
+        return f"lmm2:{self.alpha.tobytes().hex()}:{self.beta.tobytes().hex()}:{exact}"
 
     ALPHA_SIGN = 1.0
     # A multistep recurrence is not a map of phase space: symplecticity is a property of the

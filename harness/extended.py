@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, SplittingScheme, exact_value
+from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme, exact_value
 
 __all__ = [
     "NotMeasurable", "exact_form", "extended_sweep", "refine_composition_weights",
@@ -53,9 +53,9 @@ class NotMeasurable(Exception):
 # -- exact coefficients -----------------------------------------------------------------------------
 def exact_form(coefficients: Any) -> Any:
     """The coefficient object's exact form (Fractions), or NotMeasurable with the reason."""
-    if not isinstance(coefficients, (ButcherTableau, SplittingScheme)):
-        raise NotMeasurable("extended precision runs explicit Runge-Kutta tableaux and drift/kick "
-                            "compositions; this method is neither")
+    if not isinstance(coefficients, (ButcherTableau, SplittingScheme, SecondOrderMultistep)):
+        raise NotMeasurable("extended precision runs explicit Runge-Kutta tableaux, drift/kick "
+                            "compositions and second-order multistep tables; this method is none")
     if isinstance(coefficients, ButcherTableau) and not coefficients.explicit:
         raise NotMeasurable("extended precision runs explicit Runge-Kutta tableaux only (this one "
                             "is implicit)")
@@ -246,15 +246,83 @@ def _split_runner(problem, exact):
     return _step_function(problem, step, sum(1 for k, _ in exact if k == "K"))
 
 
+def _lmm2_runner(problem, coefficients, exact):
+    """sum_j alpha_j x_(n+j) = h^2 sum_j beta_j a(x_(n+j)) in real128, started from the 192-bit
+    ground truth at t_0 + j h (j < H, H = max(k, p - 1) as the float64 loop keeps), implicit tables
+    by fixed-point iteration to real128 rounding; the velocity at the end by the loop's formula of
+    order H + 1 (`harness.theory.newtonian.velocity_weights`)."""
+    import heyoka as hy
+
+    from harness import cache
+    from harness.theory.newtonian import velocity_weights
+
+    form = problem.newtonian
+    if form is None or problem.velocity_dependent or problem.time_dependent:
+        raise NotMeasurable("a second-order multistep table needs a velocity-free, autonomous acceleration")
+    names = [str(v) for v in problem.variables]
+    qi = [names.index(str(v)) for v in form.positions]
+    vi = [names.index(str(v)) for v in form.velocities]
+    cache.configure_heyoka_cache()
+    accel = hy.cfunc(_with_parameter_values(problem, form.acceleration), list(form.positions),
+                     fp_type=hy.real128, compact_mode=cache.compact_mode(problem))
+    alpha, beta = _to_real128(exact[0]), _to_real128(exact[1])
+    k = coefficients.steps
+    keep = max(k, int(coefficients.order()) - 1)
+    weights = _to_real128(velocity_weights(keep))
+
+    def run(y0: np.ndarray, span: float, n: int) -> tuple[np.ndarray, int]:
+        h = hy.real128(span) / hy.real128(n)
+        h2 = h * h
+        step = hy.real(float(span), _REFERENCE_PREC) / n
+        t0 = hy.real(float(problem.t0), _REFERENCE_PREC)
+        starts = _taylor(problem, None, _REFERENCE_PREC, [t0 + j * step for j in range(1, keep)])
+        X = [y0[qi].copy()] + [_to_real128([s[i] for i in qi]) for s in starts]
+        A = [accel(x) for x in X]
+        evals = len(X)
+        for _ in range(n - (keep - 1)):
+            psi = np.zeros_like(X[-1])
+            for j in range(k):
+                psi = psi - alpha[j] * X[j - k] + h2 * beta[j] * A[j - k]
+            x = psi
+            if beta[k] != 0:  # implicit: x = psi + h^2 beta_k a(x), a contraction at small h
+                for _ in range(tol.NEWTON_MAX_ITER * 10):
+                    new = psi + h2 * beta[k] * accel(x)
+                    evals += 1
+                    done = bool(np.all(np.abs(new - x) <= hy.real128(EXTENDED_EPS) * np.abs(new)))
+                    x = new
+                    if done:
+                        break
+            X = X[1:] + [x]
+            A = A[1:] + [accel(x)]
+            evals += 1
+        v = (X[-1] - X[-2]) / h
+        for j in range(keep):
+            v = v + h * weights[j] * A[-1 - j]
+        y = y0.copy()
+        y[qi] = X[-1]
+        y[vi] = v
+        return y, evals
+
+    run.min_steps = keep  # at least one step of the recurrence after the starting values
+    # rho's double root 1 integrates each rounding error twice: n^(3/2) eps (HLW VIII.5;
+    # `harness.experiments.roundoff`)
+    run.rounding_exponent = 1.5
+    return run
+
+
 def _runner(coefficients, problem):
     exact = exact_form(coefficients)
     if isinstance(coefficients, ButcherTableau):
         return _rk_runner(problem, exact)
+    if isinstance(coefficients, SecondOrderMultistep):
+        return _lmm2_runner(problem, coefficients, exact)
     return _split_runner(problem, exact)
 
 
 # -- ground truth in 192 bits, certified by 256 ----------------------------------------------------
-def _taylor(problem, T: float, prec: int) -> list:
+def _taylor(problem, T, prec: int, times: list | None = None) -> list:
+    """The `prec`-bit Taylor state at T; with `times` (increasing, `prec`-bit reals), the states
+    there instead, on the same orbit."""
     import heyoka as hy
 
     from harness import cache
@@ -268,10 +336,13 @@ def _taylor(problem, T: float, prec: int) -> list:
         kwargs["pars"] = [hy.real(float(v), prec) for v in problem.parameter_values]
     ta = hy.taylor_adaptive(sys, state, **kwargs)
     ta.time = hy.real(float(problem.t0), prec)
-    outcome = ta.propagate_until(hy.real(float(T), prec))[0]
-    if outcome != hy.taylor_outcome.time_limit:
-        raise NotMeasurable(f"the {prec}-bit ground truth stopped with {outcome}")
-    return list(ta.state)
+    out = []
+    for t in ([hy.real(float(T), prec)] if times is None else times):
+        outcome = ta.propagate_until(t)[0]
+        if outcome != hy.taylor_outcome.time_limit:
+            raise NotMeasurable(f"the {prec}-bit ground truth stopped with {outcome}")
+        out.append(list(ta.state))
+    return out[0] if times is None else out
 
 
 def extended_reference(problem, T: float) -> tuple[list, float]:
@@ -315,6 +386,7 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     from harness.order_fit import classify_points, fit_order
 
     runner = _runner(coefficients, problem)
+    growth = getattr(runner, "rounding_exponent", 0.5)  # rounding as a random walk: n^(1/2) eps
     T = float(problem.convergence_t_end if T is None else T)
     budget = float(tol.EXTENDED_WORK_BUDGET if work_budget is None else work_budget)
     started = time.perf_counter()
@@ -334,7 +406,7 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
         with np.errstate(all="ignore"):  # a coarse step may overflow: that point is a blow-up
             y, evals = runner(y0, span, n)
         rows.append({"h": span / n, "n_steps": n, "error": _error(y, ref), "reference_error": ref_err,
-                     "rounding_level": math.sqrt(n) * EXTENDED_EPS * scale * max(1.0, amplification)
+                     "rounding_level": n ** growth * EXTENDED_EPS * scale * max(1.0, amplification)
                      + (float(rounded_of(np.array([span / n]))[0]) if rounded_of else 0.0)})
         rows.sort(key=lambda r: -r["h"])
         return evals
@@ -350,6 +422,8 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     stops = {"roundoff": "the real128 rounding floor", "reference": "the 192-bit reference's accuracy",
              "coefficients": "the coefficients' own accuracy (their defects in the order conditions)"}
     n = 1
+    while n < getattr(runner, "min_steps", 1):  # a multistep table takes its history first
+        n *= 2
     stop = "the work budget"
     while True:
         evals = run(n)

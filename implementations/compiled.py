@@ -654,12 +654,10 @@ def compiled_variant(stepper: Stepper) -> Stepper:
     if isinstance(coeffs, SecondOrderMultistep):
         from implementations.second_order_multistep import SecondOrderMultistepStepper
 
-        if isinstance(stepper, SecondOrderMultistepStepper):
-            raise InputError(
-                f"`stepper` {stepper.info.name!r}: no compiled loop for k-step second-order "
-                "multistep methods yet (its starter is heyoka's Taylor integrator, and its implicit "
-                "tables take a Newton solve per step; the compiled Stormer loop runs the course's "
-                "two-step form only)")
+        if isinstance(stepper, SecondOrderMultistepStepper):  # the family's own compiled loop
+            from implementations.second_order_multistep_compiled import CompiledSecondOrderMultistep
+
+            return CompiledSecondOrderMultistep(stepper)
         return CompiledStormer(stepper)
     raise InputError(
         f"`stepper` {stepper.info.name!r} has no coefficient object a compiled family runs "
@@ -672,10 +670,12 @@ def _family_loops() -> tuple[type, ...]:
     """The NumPy loop classes the compiled families mirror step for step."""
     from implementations.implicit_rk import ImplicitRungeKutta
     from implementations.runge_kutta import ExplicitRungeKutta
+    from implementations.second_order_multistep import SecondOrderMultistepStepper
     from implementations.splitting import SplittingStepper
 
     return (ExplicitRungeKutta, ImplicitRungeKutta, SplittingStepper, StaggeredLeapfrog,
-            LinearMultistepStepper, TwoStepVerlet, ControlledSplittingStepper)
+            LinearMultistepStepper, TwoStepVerlet, ControlledSplittingStepper,
+            SecondOrderMultistepStepper)
 
 
 def faster(stepper: Stepper) -> Stepper | None:
@@ -704,7 +704,7 @@ def faster(stepper: Stepper) -> Stepper | None:
 
 # -- the registered variants -----------------------------------------------------------------------------
 #: Built-in steppers with a coefficient object that no compiled family runs: name -> reason
-#: (today the k-step second-order multistep family, which runs its NumPy loop everywhere).
+#: (today the implicit second-order multistep tables, Cowell's, which run their NumPy loop).
 NOT_COMPILED: dict[str, str] = {}
 
 

@@ -4,7 +4,8 @@ A k-step method sum_j alpha_j x_{n+j} = h^2 sum_j beta_j a_{n+j} (`SecondOrderMu
 Norsett & Wanner I, III.10) generalises the course's two-step Stormer rule (course-material file
 000, eq. (5)). Records:
 
-- Stormer k = 2..8 (explicit, order k) and Cowell k = 2, 4..8 (implicit, order k + 1; Cowell
+- Stormer k = 2..8 (explicit, order k; k = 2 is `stormer-verlet`, the course's two-step form
+  with its Taylor start and central-difference velocity) and Cowell k = 2, 4..8 (implicit, order k + 1; Cowell
   k = 2 is Numerov's method, order 4, and Cowell k = 3 has the same coefficients because
   sigma*_3 = 0): x_{n+1} - 2 x_n + x_{n-1} = h^2 sum_j sigma_j nabla^j a_n (Stormer) or
   h^2 sum_j sigma*_j nabla^j a_{n+1} (Cowell), with the generating functions
@@ -43,11 +44,16 @@ from harness.errors import CoefficientError, IncompatibleError
 from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, StepFailure, Stepper, check_compatible
+from harness.theory.newtonian import velocity_weights
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations import coefficient_info
 
 __all__ = ["METHODS", "STEPPERS", "SecondOrderMultistepStepper", "stormer_table", "cowell_table",
-           "velocity_weights"]
+           "velocity_weights", "START_KINDS"]
+
+#: How the loop gets x_1 .. x_(H-1): from a one-step `starter` stepper, or (two-step tables of
+#: order <= 2) the course's Taylor polynomial x_1 = x_0 + h v_0 + h^2 a_0 / 2.
+START_KINDS = ("starter", "taylor-polynomial")
 
 
 # -- coefficients from the generating functions -------------------------------------------------
@@ -106,22 +112,6 @@ def _symmetric(name: str, half_alpha: list, half_beta: list, denominator: int) -
     return SecondOrderMultistep(name, a + a[-2::-1], b + b[-2::-1])
 
 
-def velocity_weights(m: int) -> list[Fraction]:
-    """c_0..c_(m-1) of v_n = (x_n - x_(n-1)) / h + h sum_j c_j a_(n-j): c_j = int_0^1 u l_j(u) du
-    with l_j the Lagrange basis on the nodes u_j = 1 - j (order m + 1)."""
-    nodes = [Fraction(1 - j) for j in range(m)]
-    out = []
-    for j, uj in enumerate(nodes):
-        poly = [Fraction(1)]  # l_j(u), ascending
-        for i, ui in enumerate(nodes):
-            if i != j:
-                d = uj - ui
-                poly = [(poly[p - 1] if p > 0 else 0) / d - (poly[p] if p < len(poly) else 0) * ui / d
-                        for p in range(len(poly) + 1)]
-        out.append(sum(c / (p + 2) for p, c in enumerate(poly)))  # int_0^1 u * u^p du
-    return out
-
-
 def _extrapolation_weights(m: int) -> np.ndarray:
     """Weights of the polynomial through m equally spaced values (oldest first), at the next."""
     w = []
@@ -147,30 +137,66 @@ class SecondOrderMultistepStepper(Stepper):
     """One step loop for every `SecondOrderMultistep` table (see the module docstring)."""
 
     def __init__(self, table: SecondOrderMultistep, *, claimed_order: int, reference: str,
-                 description: str = "", starter: str = "taylor", on_request: bool = False):
+                 description: str = "", starter: str = "taylor", start: str = "starter",
+                 velocity_points: int | None = None, on_request: bool = False):
         if not isinstance(table, SecondOrderMultistep):
             raise CoefficientError(f"`table` must be a SecondOrderMultistep, got {type(table).__name__}")
+        if start not in START_KINDS:
+            raise CoefficientError(f"`start` must be one of {START_KINDS}, got {start!r}")
         self.coefficients = table
-        self.starter = starter
         k = table.steps
         p = int(table.order())
+        m = max(k, p - 1) if velocity_points is None else velocity_points
+        if not isinstance(m, int) or m < max(1, p - 1):
+            raise CoefficientError(
+                f"`velocity_points` of {table.name!r} must be an integer >= max(1, p - 1) = "
+                f"{max(1, p - 1)} (the velocity formula has order m + 1), got {velocity_points!r}")
         self.history_length = k
-        self._keep = max(k, p - 1)
-        self._vel = np.array([float(c) for c in velocity_weights(self._keep)])
+        self._keep = max(k, m)
+        #: positions the loop keeps (and starts): the k of the recurrence, or the velocity formula's m
+        self.kept_points = self._keep
+        self._vel_points = m
+        if start == "taylor-polynomial" and (self._keep != 2 or p > 2):
+            raise CoefficientError(
+                f"`start` 'taylor-polynomial' gives x_1 only, to O(h^3): {table.name!r} needs "
+                f"{self._keep - 1} starting values and has order {p} (allowed: 2 steps, order <= 2)")
+        # with the Taylor start the loop is one-step: no starter stepper
+        self.starter = starter if start == "starter" else None
+        self._vel = np.array([float(c) for c in velocity_weights(m)])
         self._predict = _extrapolation_weights(k)
+        if start == "starter":
+            start_text = (f"x_1..x_{self._keep - 1} from the one-step method {starter!r} (heyoka's "
+                          "adaptive Taylor integrator at tolerance eps: error ~eps |y| per value)")
+        else:
+            start_text = "Taylor: x_1 = x_0 + h v_0 + h^2 a_0 / 2 (course-material file 000)"
         extra = {
-            "start": f"x_1..x_{self._keep - 1} from the one-step method {starter!r} (heyoka's "
-                     "adaptive Taylor integrator at tolerance eps: error ~eps |y| per value)",
-            "velocity": f"v_n = (x_n - x_(n-1))/h + h sum_(j<{self._keep}) c_j a_(n-j) (interpolated "
-                        f"acceleration, order {self._keep + 1})",
-            "starter": starter,
+            "start": start_text,
+            "velocity": (f"v_n = (x_n - x_(n-1))/h + h sum_(j<{m}) c_j a_(n-j) (interpolated "
+                         f"acceleration, order {m + 1})"),
         }
+        if self.starter is not None:
+            extra["starter"] = starter
         if on_request:
             extra["on_request"] = True
+        claims = {}
+        if self.one_step_verlet:
+            claims = {"symplectic": True}
+            extra["velocity"] += ("; for this table (x_n - x_(n-1))/h + h a_n/2 = (x_(n+1) - "
+                                  "x_(n-1))/2h, the central difference")
         self.info = coefficient_info(
             table, family="second-order-multistep", form="newtonian", claimed_order=claimed_order,
             explicit=bool(table.explicit), evals_per_step=1.0 if table.explicit else 2.0,
-            reference=reference, description=description, extra=extra)
+            reference=reference, description=description, extra=extra, **claims)
+
+    @property
+    def one_step_verlet(self) -> bool:
+        """Whether the observed map (x_n, v_n) -> (x_(n+1), v_(n+1)) is velocity Verlet in exact
+        arithmetic (Hairer, Lubich & Wanner, GNI, I.1.4), hence symplectic: Stormer's table
+        (alpha, beta) = ((1, -2, 1), (0, 1, 0)), the Taylor start and the one-point velocity
+        v_n = (x_n - x_(n-1))/h + h a_n/2."""
+        c = self.coefficients
+        return (self.starter is None and c.steps == 2 and self._vel_points == 1
+                and list(c.beta) == [0.0, 1.0, 0.0])
 
     # -- history --------------------------------------------------------------------------------
     def _starter_stepper(self) -> Stepper:
@@ -182,11 +208,19 @@ class SecondOrderMultistepStepper(Stepper):
         own = super().incompatibility(problem)
         if own:
             return own
-        if not self._starter_stepper().compatible(problem):
+        if self.starter is not None and not self._starter_stepper().compatible(problem):
             return f"its starter {self.starter!r} cannot run this problem"
         return None
 
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+        if self.starter is None:  # x_1 = x_0 + h v_0 + h^2 a_0 / 2
+            nq = dyn.nq
+            x0 = y0[:nq].copy()
+            a0 = dyn.accel(t0, x0)
+            c = Carry(t0, h, y0)
+            c.hist = [[x0, a0, y0.copy()]]
+            c.pending = [[x0 + h * y0[nq:] + (0.5 * h * h) * a0, None, None]]
+            return c
         starter = self._starter_stepper()
         try:
             check_compatible(starter, dyn.problem)
@@ -274,7 +308,8 @@ class SecondOrderMultistepStepper(Stepper):
         m = len(c.hist)
         x = entry[0]
         v = (x - c.hist[-2][0]) / c.h
-        w = self._vel[:m] if m == self._keep else np.array([float(u) for u in velocity_weights(m)])
+        m = min(m, self._vel_points)
+        w = self._vel if m == self._vel_points else np.array([float(u) for u in velocity_weights(m)])
         for j in range(m):
             v += (c.h * w[j]) * self._accel(dyn, c, -1 - j)
         return np.concatenate([x, v])
@@ -294,11 +329,18 @@ _QT = ("G.D. Quinlan & S. Tremaine, Symmetric multistep methods for the numerica
        "integrators/methods.hpp")
 _Q99 = ("G.D. Quinlan, Resonances and instabilities in symmetric multistep methods, "
         "astro-ph/9901136 (1999); coefficients as in the Principia project's integrators/methods.hpp")
-DEFAULT = {"stormer2", "stormer4", "cowell2", "quinlan-tremaine8"}
+DEFAULT = {"stormer-verlet", "stormer4", "cowell2", "quinlan-tremaine8"}
+#: Stormer's two-step rule as the course runs it: its own record, the k = 2 member of the family
+STORMER_VERLET = SecondOrderMultistep("stormer-verlet", [1, -2, 1], [0, 1, 0])
 
 _TABLES = (
-    [(stormer_table(k), k, f"{_HNW} (Stormer's explicit methods, eq. (10.6)); course-material file 000",
-      f"explicit Stormer method, {k} steps") for k in range(2, 9)]
+    [(STORMER_VERLET, 2,
+      "L. Verlet, Phys. Rev. 159 (1967) 98; course-material file 000 (eq. (5), Taylor start) and file "
+      f"001 (Stormer-Verlet velocity); {_HNW}",
+      "two-step position form x_(n+1) = 2x_n - x_(n-1) + h^2 a_n, Taylor start, central-difference "
+      "velocity; equals velocity Verlet in exact arithmetic")]
+    + [(stormer_table(k), k, f"{_HNW} (Stormer's explicit methods, eq. (10.6)); course-material file 000",
+        f"explicit Stormer method, {k} steps") for k in range(3, 9)]
     + [(cowell_table(k), 4 if k == 2 else k + 1, f"{_HNW} (Cowell's implicit methods, eq. (10.8))"
         + ("; B. Numerov, MNRAS 84 (1924) 592" if k == 2 else ""),
         f"implicit Cowell method, differences to order {k}" + (" (Numerov)" if k == 2 else ""))
@@ -313,13 +355,16 @@ _TABLES = (
                    53222400), 12, _QT, "symmetric explicit 12-step method SL12"),
        (_symmetric("quinlan8a", [1, -2, 2, -2, 2], [0, 22081, -29418, 75183, -75212], 15120),
         8, _Q99, "symmetric explicit 8-step method 8A"),
-       (_symmetric("quinlan8b", [1, 0, 0, -0.5, -1], [0, 192481, 6582, 816783, -156812], 120960),
+       (_symmetric("quinlan8b", [1, 0, 0, Fraction(-1, 2), -1], [0, 192481, 6582, 816783, -156812], 120960),
         8, _Q99, "symmetric explicit 8-step method 8B")]
 )
 
+#: The course's start and velocity for Stormer-Verlet (the recurrence is the family's)
+_OPTIONS = {"stormer-verlet": {"start": "taylor-polynomial", "velocity_points": 1}}
+
 METHODS: list[Method] = [
     Method(table, order, reference, description,
-           options={"on_request": table.name not in DEFAULT})
+           options={"on_request": table.name not in DEFAULT, **_OPTIONS.get(table.name, {})})
     for table, order, reference, description in _TABLES
 ]
 

@@ -8,7 +8,8 @@ derived from central differences in course-material file 000 (eq. (5)) and file 
 - observed velocity: the central difference v_n = (x_{n+1} - x_{n-1}) / 2h. The carry at step n
   already holds x_{n+1} (computed from a_n, the step's only force evaluation), so observing
   costs nothing; at the start, v_0 itself is returned;
-- `stormer-verlet`: velocity-independent forces, x_{n+1} explicit;
+- `stormer-verlet` (velocity-independent forces) is the k = 2 record of the second-order
+  multistep family (`implementations.second_order_multistep`), the same start and velocity;
 - `verlet-damped` (course file 000, Example 2): the velocity inside the force is replaced by
   (x_{n+1} - x_{n-1}) / 2h, so x_{n+1} is implicit. When a is linear in v (d^2a/dv^2 = 0,
   found symbolically) the linear equation is solved in closed form with B = da/dv from the
@@ -272,19 +273,6 @@ class TwoStepVerlet(Stepper):
 STORMER = SecondOrderMultistep("stormer", [1, -2, 1], [0, 1, 0])
 
 STEPPERS: list[Stepper] = [
-    TwoStepVerlet(
-        "stormer-verlet",
-        STORMER,
-        implicit_velocity=False,
-        reference=(
-            "L. Verlet, Phys. Rev. 159 (1967) 98; course-material file 000 (eq. (5), Taylor start) "
-            "and file 001 (Stormer-Verlet velocity); Hairer, Norsett & Wanner I, III.10"
-        ),
-        description=(
-            "two-step position form x_(n+1) = 2x_n - x_(n-1) + h^2 a_n, Taylor start, "
-            "central-difference velocity; equals velocity Verlet in exact arithmetic"
-        ),
-    ),
     TwoStepVerlet(
         "verlet-damped",
         STORMER,

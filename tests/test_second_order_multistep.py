@@ -113,3 +113,89 @@ def test_round_trip_retraces_the_history():
     y0 = np.array([[1.0], [0.0]])
     start, back = stepper.round_trip(problem, h=0.05, n_steps=50, y0=y0)
     assert np.max(np.abs(back - start)) < 1e-12
+
+
+# -- Stormer-Verlet as the family's two-step record ---------------------------------------------
+def test_stormer_verlet_is_the_two_step_record_with_the_course_start_and_velocity():
+    """The record runs the course's form (course-material file 000: Taylor start; file 001: the
+    central-difference velocity) and agrees with the dedicated two-step loop to rounding."""
+    from harness.registry import get_stepper
+    from implementations.verlet import TwoStepVerlet
+
+    stepper = get_stepper("stormer-verlet")
+    assert isinstance(stepper, SecondOrderMultistepStepper)
+    assert stepper.info.family == "second-order-multistep" and stepper.starter is None
+    assert stepper.one_step_verlet and stepper.info.symplectic and stepper.info.symmetric
+    course = TwoStepVerlet("course", stepper.coefficients, implicit_velocity=False, reference="file 000")
+    problem = get_problem("kepler-elliptic")
+    y0 = np.array([[0.4, 0.41], [0.0, 0.01], [0.0, 0.0], [2.0, 1.98]])
+    saves = range(0, 401, 40)
+    a = course.integrate(problem, h=0.01, n_steps=400, y0=y0, save_steps=saves)
+    b = stepper.integrate(problem, h=0.01, n_steps=400, y0=y0, save_steps=saves)
+    assert np.max(np.abs(np.asarray(a.y) - np.asarray(b.y))) < 1e-12
+    assert a.evals["accel"] == b.evals["accel"]
+
+
+@pytest.mark.parametrize("options, verlet", [
+    ({}, False),
+    ({"start": "taylor-polynomial"}, False),  # the order-3 velocity: not velocity Verlet
+    ({"start": "taylor-polynomial", "velocity_points": 1}, True),
+])
+def test_the_symplectic_claim_follows_from_table_start_and_velocity(options, verlet):
+    stepper = Method(stormer_table(2), 2, "HNW I, III.10", options=options).stepper()
+    assert stepper.one_step_verlet is verlet and stepper.info.symplectic is verlet
+
+
+@pytest.mark.parametrize("table, options, match", [
+    (next(m for m in METHODS if m.name == "quinlan-tremaine8").coefficients, {"start": "taylor-polynomial"},
+     "'taylor-polynomial' gives x_1 only"),
+    (stormer_table(4), {"velocity_points": 1}, "`velocity_points` of 'stormer4' must be"),
+    (stormer_table(2), {"velocity_points": 0}, "`velocity_points`"),
+    (stormer_table(2), {"start": "euler"}, "`start` must be one of"),
+])
+def test_loop_options_that_break_the_order_are_refused(table, options, match):
+    from harness.errors import CoefficientError
+
+    with pytest.raises(CoefficientError, match=match):
+        SecondOrderMultistepStepper(table, claimed_order=int(table.order()), reference="r", **options)
+
+
+# -- the order in extended precision ----------------------------------------------------------
+@pytest.mark.slow
+def test_the_highest_order_record_shows_its_order_in_real128():
+    """Quinlan-Tremaine SL12 reaches the float64 floor before its slope settles; in real128,
+    started from the 192-bit ground truth, the fitted order is the coefficients' 12."""
+    from harness.extended import extended_sweep
+    from harness.tolerances import MIN_FIT_POINTS
+
+    method = next(m for m in METHODS if m.name == "quinlan-tremaine12")
+    r = extended_sweep(method.coefficients, get_problem("harmonic"), order_bound=12)
+    assert r["fit"] is not None and r["fit"]["points"] >= MIN_FIT_POINTS, r["note"]
+    assert r["fit"]["order"] == pytest.approx(method.coefficients.order(), abs=0.15)
+
+
+def test_an_exact_record_that_breaks_an_order_condition_shows_the_lower_order_in_real128():
+    """A mutant of Stormer's 4-step table (beta_1 and beta_2 moved by 1/24 each way: consistent,
+    order 2 by its error constants) measures order 2, not the 4 it would claim."""
+    from harness.extended import extended_sweep
+
+    base = stormer_table(4)
+    beta = list(base.exact[1])
+    beta[1] += F(1, 24)
+    beta[2] -= F(1, 24)
+    mutant = SecondOrderMultistep("stormer4-mutant", list(base.exact[0]), beta)
+    assert mutant.order() < 4
+    r = extended_sweep(mutant, get_problem("harmonic"), order_bound=4, work_budget=4000)
+    assert r["fit"] is not None
+    assert r["fit"]["order"] == pytest.approx(mutant.order(), abs=0.15)
+
+
+def test_a_float64_table_is_not_measurable_in_extended_precision_and_says_why():
+    from harness.extended import NotMeasurable, exact_form
+
+    exact = cowell_table(4)
+    floats = SecondOrderMultistep("cowell4-floats", exact.alpha.tolist(), exact.beta.tolist())
+    assert exact.exact is not None and floats.exact is None
+    with pytest.raises(NotMeasurable, match="given only to float64"):
+        exact_form(floats)
+    assert exact.fingerprint() != floats.fingerprint()  # never one cached cell for both

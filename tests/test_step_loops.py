@@ -87,14 +87,14 @@ def test_a_kernel_change_changes_the_key_of_every_cell_it_could_have_measured(mo
 def test_a_family_modules_helper_is_in_the_key_of_its_steppers_only(monkeypatch):
     """A stepper's key covers the module its class is defined in (module-level helpers of its
     loop) and what that imports: editing the second-order multistep module changes the key of
-    its steppers (which have no compiled variant), not taylor's (another family's module)."""
-    module = type(get_stepper("stormer2")).__module__
-    before = {n: keys.code_version(n, "kepler-elliptic") for n in ("stormer2", "taylor")}
+    its steppers, not taylor's (another family's module)."""
+    module = type(get_stepper("stormer3")).__module__
+    before = {n: keys.code_version(n, "kepler-elliptic") for n in ("stormer3", "taylor")}
     read = code_versions._source
     monkeypatch.setattr(code_versions, "_source", lambda name: read(name) + "\n# edited\n"
                         if name == module else read(name))
     after = {n: keys.code_version(n, "kepler-elliptic") for n in before}
-    assert after["stormer2"] != before["stormer2"] and after["taylor"] == before["taylor"]
+    assert after["stormer3"] != before["stormer3"] and after["taylor"] == before["taylor"]
 
 
 def test_a_third_party_loop_is_asked_after_the_builtins(tmp_path, monkeypatch):

@@ -68,7 +68,9 @@ def test_finite_difference_jacobian_of_a_linear_map_is_exact_to_rounding(registe
 def test_every_stepper_gets_a_cell_or_a_reason_on_every_problem(name):
     cells, skips = cells_or_reasons(EXP, name)
     stepper = steppers.get(name)
-    if stepper.history_length > 1 and stepper.info.family != "stormer":
+    # Stormer's two-step rule with the Taylor start and central velocity is velocity Verlet
+    one_step = stepper.info.family == "stormer" or getattr(stepper, "one_step_verlet", False)
+    if stepper.history_length > 1 and not one_step:
         assert not cells
         assert any("starting procedure" in s.reason for s in skips)
 

@@ -52,7 +52,8 @@ from harness.theory.roots import (
     sturm_sequence,
 )
 
-__all__ = ["HwBands", "splitting_trace_exact", "splitting_hw_bands", "lmm2_hw_bands", "hw_bands"]
+__all__ = ["HwBands", "splitting_trace_exact", "splitting_hw_bands", "lmm2_hw_bands", "hw_bands",
+           "velocity_weights"]
 
 
 @dataclass(frozen=True)
@@ -157,8 +158,16 @@ def splitting_hw_bands(scheme: SplittingScheme, hw_max: float = tol.STABILITY_HW
     return _bands([psub(T, two), padd(T, two)], stable, hw_max, "|tr M| < 2, det M = 1")
 
 
+def _exact_table(method: SecondOrderMultistep) -> tuple[list[Fraction], list[Fraction]]:
+    """(alpha, beta) exactly as given when the record is exact, else its float64 values."""
+    if getattr(method, "exact", None) is not None:
+        return list(method.exact[0]), list(method.exact[1])
+    return [Fraction(a) for a in method.alpha], [Fraction(b) for b in method.beta]
+
+
 def _char_poly(method: SecondOrderMultistep, x: Fraction) -> Poly:
-    return tuple(Fraction(a) + x * Fraction(b) for a, b in zip(method.alpha, method.beta, strict=False))
+    alpha, beta = _exact_table(method)
+    return tuple(a + x * b for a, b in zip(alpha, beta, strict=False))
 
 
 def _w_polynomial(c: list[Fraction]) -> Poly:
@@ -179,8 +188,7 @@ def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW
     docstring: periodicity for symmetric methods, spectral radius <= 1 otherwise)."""
     check_type(method, SecondOrderMultistep, "method")
     k = method.steps
-    alpha = [Fraction(a) for a in method.alpha]
-    beta = [Fraction(b) for b in method.beta]
+    alpha, beta = _exact_table(method)
     lead = poly([alpha[k], beta[k]])
     if method.symmetric and k % 2 == 0:
         m = k // 2
@@ -236,3 +244,19 @@ def hw_bands(coefficients, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwB
     if isinstance(coefficients, SecondOrderMultistep):
         return lmm2_hw_bands(coefficients, hw_max)
     return None
+
+
+def velocity_weights(m: int) -> list[Fraction]:
+    """c_0..c_(m-1) of v_n = (x_n - x_(n-1)) / h + h sum_j c_j a_(n-j): c_j = int_0^1 u l_j(u) du
+    with l_j the Lagrange basis on the nodes u_j = 1 - j (order m + 1)."""
+    nodes = [Fraction(1 - j) for j in range(m)]
+    out = []
+    for j, uj in enumerate(nodes):
+        poly = [Fraction(1)]  # l_j(u), ascending
+        for i, ui in enumerate(nodes):
+            if i != j:
+                d = uj - ui
+                poly = [(poly[p - 1] if p > 0 else 0) / d - (poly[p] if p < len(poly) else 0) * ui / d
+                        for p in range(len(poly) + 1)]
+        out.append(sum(c / (p + 2) for p, c in enumerate(poly)))  # int_0^1 u * u^p du
+    return out

@@ -5,7 +5,8 @@ and method.
 Kernels: explicit Runge-Kutta, splitting, the staggered leapfrog, Stormer's two-step rule and a
 splitting under a step controller, with column forms of the first three for ensembles
 (`one_step`); explicit and implicit linear multistep (`multistep`); implicit Runge-Kutta by
-Newton's method (`implicit_rk`); what they share (`common`). A kernel reads its method from
+Newton's method (`implicit_rk`); explicit second-order multistep (`second_order_multistep`);
+what they share (`common`). A kernel reads its method from
 arrays (A, b, c; the drift/kick sequence; alpha, beta) and calls the problem's functions through
 their addresses (`implementations.kernel_calls`: an indirect call, as a C loop through a function
 pointer), so a cold run compiles each kernel once, whatever the problems and methods, and later
@@ -47,7 +48,7 @@ from harness import cache
 __all__ = ["KERNELS", "MODULES", "CACHE_DIRECTORY", "cache_directory", "kernel"]
 
 #: The kernel modules, in import order.
-MODULES = ("common", "one_step", "multistep", "implicit_rk")
+MODULES = ("common", "one_step", "multistep", "implicit_rk", "second_order_multistep")
 #: Each kernel (or helper the compiled steppers call directly) -> its module.
 KERNELS = {
     "rk_advance": "one_step", "rk_advance_cols": "one_step", "split_advance": "one_step",
@@ -55,7 +56,7 @@ KERNELS = {
     "leapfrog_advance_cols": "one_step", "stormer_advance": "one_step",
     "controlled_advance": "one_step", "lmm_explicit_advance": "multistep",
     "lmm_implicit_advance": "multistep", "irk_advance": "implicit_rk", "rhs_all": "common",
-    "accel_all": "common",
+    "accel_all": "common", "lmm2_explicit_advance": "second_order_multistep",
 }
 
 
@@ -79,10 +80,10 @@ def _import_modules(directory: Path) -> dict:
     before = config.CACHE_DIR
     config.CACHE_DIR = str(directory)
     try:
-        from implementations.kernels import common, implicit_rk, multistep, one_step
+        from implementations.kernels import common, implicit_rk, multistep, one_step, second_order_multistep
 
         return {"common": common, "one_step": one_step, "multistep": multistep,
-                "implicit_rk": implicit_rk}
+                "implicit_rk": implicit_rk, "second_order_multistep": second_order_multistep}
     finally:
         config.CACHE_DIR = before
 

@@ -1,0 +1,105 @@
+"""The compiled implementation of the second-order multistep family (explicit tables).
+
+`CompiledSecondOrderMultistep` is the family's NumPy loop (`SecondOrderMultistepStepper`) with its
+steps run by the compiled kernel `implementations.kernels.second_order_multistep`
+(`lmm2_explicit_advance`, called through `implementations.compiled_kernels.call_kernel`):
+the start (starter stepper or Taylor polynomial), the pending starting values, the velocity
+reconstruction, time reversal and the stability probe's history are the NumPy loop's own
+(inherited), so both implementations share every convention and agree to rounding. Registered as
+`<name>@compiled` by `implementations.compiled.compiled_variant`. Implicit (Cowell) tables are
+not compiled: their simplified Newton iteration runs ensemble-wide in the NumPy loop.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from harness.code_versions import module_version
+from harness.errors import InputError
+from harness.problem import Dynamics, Problem
+from harness.stepper import Carry, Stepper
+from implementations.compiled_kernels import call_kernel
+from implementations.native_functions import UnsupportedExpression, function_address
+from implementations.second_order_multistep import SecondOrderMultistepStepper
+
+__all__ = ["CompiledSecondOrderMultistep", "SUFFIX"]
+
+SUFFIX = "@compiled"
+
+
+class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
+    """An explicit `SecondOrderMultistep` table's loop with its steps compiled (see the module
+    docstring). Raises InputError for an implicit table or an already compiled stepper."""
+
+    def __init__(self, base: Stepper):
+        compiled = isinstance(base, CompiledSecondOrderMultistep)
+        if not isinstance(base, SecondOrderMultistepStepper) or compiled:
+            raise InputError(f"`base` must be a NumPy SecondOrderMultistepStepper, got {type(base).__name__}")
+        if not base.coefficients.explicit:
+            raise InputError(
+                f"`stepper` {base.info.name!r}: no compiled loop for implicit second-order multistep "
+                "tables (their simplified Newton iteration runs ensemble-wide in the NumPy loop)")
+        self.__dict__.update(base.__dict__)
+        self.base = base
+        self.info = dataclasses.replace(
+            base.info, name=base.info.name + SUFFIX, implementation="compiled",
+            description=f"{base.info.description}; compiled (second-order multistep kernel)".lstrip("; "),
+            extra={**base.info.extra, "numpy_implementation": base.info.name})
+
+    def incompatibility(self, problem: Problem) -> str | None:
+        reason = self.base.incompatibility(problem)
+        if reason:
+            return reason
+        try:
+            function_address(problem, "accel")
+        except UnsupportedExpression as exc:
+            return f"no compiled right-hand side: {exc}"
+        return None
+
+    def fingerprint(self) -> str:
+        # this module's and its kernel's code: a change to either changes every cell's key
+        return "\n".join([super().fingerprint(),
+                          module_version("implementations.second_order_multistep_compiled"),
+                          module_version("implementations.kernels.second_order_multistep")])
+
+    def _advance(self, dyn: Dynamics, c: Carry, n: int) -> None:
+        while n > 0 and (c.pending or len(c.hist) < self._keep):  # the NumPy loop's own start
+            self._step(dyn, c)
+            c.n += 1
+            n -= 1
+        if n <= 0:
+            return
+        table = self.coefficients
+        keep = self._keep
+        X = np.ascontiguousarray(np.stack([e[0] for e in c.hist]), dtype=np.float64)
+        A = np.zeros_like(X)
+        known = np.zeros(keep, dtype=np.int64)
+        for s, e in enumerate(c.hist):
+            if e[1] is not None:
+                A[s] = e[1]
+                known[s] = 1
+        P = dyn.pars
+        if P.ndim != 2:
+            P = P.reshape(P.shape[0] if P.size else 0, dyn.size)
+        P = np.ascontiguousarray(P, dtype=np.float64)
+        evals, head = call_kernel(
+            "lmm2_explicit_advance", function_address(dyn.problem, "accel"),
+            np.ascontiguousarray(table.alpha, dtype=np.float64),
+            np.ascontiguousarray(table.beta, dtype=np.float64), float(c.h * c.h), float(c.t0),
+            int(c.n), float(c.h), int(n), X, A, known, 0, P)
+        dyn.counts["accel"] += int(evals)
+        kept = c.hist[n:] if n < keep else []  # original entries still stored keep their observed state
+        new_hist = []
+        for i in range(keep):
+            s = (head + i) % keep
+            a = A[s].copy() if known[s] else None
+            if i < len(kept):
+                entry = kept[i]
+                entry[1] = a if entry[1] is None else entry[1]
+            else:
+                entry = [X[s].copy(), a, None]
+            new_hist.append(entry)
+        c.hist = new_hist
+        c.n += n
