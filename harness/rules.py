@@ -46,6 +46,9 @@ Verdicts that say "not measurable here" rather than "wrong" (`tolerated`):
 - `unstable` too, when the problem is stiff for this method: the stability interval divided
   by the stiffness (largest -Re(lambda) along the reference) asks for more than
   STIFF_STEP_COUNT steps over the horizon, where the error is already near the rounding floor;
+- `converged` when the problem is stiff for this method and the fitted steps reach above its
+  stable step (real stability interval / stiffness): h lambda lies outside the stability region
+  there, and the slope is that of an amplified mode, not of the error expansion (HW II, IV.2);
 - `exact` when not predicted: the error was at the rounding floor even at the coarsest step
   sizes the sweep tried, so no order can be read off (an order-8 method on a short smooth span).
 - `failed` of an implicit method whose every step size failed in its implicit solve, when even
@@ -118,6 +121,7 @@ class Expectation:
     reason: str
     order_low: float | None = None
     implicit_stiffness: float | None = None  # the problem's stiffness, for an implicit method
+    stable_h: float | None = None  # real stability interval / stiffness, where stiff for the method
 
 
 def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
@@ -134,6 +138,8 @@ def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
 def convergence_expectation(method: MethodFacts, problem: ProblemFacts) -> Expectation:
     """The expected convergence verdict of a (method, problem) pair; see the module docstring."""
     expectation = _expectation(method, problem)
+    if _stiff_steps(method, problem) > tol.STIFF_STEP_COUNT:
+        expectation = replace(expectation, stable_h=float(method.real_interval / problem.stiffness))
     if not method.explicit and not method.adaptive and problem.stiffness > 0:
         return replace(expectation, implicit_stiffness=float(problem.stiffness))
     return expectation
@@ -217,6 +223,15 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
         if verdict == "insufficient-range":  # no tolerance of the sweep inside the library's range
             return "not-measurable", msg or "adaptive stepper: no tolerance of the sweep could run"
         return "fail", f"adaptive stepper: {verdict}" + (f": {msg}" if msg else "")
+    stable_h = expectation.stable_h
+    above = stable_h is not None and float(record.get("fit_h_max", math.nan)) > stable_h
+    if verdict == "converged" and above:  # a fit over steps outside the stability interval
+        return "not-measurable", (
+            f"the fitted steps reach h = {float(record['fit_h_max']):.3g}, above the stable step "
+            f"{expectation.stable_h:.3g} (real stability interval / stiffness): there h lambda lies "
+            f"outside the stability region and the error is an amplified mode, not the expansion "
+            f"C h^p the order is read from (HW II, IV.2)"
+            + (f"; {expectation.reason}" if expectation.reason else ""))
     if verdict == expectation.verdict:
         if expectation.order is None:
             return "pass", expectation.reason

@@ -215,3 +215,18 @@ def test_stable_only_at_the_floor_is_no_evidence_but_a_finest_blow_up_is(errors,
     assert record["verdict"] == verdict, record["message"]
     if excluded[-1] == "roundoff":
         assert "already at the floor" in record["message"]
+
+
+@pytest.mark.parametrize("fit_h_max, outcome", [(6.5e-3, "not-measurable"), (1e-3, "fail")])
+def test_a_fit_over_steps_outside_the_stability_interval_is_not_measurable(fit_h_max, outcome):
+    """ab3 on bari-hires (stiffness 192, real interval 0.545: stable for h < 2.8e-3) fitted a
+    constant error 7.85e-3 at h = 3.3e-3 ... 6.5e-3 (slope 0): points of an amplified mode, not
+    of the error expansion. Within the stable steps a wrong slope still fails."""
+    facts = ProblemFacts(linear=False, polynomial_degree=None, newtonian=False, velocity_free=False,
+                         time_dependent=False, stiffness=192.0, horizon=321.8)
+    ab3 = next(s for s in FIXED_STEP if s.info.name == "ab3")
+    expectation = convergence_expectation(method_facts(ab3), facts)
+    assert expectation.stable_h == pytest.approx(method_facts(ab3).real_interval / 192.0)
+    record = {"verdict": "converged", "measured_order": 0.0, "fit_h_max": fit_h_max, "message": ""}
+    got, reason = judge_convergence(record, expectation)
+    assert got == outcome, reason
