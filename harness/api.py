@@ -38,7 +38,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
-import inspect
 import textwrap
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -51,13 +50,14 @@ from harness.errors import InputError
 from harness.problem import Dynamics, Problem
 from harness.problem.checks import check_positive
 from harness.sources import source_of
-from harness.stepper import FORMS, Carry, Stepper, StepperInfo
+from harness.stepper import FORMS, Carry, Stepper
 from harness.stepper.contracts import (
     AdaptiveStateStepper,
     Field,
     StateStepper,
     batched_solve,
     checked_float64,
+    user_step_info,
 )
 
 __all__ = ["check", "ClaimReport", "ClaimError", "FunctionStepper", "StateStepper", "Field",
@@ -150,24 +150,19 @@ class FunctionStepper(Stepper):
         if form not in FORMS:
             raise InputError(f"`form` must be one of {FORMS}, got {form!r}")
         evals = check_positive(evals_per_step, "`evals_per_step`")
-        where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
         self.step_function = step
-        self.info = StepperInfo(
-            name=name or getattr(step, "__name__", "user-step"),
-            family="user",
-            claimed_order=order,
-            explicit=not implicit,
-            symplectic=bool(symplectic),
-            symmetric=bool(symmetric),
-            evals_per_step=evals,
-            form=form,
-            velocity_dependent=False,
-            reference=reference or f"user-supplied step function {where}",
-            description=description or (inspect.getdoc(step) or "").split("\n")[0],
-            implementation="user function",
-        )
+        claims = {"implicit": implicit, "symplectic": symplectic, "symmetric": symmetric, "form": form,
+                  "velocity_dependent": False, "reference": reference, "description": description}
+        self.info = user_step_info(step, name, order, evals, claims, "step function", "user function")
 
     def fingerprint(self) -> str:
+        """`Stepper.fingerprint` plus a hash of the step function's source (or, without source, its
+        byte code and constants).
+
+        Returns
+        -------
+        str
+        """
         try:
             source = source_of(self.step_function)
         except (OSError, TypeError):
@@ -357,13 +352,32 @@ def check(
 ) -> ClaimReport:
     """Measure `stepper` on `problems` and judge the stated claims (see the module docstring).
 
-    `order`: the convergence order claimed on every problem; `symmetric`: True (returns to its
-    start within rounding) or False; `energy`: 'bounded', 'sqrt' or 'linear'. `quick` starts from
-    the experiments' quick settings; `symplectic`: True or False, judged by the symplecticity
-    experiment (the one-step map's Jacobian); `configs` maps experiment name ('convergence',
-    'reversibility', 'energy', 'symplecticity') to setting overrides. Raises `ClaimError` (an
-    AssertionError with the measured table) when a claim is false and `raise_on_failure`;
-    `InputError` for bad input.
+    Parameters
+    ----------
+    stepper : Stepper, str or callable
+        A stepper, a registered name, or a step function (wrapped as a `FunctionStepper`).
+    problems : sequence of str or Problem, registered names or `Problem` objects (a non-empty sequence).
+    order : int, optional, the convergence order claimed on every problem.
+    symmetric : bool, optional, true (returns to its start within rounding) or False.
+    energy : str, optional, 'bounded', 'sqrt' or 'linear'.
+    symplectic : bool, optional
+        True or False, judged by the symplecticity experiment (the one-step map's Jacobian).
+    quick : bool, optional, start from the experiments' quick settings (default True).
+    configs : mapping, optional
+        Experiment name ('convergence', 'reversibility', 'energy', 'symplecticity') -> setting
+        overrides.
+    jobs : int, optional, worker processes (default 1: in this process).
+    cache : bool, optional, read and write the cell cache (default False).
+    cell_timeout : float, optional, seconds per cell.
+    raise_on_failure : bool, optional, raise `ClaimError` when a claim is false (default True).
+
+    Returns
+    -------
+    ClaimReport
+        One row per (claim, problem) with the measured value and verdict.
+
+    Raises `ClaimError` (an AssertionError with the measured table) when a claim is false and
+    `raise_on_failure`; `InputError` for bad input.
     """
     from harness.errors import NoApplicableCellsError
     from harness.registry import problems as problem_registry

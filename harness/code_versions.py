@@ -26,7 +26,8 @@ __all__ = ["experiment_modules", "measuring_modules", "module_version", "project
 PROJECT_PACKAGES = ("harness", "problems", "implementations")
 # Modules every cell steps through via objects (a stepper's carry, a problem's dynamics and
 # coefficient objects), which an experiment's imports need not name.
-MEASURING_MODULES = ("harness.problem", "harness.stepper", "harness.coefficients")
+MEASURING_MODULES = ("harness.problem", "harness.stepper", "harness.coefficients",
+                     "harness.multistep_coefficients", "harness.coefficient_input")
 # Modules that only judge measurements (verdict rules, the gate), or only list or look up other
 # code (the registry: its entries are keyed by `code_version`; the experiment list): never part of
 # a cell's key, and not followed in the import graph.

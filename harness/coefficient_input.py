@@ -14,9 +14,13 @@ from fractions import Fraction
 import numpy as np
 
 from harness.errors import CoefficientError
-from harness.tolerances import PUBLISHED_MIN_DIGITS
+from harness.tolerances import COEFFICIENT_TOL, COEFFICIENT_ULPS, EPS, PUBLISHED_MIN_DIGITS
 
-__all__ = ["as_float_array", "exact_value", "exact_rows", "published_precision"]
+__all__ = ["Number", "as_float_array", "close_to_rounding", "exact_value", "exact_rows",
+           "published_precision"]
+
+# A coefficient as it may be typed: a float, an int or an exact rational.
+Number = float | int | Fraction
 
 
 def _real(v) -> float:
@@ -45,12 +49,36 @@ def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
     return arr
 
 
-def published_precision(*arrays: np.ndarray) -> float:
+def published_precision(*values) -> float:
     """Half a unit in the last digit of the coarsest coefficient typed as a cut decimal (shortest
-    float text of PUBLISHED_MIN_DIGITS to 15 significant digits), else 0.0."""
+    float text of PUBLISHED_MIN_DIGITS to 15 significant digits), else 0.0. Integers and
+    Fractions are exact rationals, not printed decimals, whatever their float text looks like
+    (an exact extrapolation weight such as 1e8/807 prints as 123915.73729863692): they are
+    passed over.
+
+    Parameters
+    ----------
+    *values : the coefficients as given (arrays, nested sequences or numbers).
+
+    Returns
+    -------
+    float
+        The printing's half unit, or 0.0 when no coefficient is a cut decimal.
+    """
     from decimal import Decimal
 
-    cut = [Decimal(repr(float(x))).as_tuple() for a in arrays for x in np.ravel(a) if x != 0.0]
+    def flat(v):
+        if isinstance(v, np.ndarray):
+            yield from v.ravel().tolist()
+        elif isinstance(v, (list, tuple)):
+            for x in v:
+                yield from flat(x)
+        else:
+            yield v
+
+    typed = [float(Fraction(x)) if isinstance(x, str) else float(x) for v in values for x in flat(v)
+             if not (isinstance(x, (int, Fraction)) and not isinstance(x, bool))]
+    cut = [Decimal(repr(x)).as_tuple() for x in typed if x != 0.0]
     return max([0.5 * 10.0 ** int(e) for _, d, e in cut if PUBLISHED_MIN_DIGITS <= len(d) <= 15],
                default=0.0)
 
@@ -89,3 +117,11 @@ def exact_rows(values, ndim: int):
 # A float with numerator and denominator (a power of two) at most this is taken as exact (0.5,
 # 0.25, 3.0): a rounded decimal such as 0.1 or 1/3 has a 2^52-sized denominator.
 _EXACT_DYADIC = 1 << 20
+
+
+def close_to_rounding(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
+    """a == b up to the rounding of the coefficients that produced them: `size` is the sum of
+    the magnitudes of the `terms` numbers summed (a tableau whose weights sum |b| to 2842 rounds
+    its sum to ~1e-13, and that is no defect)."""
+    scale = max(1.0, abs(a), abs(b), float(size))
+    return abs(a - b) <= max(COEFFICIENT_TOL, COEFFICIENT_ULPS * EPS * (terms + 1) * scale)

@@ -1,7 +1,7 @@
 """Derived facts of a problem or a method, computed once and kept on disk beside the cell cache.
 
 Some facts are slow to derive and asked by many processes: where a long run leaves the
-dynamical regime of a problem's span (`harness.scales.regime_end`), how much the flow amplifies
+dynamical regime of a problem's span (`harness.regimes.regime_end`), how much the flow amplifies
 a perturbation over a span (`harness.flow`), where an orbit meets its fastest rate
 (`fastest_approach`); a method's order and stability intervals from its coefficients
 (`harness.facts`). The parent lists cells with them, every worker measures with them, and
@@ -76,6 +76,20 @@ def _version(module: str) -> str:
 
 def remembered(module: str, function: str, parts: Sequence[Any], compute: Callable[[], Any]) -> Any:
     """`compute()`, or the value it returned before for the same `parts` with the same code of
-    `module` (see the module docstring)."""
+    `module` (see the module docstring).
+
+    Parameters
+    ----------
+    module : str, the dotted module whose code version the value depends on.
+    function : str, a name for the value within the module.
+    parts : sequence, what else the value depends on (their `repr` enters the key).
+    compute : callable, makes the value (JSON-serialisable) when it is not kept yet.
+
+    Returns
+    -------
+    object
+        The value, as `compute` returned it or as read back from disk (JSON: tuples come back as
+        lists).
+    """
     text = json.dumps([module, function, _version(module), *map(repr, parts)])
     return kept("derived", hashlib.sha256(text.encode()).hexdigest()[:32], compute, function)

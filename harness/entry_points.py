@@ -32,13 +32,11 @@ def group_entry_points(group: str) -> tuple[list, list]:
 
     Parameters
     ----------
-    group : str
-        The entry-point group, e.g. 'harness.steppers'.
+    group : str, the entry-point group, e.g. 'harness.steppers'.
 
     Returns
     -------
-    (this project's own, sorted by name; every other distribution's, sorted by distribution
-    and name)
+    (this project's own, sorted by name; every other distribution's, sorted by distribution: and name)
     """
     eps = list(metadata.entry_points(group=group))
     own = sorted((ep for ep in eps if _is_own(ep)), key=lambda ep: ep.name)
@@ -51,10 +49,8 @@ def missing_builtins(kind: str, group: str) -> str:
 
     Parameters
     ----------
-    kind : str
-        What the group registers ('stepper', 'problem', 'experiment', 'step loop').
-    group : str
-        The entry-point group.
+    kind : str, what the group registers ('stepper', 'problem', 'experiment', 'step loop').
+    group : str, the entry-point group.
 
     Returns
     -------

@@ -216,16 +216,22 @@ def _rk_runner(problem, exact):
     return _step_function(problem, step, len(b))
 
 
+def _newtonian_indices(problem, what: str):
+    """(Newtonian form, position indices, velocity indices) in the state of `problem`;
+    `NotMeasurable` naming `what` unless the acceleration is velocity-free and autonomous."""
+    form = problem.newtonian
+    if form is None or problem.velocity_dependent or problem.time_dependent:
+        raise NotMeasurable(f"{what} needs a velocity-free, autonomous acceleration")
+    names = [str(v) for v in problem.variables]
+    return (form, [names.index(str(v)) for v in form.positions],
+            [names.index(str(v)) for v in form.velocities])
+
+
 def _split_runner(problem, exact):
     """Drifts q += a h v and kicks v += b h a(q) in real128."""
     import heyoka as hy
 
-    form = problem.newtonian
-    if form is None or problem.velocity_dependent or problem.time_dependent:
-        raise NotMeasurable("a drift/kick composition needs a velocity-free, autonomous acceleration")
-    names = [str(v) for v in problem.variables]
-    qi = [names.index(str(v)) for v in form.positions]
-    vi = [names.index(str(v)) for v in form.velocities]
+    form, qi, vi = _newtonian_indices(problem, "a drift/kick composition")
     accel = _with_parameter_values(problem, form.acceleration)
     positions = [str(v) for v in form.positions]
     h = hy.par[0]
@@ -256,12 +262,7 @@ def _lmm2_runner(problem, coefficients, exact):
     from harness import cache
     from harness.theory.newtonian import velocity_weights
 
-    form = problem.newtonian
-    if form is None or problem.velocity_dependent or problem.time_dependent:
-        raise NotMeasurable("a second-order multistep table needs a velocity-free, autonomous acceleration")
-    names = [str(v) for v in problem.variables]
-    qi = [names.index(str(v)) for v in form.positions]
-    vi = [names.index(str(v)) for v in form.velocities]
+    form, qi, vi = _newtonian_indices(problem, "a second-order multistep table")
     cache.configure_heyoka_cache()
     accel = hy.cfunc(_with_parameter_values(problem, form.acceleration), list(form.positions),
                      fp_type=hy.real128, compact_mode=cache.compact_mode(problem))

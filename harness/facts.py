@@ -44,7 +44,17 @@ CLASS_MAX_DEGREE = 6
 
 def class_key(nystrom: bool, degree: int | None) -> str | None:
     """The key of `MethodFacts.class_orders` for a problem class (None: no class, or one with
-    no derived order: degree 1 is the linear order, degrees above CLASS_MAX_DEGREE not kept)."""
+    no derived order: degree 1 is the linear order, degrees above CLASS_MAX_DEGREE not kept).
+
+    Parameters
+    ----------
+    nystrom : bool, the problem is x'' = g(x) written as a first-order system.
+    degree : int or None, the polynomial degree of the right-hand side in the state.
+
+    Returns
+    -------
+    str or None: "nystrom", "degree-d" or "nystrom+degree-d"; None as above.
+    """
     if degree is not None and not 2 <= degree <= CLASS_MAX_DEGREE:
         degree = None
     if not nystrom and degree is None:
@@ -73,6 +83,12 @@ class MethodFacts:
     stiffly_accurate: bool | None = None  # last row of A = b, RK only
 
     def as_dict(self) -> dict[str, Any]:
+        """The facts as a plain dict (for the report and JSON).
+
+        Returns
+        -------
+        dict: every field.
+        """
         return asdict(self)
 
 
@@ -90,11 +106,26 @@ class ProblemFacts:
     rhs_degree: int | None = None  # polynomial degree of the right-hand side in the state
 
     def as_dict(self) -> dict[str, Any]:
+        """The facts as a plain dict (for the report and JSON).
+
+        Returns
+        -------
+        dict: every field.
+        """
         return asdict(self)
 
 
 def method_facts(stepper: Stepper) -> MethodFacts:
-    """Facts of `stepper`: from its coefficient object when it has one, else its claims."""
+    """Facts of `stepper`: from its coefficient object when it has one, else its claims.
+
+    Parameters
+    ----------
+    stepper : Stepper, any stepper.
+
+    Returns
+    -------
+    MethodFacts: with `source` "coefficients" or "claims".
+    """
     coeffs = getattr(stepper, "coefficients", None)
     key = coeffs.fingerprint() if coeffs is not None and hasattr(coeffs, "fingerprint") else None
     info = stepper.info
@@ -163,7 +194,16 @@ _STIFFNESS_SAMPLES = 9
 
 
 def problem_facts(problem: Problem) -> ProblemFacts:
-    """Facts of `problem`, derived from its symbolic definition (cached by its fingerprint)."""
+    """Facts of `problem`, derived from its symbolic definition (cached by its fingerprint).
+
+    Parameters
+    ----------
+    problem : Problem
+
+    Returns
+    -------
+    ProblemFacts: linearity, polynomial degrees, Newtonian structure, stiffness and horizon.
+    """
     return _problem_facts(problem.fingerprint(), (problem,))
 
 

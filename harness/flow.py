@@ -27,7 +27,18 @@ def flow_amplification(problem, span: float, y0: np.ndarray | None = None) -> fl
     state an error of one ulp in every component becomes after `span`. Central differences of
     relative size REVERSIBILITY_FLOW_DELTA on float64 Taylor orbits (`harness.scales`): the
     signal delta A exceeds their own error, ~eps A, by delta / eps ~ 1e9, so no certified
-    reference (minutes for a many-body problem over 10^5 steps) is needed."""
+    reference (minutes for a many-body problem over 10^5 steps) is needed.
+
+    Parameters
+    ----------
+    problem : Problem
+    span : float, the time the flow runs.
+    y0 : ndarray, shape (dim,), optional, the start (default `problem.y0`).
+
+    Returns
+    -------
+    float: ||d Phi_span(y0)||_inf (kept on disk per problem, span, start and code version).
+    """
     base = np.asarray(problem.y0 if y0 is None else y0, dtype=float).reshape(problem.dim)
     key = (problem.fingerprint(), float(span), base.tobytes())
     if key not in _amplifications:  # every stepper's cell of one (problem, N) asks for the same

@@ -6,7 +6,12 @@ the verdict and order match the expectation, fails when they contradict it, and 
 `not-measurable` (reported with the limit that stopped it, neither pass nor fail) for a
 tolerated verdict. A slope above the expected order of a Runge-Kutta method is `not-measurable`
 when the predicted leading error term (`harness.prediction`) is too small to show in the fitted
-points, and stays a failure otherwise. Besides the cells, a stepper fails when
+points, and stays a failure otherwise. Every cell whose expected verdict is an h^p law of a
+Runge-Kutta tableau carries that predicted leading error constant C (err ~ C h^p at the final
+time) beside the measured one (the error at the smallest fitted step over h^p); every other cell
+says in `prediction_note` why none is given (no tableau, an adaptive or exact cell, a stiff order
+range, a problem too large for symbolic differentials). The constant is information, never a
+verdict: only the slope is judged. Besides the cells, a stepper fails when
 - the order computed from its coefficients differs from its claimed order, or its claimed
   symmetry or symplecticity contradicts what its coefficients say (a mislabelled table fails even
   if a measurement happens to look right);
@@ -38,7 +43,8 @@ NOT_VERIFIED = "not-verified"
 GATE_COLUMNS = [
     "stepper", "problem", "claimed_order", "coefficient_order", "measured_order",
     "order_ci_low", "order_ci_high", "fit_points", "fit_h_min", "fit_h_max", "t_end", "verdict",
-    "expected", "expected_order", "predicted_coefficient", "outcome", "passed", "reason",
+    "expected", "expected_order", "predicted_coefficient", "measured_coefficient",
+    "prediction_note", "outcome", "passed", "reason",
 ]
 
 
@@ -67,8 +73,9 @@ def judge(record: Mapping, facts: MethodFacts | None = None,
 
 
 def _judge(record: Mapping, facts: MethodFacts | None = None,
-           problem=None) -> tuple[str, str, str, float | None, float]:
-    """`judge` and the predicted leading error coefficient (NaN where none was needed)."""
+           problem=None) -> tuple[str, str, str, float | None, float, str]:
+    """`judge`, the predicted leading error coefficient and why none is given (NaN and a sentence
+    where the theory does not apply)."""
     from harness.registry import get_problem, get_stepper
 
     stepper = get_stepper(record["stepper"])
@@ -76,16 +83,18 @@ def _judge(record: Mapping, facts: MethodFacts | None = None,
     problem = problem if problem is not None else get_problem(record["problem"])
     split = judge_split_map(record, stepper, problem)  # a declared error law in eps h^p
     if split is not None:
-        return (*split, np.nan)
+        return (*split, np.nan, "not predicted: judged by its declared error law in the perturbation")
     pfacts = problem_facts(problem)
     expectation = convergence_expectation(facts, pfacts)
     outcome, reason = judge_convergence(dict(record), expectation)
-    predicted = np.nan
     if outcome == "fail" and _slope_above(record, expectation):
         outcome, reason, predicted = _explain_slope(record, stepper, problem, expectation, reason)
+        note = "" if np.isfinite(predicted) else _leading_term(stepper, problem, expectation)[1]
+    else:
+        predicted, note = _leading_term(stepper, problem, expectation)
     flag = stiff_span_flag(pfacts.stiffness, problem.t0, problem.t_end, record.get("t_end"))
-    return (outcome, expectation.verdict, "; ".join(x for x in (reason, flag) if x),
-            expectation.order, predicted)
+    return (outcome, expectation.verdict, "; ".join(x for x in (reason, flag) if x), expectation.order,
+            predicted, note)
 
 
 def stiff_span_flag(stiffness: float, t0: float, t_end: float, measured_end) -> str:
@@ -119,6 +128,42 @@ def stiff_span_flag(stiffness: float, t0: float, t_end: float, measured_end) -> 
     return (f"stiff problem not stiff over the measured span: -Re(lambda) x span = {measured:.3g} "
             f"over t <= {T:.6g} (at most {tol.STIFF_STEP_COUNT:g}), {span:.3g} over the declared "
             f"span to {t_end:.6g}")
+
+
+def _leading_term(stepper, problem, expectation) -> tuple[float, str]:
+    """(C, '') of the predicted leading global error C h^p (`harness.prediction`) where its
+    theorem applies (HNW I, II.8, Theorem 8.1: a Runge-Kutta tableau, a fixed step, the
+    non-stiff h^p law expected), else (NaN, why not)."""
+    from harness.coefficients import ButcherTableau
+    from harness.prediction import predicted_error
+
+    coeffs = getattr(stepper, "coefficients", None)
+    if not isinstance(coeffs, ButcherTableau):
+        kind = type(coeffs).__name__ if coeffs is not None else "a black box without coefficients"
+        return np.nan, (f"not predicted: the leading term is derived from a Runge-Kutta tableau's "
+                        f"B-series (HNW I, II.8); this method is {kind}")
+    if expectation.verdict != "converged" or expectation.order is None:
+        return np.nan, f"not predicted: the expected verdict is {expectation.verdict}, not an h^p law"
+    if expectation.order_low is not None:
+        return np.nan, ("not predicted: stiff over the horizon, the non-stiff h^p expansion's "
+                        "constant does not describe the fitted steps (any order in "
+                        f"[{expectation.order_low:g}, {expectation.order:g}] is expected)")
+    try:
+        prediction = predicted_error(coeffs, problem, int(expectation.order), next_term=False,
+                                     max_work=tol.PREDICTION_ROUTINE_MAX_WORK)
+    except Exception as exc:  # a definition heyoka cannot differentiate or integrate
+        return np.nan, f"not predicted ({type(exc).__name__}: {exc})"[:500]
+    return float(prediction["coefficient"]), prediction["why"]
+
+
+def _measured_coefficient(record: Mapping, order: float | None) -> float:
+    """The measured error constant: the smallest fitted error (at the smallest fitted step, where
+    the asymptotic law holds best among the fitted points) over that step^p; NaN without a fit
+    or an order."""
+    if record.get("verdict") != "converged" or order is None:
+        return np.nan
+    h, err = float(record.get("fit_h_min", np.nan)), float(record.get("fit_error_min", np.nan))
+    return err / h**order if np.isfinite(h) and np.isfinite(err) and h > 0 else np.nan
 
 
 def _slope_above(record: Mapping, expectation) -> bool:
@@ -177,14 +222,15 @@ def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
             stepper = get_stepper(name)
             per_stepper[name] = (method_facts(stepper), claim_contradictions(stepper))
         facts, contradictions = per_stepper[name]
-        outcome, expected, why, expected_order, predicted = _judge(rec, facts)
+        outcome, expected, why, expected_order, predicted, note = _judge(rec, facts)
         if contradictions:
             outcome, why = "fail", "; ".join(contradictions)
         row = {k: rec.get(k) for k in GATE_COLUMNS if k in rec}
         row.update({
             "coefficient_order": facts.order if facts.source == "coefficients" else None,
             "expected": expected, "expected_order": expected_order, "outcome": outcome,
-            "predicted_coefficient": predicted,
+            "predicted_coefficient": predicted, "prediction_note": note,
+            "measured_coefficient": _measured_coefficient(rec, expected_order),
             "passed": outcome != "fail", "reason": why,
         })
         rows.append(row)
@@ -197,6 +243,8 @@ def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
                 "coefficient_order": facts.order if facts.source == "coefficients" else None,
                 "measured_order": np.nan, "verdict": "", "expected": "a measured claim",
                 "expected_order": None, "outcome": NOT_VERIFIED, "passed": False,
+                "predicted_coefficient": np.nan, "measured_coefficient": np.nan,
+                "prediction_note": "",
                 "reason": f"not verified: no cell measured the claim ({len(mine)} cell(s), none passing: "
                           + ", ".join(sorted(set(mine.outcome))) + ")",
             }

@@ -65,8 +65,7 @@ def extrapolation_tableau(k: int, base: str = "forward-euler", steps: Sequence[i
     Parameters
     ----------
     k : number of extrapolation columns: order k (Euler) or 2k (midpoint)
-    base : 'forward-euler' (steps of explicit Euler) or 'gragg-midpoint' (an Euler step, then
-        midpoint steps)
+    base : 'forward-euler' (steps of explicit Euler) or 'gragg-midpoint' (an Euler step, then, midpoint steps)
     steps : the step-number sequence (default 1..k for Euler, 2, 4, ..., 2k for the midpoint
         rule; midpoint sequences must be even)
 

@@ -54,8 +54,7 @@ def check_record(record: Any) -> str:
 
     Returns
     -------
-    str
-        The record's name.
+    str: the record's name.
     """
     if not isinstance(record, Mapping):
         raise InputError(f"a method record must be a mapping, got {type(record).__name__}")

@@ -20,8 +20,7 @@ def check_name(name: Any, what: str) -> str:
 
     Returns
     -------
-    str
-        The name, unchanged.
+    str: the name, unchanged.
     """
     from harness.tolerances import MAX_NAME_LENGTH
 

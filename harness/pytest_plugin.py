@@ -26,6 +26,12 @@ __all__ = ["integrator_claims"]
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
+    """Add ``--integrator-claims-full`` (measure with the experiments' full settings).
+
+    Parameters
+    ----------
+    parser : pytest.Parser, pytest's option parser.
+    """
     group = parser.getgroup("integrator-claims", "integrator claims checked by the harness")
     group.addoption(
         "--integrator-claims-full",
@@ -39,7 +45,16 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def integrator_claims(request: pytest.FixtureRequest) -> Callable[..., Any]:
     """`check(stepper, problems, order=..., symmetric=..., energy=..., **options)`: measures the
     claims (see `harness.api.check`), returns the `ClaimReport`, fails the test when one is false
-    (unless `fail=False`)."""
+    (unless `fail=False`).
+
+    Parameters
+    ----------
+    request : pytest.FixtureRequest, the requesting test (its config tells quick or full settings).
+
+    Returns
+    -------
+    callable: ``check(stepper, problems, **claims_and_options)`` -> `ClaimReport`.
+    """
     from harness.api import check
 
     full = bool(request.config.getoption("--integrator-claims-full"))

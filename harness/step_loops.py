@@ -47,8 +47,7 @@ class StepLoop:
 
     Parameters
     ----------
-    name : str
-        What the loop runs, for messages (e.g. 'explicit Runge-Kutta').
+    name : str, what the loop runs, for messages (e.g. 'explicit Runge-Kutta').
     build : callable Method -> Stepper or None, optional
     faster : callable Stepper -> Stepper or None, optional
     """

@@ -98,13 +98,11 @@ def relative_spread(samples: Sequence[float]) -> float:
 
     Parameters
     ----------
-    samples : sequence of float
-        Repeated timings of one run, in seconds.
+    samples : sequence of float, repeated timings of one run, in seconds.
 
     Returns
     -------
-    float
-        The relative spread (0 when every sample is the same).
+    float: the relative spread (0 when every sample is the same).
     """
     if len(samples) < 2 or min(samples) <= 0:
         return float("nan")
@@ -119,27 +117,21 @@ def measure(fn: Callable[[], Any], *, warmup: int = 0, min_repeats: int = tol.TI
 
     Parameters
     ----------
-    fn : callable
-        The run to time, called without arguments.
-    warmup : int
-        Runs made first and not counted (their times are kept in `Timing.warmup_s`).
+    fn : callable, the run to time, called without arguments.
+    warmup : int, runs made first and not counted (their times are kept in `Timing.warmup_s`).
     min_repeats, max_repeats : int
         Counted runs: at least `min_repeats` (unless the budget is spent first), at most
         `max_repeats`.
-    target_spread : float
-        Stop once (median - min) / min is at most this, after `min_repeats` runs.
-    budget_s : float
-        Stop once the counted runs have spent this many seconds (at least one run is made).
+    target_spread : float, stop once (median - min) / min is at most this, after `min_repeats` runs.
+    budget_s : float, stop once the counted runs have spent this many seconds (at least one run is made).
     prior : sequence of float
         Warm runs already made alone (the sweep's own run of the point): counted first, so a
         point dearer than the budget costs nothing more.
-    clock : callable
-        The timer (seconds); injectable for tests.
+    clock : callable, the timer (seconds); injectable for tests.
 
     Returns
     -------
-    Timing
-        The samples, and the stop reason: "spread", "max-repeats" or "budget".
+    Timing: the samples, and the stop reason: "spread", "max-repeats" or "budget".
     """
     counts = isinstance(min_repeats, int) and isinstance(max_repeats, int)
     if not (counts and 1 <= min_repeats <= max_repeats):
@@ -225,10 +217,8 @@ def baseline_step(family: str, *, clock: Callable[[], float] = time.perf_counter
 
     Parameters
     ----------
-    family : str
-        The stepper's family (`StepperInfo.family`); the C baseline's `family_loop` names its loop.
-    clock : callable
-        The timer.
+    family : str, the stepper's family (`StepperInfo.family`); the C baseline's `family_loop` names its loop.
+    clock : callable, the timer.
     **protocol
         `measure`'s settings (repeats, spread, budget).
 
@@ -268,8 +258,7 @@ def time_to_target(cost: Sequence[float], error: Sequence[float], target: float)
     ----------
     cost, error : sequences of float
         One sweep's measured points (non-finite or non-positive values are left out).
-    target : float
-        The error to reach (> 0).
+    target : float, the error to reach (> 0).
 
     Returns
     -------
@@ -303,12 +292,9 @@ def time_to_target_table(rows: pd.DataFrame, targets: Sequence[float] = tol.TIMI
 
     Parameters
     ----------
-    rows : DataFrame
-        Work-precision rows with `problem`, `stepper`, `error` and the `cost` column.
-    targets : sequence of float
-        The target errors.
-    cost : str
-        The column to interpolate (seconds).
+    rows : DataFrame, work-precision rows with `problem`, `stepper`, `error` and the `cost` column.
+    targets : sequence of float, the target errors.
+    cost : str, the column to interpolate (seconds).
 
     Returns
     -------
@@ -342,13 +328,11 @@ def method_identity(stepper: Any) -> str | None:
 
     Parameters
     ----------
-    stepper : Stepper
-        Any registered stepper.
+    stepper : Stepper, any registered stepper.
 
     Returns
     -------
-    str or None
-        Equal for two steppers exactly when their coefficients are equal.
+    str or None: equal for two steppers exactly when their coefficients are equal.
     """
     coefficients = getattr(stepper, "coefficients", None)
     declared = stepper.info.extra.get("declared_splitting")

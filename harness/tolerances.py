@@ -207,6 +207,17 @@ STABILITY_CLAIM_RTOL = 1e-4
 # the motion is destroyed and the run counts as `unstable` (past that point the envelope's shape
 # describes the wreck, e.g. an escaping or collapsed Kepler orbit, not a drift) ...
 ENERGY_BLOWUP_ERROR = 0.1
+# ... unless the error was that large within the first natural period already and its running
+# maximum at the end is within this factor of that level: the bounded oscillation of a modified
+# energy (H - H~ = O(h^p) uniformly in time, HLW IX.8) keeps its size; with every phase seen in
+# the first period its later maxima equal it (measured: velocity Verlet on the oscillator at
+# h w = 0.5-1.99, ratio 1.0), while drift to a different orbit multiplies it ...
+ENERGY_BOUNDED_RISE = 2.0
+# ... and only if within the fit window it swings back below this fraction of its maximum there:
+# the error of a conserved modified energy returns near 0 where the orbit revisits its start's
+# phase (velocity Verlet on the oscillator: down to ~0), a wrecked orbit's error stays put
+# (Euler's escape on Kepler: min/max ~ 1) ...
+ENERGY_RETURN_FRACTION = 0.5
 # ... errors are floored here before taking logarithms (an exactly conserved quantity has no
 # envelope to fit; 1e-20 is far below any float64 rounding of an O(1) quantity) ...
 ENERGY_ERROR_FLOOR = 1e-20
@@ -468,6 +479,10 @@ TIMING_TWIN_WORK = 512
 # m vertices grow like dim^(m-1), so they are built only up to this size (12 variables at order
 # 5: ~30 s once, cached; order 6 took ~100 s under load; 4 variables at order 8: ~6 s).
 PREDICTION_MAX_WORK = 12**4
+# The prediction beside every convergence cell (information, not a verdict) keeps to a smaller
+# budget: 12 variables at order 5 cost ~6 s of compile cold, most of the prediction's share of a
+# cold gate; 18 variables at order 4 (18^3) ~1 s.
+PREDICTION_ROUTINE_MAX_WORK = 18**3
 # The variational integration needs only a few digits of E_t(T): the prediction is asymptotic.
 PREDICTION_TAYLOR_TOL = 1e-10
 # A slope above the order is explained when the predicted leading term C h^p is below this

@@ -53,7 +53,7 @@ from implementations.implicit_rk import NewtonSettings, extrapolation_matrix
 from implementations.multistep import LinearMultistepStepper
 from implementations.splitting import StaggeredLeapfrog
 from implementations.step_control import ControlledSplittingStepper
-from implementations.verlet import TwoStepVerlet
+from implementations.verlet import TwoStepVerlet, stormer_carry
 
 __all__ = [
     "CompiledRungeKutta",
@@ -339,11 +339,7 @@ class CompiledStormer(_Compiled):
         return super().incompatibility(problem)
 
     def _new_carry(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        nq = dyn.nq
-        c = Carry(t0, h, y0)
-        c.v0 = y0[nq:].copy()
-        c.cur = y0[:nq].copy()
-        c.prev = np.empty_like(c.cur)
+        c = stormer_carry(dyn, t0, y0, h)
         c.nxt = np.empty_like(c.cur)
         c.a = np.zeros_like(c.cur)
         return c

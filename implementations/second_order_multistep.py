@@ -47,6 +47,7 @@ from harness.stepper import Carry, StepFailure, Stepper, check_compatible
 from harness.theory.newtonian import velocity_weights
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations import coefficient_info
+from implementations.verlet import solve_members
 
 __all__ = ["METHODS", "STEPPERS", "SecondOrderMultistepStepper", "stormer_table", "cowell_table",
            "velocity_weights", "START_KINDS"]
@@ -125,14 +126,6 @@ def _extrapolation_weights(m: int) -> np.ndarray:
 
 
 # -- the loop -----------------------------------------------------------------------------------
-def _solve(M: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve M[:, :, j] x[:, j] = rhs[:, j] for every ensemble member j."""
-    if M.shape[0] == 1:
-        return rhs / M[0]
-    x = np.linalg.solve(np.moveaxis(M, -1, 0), np.moveaxis(rhs, -1, 0)[..., None])
-    return np.ascontiguousarray(np.moveaxis(x[..., 0], 0, -1))
-
-
 class SecondOrderMultistepStepper(Stepper):
     """One step loop for every `SecondOrderMultistep` table (see the module docstring)."""
 
@@ -289,7 +282,7 @@ class SecondOrderMultistepStepper(Stepper):
         correction = np.inf
         for _ in range(NEWTON_MAX_ITER):
             residual = x - psi - hb * dyn.accel(t_new, x)
-            dx = _solve(M, residual)
+            dx = solve_members(M, residual)
             x = x - dx
             correction = float(np.max(np.abs(dx) / (1.0 + np.abs(x))))
             if correction <= NEWTON_TOL:

@@ -32,7 +32,7 @@ from harness.stepper import Carry, StepFailure, Stepper, StepperInfo
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations import ProblemCache
 
-__all__ = ["TwoStepVerlet", "STORMER", "STEPPERS"]
+__all__ = ["TwoStepVerlet", "STORMER", "STEPPERS", "solve_members", "stormer_carry"]
 
 
 class _VelocityStructure:
@@ -58,12 +58,23 @@ class _VelocityStructure:
             self.kind = "nonlinear"
 
 
-def _solve(M: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve M[:, :, j] x[:, j] = rhs[:, j] for every ensemble member j."""
+def solve_members(M: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve M[:, :, j] x[:, j] = rhs[:, j] for every ensemble member j (M of shape (1, 1, N):
+    a division)."""
     if M.shape[0] == 1:
         return rhs / M[0]
     x = np.linalg.solve(np.moveaxis(M, -1, 0), np.moveaxis(rhs, -1, 0)[..., None])
     return np.ascontiguousarray(np.moveaxis(x[..., 0], 0, -1))
+
+
+def stormer_carry(dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
+    """The carry of Stormer's two-step rule at its start: the starting velocity `v0`, the
+    current positions `cur` and room for the previous ones `prev` (NumPy and compiled loops)."""
+    c = Carry(t0, h, y0)
+    c.v0 = y0[dyn.nq:].copy()
+    c.cur = y0[:dyn.nq].copy()
+    c.prev = np.empty_like(c.cur)
+    return c
 
 
 class TwoStepVerlet(Stepper):
@@ -122,11 +133,7 @@ class TwoStepVerlet(Stepper):
     history_length = 2
 
     def _new_carry(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
-        nq = dyn.nq
-        c = Carry(t0, h, y0)
-        c.v0 = y0[nq:].copy()
-        c.cur = y0[:nq].copy()
-        c.prev = np.empty_like(c.cur)
+        c = stormer_carry(dyn, t0, y0, h)
         c.a = np.empty_like(c.cur)
         c.zero_v = np.zeros_like(c.cur)
         c.kind = self._structure(dyn.problem).kind if self._implicit_velocity else "none"
@@ -195,7 +202,7 @@ class TwoStepVerlet(Stepper):
             rhs = -self._alpha1 * c.cur
             rhs += np.einsum("ijn,jn->in", P, c.prev)
             rhs += (self._beta1 * c.h * c.h) * c.a
-            c.nxt = _solve(M, rhs)
+            c.nxt = solve_members(M, rhs)
             return
         c.nxt = self._newton(dyn, c, t)
 
@@ -214,7 +221,7 @@ class TwoStepVerlet(Stepper):
             v = (z - c.prev) / (2.0 * h)
             residual = z - self._explicit_part(c, dyn.accel(t, c.cur, v), buf)
             M = eye - g * self._dadv(dyn, t, c.cur, v)
-            dz = _solve(M, residual)
+            dz = solve_members(M, residual)
             z = z - dz
             scale = 1.0 + np.max(np.abs(z), axis=0)
             correction = float(np.max(np.max(np.abs(dz), axis=0) / scale))

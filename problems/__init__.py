@@ -21,5 +21,10 @@ PROBLEM_MODULES = (
 
 def builtin_problems() -> list:
     """Every problem of the modules in PROBLEM_MODULES, in that order. A module that cannot be
-    imported (deleted, renamed) is an error, never a silently smaller catalogue."""
+    imported (deleted, renamed) is an error, never a silently smaller catalogue.
+
+    Returns
+    -------
+    list of Problem
+    """
     return [p for name in PROBLEM_MODULES for p in import_module(f"problems.{name}").PROBLEMS]

@@ -57,7 +57,16 @@ _INVARIANTS = {
 
 
 def orbital_elements(y0: np.ndarray) -> dict[str, np.ndarray]:
-    """Semi-major axis, eccentricity, mean motion and period of states shaped (4, N)."""
+    """Semi-major axis, eccentricity, mean motion and period of states shaped (4, N).
+
+    Parameters
+    ----------
+    y0 : ndarray, shape (4, N), states (x, y, vx, vy) with GM = 1.
+
+    Returns
+    -------
+    dict of str to ndarray: 'a', 'e', 'n', 'period' and 'energy', each shape (N,).
+    """
     y0 = np.asarray(y0, dtype=np.float64)
     x, y, vx, vy = y0
     r = np.hypot(x, y)
@@ -70,7 +79,19 @@ def orbital_elements(y0: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def kepler_exact(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None = None) -> np.ndarray:
-    """Exact state at t of bound Kepler orbits starting from states y0 shaped (4, N) at t0."""
+    """Exact state at t of bound Kepler orbits starting from states y0 shaped (4, N) at t0.
+
+    Parameters
+    ----------
+    t : float, the time.
+    y0 : ndarray, shape (4, N), bound starts (x, y, vx, vy), GM = 1; `InputError` for an unbound one.
+    t0 : float, their time.
+    pars : ndarray, optional, unused (the problem has no parameters).
+
+    Returns
+    -------
+    ndarray, shape (4, N)
+    """
     y0 = np.asarray(y0, dtype=np.float64)
     ld = np.longdouble
     x0, y0_, vx0, vy0 = (y0[i].astype(ld) for i in range(4))
@@ -168,7 +189,16 @@ KEPLER_ELLIPTIC = _kepler_orbit(
 
 def pericentre_start(e: float) -> list[float]:
     """The state at pericentre of the orbit with a = 1 and eccentricity e (GM = 1):
-    r = 1 - e on the x axis, speed sqrt((1 + e)/(1 - e)) along y (vis-viva)."""
+    r = 1 - e on the x axis, speed sqrt((1 + e)/(1 - e)) along y (vis-viva).
+
+    Parameters
+    ----------
+    e : float, eccentricity, in [0, 1).
+
+    Returns
+    -------
+    list of float: (x, y, vx, vy).
+    """
     return [1.0 - e, 0.0, 0.0, math.sqrt((1.0 + e) / (1.0 - e))]
 
 

@@ -29,7 +29,17 @@ _GNI = "E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed
 
 # -- Hénon-Heiles ---------------------------------------------------------------------------------
 def henon_heiles_start(energy: float, y0: float) -> list[float]:
-    """A start on the section x = 0 with py = 0 and px > 0 chosen so that H = `energy`."""
+    """A start on the section x = 0 with py = 0 and px > 0 chosen so that H = `energy`.
+
+    Parameters
+    ----------
+    energy : float, the energy H.
+    y0 : float, the start's y.
+
+    Returns
+    -------
+    list of float: (x, y, px, py).
+    """
     px2 = 2.0 * energy - y0 * y0 + 2.0 * y0 * y0 * y0 / 3.0
     return [0.0, y0, math.sqrt(px2), 0.0]
 

@@ -75,7 +75,17 @@ HARMONIC = Problem(
 
 # -- pendulum: theta'' = -sin(theta) --------------------------------------------------------------
 def pendulum_period(theta0: float, omega0: float = 0.0) -> float:
-    """True period 4 K(m) of a librating pendulum, m = k^2 = E/2, E = omega^2/2 + 1 - cos theta."""
+    """True period 4 K(m) of a librating pendulum, m = k^2 = E/2, E = omega^2/2 + 1 - cos theta.
+
+    Parameters
+    ----------
+    theta0 : float, start angle.
+    omega0 : float, optional, start angular velocity (default 0).
+
+    Returns
+    -------
+    float: the period; `InputError` for a rotating start (energy >= 2).
+    """
     energy = omega0 * omega0 / 2.0 + 2.0 * math.sin(theta0 / 2.0) ** 2
     m = energy / 2.0
     if not 0.0 <= m < 1.0:
@@ -90,6 +100,17 @@ def pendulum_exact(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None 
     sin(theta/2) = k sn(u | m), omega = 2 k cn(u | m), u = t - t0 + F(phi0 | m), where the
     amplitude phi0 = atan2(sin(theta0/2), omega0/2) (NIST DLMF section 22.19(i)). u is reduced
     modulo the period 4K before evaluating sn and cn.
+
+    Parameters
+    ----------
+    t : float, the time.
+    y0 : ndarray, shape (2, N), librating starts (theta, omega).
+    t0 : float, their time.
+    pars : ndarray, optional, unused.
+
+    Returns
+    -------
+    ndarray, shape (2, N)
     """
     y0 = np.asarray(y0, dtype=np.float64)
     theta0, omega0 = y0[0], y0[1]
@@ -119,7 +140,19 @@ def pendulum_exact(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None 
 
 
 def small_angle(t: float, y0: np.ndarray, t0: float, pars: np.ndarray | None = None) -> np.ndarray:
-    """The small-angle (sin theta ~ theta) approximation: a harmonic oscillator."""
+    """The small-angle (sin theta ~ theta) approximation: a harmonic oscillator.
+
+    Parameters
+    ----------
+    t : float, the time.
+    y0 : ndarray, shape (2, N), starts (theta, omega).
+    t0 : float, their time.
+    pars : ndarray, optional, unused.
+
+    Returns
+    -------
+    ndarray, shape (2, N): theta0 cos(t - t0) + omega0 sin(t - t0) and its derivative.
+    """
     return _harmonic_exact(t, y0, t0, pars)
 
 

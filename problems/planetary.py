@@ -50,7 +50,17 @@ def elements_to_cartesian(
     mu: float, a: float, e: float, inc: float, f: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Position and velocity on the orbit (a, e, inclination `inc`, true anomaly f), node and
-    argument of pericentre zero: r = p/(1 + e cos f), p = a (1 - e^2), v from sqrt(mu/p)."""
+    argument of pericentre zero: r = p/(1 + e cos f), p = a (1 - e^2), v from sqrt(mu/p).
+
+    Parameters
+    ----------
+    mu : float, gravitational parameter G (M + m).
+    a, e, inc, f : float, semi-major axis, eccentricity, inclination and true anomaly.
+
+    Returns
+    -------
+    (ndarray, ndarray): position and velocity, each shape (3,).
+    """
     p = a * (1.0 - e * e)
     r = p / (1.0 + e * math.cos(f))
     ci, si = math.cos(inc), math.sin(inc)

@@ -31,7 +31,16 @@ EPSILON = 1e-3
 
 
 def smooth_start(eps: float) -> list[float]:
-    """(y1, y2) at y1 = 2 on the smooth solution, to O(eps^4)."""
+    """(y1, y2) at y1 = 2 on the smooth solution, to O(eps^4).
+
+    Parameters
+    ----------
+    eps : float, van der Pol's eps (the stiff eigenvalue is about (1 - y1^2) / eps).
+
+    Returns
+    -------
+    list of float
+    """
     return [2.0, -2.0 / 3.0 + 10.0 / 81.0 * eps - 292.0 / 2187.0 * eps**2 - 1814.0 / 19683.0 * eps**3]
 
 

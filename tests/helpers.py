@@ -11,6 +11,7 @@ import copy
 import dataclasses
 import importlib.util
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import heyoka as hy
@@ -32,6 +33,7 @@ __all__ = [
     "relabelled",
     "run_direct",
     "run_through_runner",
+    "runners",
 ]
 
 
@@ -52,6 +54,12 @@ def run_through_runner(exp: Experiment, stepper_names, problem_names, **override
                             jobs=1, cache=False, progress=False)
     assert not len(result.failures), result.failures
     return result.summary
+
+
+def runners(exp: Experiment):
+    """(`run_direct`, `run_through_runner`) bound to `exp`, each called as (steppers, problems,
+    **overrides)."""
+    return partial(run_direct, exp), partial(run_through_runner, exp)
 
 
 def cells_or_reasons(exp: Experiment, name: str, config: dict | None = None):

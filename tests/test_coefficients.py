@@ -297,3 +297,26 @@ def test_a_tableau_published_with_12_digits_is_accepted_with_its_defect_stated()
     off[3][0] += 1e-9  # a real defect, 1000 times the printing's
     with pytest.raises(CoefficientError, match="row 3 of A sums to"):
         ButcherTableau("bs-off", off, b, c)
+
+
+@pytest.mark.parametrize("family, seed", [("extrap-euler", 0), ("extrap-midpoint", 0),
+                                          ("extrap-euler", 1)])
+def test_exact_rationals_are_not_read_as_cut_decimals(family, seed):
+    """An exact extrapolation weight such as 1e8/807 prints as a float of 10-15 significant
+    digits; read as a cut decimal it gave a 56-stage order-10 tableau a printing of 5e-8, which
+    let its order-11 and order-12 conditions (missed by 3e-9) pass: order 12 from the
+    coefficients. Fractions are exact: no printing, and the order is the one built."""
+    import numpy as np
+
+    from harness.high_order import build_high_order, draw_high_order
+
+    rng = np.random.default_rng(seed)
+    for made in range(3):
+        spec, claimed = draw_high_order(family, rng, 12)
+        tableau = build_high_order(spec, f"t-{family}-{seed}-{made}")
+        assert tableau.published_precision == 0.0
+        assert tableau.order() == claimed
+    # the same values typed as floats of 12 digits are a printing
+    cut = ButcherTableau("cut", [[float(f"{float(x):.12g}") for x in row] for row in tableau.A],
+                         [float(f"{float(x):.12g}") for x in tableau.b])
+    assert cut.published_precision > 0.0

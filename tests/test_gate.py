@@ -136,3 +136,37 @@ def test_classification_excludes_floor_reference_and_pre_asymptotic_points():
     kept = np.flatnonzero(reasons == "")
     assert len(kept) >= 3
     assert fit_order(h[kept], e[kept])["order"] == pytest.approx(2.0, abs=1e-9)
+
+
+def _converged_record(stepper: str, problem: str, order: float, C: float) -> dict:
+    h = np.array([1e-2, 5e-3])
+    return {"stepper": stepper, "problem": problem, "claimed_order": order,
+            "measured_order": order, "order_ci_low": order - 0.01, "order_ci_high": order + 0.01,
+            "fit_points": 2, "fit_h_min": h[1], "fit_h_max": h[0], "fit_error_min": C * h[1]**order,
+            "fit_error_max": C * h[0]**order, "verdict": "converged", "message": ""}
+
+
+def test_every_gate_row_has_a_predicted_error_constant_or_says_why_not():
+    """Swept over the registry on the oscillator: Runge-Kutta tableaus with an h^p law expected
+    get the predicted leading constant beside the measured one (rk4 on x'' = -x: R(z) - e^z =
+    -z^5/120 + ... gives a phase error of Euclidean size T h^4/120, so the largest component is
+    between that over sqrt(2) and that); every other row names the reason."""
+    problem = get_problem("harmonic")
+    rows = []
+    for name in steppers.names():
+        s = steppers.get(name)
+        if s.compatible(problem) and s.info.claimed_order:
+            rows.append(_converged_record(name, "harmonic", float(s.info.claimed_order), 1.0))
+    table = gate_table(pd.DataFrame(rows)).set_index("stepper")
+    assert len(table) >= 20
+    for name, r in table.iterrows():
+        predicted, note = r.predicted_coefficient, str(r.prediction_note or "")
+        assert np.isfinite(predicted) != bool(note), (name, predicted, note)
+        coeffs = getattr(steppers.get(name), "coefficients", None)
+        if not isinstance(coeffs, ButcherTableau):
+            assert "Runge-Kutta tableau" in note, (name, note)
+        if r.expected == "converged" and pd.notna(r.expected_order):
+            assert r.measured_coefficient == pytest.approx(1.0), name
+    T = problem.convergence_t_end - problem.t0
+    assert T / 120 / np.sqrt(2) <= table.loc["rk4", "predicted_coefficient"] <= T / 120 * (1 + 1e-6)
+    assert np.isfinite(table.loc["heun", "predicted_coefficient"])

@@ -27,16 +27,7 @@ PACKAGES = ("harness", "implementations", "problems")
 # the fix that removes it. A deferred (function-level) import is no reason by itself: it is
 # allowed only where a heavy optional library is imported on first use, which is never a module
 # of this project.
-EXCEPTIONS: dict[tuple[str, str], str] = {
-    # -- a problem's derived scales -------------------------------------------------------------------
-    ("harness.problem.definition", "harness.scales"):
-        "`Problem` offers its time scales and perturbations, derived by `harness.scales` from the "
-        "flow; fix: scales become functions of a problem, asked by whoever needs them",
-    # -- coefficient objects asked about themselves ------------------------------------------------
-    ("harness.coefficients", "harness.theory"):
-        "a coefficient object answers order and stability questions (NodePy style) through the "
-        "theory functions, which take coefficient objects; fix: theory works on arrays only",
-}
+EXCEPTIONS: dict[tuple[str, str], str] = {}
 
 
 # -- the layers, read from docs/LAYOUT.md --------------------------------------------------------------

@@ -206,7 +206,7 @@ def test_invalid_definitions_raise(overrides, match):
 # -- derived time scales and ensemble perturbations (harness.scales) ------------------------------
 from helpers import plugin_problem  # noqa: E402
 
-from harness import scales  # noqa: E402
+from harness import regimes, scales  # noqa: E402
 from harness import tolerances as tol  # noqa: E402
 
 # The step sizes of the hand-kept table the derived time scale replaced (period / steps per
@@ -372,8 +372,8 @@ def test_applicability_follows_facts_and_says_why():
 def test_long_runs_stop_where_the_orbit_leaves_the_regime_of_its_span(pleiades):
     """Past its span [0, 3] the Pleiades comes closer than any encounter within it: a long run
     stops before that and says why; an oscillator's long run is never stopped."""
-    stop, why = scales.regime_end(pleiades, 18.0)
+    stop, why = regimes.regime_end(pleiades, 18.0)
     assert pleiades.t_end <= stop < 18.0 and "leaves the regime" in why
     harmonic = problems.get("harmonic")
-    assert scales.regime_end(harmonic, 1e4) == (1e4, "")
+    assert regimes.regime_end(harmonic, 1e4) == (1e4, "")
     assert pleiades.time_scale.rate_contrast > 10 * harmonic.time_scale.rate_contrast

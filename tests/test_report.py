@@ -124,8 +124,15 @@ def test_first_screen_leads_with_the_verdict_count_and_each_failing_claim(report
     verdicts = collect_verdicts(run_view(load_run(None, root=report["own"] / "results")))
     n_bad = int((~verdicts["passed"]).sum())
     m = re.search(r'<p class="headline (?:fail|pass)">(\d+) claims checked in (\d+) experiments', head)
-    assert m and int(m.group(1)) == len(verdicts) and len(verdicts) > 20
+    judged = verdicts[verdicts["judged"]]
+    assert m and int(m.group(1)) == len(judged) and len(judged) > 20
     assert f": {n_bad} failed." in head
+    # only rows that judge a claim are counted: a passing no-claim or not-measurable row is
+    # informational, and the headline says how many there are
+    info = verdicts[~verdicts["judged"]]
+    assert info["passed"].all() and not judged["verdict"].isin(["no-claim", "measured"]).any()
+    if len(info):
+        assert f"{len(info)} further cells are informational" in head
     assert head.index('class="headline') < head.index('id="scoreboard-table"')
     listed = [a for a in re.findall(r'<li><a href="#([\w-]+)">', head) if a != "changes"]
     assert len(listed) == n_bad
@@ -543,3 +550,23 @@ def test_forked_sections_equal_the_ones_built_in_process_and_a_dead_worker_costs
     dead = _experiment_bodies(write_report(run, output=tmp_path / "dead").read_text("utf-8"))
     assert forked == here == dead
     assert all("could not be built" not in body for body in forked.values())
+
+
+@pytest.mark.parametrize("row, judged", [
+    ({"verdict": "as-claimed", "passed": True}, True),
+    ({"verdict": "claim-false", "passed": False}, True),
+    ({"verdict": "no-claim", "passed": True}, False),
+    ({"verdict": "not-measurable", "passed": True}, False),
+    ({"verdict": "measured", "passed": True}, False),  # a stability figure with no formula or claim
+    ({"verdict": "agrees", "passed": True}, True),
+    ({"verdict": "converged", "passed": True, "outcome": "pass"}, True),
+    ({"verdict": "unstable", "passed": True, "outcome": "not-measurable"}, False),
+    ({"verdict": "converged", "passed": False, "outcome": "fail"}, True),
+    ({"verdict": "no-claim", "passed": False}, True),  # a failing row is always counted
+])
+def test_the_headline_counts_only_rows_that_judge_a_claim(row, judged):
+    from harness.report.verdicts import summary_verdicts
+
+    table = pd.DataFrame([{"stepper": "s", "problem": "p", "message": "", **row}])
+    out = summary_verdicts("energy", table, ("stepper", "problem"))
+    assert out["judged"].tolist() == [judged]

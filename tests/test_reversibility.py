@@ -7,8 +7,6 @@ a non-symmetric one misses by ~h^p T (Hairer, Lubich & Wanner, GNI II.3 and V.1)
 
 from __future__ import annotations
 
-from functools import partial
-
 import helpers
 import numpy as np
 import pandas as pd
@@ -32,9 +30,7 @@ EXP = get_experiment("reversibility")
 STEPPERS = steppers.names()
 PROBLEMS = ["harmonic", "kepler-elliptic"]
 
-run_direct = partial(helpers.run_direct, EXP)
-
-run = partial(helpers.run_through_runner, EXP)
+run_direct, run = helpers.runners(EXP)
 
 
 @pytest.fixture(scope="module")

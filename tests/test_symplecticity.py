@@ -10,7 +10,6 @@ Wanner, GNI VI.3-VI.4.
 from __future__ import annotations
 
 import json
-from functools import partial
 
 import helpers
 import numpy as np
@@ -33,9 +32,7 @@ EXP = get_experiment("symplecticity")
 STEPPERS = steppers.names()
 PROBLEMS = ["harmonic", "kepler-elliptic"]
 
-run_direct = partial(helpers.run_direct, EXP)
-
-run = partial(helpers.run_through_runner, EXP)
+run_direct, run = helpers.runners(EXP)
 
 
 # -- the machinery on maps with a known Jacobian ---------------------------------------------------

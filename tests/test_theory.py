@@ -215,6 +215,16 @@ def test_stability_boundary_on_known_functions():
         3.14159265358979, abs=1e-9)
 
 
+# -- the families the theory reads ---------------------------------------------------------------
+@pytest.mark.parametrize("cls", [ButcherTableau, SplittingScheme, LinearMultistep, SecondOrderMultistep])
+def test_every_coefficient_class_declares_a_family_the_theory_knows(cls):
+    """The theory never imports the coefficient classes: it reads their `family` tag, so each
+    class must declare a tag the theory maps back to that class (else its checks refuse it)."""
+    from harness.theory.checks import FAMILIES
+
+    assert FAMILIES[cls.family] == cls.__name__
+
+
 # -- bad input ---------------------------------------------------------------------------------
 def test_bad_input_is_named():
     with pytest.raises(InputError, match="`tableau` must be a ButcherTableau"):

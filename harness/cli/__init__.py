@@ -80,7 +80,12 @@ def _common(p: argparse.ArgumentParser, *, grid: bool = True) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the `harness` command (one subparser per command)."""
+    """The argument parser of the `harness` command (one subparser per command).
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     parser = _Parser(prog="harness", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
@@ -178,8 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     Returns
     -------
-    int
-        The exit status (module docstring).
+    int: the exit status (module docstring).
     """
     parser = build_parser()
     args = parser.parse_args(_join_values(sys.argv[1:] if argv is None else argv))

@@ -20,7 +20,13 @@ from harness.cli.output import (
 
 
 def load_plugins(paths: Sequence[str]) -> None:
-    """Load every plugin file in `paths` into the registry."""
+    """Load every plugin file in `paths` into the registry.
+
+    Parameters
+    ----------
+    paths : sequence of str
+        Plugin .py files.
+    """
     from harness.registry import load_plugin
 
     for path in paths:
@@ -41,7 +47,18 @@ def _names(kind: str, requested: Sequence[str]) -> list[str]:
 
 def cmd_population(args) -> int:
     """Generate a population (harness.populations), judge it, save the per-method table and the
-    rates under results/<run-id>/ as `gate-population`, and exit 1 on any false alarm or miss."""
+    rates under results/<run-id>/ as `gate-population`, and exit 1 on any false alarm or miss.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (`build_parser`).
+
+    Returns
+    -------
+    int
+        The exit status.
+    """
     import time
 
     import pandas as pd
@@ -85,7 +102,18 @@ def cmd_population(args) -> int:
 
 
 def cmd_list(args) -> int:
-    """`harness list steppers|problems`: the registry as a table or JSON."""
+    """`harness list steppers|problems`: the registry as a table or JSON.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (`build_parser`).
+
+    Returns
+    -------
+    int
+        The exit status.
+    """
     from harness.registry import plugin_errors, problems, steppers
 
     if args.kind == "steppers":
@@ -118,7 +146,18 @@ def cmd_list(args) -> int:
 
 
 def cmd_reference(args) -> int:
-    """`harness reference PROBLEM --t T`: the certified reference state at the given times."""
+    """`harness reference PROBLEM --t T`: the certified reference state at the given times.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (`build_parser`).
+
+    Returns
+    -------
+    int
+        The exit status.
+    """
     import numpy as np
 
     from harness.ground_truth import reference
@@ -237,6 +276,16 @@ def _failures_table(result) -> list[dict]:
 def cmd_run(args) -> int:
     """`harness run EXPERIMENT`: run one experiment, print its summary; exit 1 on a failed cell
     or claim.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (`build_parser`).
+
+    Returns
+    -------
+    int
+        The exit status.
     """
     from harness.experiments import get_experiment
 
@@ -279,7 +328,18 @@ def _print_footer(result, failures) -> None:
 def cmd_gate(args) -> int:
     """`harness gate`: run convergence and judge every stepper's claims; exit 1 when one is
     contradicted (or a cell failed), else EXIT_NOT_VERIFIED when a stepper's claim was measured
-    on no cell of the problems given, else 0."""
+    on no cell of the problems given, else 0.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (`build_parser`).
+
+    Returns
+    -------
+    int
+        The exit status.
+    """
     from harness.gate import GATE_COLUMNS, NOT_VERIFIED, gate_table
 
     result = _run(args, "convergence")
@@ -292,7 +352,7 @@ def cmd_gate(args) -> int:
             dict(f, verdict="failed", passed=False) for f in failures
         ])
     else:
-        print_table(table, GATE_COLUMNS)
+        print_table(table, [c for c in GATE_COLUMNS if c != "prediction_note"])  # the note: --json
         _print_footer(result, failures)
         n_bad = int((table["outcome"] == "fail").sum()) + len(failures)
         n_unmeasured = int((table["outcome"] == "not-measurable").sum())
@@ -306,7 +366,18 @@ def cmd_gate(args) -> int:
 
 
 def cmd_report(args) -> int:
-    """`harness report`: build the HTML report and print its path."""
+    """`harness report`: build the HTML report and print its path.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line (`build_parser`).
+
+    Returns
+    -------
+    int
+        The exit status.
+    """
     from harness.report import build_report, rerender_report
 
     if args.from_run is not None:

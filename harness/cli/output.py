@@ -24,20 +24,44 @@ OUTPUT: list[io.StringIO] = []
 
 
 def output_buffer() -> io.StringIO:
-    """The buffer collecting the running command's output (written to stdout at the end)."""
+    """The buffer collecting the running command's output (written to stdout at the end).
+
+    Returns
+    -------
+    io.StringIO
+    """
     if not OUTPUT:
         OUTPUT.append(io.StringIO())
     return OUTPUT[-1]
 
 
 def report_error(message: str, code: int) -> int:
-    """Print `message` as one error line on stderr and return `code`."""
+    """Print `message` as one error line on stderr and return `code`.
+
+    Parameters
+    ----------
+    message : str, the message (put on one line).
+    code : int, the exit status.
+
+    Returns
+    -------
+    int: `code`.
+    """
     print(f"harness: error: {one_line(message)}", file=sys.stderr)
     return code
 
 
 def os_error_status(exc: OSError) -> tuple[str, int]:
-    """(one-line message, exit status) for an OS error (`harness.errors.describe_os_error`)."""
+    """(one-line message, exit status) for an OS error (`harness.errors.describe_os_error`).
+
+    Parameters
+    ----------
+    exc : OSError, the error.
+
+    Returns
+    -------
+    (str, int)
+    """
     from harness.errors import describe_os_error
 
     return describe_os_error(exc)
@@ -52,7 +76,16 @@ def _stdout_name() -> str:
 
 
 def write_stdout(text: str) -> int:
-    """Write the command's output and flush it; an OS error becomes one line on stderr."""
+    """Write the command's output and flush it; an OS error becomes one line on stderr.
+
+    Parameters
+    ----------
+    text : str, the output (control characters escaped).
+
+    Returns
+    -------
+    int: EXIT_OK, or the OS error's exit status.
+    """
     try:
         if text:
             sys.stdout.write(escape_controls(text))
@@ -76,7 +109,13 @@ def _silence_stdout() -> None:
 
 
 def explain_skips(skips: Sequence[dict], as_json: bool) -> None:
-    """Why each requested pair does not apply: JSON records or a table, on stdout."""
+    """Why each requested pair does not apply: JSON records or a table, on stdout.
+
+    Parameters
+    ----------
+    skips : sequence of dict, skip records (stepper, problem, reason, ...).
+    as_json : bool, print JSON records instead of a table.
+    """
     if as_json:
         print_json([dict(r, verdict="not-applicable", passed=False) for r in skips])
         return
@@ -89,7 +128,16 @@ def explain_skips(skips: Sequence[dict], as_json: bool) -> None:
 
 def one_line(text: str) -> str:
     """`text` on one line, whitespace collapsed, control characters escaped, cut to 500
-    characters."""
+    characters.
+
+    Parameters
+    ----------
+    text : str, the text.
+
+    Returns
+    -------
+    str
+    """
     line = escape_controls(" ".join(text.split()))
     return line if len(line) <= 500 else line[:497] + "..."
 
@@ -99,8 +147,17 @@ _KEPT = {"\n", "\t", "\r"}  # \r: a progress bar redraws its line
 
 def escape_controls(text: str) -> str:
     """`text` with every control or format character but newline, tab and carriage return
-    written as its escape (`\x1b`, `\u202e`): a name or message from a plugin or a
-    saved run can never move the cursor, recolour, retitle or reorder the user's terminal."""
+    written as its escape (``, `‮`): a name or message from a plugin or a
+    saved run can never move the cursor, recolour, retitle or reorder the user's terminal.
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    str: `text` itself when it has nothing to escape.
+    """
     import unicodedata
 
     if text.isprintable() or all(c in _KEPT or c.isprintable() or c == " " for c in text):
@@ -122,19 +179,45 @@ class EscapingStream(io.TextIOBase):
         self._target = target
 
     def write(self, text: str) -> int:
+        """Write `text` to the target stream with control characters escaped.
+
+        Parameters
+        ----------
+        text : str (any characters).
+
+        Returns
+        -------
+        int: len(text), as `io.TextIOBase.write` counts what it was given.
+        """
         self._target.write(escape_controls(text))
         return len(text)
 
     def flush(self) -> None:
+        """Flush the target stream."""
         self._target.flush()
 
     def isatty(self) -> bool:
+        """Returns
+        -------
+        bool
+            Whether the target stream is a terminal.
+        """
         return bool(getattr(self._target, "isatty", lambda: False)())
 
     def fileno(self) -> int:
+        """Returns
+        -------
+        int
+            The target stream's file descriptor.
+        """
         return self._target.fileno()
 
     def writable(self) -> bool:
+        """Returns
+        -------
+        bool
+            True.
+        """
         return True
 
 
@@ -156,12 +239,23 @@ def _jsonable(value: Any) -> Any:
 
 
 def print_json(records: Any) -> None:
-    """Print `records` as indented JSON to the command's output."""
+    """Print `records` as indented JSON to the command's output.
+
+    Parameters
+    ----------
+    records : any, JSON-able data (NumPy and pandas values converted).
+    """
     print(json.dumps(_jsonable(records), indent=2), file=output_buffer())
 
 
 def print_table(frame, columns: Sequence[str]) -> None:
-    """Print the `columns` of `frame` as a plain-text table to the command's output."""
+    """Print the `columns` of `frame` as a plain-text table to the command's output.
+
+    Parameters
+    ----------
+    frame : DataFrame
+    columns : sequence of str, the columns shown.
+    """
     import pandas as pd
 
     if frame.empty:

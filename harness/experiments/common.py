@@ -347,8 +347,8 @@ def fixed_plan(problem, config: Mapping[str, Any], steps: int) -> tuple[float, i
 
 def long_run_steps(problem, h: float, n: int) -> tuple[int, str]:
     """(n, reason): n steps of h, or fewer where the orbit would leave the dynamical regime of
-    the problem's span before n h (`harness.scales.regime_end`); reason says why ("" if not)."""
-    from harness.scales import regime_end
+    the problem's span before n h (`harness.regimes.regime_end`); reason says why ("" if not)."""
+    from harness.regimes import regime_end
 
     stop, why = regime_end(problem, problem.t0 + n * h)
     if not why or problem.t0 + n * h <= stop:

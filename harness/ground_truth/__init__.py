@@ -213,7 +213,24 @@ def reference(
 ) -> Reference:
     """Certified ground truth of `problem` at `times` (scalar or increasing 1-D array >= t0) from
     initial states `y0` ((dim,) or (dim, N); default the problem's) with parameters `pars` (as in
-    `Problem.pars_for`). See the module docstring for the level policy."""
+    `Problem.pars_for`). See the module docstring for the level policy.
+
+    Parameters
+    ----------
+    problem : Problem or str, the problem, or its registered name.
+    times : float or array_like, output times, increasing, >= t0.
+    y0 : array_like, optional, initial states, shape (dim,) or (dim, N) (default the problem's start).
+    t0 : float, optional, initial time (default the problem's).
+    pars : ndarray or mapping, optional, parameter values, as in `Problem.pars_for`.
+    required_error : float, optional
+        The certified error the reference must meet (None: the default level pair).
+
+    Returns
+    -------
+    Reference
+        y shaped (nt, dim, N) and its certified error (nt, N), with precision, certifier and
+        cost; `ReferenceError_` when no level meets `required_error`.
+    """
     start = time.perf_counter()
     if isinstance(problem, str):
         from harness.registry import get_problem

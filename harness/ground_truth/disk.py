@@ -20,7 +20,12 @@ from harness.tolerances import CERTIFIER_TOL_FACTOR, REFERENCE_TOL_FACTOR
 
 # -- disk cache ------------------------------------------------------------------------------------
 def references_dir() -> Path:
-    """The directory of cached references (`cache_dir()/references`), created if missing."""
+    """The directory of cached references (`cache_dir()/references`), created if missing.
+
+    Returns
+    -------
+    Path: the directory.
+    """
     d = cache.cache_dir() / "references"
     d.mkdir(parents=True, exist_ok=True)
     return d
@@ -52,8 +57,7 @@ def reference_key(problem: Problem, level: str, times, t0, y0, pars) -> str:
 
     Returns
     -------
-    str
-        A hex digest.
+    str: A hex digest.
     """
     h = hashlib.sha256()
     for part in (
@@ -75,7 +79,18 @@ def reference_key(problem: Problem, level: str, times, t0, y0, pars) -> str:
 
 
 def cache_path(problem: Problem, level: str, key: str) -> Path:
-    """The file of the cached reference `key` of `problem` at `level`."""
+    """The file of the cached reference `key` of `problem` at `level`.
+
+    Parameters
+    ----------
+    problem : Problem, the problem (its name, made file-safe, starts the file name).
+    level : str, the precision level.
+    key : str, the request's hash.
+
+    Returns
+    -------
+    Path: ``references_dir()/<name>-<level>-<key>.npz``.
+    """
     safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in problem.name)
     return references_dir() / f"{safe}-{level}-{key}.npz"
 
@@ -83,6 +98,16 @@ def cache_path(problem: Problem, level: str, key: str) -> Path:
 def load_reference(path: Path, times: np.ndarray, shape: tuple[int, int, int]):
     """The arrays cached at `path`, or None when the file is missing, unreadable, or does not hold
     `times` and states of `shape` (a corrupt file is ignored and recomputed).
+
+    Parameters
+    ----------
+    path : Path, the cached file.
+    times : ndarray, the output times it must hold.
+    shape : (int, int, int), the states' shape (nt, dim, N).
+
+    Returns
+    -------
+    tuple or None: (y, error, floor, certified_by, compute_s), or None.
     """
     if not path.exists():
         return None
@@ -106,7 +131,14 @@ def load_reference(path: Path, times: np.ndarray, shape: tuple[int, int, int]):
 
 
 def store_reference(path: Path, **arrays: Any) -> None:
-    """Write `arrays` to `path` as one .npz file, atomically (temporary file, then rename)."""
+    """Write `arrays` to `path` as one .npz file, atomically (temporary file, then rename).
+
+    Parameters
+    ----------
+    path : Path, the file to write.
+    **arrays
+        Named arrays (and scalars), as for `numpy.savez`.
+    """
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem[:40] + ".", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:

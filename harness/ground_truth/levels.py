@@ -42,7 +42,16 @@ class Level:
         return 2.0 ** (1 - self.bits)
 
     def scalar(self, x: float) -> Any:
-        """`x` as a scalar of this level's type."""
+        """`x` as a scalar of this level's type.
+
+        Parameters
+        ----------
+        x : float, converted exactly.
+
+        Returns
+        -------
+        float, np.longdouble, hy.real128 or hy.real: `x` in this level's number type.
+        """
         x = float(x)
         if self.name == "float64":
             return x
@@ -53,7 +62,16 @@ class Level:
         return hy.real(x, self.prec)
 
     def array(self, a: np.ndarray) -> np.ndarray:
-        """float64 values converted (exactly) to this level."""
+        """float64 values converted (exactly) to this level.
+
+        Parameters
+        ----------
+        a : array_like, float64 values.
+
+        Returns
+        -------
+        ndarray: the same values in this level's number type (a copy), same shape.
+        """
         a = np.asarray(a, dtype=np.float64)
         if self.name == "float64":
             return a.copy()
@@ -65,7 +83,16 @@ class Level:
         return np.array(flat).reshape(a.shape)
 
     def exact(self, values) -> np.ndarray:
-        """Decimal strings (a test set's published values) rounded once, to this level."""
+        """Decimal strings (a test set's published values) rounded once, to this level.
+
+        Parameters
+        ----------
+        values : sequence, decimal numbers (strings or anything whose `str` is one).
+
+        Returns
+        -------
+        ndarray: the values, each rounded once to this level.
+        """
         texts = [str(v) for v in values]
         if self.name == "float64":
             return np.array([float(v) for v in texts], dtype=np.float64)
@@ -99,7 +126,12 @@ def _level_available(lv: Level) -> bool:
 
 def level_chain() -> list[Level]:
     """Available levels of strictly increasing precision (where long double is IEEE quad, it
-    replaces real128 rather than being certified by an equally precise level)."""
+    replaces real128 rather than being certified by an equally precise level).
+
+    Returns
+    -------
+    list of Level: the chain, least precise first.
+    """
     chain: list[Level] = []
     for lv in _ALL_LEVELS:
         if _level_available(lv) and (not chain or lv.bits > chain[-1].bits):
@@ -108,13 +140,27 @@ def level_chain() -> list[Level]:
 
 
 def available_levels() -> list[str]:
-    """Levels that can be computed *and* certified on this installation, cheapest first."""
+    """Levels that can be computed *and* certified on this installation, cheapest first.
+
+    Returns
+    -------
+    list of str: level names: every level of `level_chain` but the last that is in LEVELS.
+    """
     chain = level_chain()
     return [lv.name for lv in chain[:-1] if lv.name in LEVELS]
 
 
 def certifier_of(level: str) -> str:
-    """The level that certifies a reference computed at `level` (the next one in the chain)."""
+    """The level that certifies a reference computed at `level` (the next one in the chain).
+
+    Parameters
+    ----------
+    level : str, a level name of `available_levels`.
+
+    Returns
+    -------
+    str: the certifying level's name; `InputError` for any other `level`.
+    """
     chain = level_chain()
     names = [lv.name for lv in chain]
     if level not in names[:-1]:
@@ -187,9 +233,19 @@ def _lift(parts: list[np.ndarray], level: Level) -> np.ndarray:
 def certify(values: np.ndarray, level: Level, higher: np.ndarray, cert: Level):
     """Check `values` (nt, dim, N) against the certifying level's `higher`.
 
-    Returns the float64 rounding y, the certified error (nt, N), and a lower bound (nt, N) on the
-    error any level at least as accurate as `values` can reach: the float64 rounding distance of
-    `higher`, less the spread between the two levels.
+    Parameters
+    ----------
+    values : ndarray, shape (nt, dim, N), states at `level`.
+    level : Level, their level.
+    higher : ndarray, shape (nt, dim, N), the same states at the certifying level.
+    cert : Level, the certifying level.
+
+    Returns
+    -------
+    (y, error, floor)
+        The float64 rounding y of `values`, the certified error (nt, N), and a lower bound
+        (nt, N) on the error any level at least as accurate as `values` can reach: the float64
+        rounding distance of `higher`, less the spread between the two levels.
     """
     parts = _expansion(values, level)
     y = parts[0]

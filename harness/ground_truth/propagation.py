@@ -79,7 +79,17 @@ def stiff_check(problem: Problem, level: Level, ta: Any, t_end: float, member: i
     """Raise `StiffReferenceError` when, from the integrator's current state, the rest of the span
     needs more than `REFERENCE_STIFF_STEPS` steps held by the Jacobian's eigenvalue: the mean
     `step` of the last chunk (at the start, the solution's own time scale |y|/|y'|, the step
-    accuracy alone would allow) reaches `REFERENCE_STIFF_SHARE` of the stability bound p/(e |lambda|)."""
+    accuracy alone would allow) reaches `REFERENCE_STIFF_SHARE` of the stability bound p/(e |lambda|).
+
+    Parameters
+    ----------
+    problem : Problem
+    level : Level, the integrator's precision level (for the message).
+    ta : heyoka taylor_adaptive, the integrator, at its current time and state.
+    t_end : float, the end of the span.
+    member : int, the ensemble member (for the message).
+    step : float, optional, the mean step of the last chunk (None at the start).
+    """
     now = float(ta.time)
     pars = np.array([float(v) for v in ta.pars]) if len(ta.pars) else np.zeros(0)
     state = np.array([float(v) for v in ta.state])
@@ -172,12 +182,31 @@ def _build(problem: Problem, level: Level, tol: float):
 
 
 def reference_tol(level: Level) -> float:
-    """heyoka's tolerance for a reference at `level`: its epsilon times REFERENCE_TOL_FACTOR."""
+    """heyoka's tolerance for a reference at `level`: its epsilon times REFERENCE_TOL_FACTOR.
+
+    Parameters
+    ----------
+    level : Level (its `eps` is read).
+
+    Returns
+    -------
+    float: the tolerance.
+    """
     return level.eps * REFERENCE_TOL_FACTOR
 
 
 def certifier_tol(cert: Level, level: Level) -> float:
-    """heyoka's tolerance for the certifying rerun at `cert` of a reference at `level`."""
+    """heyoka's tolerance for the certifying rerun at `cert` of a reference at `level`.
+
+    Parameters
+    ----------
+    cert : Level, the certifying level.
+    level : Level, the level certified.
+
+    Returns
+    -------
+    float: max(cert's epsilon, `reference_tol(level)` x CERTIFIER_TOL_FACTOR).
+    """
     return max(cert.eps, reference_tol(level) * CERTIFIER_TOL_FACTOR)
 
 
@@ -194,7 +223,23 @@ def propagate(
     """States at `times` for every member, shaped (nt, dim, N), in the level's number type.
     With `published`, every member starts from the problem's exact published start values and
     constants (`Problem.published`, rounded once to the level), and a time equal to the published
-    end time's float64 rounding is the exact published end time."""
+    end time's float64 rounding is the exact published end time.
+
+    Parameters
+    ----------
+    problem : Problem
+    level : Level, the precision level.
+    tol : float, heyoka's tolerance.
+    times : ndarray, output times, increasing, > t0 or starting at t0.
+    y0 : ndarray, shape (dim, N), initial states (float64).
+    t0 : float, initial time.
+    pars : ndarray, shape (P, N), parameter values.
+    published : bool, optional, start from the published exact values (see above).
+
+    Returns
+    -------
+    (ndarray, float): the states (nt, dim, N) in the level's type, and the wall time in seconds.
+    """
     lock, ta = _integrator(problem, level, tol)
     prepend = times[0] > t0
     grid = level.array(np.concatenate([[t0], times]) if prepend else times)

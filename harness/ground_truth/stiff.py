@@ -45,7 +45,12 @@ IMPLICIT_CERTIFIER = "radau+cvode-bdf"
 
 
 def available() -> bool:
-    """True when both solvers can be imported (scikit-sundae is an optional extra)."""
+    """True when both solvers can be imported (scikit-sundae is an optional extra).
+
+    Returns
+    -------
+    bool: whether ``sksundae.cvode`` imports.
+    """
     try:
         import sksundae.cvode  # noqa: F401
     except ImportError:

@@ -22,7 +22,7 @@ from harness.kit.figure_svg import Figure
 FAIL, PASS, NONE = "fail", "pass", "none"
 MARK = {FAIL: "✗ FAIL", PASS: "✓ pass", NONE: "– not measured"}
 # Columns whose text is a reason: written once per table as a numbered note.
-NOTE_COLUMNS = ("message", "reason")
+NOTE_COLUMNS = ("message", "reason", "prediction_note")
 # Columns of folded tables whose value is written once per run of equal rows (the rows of one
 # problem follow each other); a row a link points to shows it in full.
 DITTO_COLUMNS = ("problem", "h", "steps", "states")

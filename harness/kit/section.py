@@ -27,7 +27,21 @@ from harness.kit.view import RunView
 __all__ = ["Measure", "ScoreColumn", "SectionSpec", "generic_spec", "generic_section", "generic_key",
            "missing", "skip_note", "summary_verdicts", "key_text", "claimed_measured", "VERDICT_COLUMNS"]
 
-VERDICT_COLUMNS = ["experiment", "stepper", "problem", "key", "passed", "verdict", "sentence", "anchor"]
+VERDICT_COLUMNS = ["experiment", "stepper", "problem", "key", "passed", "verdict", "sentence", "anchor",
+                   "judged"]
+
+# Verdicts that pass without judging a claim (`judged` False): no theorem or claim behind the
+# cell (`no-claim`; a stability figure with neither a formula nor a declared claim, `measured`),
+# or a cell the run could not measure (`not-measurable`); the gate says it in its `outcome`.
+INFORMATIONAL_VERDICTS = frozenset({"no-claim", "not-measurable", "measured"})
+JUDGED_OUTCOMES = frozenset({"pass", "fail"})
+
+
+def _judges_a_claim(rec: dict, verdict: str) -> bool:
+    outcome = rec.get("outcome")
+    if isinstance(outcome, str) and outcome:
+        return outcome in JUDGED_OUTCOMES
+    return verdict not in INFORMATIONAL_VERDICTS
 
 
 @dataclass(frozen=True)
@@ -159,7 +173,9 @@ def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
 
     Returns
     -------
-    DataFrame with `VERDICT_COLUMNS`, one row per judged row.
+    DataFrame with `VERDICT_COLUMNS`, one row per judged row; `judged` says whether the row
+    judges a claim (a failing row always does; a passing `no-claim` or `not-measurable` row is
+    informational, and the report's headline does not count it).
     """
     out = []
     if table.empty or "passed" not in table:
@@ -183,7 +199,8 @@ def summary_verdicts(name: str, table: pd.DataFrame, key: tuple[str, ...],
                     "problem": str(rec.get("problem", "")), "key": key_text(values),
                     "passed": bool(passed), "verdict": verdict, "sentence": sentence,
                     "anchor": anchor(name, *(values if anchor_key is None
-                                             else [rec.get(c, "") for c in anchor_key]))})
+                                             else [rec.get(c, "") for c in anchor_key])),
+                    "judged": bool(not passed or _judges_a_claim(rec, verdict))})
     return pd.DataFrame(out, columns=VERDICT_COLUMNS)
 
 

@@ -29,7 +29,16 @@ def check_time(value: Any, name: str) -> float:
 
 
 def check_ensemble_size(size: Any) -> int:
-    """`size` as an int in [1, MAX_ENSEMBLE_SIZE], or `InputError` naming `size`."""
+    """`size` as an int in [1, MAX_ENSEMBLE_SIZE], or `InputError` naming `size`.
+
+    Parameters
+    ----------
+    size : any, the requested ensemble size (checked by `check_count`).
+
+    Returns
+    -------
+    int: `size`, checked.
+    """
     from harness.tolerances import MAX_ENSEMBLE_SIZE
 
     return check_count(size, "`ensemble` size", MAX_ENSEMBLE_SIZE)
@@ -58,7 +67,18 @@ def check_count(value: Any, label: str, maximum: int) -> int:
 
 def check_state(y: Any, dim: int, name: str = "y0") -> np.ndarray:
     """A state shaped (dim,) or (dim, N) as a float64 (dim, N) array, real and finite (complex
-    values are refused, never cast)."""
+    values are refused, never cast).
+
+    Parameters
+    ----------
+    y : array_like, the state or states.
+    dim : int, the problem's dimension.
+    name : str, optional, the argument's name in the error message (default "y0").
+
+    Returns
+    -------
+    ndarray, shape (dim, N): A new float64 array.
+    """
     if np.iscomplexobj(y) or (isinstance(y, list | tuple) and any(isinstance(v, complex) for v in y)):
         raise InputError(f"`{name}` must be real numbers (complex values are not cast to real)")
     try:

@@ -169,7 +169,14 @@ class Problem:
         return np.array(list(self.parameters.values()), dtype=np.float64)
 
     def describe(self) -> dict[str, Any]:
-        """Declared properties as plain data (for `harness list problems`)."""
+        """Declared properties as plain data (for `harness list problems`).
+
+        Returns
+        -------
+        dict
+            Name, form, dimension, variables and right-hand side as text, y0, span, declared
+            horizon, period and perturbation, parameters, invariants and the rest of the declaration.
+        """
         return {
             "name": self.name,
             "form": self.form,
@@ -196,7 +203,14 @@ class Problem:
         }
 
     def fingerprint(self) -> str:
-        """A text form of the whole definition: changes whenever the problem changes."""
+        """A text form of the whole definition: changes whenever the problem changes.
+
+        Returns
+        -------
+        str
+            Name, variables, right-hand side, y0, span, declared scales, parameters, invariants and
+            any structure or published form, joined by "|".
+        """
         parts = [self.name, *map(str, self.variables), *map(str, self.rhs), self.y0.tobytes().hex()]
         horizon = self.declared_convergence_t_end
         parts += [repr((self.t0, self.t_end, self.t_end if horizon is None else horizon))]
@@ -218,6 +232,16 @@ class Problem:
         along the orbit (`ensemble_perturbation`), so an order is never the artefact of one
         start. `scale` defaults to the problem's size (declared, or derived so that every
         member stays in the start's dynamical regime: `harness.scales`).
+
+        Parameters
+        ----------
+        size : int, ensemble size, 1 to MAX_ENSEMBLE_SIZE.
+        seed : int, optional, seed of the draws (default 0); member j's draws do not depend on `size`.
+        scale : float, optional, the relative size of the perturbation (positive and finite).
+
+        Returns
+        -------
+        ndarray, shape (dim, size): the initial states.
         """
         from harness.scales import draw_noise
 
@@ -233,7 +257,19 @@ class Problem:
         return self.y0[:, None] + noise
 
     def pars_for(self, size: int, pars: np.ndarray | Mapping[str, float] | None = None) -> np.ndarray:
-        """Parameter values shaped (P, size), from defaults, a mapping, or an array."""
+        """Parameter values shaped (P, size), from defaults, a mapping, or an array.
+
+        Parameters
+        ----------
+        size : int, ensemble size N.
+        pars : ndarray or mapping, optional
+            None (the defaults), a mapping name -> value (the others default), a (P,) array (the
+            same for every member) or a (P, N) array.
+
+        Returns
+        -------
+        ndarray, shape (P, size): finite float64 values; `InputError` names a bad `pars`.
+        """
         P = len(self.parameters)
         if pars is None:
             return np.repeat(self.parameter_values[:, None], size, axis=1)
@@ -280,7 +316,17 @@ class Problem:
 
     # -- derived numerical functions --------------------------------------------------------------
     def dynamics(self, pars: np.ndarray | None = None, size: int = 1) -> Dynamics:
-        """Ensemble-batched numerical functions bound to parameter values (P, size)."""
+        """Ensemble-batched numerical functions bound to parameter values (P, size).
+
+        Parameters
+        ----------
+        pars : ndarray, optional, parameter values, as in `pars_for`.
+        size : int, optional, ensemble size N (default 1).
+
+        Returns
+        -------
+        Dynamics: the right-hand side, acceleration and Jacobian with evaluation counters.
+        """
         return Dynamics(self, self.pars_for(size, pars))
 
     @cached_property
@@ -291,7 +337,19 @@ class Problem:
     def compiled(self, kind: str, constants: tuple[float, ...] | None) -> Any:
         """The compiled function `kind` ('rhs', 'accel', 'accel_q' (of positions only, for
         accelerations that ignore velocity), 'jac', 'inv'), parameters either
-        substituted as constants (a tuple of values) or left as runtime parameters (None)."""
+        substituted as constants (a tuple of values) or left as runtime parameters (None).
+
+        Parameters
+        ----------
+        kind : str, which expressions: 'rhs', 'accel', 'accel_q', 'jac' or 'inv'.
+        constants : tuple of float or None, parameter values substituted into the expressions, or None.
+
+        Returns
+        -------
+        heyoka cfunc or None
+            Compiled once per (kind, constants) and kept on the problem; None when there are no
+            expressions (no invariants).
+        """
         key = (kind, constants)
         with self._lock:
             store = self.__dict__.setdefault("_compiled", {})
@@ -320,7 +378,18 @@ class Problem:
         return fn
 
     def invariant_values(self, y: np.ndarray, t: float = 0.0, pars: np.ndarray | None = None) -> dict:
-        """Invariants of states shaped (dim, N): name -> array (N,)."""
+        """Invariants of states shaped (dim, N): name -> array (N,).
+
+        Parameters
+        ----------
+        y : ndarray, shape (dim, N), states.
+        t : float, optional, their time (default 0.0).
+        pars : ndarray, optional, parameter values, as in `pars_for`.
+
+        Returns
+        -------
+        dict of str to ndarray: each invariant's values, shape (N,); empty when the problem declares none.
+        """
         if not self.invariants:
             return {}
         y = np.asarray(y, dtype=np.float64)
@@ -363,6 +432,16 @@ def _check_structure(name: str, structure: Any, var_names: list[str]) -> None:
 
 
 def subs_pars(e: hy.expression, mapping: dict[str, hy.expression]) -> hy.expression:
-    """Replace runtime parameters p0, p1, ... by constants."""
+    """Replace runtime parameters p0, p1, ... by constants.
+
+    Parameters
+    ----------
+    e : heyoka expression, the expression.
+    mapping : dict, "p<i>" -> the expression put in place of ``hy.par[i]``.
+
+    Returns
+    -------
+    heyoka expression: `e` with the substitutions.
+    """
     pars = [hy.par[int(k[1:])] for k in mapping]
     return hy.subs(e, dict(zip(pars, mapping.values(), strict=True)))

@@ -93,12 +93,35 @@ class Dynamics:
         return out
 
     def f(self, t: float, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """First-order right-hand side, y shaped (dim, N)."""
+        """First-order right-hand side, y shaped (dim, N).
+
+        Parameters
+        ----------
+        t : float, time.
+        y : ndarray, shape (dim, N), states.
+        out : ndarray, shape (dim, N), optional, where to write the result.
+
+        Returns
+        -------
+        ndarray, shape (dim, N): f(t, y) (`out` when given).
+        """
         self.counts["rhs"] += 1
         return self._call(self._f, t, y, out)
 
     def accel(self, t: float, q: np.ndarray, v: np.ndarray | None = None, out=None) -> np.ndarray:
-        """Acceleration a(q, v, t), q and v shaped (nq, N). v may be None when a ignores it."""
+        """Acceleration a(q, v, t), q and v shaped (nq, N). v may be None when a ignores it.
+
+        Parameters
+        ----------
+        t : float, time.
+        q : ndarray, shape (nq, N), positions.
+        v : ndarray, shape (nq, N), optional, velocities.
+        out : ndarray, shape (nq, N), optional, where to write the result.
+
+        Returns
+        -------
+        ndarray, shape (nq, N): a(q, v, t); `InputError` for a problem without a Newtonian form.
+        """
         if self._a is None:
             raise InputError(f"problem {self.problem.name!r} has no Newtonian form")
         self.counts["accel"] += 1
@@ -117,7 +140,17 @@ class Dynamics:
         return self._call(self._a, t, self._qv, out)
 
     def jac(self, t: float, y: np.ndarray) -> np.ndarray:
-        """Jacobian df/dy shaped (dim, dim, N)."""
+        """Jacobian df/dy shaped (dim, dim, N).
+
+        Parameters
+        ----------
+        t : float, time.
+        y : ndarray, shape (dim, N), states.
+
+        Returns
+        -------
+        ndarray, shape (dim, dim, N): the Jacobians.
+        """
         self.counts["jac"] += 1
         fn = self.problem.compiled("jac", self.constants)
         out = self._call(fn, t, y, None)

@@ -110,7 +110,12 @@ class NBody:
         """(variables, Newtonian form, invariants) of this system: variables `<name>_x` ...,
         `<name>_vx` ... (just `x`, `vx` for a body named ''); energy (and, inertial frame,
         momentum and angular momentum; heliocentric frame, the specific orbital energy and
-        angular momentum of a lone massless body)."""
+        angular momentum of a lone massless body).
+
+        Returns
+        -------
+        (list of heyoka variables, NewtonianForm, dict of str to heyoka expression)
+        """
         axes = "xyz"[: self.dimension]
         m, G = self.masses, float(self.G)
         bodies = self.state_bodies
@@ -191,7 +196,12 @@ class NBody:
         return list(positions + velocities), nf, invariants
 
     def describe(self) -> dict[str, Any]:
-        """The system's description as plain data (masses, G, frame, dimension, body names)."""
+        """The system's description as plain data (masses, G, frame, dimension, body names).
+
+        Returns
+        -------
+        dict: kind, masses, G, central, frame, dimension, names.
+        """
         return {"kind": "n-body", "masses": list(self.masses), "G": float(self.G),
                 "central": self.central, "frame": self.frame, "dimension": self.dimension,
                 "names": list(self.names)}

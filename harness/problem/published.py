@@ -33,7 +33,17 @@ __all__ = ["Published", "exact_decimal"]
 
 def exact_decimal(value: Any) -> str:
     """`value` (a decimal string, int, Decimal or Fraction) as a decimal string; a float is refused
-    (it is already rounded)."""
+    (it is already rounded).
+
+    Parameters
+    ----------
+    value : str, int, Decimal or Fraction
+        The published value ("1.5", "2D-3", 7, Fraction(1, 3): 60 significant digits).
+
+    Returns
+    -------
+    str: the value as a decimal string; `InputError` for a float or an unreadable string.
+    """
     if isinstance(value, bool) or isinstance(value, float):
         raise InputError(f"a published value must be exact (a decimal string, an integer or a "
                          f"Fraction), got the float {value!r}")
@@ -110,7 +120,12 @@ class Published:
     def rounding(self) -> dict[str, float]:
         """How far the float64 form is from the published one: the largest relative rounding of
         the start values, of the constants and of the end time (0.0 where float64 holds them
-        exactly)."""
+        exactly).
+
+        Returns
+        -------
+        dict: 'y0', 'parameters', 't_end' -> the largest relative rounding.
+        """
         return {
             "y0": max((_relative_rounding(v) for v in self.y0), default=0.0),
             "parameters": max((_relative_rounding(v) for v in self.parameters.values()), default=0.0),
@@ -124,7 +139,15 @@ class Published:
 
     def check(self, problem: str, y0: Sequence[float], parameters: Mapping[str, float],
               t_end: float) -> None:
-        """Rule 1 and 3 of the contract, against the problem being built."""
+        """Rule 1 and 3 of the contract, against the problem being built.
+
+        Parameters
+        ----------
+        problem : str, the problem's name (for messages).
+        y0 : sequence of float, the problem's float64 start.
+        parameters : mapping, its float64 parameter values by name.
+        t_end : float, its end time.
+        """
         if len(self.y0) != len(y0):
             raise InputError(f"problem {problem!r}: `published.y0` needs {len(y0)} values, got "
                              f"{len(self.y0)}")
@@ -142,7 +165,12 @@ class Published:
                              f"{self.t_end}")
 
     def describe(self) -> dict[str, Any]:
-        """Plain data for `harness list problems` and the report."""
+        """Plain data for `harness list problems` and the report.
+
+        Returns
+        -------
+        dict: source, y0, parameters, t_end, values, accuracy and its note, float64_rounding.
+        """
         return {
             "source": self.source,
             "y0": list(self.y0),

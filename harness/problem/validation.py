@@ -33,8 +33,7 @@ def check_definition(name: Any, variables: Sequence[Any], newtonian: Any) -> str
 
     Returns
     -------
-    str
-        The name.
+    str: the name.
     """
     import heyoka as hy
 
@@ -97,8 +96,7 @@ def exact_state(problem, t: float, y0: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    numpy.ndarray
-        States shaped (dim, N).
+    numpy.ndarray: states shaped (dim, N).
     """
     try:
         out = problem.exact(t, y0, problem.t0, problem.pars_for(y0.shape[1]))

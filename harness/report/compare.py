@@ -98,11 +98,14 @@ def _read_verdicts(path: Path) -> tuple[pd.DataFrame | None, str]:
                                keep_default_na=False)
     except Exception as exc:  # noqa: BLE001  (any damage: unreadable, not CSV, not UTF-8)
         return None, " ".join(f"{type(exc).__name__}: {exc}".split())[:200]
-    written = [c for c in VERDICT_COLUMNS if c != "anchor"]  # a report stores all but anchors
+    # a report stores all but anchors; `judged` is newer than some stored reports
+    written = [c for c in VERDICT_COLUMNS if c not in ("anchor", "judged")]
     missing = [c for c in written if c not in verdicts.columns]
     if missing:
         return None, f"columns {missing} missing"
     verdicts["passed"] = verdicts["passed"].astype(str).str.lower().isin(("true", "1"))
+    verdicts["judged"] = (verdicts["judged"].astype(str).str.lower().isin(("true", "1"))
+                          if "judged" in verdicts else True)
     return verdicts, ""
 
 

@@ -46,11 +46,15 @@ def verdicts_section(view: RunView, verdicts: pd.DataFrame, experiments: list[st
     """How many claims were checked and failed, the failing ones in a sentence each (linked to
     their rows), then the scoreboard: one row per stepper, every number linked to its row."""
     sec = Section("verdicts", 1, "Verdicts")
-    n, bad = len(verdicts), verdicts[~verdicts["passed"]] if len(verdicts) else verdicts
-    exps = set(verdicts["experiment"]) - {"claims"} if n else set()
+    judged = verdicts[verdicts["judged"].astype(bool)] if len(verdicts) else verdicts
+    n, bad = len(judged), verdicts[~verdicts["passed"]] if len(verdicts) else verdicts
+    exps = set(judged["experiment"]) - {"claims"} if n else set()
     fails = view.failures()
-    course = " and the course material" if n and (verdicts["experiment"] == "claims").any() else ""
+    course = " and the course material" if n and (judged["experiment"] == "claims").any() else ""
     text = f"{n} claims checked in {len(exps)} experiments{course}: {len(bad)} failed."
+    if len(verdicts) > n:
+        text += (f" {len(verdicts) - n} further cells are informational (no claim behind them, or "
+                 "not measurable on this run) and are not counted.")
     if fails:
         text += f" {len(fails)} cells could not be measured (see Provenance)."
     sec.blocks.append(Block("headline", text=text, cls="fail" if len(bad) or fails else "pass"))

@@ -16,6 +16,7 @@ after `harness.kit.figure_svg.check_svg` has passed it.
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -92,7 +93,9 @@ def build_sections(view: RunView, *, run_id: str, results_path: str, build_s: Ma
             sec.number = number.get(sec.id, sec.number)
         drop_unlinked_row_ids(out)
         failing = verdicts[~verdicts["passed"].astype(bool)] if len(verdicts) else verdicts
-        headline = {"checked": int(len(verdicts)), "failed": int(len(failing)),
+        judged = verdicts[verdicts["judged"].astype(bool)] if len(verdicts) else verdicts
+        headline = {"checked": int(len(judged)), "failed": int(len(failing)),
+                    "informational": int(len(verdicts) - len(judged)),
                     "experiments": int(verdicts["experiment"].nunique()) if len(verdicts) else 0,
                     "verdicts": verdicts}
         return out, statuses, headline
@@ -157,11 +160,16 @@ def _start_experiment_sections(view: RunView, experiments: Sequence[str], number
         return None
     size = {name: len(view.rows.get(name, ())) for name in experiments}
     _FORKED_VIEW[:] = [view]
-    try:
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                                   initializer=_quiet_signals)
-        futures = {name: pool.submit(_section_in_worker, name, dict(number), dict(titles))
-                   for name in sorted(experiments, key=lambda n: -size[n])}
+    import signal
+
+    from harness.runner.executors import workers_born_deaf
+
+    try:  # forked with the signals ignored until `_quiet_signals` (the parent's handlers raise)
+        with workers_born_deaf((signal.SIGINT, signal.SIGTERM)):
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                       initializer=_quiet_signals)
+            futures = {name: pool.submit(_section_in_worker, name, dict(number), dict(titles))
+                       for name in sorted(experiments, key=lambda n: -size[n])}
     except (OSError, RuntimeError):  # no process could be started: build them here
         _FORKED_VIEW.clear()
         return None
@@ -199,6 +207,10 @@ def _close(pending: _Pending | None) -> None:
 
     if pending is not None:  # interrupted: the workers got the signal too; do not wait for them
         interrupted = isinstance(sys.exc_info()[1], KeyboardInterrupt | SystemExit | Terminated)
+        if interrupted:  # one forked while the signals were ignored may have missed it
+            for proc in list((getattr(pending.pool, "_processes", None) or {}).values()):
+                with contextlib.suppress(Exception):
+                    proc.terminate()
         pending.pool.shutdown(wait=not interrupted, cancel_futures=True)
     _FORKED_VIEW.clear()
 

@@ -4,7 +4,9 @@ comparison follows.
 One row per judged row of an experiment's summary (its `passed` column, or the section's own
 `verdicts` function, e.g. the gate for convergence) and per claim of the course material that
 was measured. Columns: experiment, stepper, problem, key (the row's identity, JSON), passed,
-verdict, sentence (why, one sentence), anchor (id of the row in its section's table).
+verdict, sentence (why, one sentence), anchor (id of the row in its section's table), judged
+(the row judges a claim: it can fail; a row with no claim behind it, or one that could not be
+measured, passes without evidence and is informational, so the headline does not count it).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ def claim_verdicts(view: RunView) -> pd.DataFrame:
                     "passed": r.status == AGREE, "verdict": r.status,
                     "sentence": f"course claim “{first_sentence(r.claim, 140)}” — {r.status}: "
                                 f"{first_sentence(r.measurement)}",
-                    "anchor": anchor("claims", r.key)})
+                    "anchor": anchor("claims", r.key), "judged": True})
     return pd.DataFrame(out, columns=VERDICT_COLUMNS)
 
 
@@ -53,4 +55,5 @@ def collect_verdicts(view: RunView) -> pd.DataFrame:
         return pd.DataFrame(columns=VERDICT_COLUMNS)
     table = pd.concat(frames, ignore_index=True)
     table["passed"] = table["passed"].astype(bool)
+    table["judged"] = table["judged"].astype(bool)
     return table.sort_values("passed", kind="stable").reset_index(drop=True)

@@ -3,7 +3,8 @@
 Layout (one job per module; everything public is re-exported here):
 
     harness/runner/__init__.py    this overview; re-exports
-    harness/runner/orchestration.py  run_experiment(s), RunOptions
+    harness/runner/orchestration.py  run_experiment, RunOptions
+    harness/runner/several.py     run_experiments: several experiments, one display and connection
     harness/runner/checks.py      argument checks (jobs, scheduler, names, plugins, config)
     harness/runner/limits.py      a cell's time limit (SIGALRM, or an abandoned helper thread)
     harness/runner/validation.py  checking a cell's rows (validate_rows)
@@ -136,7 +137,6 @@ from harness.runner.orchestration import (  # noqa: F401  (re-exported)
     RunOptions,
     no_cells_error,
     run_experiment,
-    run_experiments,
 )
 from harness.runner.result import (  # noqa: F401  (re-exported)
     CELL_COLUMNS,
@@ -145,6 +145,7 @@ from harness.runner.result import (  # noqa: F401  (re-exported)
     SKIP_COLUMNS,
     RunResult,
 )
+from harness.runner.several import run_experiments  # noqa: F401  (re-exported)
 from harness.runner.validation import SCALARS, CellOutputError, validate_rows  # noqa: F401
 from harness.runner.workers import (  # noqa: F401  (re-exported)
     ORPHAN_CHECK_S,

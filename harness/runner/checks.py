@@ -22,7 +22,12 @@ MAX_JOBS_PER_CORE = 8
 
 # -- argument checks --------------------------------------------------------------------------------
 def default_jobs() -> int:
-    """All cores this process may use."""
+    """All cores this process may use.
+
+    Returns
+    -------
+    int: the number of CPUs in this process's affinity mask (else `os.cpu_count()`), at least 1.
+    """
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):
@@ -30,7 +35,16 @@ def default_jobs() -> int:
 
 
 def check_jobs(jobs: Any) -> int:
-    """`jobs` as a worker count (None: `default_jobs()`), or `InputError` naming `jobs`."""
+    """`jobs` as a worker count (None: `default_jobs()`), or `InputError` naming `jobs`.
+
+    Parameters
+    ----------
+    jobs : int or None, the requested worker count; None for the default.
+
+    Returns
+    -------
+    int
+    """
     if jobs is None:
         return default_jobs()
     if isinstance(jobs, bool) or not isinstance(jobs, int | np.integer):
@@ -45,7 +59,16 @@ _SCHEDULER = re.compile(r"^(tcp|tls|ucx|ws|wss|inproc)://[^\s/]+$")
 
 
 def check_scheduler(value: Any) -> Any:
-    """`value` as a Dask scheduler address or client (None: run locally), or `InputError`."""
+    """`value` as a Dask scheduler address or client (None: run locally), or `InputError`.
+
+    Parameters
+    ----------
+    value : any, none, a ``tcp://HOST:PORT`` address or a `distributed.Client`.
+
+    Returns
+    -------
+    str, Client or None
+    """
     if value is None:
         return None
     try:
@@ -72,7 +95,17 @@ def check_scheduler(value: Any) -> Any:
 def check_names(kind: str, names: Any) -> list[str]:
     """The requested names of `kind` ('steppers' or 'problems'; None: every registered one),
     each checked against the registry (`UnknownNameError` with the closest names), duplicates
-    dropped."""
+    dropped.
+
+    Parameters
+    ----------
+    kind : str, 'steppers' or 'problems'.
+    names : sequence of str or None, the requested names.
+
+    Returns
+    -------
+    list of str
+    """
     from harness import registry
 
     reg = registry.steppers if kind == "steppers" else registry.problems
@@ -92,7 +125,16 @@ def check_names(kind: str, names: Any) -> list[str]:
 
 
 def check_plugins(plugins: Any) -> list[str]:
-    """`plugins` (None, a path or a sequence of paths) as a list of path strings."""
+    """`plugins` (None, a path or a sequence of paths) as a list of path strings.
+
+    Parameters
+    ----------
+    plugins : str, PathLike, sequence of them, or None, the plugin files.
+
+    Returns
+    -------
+    list of str: `InputError` for anything else.
+    """
     if plugins is None:
         return []
     if isinstance(plugins, str | os.PathLike):
@@ -108,7 +150,16 @@ def check_plugins(plugins: Any) -> list[str]:
 
 
 def resolve_experiment(experiment: Any) -> Experiment:
-    """The experiment object for `experiment` (an `Experiment` or a registered name)."""
+    """The experiment object for `experiment` (an `Experiment` or a registered name).
+
+    Parameters
+    ----------
+    experiment : Experiment or str, the experiment or its name (`UnknownNameError` for an unknown name).
+
+    Returns
+    -------
+    Experiment
+    """
     from harness.experiments.base import get_experiment
 
     if isinstance(experiment, Experiment):
@@ -121,6 +172,16 @@ def resolve_experiment(experiment: Any) -> Experiment:
 def resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
     """The experiment's configuration: its defaults (quick ones when `quick`), updated with the
     known settings of `config` (`InputError` for an unknown one).
+
+    Parameters
+    ----------
+    exp : Experiment, the experiment.
+    config : mapping or None, overrides of its settings.
+    quick : bool, start from the quick settings.
+
+    Returns
+    -------
+    dict: the settings, checked by the experiment.
     """
     if config is not None and not isinstance(config, Mapping):
         raise InputError(f"`config` must be a mapping of settings, got {type(config).__name__}")
@@ -135,7 +196,18 @@ def resolve_config(exp: Experiment, config: Any, quick: bool) -> dict:
 
 
 def progress_display(progress: Any, desc: str) -> tuple[Progress, bool]:
-    """(progress display, whether this call owns and closes it)."""
+    """(progress display, whether this call owns and closes it).
+
+    Parameters
+    ----------
+    progress : Progress, bool, str or None
+        A shared display, None/True (default display), False (silent) or a mode.
+    desc : str, the display's label.
+
+    Returns
+    -------
+    (Progress, bool)
+    """
     if isinstance(progress, Progress):
         return progress, False
     if progress is None or progress is True:

@@ -48,13 +48,36 @@ class Task:
 
 
 def crash_outcome(task: Task, message: str, kind: str = "crash") -> dict:
-    """The outcome of a task whose worker died (or, with `kind`, another failure outside the cell)."""
+    """The outcome of a task whose worker died (or, with `kind`, another failure outside the cell).
+
+    Parameters
+    ----------
+    task : Task
+        The task.
+    message : str
+        What happened (put on one line).
+    kind : str, optional
+        The failure kind (default "crash").
+
+    Returns
+    -------
+    dict
+        An outcome as `execute` returns one, not ok, with no rows.
+    """
     return {"key": task.key, "ok": False, "kind": kind, "message": one_line(message),
             "traceback": "", "rows": None, "wall_s": 0.0, "worker": ""}
 
 
 def run_serial(tasks: Sequence[Task], accept: Callable[[Task, dict], None]) -> None:
-    """Execute `tasks` one after another in this process, handing each outcome to `accept`."""
+    """Execute `tasks` one after another in this process, handing each outcome to `accept`.
+
+    Parameters
+    ----------
+    tasks : sequence of Task
+        The tasks.
+    accept : callable
+        ``accept(task, outcome)``, called once per task.
+    """
     for t in tasks:
         accept(t, execute(t.payload))
 
@@ -62,11 +85,47 @@ def run_serial(tasks: Sequence[Task], accept: Callable[[Task, dict], None]) -> N
 def quiet_worker_signals() -> None:
     """A loky worker's signal dispositions: Ctrl-C at a terminal reaches the whole process
     group, but only the parent decides (it stops the pool and prints one line), so workers
-    ignore SIGINT; SIGTERM ends a worker at once and silently. Never a worker's traceback."""
+    ignore SIGINT; SIGTERM ends a worker at once and silently. Never a worker's traceback.
+    Workers started by `loky_batch` ignore SIGINT from birth already (`workers_born_deaf`)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def workers_born_deaf(signals: Sequence[int] = ()):
+    """`signals` (default SIGINT) ignored in this process while it starts pool workers: an
+    ignored signal stays ignored through fork and exec, and Python then installs no handler,
+    so a Ctrl-C to the process group while a worker is still importing (up to seconds on a
+    loaded machine, before `quiet_worker_signals` runs) cannot print its traceback (it did:
+    "Fatal Python error: init_import_site", or KeyboardInterrupt from joblib's import; a forked
+    worker raised the parent's Terminated in an at-fork hook). The worker's initializer sets
+    its own dispositions. The cost: a signal within the few milliseconds of starting the
+    workers is not seen by this process either (send it again). Outside the main thread a
+    no-op.
+
+    Parameters
+    ----------
+    signals : sequence of int
+        The signal numbers to ignore while the block runs (empty: SIGINT alone).
+
+    Yields
+    ------
+    None
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = [(s, signal.signal(s, signal.SIG_IGN)) for s in (signals or (signal.SIGINT,))]
+    try:
+        yield
+    finally:
+        for sig, handler in saved:
+            signal.signal(sig, handler)
 
 
 def _quiet_loky() -> None:
@@ -81,16 +140,31 @@ def _quiet_loky() -> None:
 
 
 def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | None, list[Task]]:
-    """Run `batch` on `n` loky workers. Returns (the pool's breakdown or None, unfinished tasks)."""
+    """Run `batch` on `n` loky workers. Returns (the pool's breakdown or None, unfinished tasks).
+
+    Parameters
+    ----------
+    batch : sequence of Task
+        The tasks.
+    n : int
+        Number of workers.
+    accept : callable
+        ``accept(task, outcome)``, called as outcomes arrive.
+
+    Returns
+    -------
+    (BaseException or None, list of Task)
+    """
     from joblib.externals.loky import get_reusable_executor
 
     _quiet_loky()
-    executor = get_reusable_executor(max_workers=n, timeout=LOKY_IDLE_TIMEOUT_S,
-                                     initializer=quiet_worker_signals)
-    futures = {}
+    executor, futures = None, {}
     try:
-        for t in batch:
-            futures[executor.submit(execute, t.payload)] = t
+        with workers_born_deaf():  # workers start in submit, or in the manager thread it starts
+            executor = get_reusable_executor(max_workers=n, timeout=LOKY_IDLE_TIMEOUT_S,
+                                             initializer=quiet_worker_signals)
+            for t in batch:
+                futures[executor.submit(execute, t.payload)] = t
         pending = set(futures)
         broken: BaseException | None = None
         while pending and broken is None:
@@ -107,7 +181,8 @@ def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | N
                 else:
                     accept(t, fut.result())
     except BaseException:  # Ctrl-C, SIGTERM (the CLI raises Terminated), anything unexpected
-        _stop_pool(executor, futures)
+        if executor is not None:
+            _stop_pool(executor, futures)
         raise
     if broken is None:
         return None, []
@@ -151,6 +226,15 @@ def _stop_pool(executor: Any, futures: Mapping[Any, Task]) -> None:
 def run_loky(tasks: Sequence[Task], jobs: int, accept) -> None:
     """Execute `tasks` on `jobs` local loky workers, handing each outcome to `accept` as it
     arrives; a crashed worker's cells are identified by their claim files (package docstring).
+
+    Parameters
+    ----------
+    tasks : sequence of Task
+        The tasks.
+    jobs : int
+        Number of workers.
+    accept : callable
+        ``accept(task, outcome)``, called once per task.
     """
     clean_stale_claims()
     claim_dir = tempfile.mkdtemp(prefix="harness-claims-")
@@ -195,7 +279,17 @@ def run_loky(tasks: Sequence[Task], jobs: int, accept) -> None:
 
 
 def dask_client(scheduler: Any) -> tuple[Any, bool]:
-    """(client, owned) for `scheduler` (an address or a client); `owned` says this call made it."""
+    """(client, owned) for `scheduler` (an address or a client); `owned` says this call made it.
+
+    Parameters
+    ----------
+    scheduler : str or Client
+        An address or a connected client.
+
+    Returns
+    -------
+    (Client, bool)
+    """
     from distributed import Client
 
     if isinstance(scheduler, Client):
@@ -267,7 +361,17 @@ def _handshake(address: str) -> None:
 
 
 def run_dask(tasks: Sequence[Task], client: Any, accept) -> None:
-    """Execute `tasks` as Dask tasks on `client`, handing each outcome to `accept` as it completes."""
+    """Execute `tasks` as Dask tasks on `client`, handing each outcome to `accept` as it completes.
+
+    Parameters
+    ----------
+    tasks : sequence of Task
+        The tasks.
+    client : distributed.Client
+        The connected client.
+    accept : callable
+        ``accept(task, outcome)``, called once per task.
+    """
     import uuid
 
     from distributed import as_completed

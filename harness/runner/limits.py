@@ -36,7 +36,16 @@ def _alarm_possible() -> bool:
 @contextlib.contextmanager
 def time_limit(seconds: float | None):
     """Raise `CellTimeout` in the body after `seconds` (SIGALRM; main thread only; None: no
-    limit). A limit already running outside is restored afterwards."""
+    limit). A limit already running outside is restored afterwards.
+
+    Parameters
+    ----------
+    seconds : float or None, the limit.
+
+    Yields
+    ------
+    None
+    """
     if seconds is None:
         yield
         return
@@ -61,7 +70,17 @@ def time_limit(seconds: float | None):
 
 
 def call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
-    """fn() under a time limit: SIGALRM in a main thread, else an abandoned helper thread."""
+    """fn() under a time limit: SIGALRM in a main thread, else an abandoned helper thread.
+
+    Parameters
+    ----------
+    fn : callable, called with no arguments.
+    seconds : float or None, the limit (None: none).
+
+    Returns
+    -------
+    any: what `fn` returned; `CellTimeout` after `seconds`, and `fn`'s own exception re-raised.
+    """
     if seconds is None:
         return fn()
     if _alarm_possible():
@@ -87,7 +106,16 @@ def call_limited(fn: Callable[[], Any], seconds: float | None) -> Any:
 
 
 def check_timeout(value: Any) -> float | None:
-    """`value` as a cell time limit in seconds (None: no limit), or `InputError` naming it."""
+    """`value` as a cell time limit in seconds (None: no limit), or `InputError` naming it.
+
+    Parameters
+    ----------
+    value : any, seconds, positive, finite and at most MAX_CELL_TIMEOUT_S, or None.
+
+    Returns
+    -------
+    float or None
+    """
     if value is None:
         return None
     if isinstance(value, bool):

@@ -21,7 +21,19 @@ WORK_ARRAYS = 16
 def estimate_bytes(*, dim: int, ensemble: int = 1, saved_states: int = 2,
                    work_arrays: int = WORK_ARRAYS) -> int:
     """Peak bytes of integrating an ensemble: float64 states of shape (dim, ensemble), times
-    (saved states + working arrays)."""
+    (saved states + working arrays).
+
+    Parameters
+    ----------
+    dim : int, state dimension.
+    ensemble : int, optional, ensemble size (default 1).
+    saved_states : int, optional, states kept (default 2: start and end).
+    work_arrays : int, optional, working arrays of the state's size (WORK_ARRAYS).
+
+    Returns
+    -------
+    int: 8 dim ensemble (saved_states + work_arrays).
+    """
     for name, v in (("dim", dim), ("ensemble", ensemble), ("saved_states", saved_states),
                     ("work_arrays", work_arrays)):
         if isinstance(v, bool) or not isinstance(v, int | np.integer):
@@ -32,7 +44,12 @@ def estimate_bytes(*, dim: int, ensemble: int = 1, saved_states: int = 2,
 
 
 def available_memory() -> int:
-    """Bytes of memory available to new allocations now (psutil)."""
+    """Bytes of memory available to new allocations now (psutil).
+
+    Returns
+    -------
+    int
+    """
     import psutil
 
     return int(psutil.virtual_memory().available)
@@ -49,7 +66,15 @@ def _fmt_bytes(n: float) -> str:
 def check_memory(needed: int, *, argument: str, detail: str = "",
                  available: int | None = None) -> None:
     """Raise `InputError` naming `argument` when `needed` bytes exceed MEMORY_HEADROOM of the
-    available memory (`available`, default: measured now)."""
+    available memory (`available`, default: measured now).
+
+    Parameters
+    ----------
+    needed : int, bytes needed.
+    argument : str, the argument named in the error.
+    detail : str, optional, added to the message.
+    available : int, optional, bytes available (default measured now).
+    """
     from harness.tolerances import MEMORY_HEADROOM
 
     avail = available_memory() if available is None else int(available)
@@ -85,6 +110,13 @@ def guard_memory(experiment: Experiment, cells: Sequence[Cell], config: Mapping[
                   jobs: int) -> None:
     """Refuse (`InputError`) a run whose `jobs` largest cells together would not fit in the
     available memory (see `estimate_bytes`).
+
+    Parameters
+    ----------
+    experiment : Experiment, the experiment (its `estimate_bytes(cell, config)` hook when it has one).
+    cells : sequence of Cell, the cells to run.
+    config : mapping, the experiment's resolved configuration.
+    jobs : int, number of workers running at once.
     """
     estimates = []
     for cell in cells:

@@ -17,7 +17,6 @@ from harness.errors import (
     HarnessError,
     InputError,
     NoApplicableCellsError,
-    UnknownNameError,
 )
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
 from harness.keys import cell_key, code_version, experiment_fingerprint
@@ -81,7 +80,18 @@ def _skip_records(skips: Iterable[Skip]) -> list[dict]:
 def no_cells_error(experiments: Sequence[str], skips: Sequence[Skip] | pd.DataFrame,
                    steppers: Sequence[str], problems: Sequence[str]) -> NoApplicableCellsError:
     """The error for a run over zero applicable cells: one line saying why each requested pair
-    does not apply (the experiments' skip reasons); every record is kept in `.skips`."""
+    does not apply (the experiments' skip reasons); every record is kept in `.skips`.
+
+    Parameters
+    ----------
+    experiments : sequence of str, the experiments run.
+    skips : sequence of Skip or DataFrame, their skip records.
+    steppers, problems : sequence of str, the requested names.
+
+    Returns
+    -------
+    NoApplicableCellsError
+    """
     records = (skips.to_dict("records") if isinstance(skips, pd.DataFrame)
                else _skip_records(skips))
     what = ", ".join(map(repr, experiments))
@@ -165,17 +175,35 @@ def run_experiment(
 ) -> RunResult:
     """Run one experiment over `steppers` x `problems` (None: the whole registry).
 
-    Arguments: `config` overrides the experiment's settings (`quick` starts from its quick
-    settings); `jobs` worker processes (None: all cores; 1: in this process); `scheduler` a Dask
-    scheduler address (`tcp://HOST:PORT`) or `distributed.Client`, instead of local processes;
-    `fresh` recomputes cached cells; `cache=False` neither reads nor writes the cache;
-    `cache_dir` the cache root (default `harness.cache.cache_dir()`); `plugins` .py files loaded
-    here and on every worker before names are looked up; `cell_timeout` seconds per cell;
-    `progress` None/True (bar on a terminal, plain lines otherwise), False (silent), a mode
-    ('bar', 'lines', 'off') or a shared `Progress`; `allow_empty=True` returns an empty result
-    instead of raising when no cell applies. `options` (a `RunOptions`), when given, supplies
-    `quick`, `jobs`, `scheduler`, `fresh`, `cache`, `cache_dir`, `plugins` and `cell_timeout`
-    in place of those keywords.
+    Parameters
+    ----------
+    experiment : str or Experiment, the experiment, or its registered name.
+    steppers, problems : sequence of str, optional, registered names (None: every one).
+    config : mapping, optional, overrides of the experiment's settings.
+    options : RunOptions, optional
+        Supplies `quick`, `jobs`, `scheduler`, `fresh`, `cache`, `cache_dir`, `plugins` and
+        `cell_timeout` in place of those keywords.
+    quick : bool, optional, start from the experiment's quick settings.
+    jobs : int, optional, worker processes (None: all cores; 1: in this process).
+    scheduler : str or distributed.Client, optional
+        A Dask scheduler (``tcp://HOST:PORT``) or client, instead of local processes.
+    fresh : bool, optional, recompute cached cells.
+    cache : bool, optional, false: neither read nor write the cache.
+    cache_dir : str or PathLike, optional, the cache root (default `harness.cache.cache_dir()`).
+    plugins : sequence of paths, optional
+        .py files loaded here and on every worker before names are looked up.
+    cell_timeout : float, optional, seconds per cell.
+    progress : Progress, bool or str, optional
+        None/True (bar on a terminal, plain lines otherwise), False (silent), a mode ('bar',
+        'lines', 'off') or a shared `Progress`.
+    allow_empty : bool, optional, return an empty result instead of raising when no cell applies.
+    _client, _counted, _listed, _versions
+        Internal: what `run_experiments` shares between its experiments.
+
+    Returns
+    -------
+    RunResult
+        Rows, summary, failures, skips, per-cell records, counts and wall time.
 
     Raises `InputError` / `UnknownNameError` / `PluginError` (all `HarnessError`) for bad
     arguments before any cell runs, `NoApplicableCellsError` (with every skip reason) when no
@@ -407,7 +435,16 @@ def interleaved(tasks: list[Task]) -> list[Task]:
     starting together then meet different problems and steppers half a registry apart (other
     families), so each compiles its own problem's functions and family kernel instead of
     waiting on the other's lock for the same one. Results keep the cell order (they are placed
-    by cell index)."""
+    by cell index).
+
+    Parameters
+    ----------
+    tasks : list of Task, the tasks in cell order.
+
+    Returns
+    -------
+    list of Task
+    """
     groups: dict[str, list[Task]] = {}
     for t in tasks:
         groups.setdefault(t.cell.problem, []).append(t)
@@ -416,85 +453,3 @@ def interleaved(tasks: list[Task]) -> list[Task]:
         shift = (j % 2) * (len(group) // 2)
         keyed += [(n, j, t) for n, t in enumerate(group[shift:] + group[:shift])]
     return [t for _, _, t in sorted(keyed, key=lambda item: item[:2])]
-
-
-def run_experiments(
-    experiments: Sequence[str | Experiment] | None = None,
-    steppers: Sequence[str] | None = None,
-    problems: Sequence[str] | None = None,
-    *,
-    configs: Mapping[str, Mapping[str, Any]] | None = None,
-    quick: bool = False,
-    jobs: int | None = None,
-    scheduler: str | Any | None = None,
-    fresh: bool = False,
-    cache: bool = True,
-    cache_dir: str | os.PathLike | None = None,
-    plugins: Sequence[str | os.PathLike] = (),
-    cell_timeout: float | None = None,
-    progress: Progress | bool | str | None = None,
-) -> dict[str, RunResult]:
-    """`run_experiment` for several experiments (None: every registered one), in order, with one
-    progress display and one Dask connection; `configs` maps experiment name -> overrides.
-    Returns {experiment name: RunResult}; pass it to `harness.store.save_run`."""
-    from harness.experiments import EXPERIMENTS
-
-    if experiments is None:
-        experiments = list(EXPERIMENTS)
-    if isinstance(experiments, str | Experiment):
-        experiments = [experiments]
-    exps = [resolve_experiment(e) for e in experiments]
-    if configs is not None and not isinstance(configs, Mapping):
-        raise InputError(f"`configs` must map experiment names to settings, got {type(configs).__name__}")
-    unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
-    if unknown:
-        raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
-    sched = check_scheduler(scheduler)
-    from harness.registry import load_plugin
-
-    plugin_paths = check_plugins(plugins)
-    for p in plugin_paths:
-        load_plugin(p)
-    options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
-                         cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
-    stepper_names = check_names("steppers", steppers)
-    problem_names = check_names("problems", problems)
-    bar, own_bar = progress_display(progress, "cells")
-    # Every experiment's cells are listed once, here: the whole run's size first, so the
-    # display's total does not grow; each `run_experiment` takes its list.
-    listed: dict[str, tuple[list, list]] = {}
-    versions: dict[tuple[str, str], Any] = {}
-    for exp in exps:
-        try:
-            cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
-            cells, skips = exp.cells(stepper_names, problem_names, cfg)
-            listed[exp.name] = (list(cells), list(skips))
-        except Exception:  # run_experiment lists it again and reports the failure properly
-            break
-    counted = len(listed) == len(exps)
-    if counted:
-        bar.add_total(sum(len(cells) for cells, _ in listed.values()))
-    client = None
-    own_client = False
-    out: dict[str, RunResult] = {}
-    try:
-        if sched is not None:
-            client, own_client = dask_client(sched)
-        for i, exp in enumerate(exps, 1):
-            bar.set_description(f"[{i}/{len(exps)}] {exp.name}")
-            out[exp.name] = run_experiment(
-                exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
-                options=options, progress=bar, _client=client, _counted=counted, allow_empty=True,
-                _listed=listed.get(exp.name), _versions=versions,
-            )
-            if sched is not None:
-                out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None
-    finally:
-        if own_client and client is not None:
-            client.close()
-        if own_bar:
-            bar.close()
-    if out and not any(r.n_cells for r in out.values()):
-        raise no_cells_error(list(out), pd.concat([r.skips for r in out.values()], ignore_index=True),
-                             stepper_names, problem_names)
-    return out

@@ -33,7 +33,17 @@ def validate_rows(experiment: Experiment, rows: Any) -> pd.DataFrame:
 
     Always: a non-empty DataFrame with distinct, non-empty string column names, columns of
     numbers, booleans or strings (plain scalars; no complex values, lists or objects). Declared by
-    the experiment: `row_dtypes` (column -> kind) and `finite_columns` (no NaN/inf there)."""
+    the experiment: `row_dtypes` (column -> kind) and `finite_columns` (no NaN/inf there).
+
+    Parameters
+    ----------
+    experiment : Experiment, the experiment that made the rows.
+    rows : any, what its `run_cell` returned.
+
+    Returns
+    -------
+    DataFrame: `rows`, checked.
+    """
     if not isinstance(rows, pd.DataFrame):
         raise CellOutputError(f"run_cell returned {type(rows).__name__}, expected a pandas DataFrame")
     if len(rows) == 0:

@@ -40,20 +40,49 @@ STALE_CLAIMS_S = 24 * 3600.0
 
 
 def short_traceback(exc: BaseException, frames: int = 6) -> str:
-    """The last `frames` frames of `exc`'s traceback as text, at most 4000 characters."""
+    """The last `frames` frames of `exc`'s traceback as text, at most 4000 characters.
+
+    Parameters
+    ----------
+    exc : BaseException, the exception.
+    frames : int, optional, how many of the innermost frames (default 6).
+
+    Returns
+    -------
+    str
+    """
     te = traceback.TracebackException.from_exception(exc, limit=-frames)
     text = "".join(te.format()).strip()
     return text if len(text) <= 4000 else "..." + text[-3997:]
 
 
 def one_line(text: str, limit: int = 500) -> str:
-    """`text` on one line, whitespace collapsed, cut to `limit` characters."""
+    """`text` on one line, whitespace collapsed, cut to `limit` characters.
+
+    Parameters
+    ----------
+    text : str, the text.
+    limit : int, optional, the longest result (default 500), "..." marking a cut.
+
+    Returns
+    -------
+    str
+    """
     line = " ".join(str(text).split())
     return line if len(line) <= limit else line[: limit - 3] + "..."
 
 
 def plugin_spec(path: str | os.PathLike) -> dict:
-    """A plugin file as data a worker can rebuild it from: path, name, sha256 and source bytes."""
+    """A plugin file as data a worker can rebuild it from: path, name, sha256 and source bytes.
+
+    Parameters
+    ----------
+    path : str or PathLike, the plugin file.
+
+    Returns
+    -------
+    dict
+    """
     p = Path(path).resolve()
     data = p.read_bytes()
     return {"path": str(p), "name": p.name, "sha256": hashlib.sha256(data).hexdigest(), "source": data}
@@ -84,7 +113,17 @@ _shipped: dict[str, list] = {}
 def shipped_objects(stepper_names: Sequence[str], problem_names: Sequence[str]) -> bytes | None:
     """The steppers and problems of a run that a worker cannot import (registered in this process
     by `harness.api.check`: a user's function stepper, a `Problem` object), cloudpickled, or
-    None when there are none."""
+    None when there are none.
+
+    Parameters
+    ----------
+    stepper_names : sequence of str, the run's steppers.
+    problem_names : sequence of str, the run's problems.
+
+    Returns
+    -------
+    bytes or None
+    """
     from harness.registry import problems, steppers
 
     objs = [reg.get(n) for reg, names in ((steppers, stepper_names), (problems, problem_names))
@@ -137,7 +176,16 @@ _FATAL_MARK = "Fatal Python error:"
 
 
 def claim_verdict(text: str) -> tuple[str, str] | None:
-    """(failure kind, message) when a claim file says why its worker died, else None."""
+    """(failure kind, message) when a claim file says why its worker died, else None.
+
+    Parameters
+    ----------
+    text : str, the claim file's content.
+
+    Returns
+    -------
+    (str, str) or None
+    """
     for line in text.splitlines():
         if line.startswith(_HARD_TIMEOUT_MARK):
             seconds = line[len(_HARD_TIMEOUT_MARK):].strip()
@@ -190,7 +238,18 @@ def _watch_for_orphaning(parent: int) -> None:
 
 def execute(task: Mapping[str, Any]) -> dict:
     """Run one cell and return its outcome; never raises (a worker's entry point). The time
-    limit and `wall_s` cover `run_cell` and the check of its rows, not the worker's set-up."""
+    limit and `wall_s` cover `run_cell` and the check of its rows, not the worker's set-up.
+
+    Parameters
+    ----------
+    task : mapping
+        The task's payload: cell, key, experiment, config, and optionally timeout, claim_dir,
+        parent_pid, hard_kill, plugins, objects and the version to match.
+
+    Returns
+    -------
+    dict: key, ok, kind, message, traceback, rows (the checked DataFrame or None), wall_s, worker.
+    """
     cell: Cell = task["cell"]
     timeout = task.get("timeout")
     out: dict[str, Any] = {"key": task["key"], "ok": False, "kind": "error", "message": "",

@@ -52,6 +52,7 @@ from harness.stepper.records import (
     check_step_size,
     check_steps,
 )
+from harness.stepper.replay import NonfiniteReplay, made_nan
 
 __all__ = [
     "StepperInfo",
@@ -69,27 +70,7 @@ __all__ = [
     "StepperOutputError",
 ]
 
-# A step that turns a finite state no larger than this into NaN (with no inf anywhere) is the
-# stepper's fault, not a blow-up: overflow gives inf first, and NaN needs inf - inf, 0 * inf or
-# 0 / 0 -- unless the step overflowed on the way (checked by replaying it with overflow trapped).
-NAN_FROM_FINITE_LIMIT = 1e100
-# A non-finite trajectory is replayed to find its first non-finite step: the run is cut into
-# this many chunks first, then the failing chunk is stepped one step at a time.
-_REPLAY_CHUNKS = 64
-
-
-def _made_nan(before: np.ndarray, after: np.ndarray) -> bool:
-    """True when one step turned the finite, moderate state `before` into NaN in every member
-    (at least one NaN per column) with no inf anywhere: not a blow-up (see
-    NAN_FROM_FINITE_LIMIT)."""
-    if not np.all(np.isfinite(before)) or np.any(np.isinf(after)):
-        return False
-    if before.size and np.max(np.abs(before)) > NAN_FROM_FINITE_LIMIT:
-        return False
-    return bool(after.size) and bool(np.all(np.any(np.isnan(after), axis=0)))
-
-
-class Stepper(ABC):
+class Stepper(NonfiniteReplay, ABC):
     """Base class: see the module docstring for the numbered contract."""
 
     info: StepperInfo
@@ -97,11 +78,32 @@ class Stepper(ABC):
 
     # -- optional hooks --------------------------------------------------------------------------
     def incompatibility(self, problem: Problem) -> str | None:
-        """A reason this stepper cannot run `problem` beyond the declared form, or None."""
+        """A reason this stepper cannot run `problem` beyond the declared form, or None.
+
+        Parameters
+        ----------
+        problem : Problem
+            The problem.
+
+        Returns
+        -------
+        str or None
+            The reason (this base class has none; subclasses may).
+        """
         return None
 
     def compatible(self, problem: Problem) -> bool:
-        """True when this stepper can integrate `problem` (see `check_compatible`)."""
+        """True when this stepper can integrate `problem` (see `check_compatible`).
+
+        Parameters
+        ----------
+        problem : Problem
+            The problem.
+
+        Returns
+        -------
+        bool
+        """
         try:
             check_compatible(self, problem)
         except IncompatibleError:
@@ -109,14 +111,21 @@ class Stepper(ABC):
         return True
 
     def fingerprint(self) -> str:
-        """Changes whenever the method changes: its coefficients and its class's source."""
+        """Changes whenever the method changes: its coefficients and its class's source.
+
+        Returns
+        -------
+        str
+            The record's name and claims, the coefficients' fingerprint (if any) and the source of
+            every class of the stepper below `Stepper`.
+        """
         from harness.sources import source_of
 
         parts = [self.info.name, repr(sorted(self.info.as_dict().items()))]
         if self.coefficients is not None and hasattr(self.coefficients, "fingerprint"):
             parts.append(self.coefficients.fingerprint())
         for cls in type(self).__mro__:
-            if cls in (object, ABC, Stepper):
+            if cls in (object, ABC, Stepper, NonfiniteReplay):
                 continue
             try:
                 parts.append(source_of(cls))
@@ -178,85 +187,6 @@ class Stepper(ABC):
             )
         return y
 
-    def _nan_error(self, step: int, before: np.ndarray) -> StepperOutputError:
-        return StepperOutputError(
-            f"stepper {self.info.name!r} turned a finite state (max |y| = "
-            f"{float(np.max(np.abs(before), initial=0.0)):.3g}) into NaN in one step (step {step}); "
-            "a blow-up passes through large values and inf first, so this is the stepper's fault"
-        )
-
-    def _explain_nonfinite(self, problem: Problem, h: float, t0: float, y: np.ndarray, pars,
-                           upto: int, prefix=None) -> None:
-        """Replay a run that ended non-finite within `upto` steps (after `prefix(dyn, c)` when
-        given) and raise `StepperOutputError` when its first non-finite step made NaN from a
-        finite, moderate state; return quietly for a genuine blow-up, and when the replay itself
-        fails (an adaptive stepper stepped in other chunks may refuse a non-finite state): the
-        run's own result, flagged non-finite, stands."""
-        try:
-            self._replay_nonfinite(problem, h, t0, y, pars, upto, prefix)
-        except StepperOutputError:
-            raise
-        except Exception:  # the diagnosis is best effort; the measurement is already flagged
-            return
-
-    def _replay_nonfinite(self, problem, h, t0, y, pars, upto, prefix) -> None:
-        shape = (problem.dim, y.shape[1])
-
-        def fresh():
-            dyn = problem.dynamics(pars, y.shape[1])
-            c = self._start(dyn, t0, y.copy(), h)
-            if prefix is not None:
-                prefix(dyn, c)
-            return dyn, c
-
-        with np.errstate(all="ignore"):
-            dyn, c = fresh()
-            before = self._checked_observe(dyn, c, shape, "at the start")
-            if prefix is None and _made_nan(y, before):
-                raise self._nan_error(0, y)
-            chunk = max(1, -(-upto // _REPLAY_CHUNKS))
-            done, start = 0, 0
-            while done < upto:  # coarse pass: the first chunk that ends non-finite
-                n = min(chunk, upto - done)
-                self._advance(dyn, c, n)
-                done += n
-                if not np.all(np.isfinite(self._checked_observe(dyn, c, shape, f"after step {done}"))):
-                    break
-                start = done
-            else:
-                return
-            dyn, c = fresh()
-            if start:
-                self._advance(dyn, c, start)
-            before = self._checked_observe(dyn, c, shape, f"after step {start}")
-            for k in range(start + 1, done + 1):  # fine pass through that chunk
-                self._advance(dyn, c, 1)
-                after = self._checked_observe(dyn, c, shape, f"after step {k}")
-                if not np.all(np.isfinite(after)):
-                    if _made_nan(before, after) and not self._overflows(fresh, k):
-                        raise self._nan_error(k, before)
-                    return
-                before = after
-
-    def _overflows(self, fresh, k: int) -> bool:
-        """True when step `k`, replayed with floating-point overflow trapped, overflows on the
-        way: a large step (a high-order composition's substeps, a cubic force) can reach 1e308
-        inside one step, and inf - inf then gives NaN with no inf in the state. A compiled loop
-        traps nothing; it mirrors a NumPy loop that is checked itself, so it gets the benefit of
-        the doubt."""
-        if self.info.implementation == "compiled":
-            return True
-        dyn, c = fresh()
-        with np.errstate(all="ignore"):
-            if k > 1:
-                self._advance(dyn, c, k - 1)
-        try:
-            with np.errstate(over="raise", invalid="ignore", divide="ignore", under="ignore"):
-                self._advance(dyn, c, 1)
-        except FloatingPointError:
-            return True
-        return False
-
     # -- public API ------------------------------------------------------------------------------
     def _prepare(self, problem, h, y0, t0, pars):
         if not isinstance(problem, Problem):
@@ -280,7 +210,31 @@ class Stepper(ABC):
         save_steps: Sequence[int] | None = None,
     ) -> Trajectory:
         """Advance `n_steps` steps of size `h` from (t0, y0); save the state at `save_steps`
-        (step indices, 0..n_steps; default: the start and the end)."""
+        (step indices, 0..n_steps; default: the start and the end).
+
+        Parameters
+        ----------
+        problem : Problem
+            The problem (compatible with this stepper).
+        h : float
+            Step size, positive and finite.
+        n_steps : int
+            Number of steps, 1 to MAX_STEPS.
+        y0 : array_like, optional
+            Initial states, (dim,) or (dim, N) (default the problem's start).
+        t0 : float, optional
+            Initial time (default the problem's).
+        pars : ndarray, optional
+            Parameter values, as in `Problem.pars_for`.
+        save_steps : sequence of int, optional
+            Step indices to save.
+
+        Returns
+        -------
+        Trajectory
+            The saved states, times, evaluation counts and wall time; `finite` False when a state
+            went non-finite (`StepperOutputError` when the stepper itself made a NaN).
+        """
         h, t0, y, dyn = self._prepare(problem, h, y0, t0, pars)
         n_steps = check_steps(n_steps)
         if save_steps is None:
@@ -341,7 +295,18 @@ class Stepper(ABC):
         t0: float | None = None,
         pars: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """`n_steps` forward, time reversed (h -> -h), `n_steps` back. Returns (start, returned)."""
+        """`n_steps` forward, time reversed (h -> -h), `n_steps` back. Returns (start, returned).
+
+        Parameters
+        ----------
+        problem, h, n_steps, y0, t0, pars
+            As in `integrate`.
+
+        Returns
+        -------
+        (ndarray, ndarray)
+            The observed start and the state after the way back, each shaped (dim, N).
+        """
         h, t0, y, dyn = self._prepare(problem, h, y0, t0, pars)
         n_steps = check_steps(n_steps)
         shape = (problem.dim, y.shape[1])
@@ -395,7 +360,26 @@ class Stepper(ABC):
     ) -> np.ndarray:
         """One step of the recurrence from exact past states (oldest first; `history_length`
         of them at t0, t0+h, ...). Returns the state after that step: its difference from the
-        exact state is the method's local error."""
+        exact state is the method's local error.
+
+        Parameters
+        ----------
+        problem : Problem
+            The problem.
+        h : float
+            Step size.
+        history : sequence of ndarray
+            `history_length` states, each (dim,) or (dim, N).
+        t0 : float, optional
+            Time of the oldest state (default the problem's start time).
+        pars : ndarray, optional
+            Parameter values, as in `Problem.pars_for`.
+
+        Returns
+        -------
+        ndarray, shape (dim, N)
+            The state at t0 + history_length h.
+        """
         h = check_step_size(h)
         if not isinstance(problem, Problem):
             raise InputError(f"`problem` must be a Problem, got {type(problem).__name__}")
@@ -413,7 +397,7 @@ class Stepper(ABC):
             self._step(dyn, c)
             c.n += 1
             after = self._checked_observe(dyn, c, states[-1].shape, "after one step from history")
-        if _made_nan(np.stack(states), after):
+        if made_nan(np.stack(states), after):
             raise self._nan_error(1, np.stack(states))
         return after
 
@@ -435,7 +419,18 @@ class AdaptiveStepper(Stepper):
     tol: float = 1e-10
 
     def with_tolerance(self, tol: float) -> AdaptiveStepper:
-        """A copy of this stepper with tolerance `tol` (a positive finite number)."""
+        """A copy of this stepper with tolerance `tol` (a positive finite number).
+
+        Parameters
+        ----------
+        tol : float
+            The tolerance.
+
+        Returns
+        -------
+        AdaptiveStepper
+            A shallow copy with `tol` set (and its record's `extra` updated by `extra_info`).
+        """
         import copy
 
         tol = check_positive(tol, "`tol`")
@@ -448,5 +443,10 @@ class AdaptiveStepper(Stepper):
 
     def extra_info(self) -> dict | None:
         """The record's `extra` entries at this stepper's tolerance, or None to keep them as
-        they are; `with_tolerance` puts them on the copy's record."""
+        they are; `with_tolerance` puts them on the copy's record.
+
+        Returns
+        -------
+        dict or None
+        """
         return None

@@ -55,20 +55,43 @@ from harness.problem.checks import check_positive
 from harness.sources import source_of
 from harness.stepper import FORMS, AdaptiveStepper, Carry, Stepper, StepperInfo
 
-__all__ = ["Field", "StateStepper", "AdaptiveStateStepper", "BACKENDS", "checked_float64", "batched_solve"]
+__all__ = ["Field", "StateStepper", "AdaptiveStateStepper", "BACKENDS", "checked_float64", "batched_solve",
+           "user_step_info"]
 
 BACKENDS = ("numpy", "jax")
 
 
 def batched_solve(A: Any, b: Any, xp: Any = np) -> Any:
-    """x with A[:, :, k] x[:, k] = b[:, k] for every member k (A (dim, dim, N), b (dim, N))."""
+    """x with A[:, :, k] x[:, k] = b[:, k] for every member k (A (dim, dim, N), b (dim, N)).
+
+    Parameters
+    ----------
+    A : array, shape (dim, dim, N), one matrix per member.
+    b : array, shape (dim, N), one right-hand side per member.
+    xp : module, optional, the array namespace (numpy, or jax.numpy).
+
+    Returns
+    -------
+    array, shape (dim, N): the solutions.
+    """
     mats = xp.moveaxis(A, -1, 0)
     rhs = xp.moveaxis(b, -1, 0)[..., None]
     return xp.moveaxis(xp.linalg.solve(mats, rhs)[..., 0], 0, -1)
 
 
 def checked_float64(y: Any, name: str, when: str) -> np.ndarray:
-    """`y` as a float64 array; `StepperOutputError` when it holds fewer than 64-bit floats."""
+    """`y` as a float64 array; `StepperOutputError` when it holds fewer than 64-bit floats.
+
+    Parameters
+    ----------
+    y : array_like, a state a library step returned.
+    name : str, the stepper's name (for the message).
+    when : str, where in the run (for the message).
+
+    Returns
+    -------
+    ndarray: `y` as float64; `StepperOutputError` for a narrower float or a complex state.
+    """
     dtype = getattr(y, "dtype", None)
     if dtype is not None and np.issubdtype(np.dtype(dtype), np.floating) and np.dtype(dtype).itemsize < 8:
         raise StepperOutputError(
@@ -82,6 +105,40 @@ def checked_float64(y: Any, name: str, when: str) -> np.ndarray:
     return np.asarray(y, dtype=np.float64)
 
 
+def user_step_info(step: Callable, name: str | None, order: int, evals: int, claims: dict,
+                   what: str, implementation: str) -> StepperInfo:
+    """The `StepperInfo` of a stepper made from user functions, as `FunctionStepper` and
+    `StateStepper` declare it (family "user", its claims taken as given).
+
+    Parameters
+    ----------
+    step : the step function (its name, module, qualified name and docstring fill the blanks).
+    name, order, evals : the stepper's name (None: the function's), claimed order and
+        evaluations per step; claims : implicit, symplectic, symmetric, form,
+        velocity_dependent, reference and description as the constructor took them.
+    what, implementation : how the reference and `implementation` name the functions.
+
+    Returns
+    -------
+    StepperInfo
+    """
+    where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
+    return StepperInfo(
+        name=name or getattr(step, "__name__", "user-step"),
+        family="user",
+        claimed_order=order,
+        explicit=not claims["implicit"],
+        symplectic=bool(claims["symplectic"]),
+        symmetric=bool(claims["symmetric"]),
+        evals_per_step=evals,
+        form=claims["form"],
+        velocity_dependent=bool(claims["velocity_dependent"]),
+        reference=claims["reference"] or f"user-supplied {what} {where}",
+        description=claims["description"] or (inspect.getdoc(step) or "").split("\n")[0],
+        implementation=implementation,
+    )
+
+
 class Field:
     """The problem's functions offered to a step (rule 5 of the module docstring)."""
 
@@ -93,13 +150,31 @@ class Field:
 
     @classmethod
     def numpy(cls, dyn: Dynamics) -> Field:
-        """A field over `dyn`'s counted NumPy functions."""
+        """A field over `dyn`'s counted NumPy functions.
+
+        Parameters
+        ----------
+        dyn : Dynamics, the problem's dynamics at fixed parameters.
+
+        Returns
+        -------
+        Field
+        """
         accel = dyn.accel if dyn.problem.newtonian is not None else None
         return cls(dyn.f, accel, dyn.jac, batched_solve)
 
     @classmethod
     def jax(cls, dyn: Dynamics) -> Field:
-        """A field over the problem's JAX functions, bound to `dyn`'s parameters."""
+        """A field over the problem's JAX functions, bound to `dyn`'s parameters.
+
+        Parameters
+        ----------
+        dyn : Dynamics, the problem's dynamics (its problem and parameter values are used).
+
+        Returns
+        -------
+        Field
+        """
         import jax.numpy as jnp
 
         from harness.jax_problem import jax_functions
@@ -190,25 +265,19 @@ class StateStepper(Stepper):
                         "velocity_dependent": velocity_dependent, "backend": backend}
         self._loops: dict[Any, Callable] = {}
         self._fields: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # one per Dynamics
-        where = f"{getattr(step, '__module__', '?')}.{getattr(step, '__qualname__', repr(step))}"
-        self.info = StepperInfo(
-            name=name or getattr(step, "__name__", "user-state-step"),
-            family="user",
-            claimed_order=order,
-            explicit=not implicit,
-            symplectic=bool(symplectic),
-            symmetric=bool(symmetric),
-            evals_per_step=evals,
-            form=form,
-            velocity_dependent=bool(velocity_dependent),
-            reference=reference or f"user-supplied init/step functions {where}",
-            description=description or (inspect.getdoc(step) or "").split("\n")[0],
-            implementation=f"user init/step ({backend})",
-        )
+        self.info = user_step_info(
+            step, name or getattr(step, "__name__", "user-state-step"), order, evals,
+            dict(self._claims, reference=reference, description=description),
+            "init/step functions", f"user init/step ({backend})")
 
     def embedded(self) -> StateStepper:
         """The embedded method of a pair as a stepper of its own (rule 7), claiming
-        `embedded_order`, named `<name>@embedded`."""
+        `embedded_order`, named `<name>@embedded`.
+
+        Returns
+        -------
+        StateStepper: `InputError` when the stepper declares no `error`.
+        """
         if self.error_function is None:
             raise InputError(f"stepper {self.info.name!r} declares no embedded pair (`error`)")
         init, step, read_y, error = self.init_function, self.step_function, self.y_function, \
@@ -236,6 +305,13 @@ class StateStepper(Stepper):
         return hat
 
     def fingerprint(self) -> str:
+        """`Stepper.fingerprint` plus the source of the init/step/y/reverse/error functions, the
+        history length and the parent's fingerprint (an embedded method's).
+
+        Returns
+        -------
+        str
+        """
         parts = []
         for fn in (self.init_function, self.step_function, self.y_function, self.reverse_function,
                    self.error_function):
@@ -398,6 +474,12 @@ class AdaptiveStateStepper(StateStepper, AdaptiveStepper):
         self.info = dataclasses.replace(self.info, adaptive=True, extra=self.extra_info())
 
     def extra_info(self) -> dict:
+        """The tolerance, recorded on the stepper's claims.
+
+        Returns
+        -------
+        dict: {"tol": the tolerance}.
+        """
         return {"tol": self.tol}
 
     def _init_options(self) -> dict:

@@ -64,7 +64,12 @@ class StepperInfo:
             raise InputError(f"stepper {self.name!r}: `reference` (literature source) is required")
 
     def as_dict(self) -> dict[str, Any]:
-        """The claims as one flat dict (the `extra` entries merged in)."""
+        """The claims as one flat dict (the `extra` entries merged in).
+
+        Returns
+        -------
+        dict
+        """
         d = asdict(self)
         d.update(d.pop("extra"))
         return d
@@ -110,7 +115,17 @@ class Trajectory:
 
 
 def check_step_size(h: Any) -> float:
-    """`h` as a positive finite float, or `InputError` naming `h`."""
+    """`h` as a positive finite float, or `InputError` naming `h`.
+
+    Parameters
+    ----------
+    h : any
+        The step size.
+
+    Returns
+    -------
+    float
+    """
     x = check_time(h, "h")
     if x <= 0.0:
         raise InputError(f"`h` must be positive, got {x!r}")
@@ -118,12 +133,32 @@ def check_step_size(h: Any) -> float:
 
 
 def check_steps(n: Any, name: str = "n_steps") -> int:
-    """`n` as a step count in [1, MAX_STEPS], or `InputError` naming `name`."""
+    """`n` as a step count in [1, MAX_STEPS], or `InputError` naming `name`.
+
+    Parameters
+    ----------
+    n : any
+        The step count.
+    name : str, optional
+        The argument's name in the message (default "n_steps").
+
+    Returns
+    -------
+    int
+    """
     return check_count(n, f"`{name}`", MAX_STEPS)
 
 
 def check_compatible(stepper: Stepper, problem: Problem) -> None:
-    """Raise IncompatibleError when `stepper` cannot integrate `problem` (with the reason)."""
+    """Raise IncompatibleError when `stepper` cannot integrate `problem` (with the reason).
+
+    Parameters
+    ----------
+    stepper : Stepper
+        The stepper: its declared form and velocity dependence, and `incompatibility`.
+    problem : Problem
+        The problem.
+    """
     info = stepper.info
     if info.form == "newtonian" and problem.newtonian is None:
         raise IncompatibleError(

@@ -60,7 +60,18 @@ def _cell_schema(df: pd.DataFrame) -> dict[str, str]:
 def encode_cell(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[pd.DataFrame, bytes]:
     """A finished cell as (its rows as they read back from the file, the file's bytes). The
     metadata holds `info`, the key, the schema, the column dtypes, the row count and the content
-    checksum. Raises `InputError` when the rows cannot be stored as Parquet."""
+    checksum. Raises `InputError` when the rows cannot be stored as Parquet.
+
+    Parameters
+    ----------
+    key : str, the cell's key.
+    rows : DataFrame, its rows.
+    info : mapping, its metadata (made JSON-safe).
+
+    Returns
+    -------
+    (DataFrame, bytes)
+    """
     plain = {**to_jsonable(dict(info)), "schema": CELL_SCHEMA, "key": key}
     table = arrow_table(rows)
     back = table.to_pandas()  # what a Parquet file of `table` reads back as (its Arrow schema)
@@ -71,7 +82,18 @@ def encode_cell(key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> tuple[
 
 def decode_cell(data: bytes, path: str | os.PathLike, key: str | None = None) -> tuple[pd.DataFrame, dict]:
     """(rows, info) of a cell file's bytes, after checking its schema, key, columns, dtypes,
-    row count and content checksum; `CorruptResultsError` naming `path` otherwise."""
+    row count and content checksum; `CorruptResultsError` naming `path` otherwise.
+
+    Parameters
+    ----------
+    data : bytes, the file's content.
+    path : str or PathLike, where it came from (for messages).
+    key : str, optional, the key it must hold.
+
+    Returns
+    -------
+    (DataFrame, dict)
+    """
     df, info = decode_parquet(data, path)
     if info.get("schema") != CELL_SCHEMA:
         raise CorruptResultsError(path, f"not a harness cell file of schema {CELL_SCHEMA!r} "
@@ -118,13 +140,31 @@ class CellCache:
         self.root = Path(root) / "cells"
 
     def path(self, key: str) -> Path:
-        """The file that holds the cell with key `key` (32 lowercase hex digits), existing or not."""
+        """The file that holds the cell with key `key` (32 lowercase hex digits), existing or not.
+
+        Parameters
+        ----------
+        key : str, the cell key; `InputError` otherwise.
+
+        Returns
+        -------
+        Path: ``<root>/<key[:2]>/<key>.parquet``.
+        """
         if not isinstance(key, str) or not _CELL_KEY.match(key):
             raise InputError(f"`key` must be 32 lowercase hex digits, got {key!r}")
         return self.root / key[:2] / f"{key}.parquet"
 
     def get(self, key: str) -> tuple[pd.DataFrame, dict] | None:
-        """(rows, info) of a finished cell, or None when it is not cached."""
+        """(rows, info) of a finished cell, or None when it is not cached.
+
+        Parameters
+        ----------
+        key : str, the cell key.
+
+        Returns
+        -------
+        (DataFrame, dict) or None: `CorruptResultsError` when the file exists but is damaged.
+        """
         return self._read(self.path(key), key)
 
     def _read(self, p: Path, key: str) -> tuple[pd.DataFrame, dict] | None:
@@ -144,7 +184,17 @@ class CellCache:
 
     def get_or_discard(self, key: str, kind: str = "cells") -> tuple[pd.DataFrame, dict] | None:
         """Like `get` (`kind='cells'`) or `get_pack` (`'packs'`, `'summaries'`), but a damaged
-        entry is removed, named in one warning line on stderr, and read as missing."""
+        entry is removed, named in one warning line on stderr, and read as missing.
+
+        Parameters
+        ----------
+        key : str, the cell or pack key.
+        kind : str, optional, 'cells' (default), 'packs' or 'summaries'.
+
+        Returns
+        -------
+        (DataFrame, dict) or None
+        """
         path = self.path(key) if kind == "cells" else self.pack_path(key, kind)
         try:
             return self._read(path, key)
@@ -154,7 +204,13 @@ class CellCache:
 
     def discard(self, path: Path, reason: str) -> None:
         """Remove the damaged cache entry `path` with one warning line naming it; a directory
-        where an entry belongs is left (and named) for the user to move."""
+        where an entry belongs is left (and named) for the user to move.
+
+        Parameters
+        ----------
+        path : Path, the damaged entry.
+        reason : str, what is wrong with it (for the warning line).
+        """
         import sys
 
         if path.is_dir() and not path.is_symlink():
@@ -172,7 +228,12 @@ class CellCache:
 
     def check_writable(self) -> CellCache:
         """This cache, or `OutputError` (exit 77/73/74, one line naming the directory) when it
-        cannot be written: found before any cell runs, not as every cell's failure."""
+        cannot be written: found before any cell runs, not as every cell's failure.
+
+        Returns
+        -------
+        CellCache: self.
+        """
         import tempfile
 
         from harness.errors import OutputError
@@ -191,13 +252,33 @@ class CellCache:
     # -- packs: every cell of one experiment's run in one file --------------------------------------
     @staticmethod
     def pack_key(experiment: str, keys: Sequence[str]) -> str:
-        """The key of the pack holding exactly the cells `keys` of `experiment`, in that order."""
+        """The key of the pack holding exactly the cells `keys` of `experiment`, in that order.
+
+        Parameters
+        ----------
+        experiment : str, the experiment's name.
+        keys : sequence of str, the cell keys, in order.
+
+        Returns
+        -------
+        str: 32 lowercase hex digits.
+        """
         text = "\n".join(["harness-pack", str(experiment), *keys])
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     def pack_path(self, key: str, kind: str = "packs") -> Path:
         """The file of the pack with key `key` (beside the cell files, under `packs/`; a run's
-        cached summary under `summaries/`)."""
+        cached summary under `summaries/`).
+
+        Parameters
+        ----------
+        key : str, the pack key (32 lowercase hex digits).
+        kind : str, optional, 'packs' (default) or 'summaries'.
+
+        Returns
+        -------
+        Path
+        """
         if not isinstance(key, str) or not _CELL_KEY.match(key):
             raise InputError(f"`key` must be 32 lowercase hex digits, got {key!r}")
         if kind not in ("packs", "summaries"):
@@ -205,23 +286,66 @@ class CellCache:
         return self.root.parent / kind / key[:2] / f"{key}.parquet"
 
     def get_pack(self, key: str, kind: str = "packs") -> tuple[pd.DataFrame, dict] | None:
-        """(rows of every cell, info) of a pack, or None; checked like a cell file."""
+        """(rows of every cell, info) of a pack, or None; checked like a cell file.
+
+        Parameters
+        ----------
+        key : str, the pack key.
+        kind : str, optional, 'packs' (default) or 'summaries'.
+
+        Returns
+        -------
+        (DataFrame, dict) or None
+        """
         return self._read(self.pack_path(key, kind), key)
 
     def put_pack(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any],
                  kind: str = "packs") -> pd.DataFrame:
-        """Write a pack atomically; return its rows as they read back from the file."""
+        """Write a pack atomically; return its rows as they read back from the file.
+
+        Parameters
+        ----------
+        key : str, the pack key.
+        rows : DataFrame, every cell's rows.
+        info : mapping, the pack's metadata.
+        kind : str, optional, 'packs' (default) or 'summaries'.
+
+        Returns
+        -------
+        DataFrame
+        """
         back, data = encode_cell(key, rows, info)
         atomic_write_bytes(self.pack_path(key, kind), data)
         return back
 
     def put(self, key: str, rows: pd.DataFrame, info: Mapping[str, Any]) -> Path:
-        """Write a finished cell (encoded by `encode_cell`) atomically; return its path."""
+        """Write a finished cell (encoded by `encode_cell`) atomically; return its path.
+
+        Parameters
+        ----------
+        key : str, the cell key.
+        rows : DataFrame, its rows.
+        info : mapping, its metadata.
+
+        Returns
+        -------
+        Path
+        """
         _, data = encode_cell(key, rows, info)
         return self.put_encoded(key, data)
 
     def put_encoded(self, key: str, data: bytes) -> Path:
-        """Write the bytes `encode_cell` made for `key` atomically; return the path."""
+        """Write the bytes `encode_cell` made for `key` atomically; return the path.
+
+        Parameters
+        ----------
+        key : str, the cell key.
+        data : bytes, what `encode_cell` returned for it.
+
+        Returns
+        -------
+        Path
+        """
         p = self.path(key)
         atomic_write_bytes(p, data)
         return p

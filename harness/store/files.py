@@ -25,6 +25,10 @@ _META_MARK = b"harness"
 def fsync_dir(path: Path) -> None:
     """Flush the directory entry of `path` to disk (after a rename into it); a no-op where the
     system cannot open directories.
+
+    Parameters
+    ----------
+    path : Path, the directory.
     """
     try:
         fd = os.open(path, os.O_RDONLY)
@@ -42,7 +46,17 @@ def fsync_dir(path: Path) -> None:
 def atomic_writer(path: str | os.PathLike) -> Iterator[IO[bytes]]:
     """Open a temporary file beside `path` for writing; on success flush, fsync and rename it
     over `path`. On any error (or a crash) `path` keeps its previous content; the temporary file
-    is removed when Python still runs, and is hidden (`.name.*.tmp`) otherwise."""
+    is removed when Python still runs, and is hidden (`.name.*.tmp`) otherwise.
+
+    Parameters
+    ----------
+    path : str or PathLike, the file to replace; `OutputError` naming it when its directory cannot be written.
+
+    Yields
+    ------
+    binary file
+        The temporary file, open for writing.
+    """
     target = Path(path)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -73,13 +87,25 @@ def _output_error(exc: OSError, target: Path) -> OutputError:
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write `data` to `path` atomically (see `atomic_writer`)."""
+    """Write `data` to `path` atomically (see `atomic_writer`).
+
+    Parameters
+    ----------
+    path : str or PathLike, the file.
+    data : bytes, its new content.
+    """
     with atomic_writer(path) as fh:
         fh.write(data)
 
 
 def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
-    """Write `obj` as JSON (NumPy values converted, no NaN literals) atomically."""
+    """Write `obj` as JSON (NumPy values converted, no NaN literals) atomically.
+
+    Parameters
+    ----------
+    path : str or PathLike, the file.
+    obj : any, A JSON-able value (after `to_jsonable`).
+    """
     text = json.dumps(to_jsonable(obj), indent=1, allow_nan=False) + "\n"
     atomic_write_bytes(path, text.encode("utf-8"))
 
@@ -87,7 +113,16 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
 def arrow_table(df: pd.DataFrame) -> Any:
     """`df` (index dropped) as a pyarrow Table, the form `table_bytes` writes. Raises
     `InputError` when `df` cannot be stored (say, a column of mixed Python objects), with the
-    reason pyarrow gives."""
+    reason pyarrow gives.
+
+    Parameters
+    ----------
+    df : DataFrame
+
+    Returns
+    -------
+    pyarrow.Table
+    """
     import pyarrow as pa
 
     if not isinstance(df, pd.DataFrame):
@@ -99,7 +134,17 @@ def arrow_table(df: pd.DataFrame) -> Any:
 
 
 def table_bytes(table: Any, extra: Mapping[str, Any] | None = None) -> bytes:
-    """An `arrow_table` as Parquet bytes, `extra` in the file's metadata."""
+    """An `arrow_table` as Parquet bytes, `extra` in the file's metadata.
+
+    Parameters
+    ----------
+    table : pyarrow.Table
+    extra : mapping, optional, JSON-able metadata stored under the harness's key.
+
+    Returns
+    -------
+    bytes
+    """
     import pyarrow.parquet as pq
 
     try:
@@ -122,13 +167,33 @@ def _unstorable(exc: Exception) -> InputError:
 def encode_parquet(df: pd.DataFrame, extra: Mapping[str, Any] | None = None) -> bytes:
     """`df` (index dropped) as Parquet bytes, `extra` in the file's metadata. Raises
     `InputError` when `df` cannot be stored (say, a column of mixed Python objects), with the
-    reason pyarrow gives."""
+    reason pyarrow gives.
+
+    Parameters
+    ----------
+    df : DataFrame
+    extra : mapping, optional, JSON-able metadata.
+
+    Returns
+    -------
+    bytes
+    """
     return table_bytes(arrow_table(df), extra)
 
 
 def decode_parquet(data: bytes, path: str | os.PathLike = "<bytes>") -> tuple[pd.DataFrame, dict]:
     """(DataFrame, `extra` metadata or {}) from Parquet bytes; `CorruptResultsError` naming
-    `path` when they are not Parquet or the harness metadata is damaged."""
+    `path` when they are not Parquet or the harness metadata is damaged.
+
+    Parameters
+    ----------
+    data : bytes, the file's content.
+    path : str or PathLike, optional, where it came from (for messages).
+
+    Returns
+    -------
+    (DataFrame, dict)
+    """
     import pyarrow.parquet as pq
 
     try:
@@ -152,7 +217,18 @@ def decode_parquet(data: bytes, path: str | os.PathLike = "<bytes>") -> tuple[pd
 
 def write_parquet(path: str | os.PathLike, df: pd.DataFrame,
                   extra: Mapping[str, Any] | None = None) -> str:
-    """Write `df` as Parquet atomically (see `encode_parquet`); return the file's sha256."""
+    """Write `df` as Parquet atomically (see `encode_parquet`); return the file's sha256.
+
+    Parameters
+    ----------
+    path : str or PathLike, the file.
+    df : DataFrame
+    extra : mapping, optional, JSON-able metadata.
+
+    Returns
+    -------
+    str: the sha256 of the bytes written, in hex.
+    """
     data = encode_parquet(df, extra)
     atomic_write_bytes(path, data)
     return hashlib.sha256(data).hexdigest()
@@ -162,7 +238,17 @@ def read_bounded(path: str | os.PathLike, limit: int | None = None) -> bytes:
     """The bytes of the regular file `path` (links followed), read with a bound: a device, pipe
     or directory (a link to /dev/zero), or a file over `limit` bytes (default
     MAX_STORED_FILE_BYTES), raises `CorruptResultsError` naming it; a missing file raises
-    FileNotFoundError and another OS error OSError, for the caller to name."""
+    FileNotFoundError and another OS error OSError, for the caller to name.
+
+    Parameters
+    ----------
+    path : str or PathLike, the file.
+    limit : int, optional, the largest size accepted, in bytes.
+
+    Returns
+    -------
+    bytes
+    """
     import stat
 
     from harness.tolerances import MAX_STORED_FILE_BYTES
@@ -193,7 +279,19 @@ def read_parquet(
     """Read a Parquet file the harness wrote: (DataFrame, the `extra` metadata or {}).
 
     Checks, when given, the exact column list, the row count and the checksum; any mismatch,
-    or a file that is not Parquet, raises `CorruptResultsError` naming the file."""
+    or a file that is not Parquet, raises `CorruptResultsError` naming the file.
+
+    Parameters
+    ----------
+    path : str or PathLike, the file.
+    columns : list of str, optional, the exact columns it must have.
+    n_rows : int, optional, the row count it must have.
+    sha256 : str, optional, the checksum its bytes must have.
+
+    Returns
+    -------
+    (DataFrame, dict)
+    """
     p = Path(path)
     try:
         data = read_bounded(p)
@@ -213,7 +311,15 @@ def read_parquet(
 def check_frame(path: str | os.PathLike, df: pd.DataFrame, *, columns: list[str] | None = None,
                 n_rows: int | None = None) -> None:
     """`CorruptResultsError` naming `path` when `df`'s columns or row count differ from the
-    recorded ones (None: not checked)."""
+    recorded ones (None: not checked).
+
+    Parameters
+    ----------
+    path : str or PathLike, the file `df` came from (for the message).
+    df : DataFrame, the table read.
+    columns : list of str, optional, the recorded columns.
+    n_rows : int, optional, the recorded row count.
+    """
     if columns is not None and list(df.columns) != list(columns):
         raise CorruptResultsError(
             path, f"columns {list(map(str, df.columns))} differ from the recorded {list(columns)}"
@@ -225,6 +331,14 @@ def check_frame(path: str | os.PathLike, df: pd.DataFrame, *, columns: list[str]
 def read_json(path: Path) -> Any:
     """The parsed JSON file `path`; `CorruptResultsError` naming it when it is missing, not UTF-8,
     not JSON, or nested too deeply to be a harness file.
+
+    Parameters
+    ----------
+    path : Path, the file.
+
+    Returns
+    -------
+    any: the parsed value.
     """
     try:
         text = read_bounded(path).decode("utf-8")

@@ -61,7 +61,17 @@ class StoredRun:
 
     def table(self, name: str, experiment: str | None = None) -> pd.DataFrame:
         """One table ('rows', 'summary', 'failures', 'skips', 'cells') of one experiment, or of
-        all experiments stacked with an `experiment` column first."""
+        all experiments stacked with an `experiment` column first.
+
+        Parameters
+        ----------
+        name : str, 'rows', 'summary', 'failures', 'skips' or 'cells'.
+        experiment : str, optional, one experiment of the run (default all).
+
+        Returns
+        -------
+        DataFrame
+        """
         if name not in (*TABLES, "failures", "skips", "cells"):
             raise InputError(
                 f"`table` must be one of rows, summary, failures, skips, cells; got {name!r}"
@@ -204,7 +214,19 @@ def load_run(run: str | os.PathLike | None = None, *, root: str | os.PathLike | 
     `stored_rows` maps experiments to rows frames already in their stored form (decoded from
     Parquet, as a run's packs are: the file just saved from them decodes to an equal frame);
     they are taken instead of decoding their files again, after the same column and row-count
-    checks."""
+    checks.
+
+    Parameters
+    ----------
+    run : str or PathLike, optional, which run (see above).
+    root : str or PathLike, optional, the results root.
+    tables : sequence of str, optional, the tables to read.
+    stored_rows : mapping, optional, rows frames already decoded, by experiment.
+
+    Returns
+    -------
+    StoredRun
+    """
     unknown = [t for t in tables if t not in TABLES]
     if isinstance(tables, str) or unknown:
         raise InputError(f"`tables` must list tables among {list(TABLES)}, got {tables!r}")

@@ -23,7 +23,17 @@ RUN_ID = re.compile(r"^(\d{8}T\d{6}Z)-([0-9a-z]+)(?:-(\d+))?$")
 # -- locations ------------------------------------------------------------------------------------
 def results_root(root: str | os.PathLike | None = None, *, create: bool = False) -> Path:
     """The directory holding saved runs: `root`, else `HARNESS_RESULTS_DIR`, else
-    `<project>/results` (the current directory's `results/` when installed elsewhere)."""
+    `<project>/results` (the current directory's `results/` when installed elsewhere).
+
+    Parameters
+    ----------
+    root : str or PathLike, optional, the directory.
+    create : bool, optional, create it when missing.
+
+    Returns
+    -------
+    Path
+    """
     root = default_directory(root, "HARNESS_RESULTS_DIR", "results")
     if not isinstance(root, str | os.PathLike) or not str(root):
         raise InputError(f"`root` must be a directory path, got {root!r}")
@@ -46,7 +56,18 @@ def _run_sort_key(run_id: str) -> tuple:
 
 def new_run_id(root: str | os.PathLike | None = None, *, short_sha: str | None = None,
                now: _dt.datetime | None = None) -> str:
-    """A fresh, sortable run id `YYYYmmddTHHMMSSZ-<sha>` not yet used under `root`."""
+    """A fresh, sortable run id `YYYYmmddTHHMMSSZ-<sha>` not yet used under `root`.
+
+    Parameters
+    ----------
+    root : str or PathLike, optional, the results root (ids already used there are skipped).
+    short_sha : str, optional, the code's short commit hash (default "nogit").
+    now : datetime, optional, the time stamped (default now, UTC).
+
+    Returns
+    -------
+    str
+    """
     when = (now or utc_now()).astimezone(_dt.UTC)
     stamp = when.strftime("%Y%m%dT%H%M%SZ")
     sha = (short_sha or "nogit").lower()
@@ -64,7 +85,16 @@ def new_run_id(root: str | os.PathLike | None = None, *, short_sha: str | None =
 
 
 def list_runs(root: str | os.PathLike | None = None) -> list[str]:
-    """Saved run ids under `root`, oldest first (directories named like run ids)."""
+    """Saved run ids under `root`, oldest first (directories named like run ids).
+
+    Parameters
+    ----------
+    root : str or PathLike, optional, the results root.
+
+    Returns
+    -------
+    list of str
+    """
     base = results_root(root)
     if not base.is_dir():
         return []
@@ -74,7 +104,17 @@ def list_runs(root: str | os.PathLike | None = None) -> list[str]:
 
 def resolve_run(run: str | os.PathLike | None = None, root: str | os.PathLike | None = None) -> Path:
     """The directory of a saved run: None or 'latest' (newest under `root`), a run id under
-    `root`, or a path to a run directory."""
+    `root`, or a path to a run directory.
+
+    Parameters
+    ----------
+    run : str or PathLike, optional, which run.
+    root : str or PathLike, optional, the results root.
+
+    Returns
+    -------
+    Path: `ResultsError` when there is no such run.
+    """
     base = results_root(root)
     if run is None or (isinstance(run, str) and run == "latest"):
         ids = list_runs(base)
@@ -161,6 +201,17 @@ def save_run(
     complete or not at all (assembled in `.staging-...` and renamed). An existing run is never
     overwritten: an explicit `run_id` that exists raises `ResultsError`; an OS error (read-only
     or full disk, a file where the directory belongs) raises `OutputError` naming the path.
+
+    Parameters
+    ----------
+    results : iterable or mapping of RunResult, one result per experiment.
+    root : str or PathLike, optional, the results root.
+    run_id : str, optional, the run id (default a fresh one, `new_run_id`).
+    config : mapping, optional, the run's own configuration.
+
+    Returns
+    -------
+    Path
     """
     try:
         return _save_run(results, root=root, run_id=run_id, config=config)

@@ -7,21 +7,27 @@
   (`splitting_propagator`, `second_order_lmm_amplification`).
 - Intervals (`real_stability_interval`, `imag_stability_interval`, `stability_boundary`): the
   first crossing of |R| = 1 on a scan, refined by root finding (never read off a grid).
+
+Arguments shared by the functions below: `method` or `scheme` is a coefficient object of the
+family its annotation names; `z` holds complex points h lambda and `hw` values of h omega, of
+any shape, and a result over them keeps that shape.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
 from harness.errors import InputError
 from harness.problem.checks import check_positive
 from harness.theory.checks import check_type
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
 
 __all__ = ["rk_stability_function", "lmm_amplification", "second_order_lmm_amplification",
            "splitting_propagator", "spectral_radius", "splitting_amplification",
@@ -30,8 +36,17 @@ __all__ = ["rk_stability_function", "lmm_amplification", "second_order_lmm_ampli
 
 
 def rk_stability_function(tableau: ButcherTableau, z: Any) -> np.ndarray:
-    """R(z) = 1 + z b^T (I - zA)^{-1} e for an array of complex z (poles give inf or nan)."""
-    check_type(tableau, ButcherTableau, "tableau")
+    """R(z) = 1 + z b^T (I - zA)^{-1} e for an array of complex z (poles give inf or nan).
+
+    Parameters
+    ----------
+    tableau : ButcherTableau; z : complex array_like.
+
+    Returns
+    -------
+    ndarray, complex, shape of `z`: R(z).
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     z = np.asarray(z, dtype=complex)
     with np.errstate(all="ignore"):
         try:
@@ -76,8 +91,17 @@ def _max_root_modulus(coeffs: np.ndarray) -> np.ndarray:
 
 def lmm_amplification(method: LinearMultistep, z: Any) -> np.ndarray:
     """The largest modulus of the roots of rho(zeta) - z sigma(zeta) for each complex z: the
-    method is stable at z when it is <= 1 (with simple roots on the unit circle)."""
-    check_type(method, LinearMultistep, "method")
+    method is stable at z when it is <= 1 (with simple roots on the unit circle).
+
+    Parameters
+    ----------
+    method : LinearMultistep; z : complex array_like (h lambda).
+
+    Returns
+    -------
+    ndarray, shape of `z`: the largest root modulus at each point.
+    """
+    check_type(method, "multistep", "method")
     z = np.asarray(z, dtype=complex)
     coeffs = method.alpha[None, :] - z.reshape(-1, 1) * method.beta[None, :]
     return _max_root_modulus(coeffs).reshape(z.shape)
@@ -85,8 +109,17 @@ def lmm_amplification(method: LinearMultistep, z: Any) -> np.ndarray:
 
 def second_order_lmm_amplification(method: SecondOrderMultistep, hw: Any) -> np.ndarray:
     """For x'' = -omega^2 x: the largest root modulus of sum_j (alpha_j + (h omega)^2 beta_j)
-    zeta^j, for each h*omega in `hw`."""
-    check_type(method, SecondOrderMultistep, "method")
+    zeta^j, for each h*omega in `hw`.
+
+    Parameters
+    ----------
+    method : SecondOrderMultistep; hw : array_like.
+
+    Returns
+    -------
+    ndarray, shape of `hw`: the largest root modulus at each value.
+    """
+    check_type(method, "second-order multistep", "method")
     hw = np.asarray(hw, dtype=float)
     coeffs = method.alpha[None, :] + (hw.reshape(-1, 1) ** 2) * method.beta[None, :]
     return _max_root_modulus(coeffs.astype(complex)).reshape(hw.shape)
@@ -95,8 +128,17 @@ def second_order_lmm_amplification(method: SecondOrderMultistep, hw: Any) -> np.
 def splitting_propagator(scheme: SplittingScheme, hw: Any) -> np.ndarray:
     """The one-step matrix of `scheme` on (x, v) for x'' = -x with step h*omega (omega = 1):
     a drift a is [[1, a h], [0, 1]], a kick b is [[1, 0], [-b h, 1]], applied in sequence order.
-    Shape hw.shape + (2, 2)."""
-    check_type(scheme, SplittingScheme, "scheme")
+    Shape hw.shape + (2, 2).
+
+    Parameters
+    ----------
+    scheme : SplittingScheme, the composition; hw : array_like.
+
+    Returns
+    -------
+    ndarray, shape hw.shape + (2, 2): the one-step matrices.
+    """
+    check_type(scheme, "splitting", "scheme")
     hw = np.asarray(hw, dtype=float)
     flat = hw.reshape(-1)
     M = np.broadcast_to(np.eye(2), (flat.size, 2, 2)).copy()
@@ -111,7 +153,17 @@ def splitting_propagator(scheme: SplittingScheme, hw: Any) -> np.ndarray:
 
 
 def spectral_radius(M: np.ndarray) -> np.ndarray:
-    """Largest eigenvalue modulus of a batch of square matrices (..., k, k); inf if not finite."""
+    """Largest eigenvalue modulus of a batch of square matrices (..., k, k); inf if not finite.
+
+    Parameters
+    ----------
+    M : array_like, shape (..., k, k)
+
+    Returns
+    -------
+    ndarray, shape M.shape[:-2]
+        max |eigenvalue| of each matrix.
+    """
     M = np.asarray(M)
     flat = M.reshape(-1, M.shape[-2], M.shape[-1])
     out = np.full(flat.shape[0], np.inf)
@@ -122,7 +174,16 @@ def spectral_radius(M: np.ndarray) -> np.ndarray:
 
 
 def splitting_amplification(scheme: SplittingScheme, hw: Any) -> np.ndarray:
-    """Spectral radius of `splitting_propagator(scheme, hw)`."""
+    """Spectral radius of `splitting_propagator(scheme, hw)`.
+
+    Parameters
+    ----------
+    scheme, hw : as for `splitting_propagator`.
+
+    Returns
+    -------
+    ndarray, shape of `hw`: the spectral radius of the one-step matrix at each value.
+    """
     return spectral_radius(splitting_propagator(scheme, hw))
 
 
@@ -159,6 +220,19 @@ def stability_boundary(
     is empty: e.g. explicit Euler on the imaginary axis) and +inf when no scan point up to
     `limit` is unstable (reported as unbounded up to `limit`). An unstable gap narrower than the
     scan step is not seen.
+
+    Parameters
+    ----------
+    amplification : callable, positions x (float array) -> amplification factors (array of the same shape).
+    limit : float, optional, the end of the search (STABILITY_SEARCH_LIMIT).
+    scan_step : float, optional, the linear scan's step, in (0, min(limit, 1)] (STABILITY_SCAN_STEP).
+    amplification_tol : float, optional
+        How far above 1 a factor may be and still count as stable (STABILITY_AMPLIFICATION_TOL).
+    xtol : float, optional, the bracket width at which Brent's method stops (STABILITY_XTOL).
+
+    Returns
+    -------
+    float: the end of the stable interval: 0.0, a finite x, or +inf.
     """
     from scipy.optimize import brentq
 
@@ -189,15 +263,48 @@ def stability_boundary(
 
 def real_stability_interval(R: Callable[[np.ndarray], np.ndarray], **kwargs: Any) -> float:
     """x such that [-x, 0] is the stable interval on the negative real axis of the amplification
-    function `R` (complex z array -> R(z) or |R(z)|); see `stability_boundary`."""
+    function `R` (complex z array -> R(z) or |R(z)|); see `stability_boundary`.
+
+    Parameters
+    ----------
+    R : callable, complex z array -> R(z) or |R(z)|.
+    **kwargs
+        Passed to `stability_boundary` (limit, scan_step, amplification_tol, xtol).
+
+    Returns
+    -------
+    float: the length x of the stable interval [-x, 0] (0.0, finite, or inf).
+    """
     return stability_boundary(lambda x: np.abs(R(-np.asarray(x) + 0j)), **kwargs)
 
 
 def imag_stability_interval(R: Callable[[np.ndarray], np.ndarray], **kwargs: Any) -> float:
-    """The largest y with |R(i s)| <= 1 for s in [0, y]; see `stability_boundary`."""
+    """The largest y with |R(i s)| <= 1 for s in [0, y]; see `stability_boundary`.
+
+    Parameters
+    ----------
+    R : callable, complex z array -> R(z) or |R(z)|.
+    **kwargs
+        Passed to `stability_boundary`.
+
+    Returns
+    -------
+    float: y (0.0, finite, or inf).
+    """
     return stability_boundary(lambda y: np.abs(R(1j * np.asarray(y))), **kwargs)
 
 
 def hw_stability_limit(amplification: Callable[[np.ndarray], np.ndarray], **kwargs: Any) -> float:
-    """The largest h*omega with spectral radius <= 1 on (0, h*omega]; see `stability_boundary`."""
+    """The largest h*omega with spectral radius <= 1 on (0, h*omega]; see `stability_boundary`.
+
+    Parameters
+    ----------
+    amplification : callable, h omega array -> spectral radius of the one-step map (array of the same shape).
+    **kwargs
+        Passed to `stability_boundary`.
+
+    Returns
+    -------
+    float: the limit (0.0, finite, or inf).
+    """
     return stability_boundary(amplification, **kwargs)

@@ -8,7 +8,18 @@ import numpy as np
 
 from harness.errors import InputError
 
-__all__ = ["check_int", "check_type"]
+__all__ = ["FAMILIES", "check_int", "check_type", "family_of"]
+
+# The coefficient families the theory reads: the `family` tag each coefficient class of
+# `harness.coefficients` declares -> that class's name (for messages). The theory reads the tag and
+# the arrays and never imports the classes, so the one arrow between the two modules points from
+# the coefficient objects to the theory they are asked about.
+FAMILIES = {
+    "runge-kutta": "ButcherTableau",
+    "splitting": "SplittingScheme",
+    "multistep": "LinearMultistep",
+    "second-order multistep": "SecondOrderMultistep",
+}
 
 def check_int(value: Any, name: str, lo: int, hi: int) -> int:
     """`value` as an int, after checking it is a whole number in [`lo`, `hi`].
@@ -19,8 +30,7 @@ def check_int(value: Any, name: str, lo: int, hi: int) -> int:
 
     Returns
     -------
-    int
-        `value` as a Python int.
+    int: `value` as a Python int.
     """
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         raise InputError(f"`{name}` must be a whole number, got {value!r}")
@@ -29,7 +39,27 @@ def check_int(value: Any, name: str, lo: int, hi: int) -> int:
     return int(value)
 
 
-def check_type(obj: Any, cls: type, name: str) -> None:
-    """Raise `InputError` naming `name` unless `obj` is an instance of `cls`."""
-    if not isinstance(obj, cls):
-        raise InputError(f"`{name}` must be a {cls.__name__}, got {type(obj).__name__}")
+def family_of(obj: Any) -> str | None:
+    """The coefficient family `obj` declares.
+
+    Parameters
+    ----------
+    obj : any object; a coefficient object declares its family as the class attribute `family`.
+
+    Returns
+    -------
+    str or None: one of the keys of `FAMILIES`, or None when `obj` declares none of them.
+    """
+    family = getattr(type(obj), "family", None)
+    return family if isinstance(family, str) and family in FAMILIES else None
+
+
+def check_type(obj: Any, family: str, name: str) -> None:
+    """Raise `InputError` naming `name` unless `obj` is a coefficient object of `family`.
+
+    Parameters
+    ----------
+    obj : the argument; family : a key of `FAMILIES`; name : the argument's name in the message.
+    """
+    if family_of(obj) != family:
+        raise InputError(f"`{name}` must be a {FAMILIES[family]}, got {type(obj).__name__}")

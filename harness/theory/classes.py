@@ -33,19 +33,17 @@ from __future__ import annotations
 
 import math
 from functools import cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau
 from harness.theory.checks import check_int, check_type
-from harness.theory.orders import (
-    MAX_TREE_ORDER,
-    RootedTree,
-    condition_tolerance,
-    elementary_weights,
-    rooted_trees,
-)
+from harness.theory.orders import MAX_TREE_ORDER, condition_tolerance, elementary_weights, rooted_trees
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau
+    from harness.theory.orders import RootedTree
 
 __all__ = ["tree_symmetry", "tree_survives", "rk_class_order", "rk_class_orders", "rk_error_defects",
            "rk_stage_order", "rk_stiffly_accurate"]
@@ -70,7 +68,18 @@ def _children_counts(max_order: int) -> tuple[tuple[int, ...], ...]:
 
 def tree_symmetry(tree: RootedTree, max_order: int | None = None) -> int:
     """sigma(t): the order of the tree's automorphism group, sigma([t_1^m_1 ... t_k^m_k]) =
-    prod m_i! sigma(t_i)^m_i (Hairer, Norsett & Wanner I, II.2, Definition 2.10)."""
+    prod m_i! sigma(t_i)^m_i (Hairer, Norsett & Wanner I, II.2, Definition 2.10).
+
+    Parameters
+    ----------
+    tree : RootedTree, a tree of `rooted_trees`.
+    max_order : int, optional
+        The `rooted_trees` table the tree's children index into (default: the tree's order).
+
+    Returns
+    -------
+    int: sigma(tree).
+    """
     trees = rooted_trees(max_order or max(tree.order, 1))
     out = 1
     for k in set(tree.children):
@@ -82,7 +91,18 @@ def tree_symmetry(tree: RootedTree, max_order: int | None = None) -> int:
 def tree_survives(tree: RootedTree, *, nystrom: bool = False, degree: int | None = None) -> bool:
     """True when the elementary differential F(tree) can be non-zero on the class: `nystrom`
     (x'' = g(x) as a first-order system) and/or a right-hand side polynomial of `degree` in the
-    state (None: any smooth field). See the module docstring."""
+    state (None: any smooth field). See the module docstring.
+
+    Parameters
+    ----------
+    tree : RootedTree, a tree of `rooted_trees`.
+    nystrom : bool, optional, the problem is x'' = g(x) written as a first-order system.
+    degree : int or None, optional, the right-hand side is a polynomial of this degree in the state.
+
+    Returns
+    -------
+    bool: whether the tree's order condition counts on that class.
+    """
     even, odd = _children_counts(tree.order)[tree.index] if tree.order <= MAX_TREE_ORDER else (0, 0)
     d = math.inf if degree is None else degree
     if nystrom:  # positions at one depth parity (at most one child), velocities at the other
@@ -99,8 +119,7 @@ def rk_class_order(tableau: ButcherTableau, *, nystrom: bool = False, degree: in
     Parameters
     ----------
     tableau : ButcherTableau
-    nystrom : bool
-        The class x'' = g(x) (acceleration free of velocities) written as a first-order system.
+    nystrom : bool, the class x'' = g(x) (acceleration free of velocities) written as a first-order system.
     degree : int or None
         The right-hand side is a polynomial of this degree in the state (None: not known to be).
     max_order : int, optional
@@ -113,7 +132,7 @@ def rk_class_order(tableau: ButcherTableau, *, nystrom: bool = False, degree: in
         The class order; at least `rk_order(tableau)`. A result equal to `max_order` means "at
         least that".
     """
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     if degree is not None:
         degree = check_int(degree, "degree", 1, 1000)
     if max_order is None:
@@ -125,8 +144,21 @@ def rk_class_order(tableau: ButcherTableau, *, nystrom: bool = False, degree: in
 def rk_class_orders(tableau: ButcherTableau, classes: list[tuple[bool, int | None]],
                     max_order: int | None = None) -> list[int]:
     """`rk_class_order` for several (nystrom, degree) classes at once: the elementary weights
-    are computed once and each violated condition is checked against every class."""
-    check_type(tableau, ButcherTableau, "tableau")
+    are computed once and each violated condition is checked against every class.
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+    classes : list of (bool, int or None), (nystrom, degree) pairs, as in `tree_survives`.
+    max_order : int, optional
+        The highest order checked (default: s for explicit s-stage methods, 2s otherwise,
+        capped at MAX_TREE_ORDER).
+
+    Returns
+    -------
+    list of int: the order on each class, in the order of `classes`.
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     if max_order is None:
         max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
@@ -147,11 +179,16 @@ def rk_error_defects(tableau: ButcherTableau, order: int) -> tuple[list[RootedTr
     times F(t)(y) (module docstring). Exact (Fraction) coefficients are used when the tableau
     was given exactly, so a defect far below float64 rounding is still its true value.
 
+    Parameters
+    ----------
+    tableau : ButcherTableau
+    order : int, the number of vertices, 1 to MAX_TREE_ORDER.
+
     Returns
     -------
     (trees, defects) : the trees of that order and a float array of their coefficients.
     """
-    check_type(tableau, ButcherTableau, "tableau")
+    check_type(tableau, "runge-kutta", "tableau")
     order = check_int(order, "order", 1, MAX_TREE_ORDER)
     trees = [t for t in rooted_trees(order) if t.order == order]
     if tableau.exact is not None:
@@ -182,8 +219,17 @@ def _exact_weights(exact: tuple, max_order: int) -> list:
 def rk_stage_order(tableau: ButcherTableau) -> int:
     """The stage order: the largest q such that B(q) and C(q) hold (Hairer & Wanner II, IV.15):
     sum_i b_i c_i^(k-1) = 1/k and sum_j a_ij c_j^(k-1) = c_i^k / k for every stage i and
-    k <= q. Each residual is compared with rounding of the sum of its magnitudes."""
-    check_type(tableau, ButcherTableau, "tableau")
+    k <= q. Each residual is compared with rounding of the sum of its magnitudes.
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+
+    Returns
+    -------
+    int: the stage order q (at most 2s).
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     A, b, c = tableau.A, tableau.b, tableau.c
     for k in range(1, 2 * tableau.stages + 1):
         lhs = np.append(A @ c ** (k - 1), b @ c ** (k - 1))
@@ -197,8 +243,17 @@ def rk_stage_order(tableau: ButcherTableau) -> int:
 
 def rk_stiffly_accurate(tableau: ButcherTableau) -> bool:
     """The last row of A equals b (so y_1 is the last stage; R(infinity) = 0 when A is
-    invertible): Hairer & Wanner II, IV.6 and IV.15."""
-    check_type(tableau, ButcherTableau, "tableau")
+    invertible): Hairer & Wanner II, IV.6 and IV.15.
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+
+    Returns
+    -------
+    bool: whether a_sj = b_j for every j, to rounding.
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     scale = np.abs(tableau.b) + np.abs(tableau.A[-1])
     allowed = np.maximum(tol.ORDER_CONDITION_ULPS * tol.EPS * scale, tol.ORDER_CONDITION_FLOOR)
     return bool(np.all(np.abs(tableau.A[-1] - tableau.b) <= allowed))

@@ -14,11 +14,14 @@ has no exact form; `defect_floor` turns them into the smallest error a sweep can
 from __future__ import annotations
 
 from fractions import Fraction
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from harness.coefficients import ButcherTableau
 from harness.theory.orders import rooted_trees
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau
 
 __all__ = ["condition_defects", "defect_floor", "DEFECT_MAX_ORDER"]
 

@@ -13,15 +13,17 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from functools import lru_cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
 from harness.theory import amplification
-from harness.theory.checks import check_type
+from harness.theory.checks import check_type, family_of
 from harness.theory.orders import rk_linear_order, rk_stability_coefficients
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau, LinearMultistep, SplittingScheme
 
 __all__ = ["rk_stability_intervals", "splitting_trace_polynomial", "splitting_linear_order",
            "splitting_hw_limit", "exact_hw_bands", "lmm_real_interval", "analytic_stability"]
@@ -145,8 +147,17 @@ def _interval_end(F: np.ndarray, F_abs: np.ndarray, forced_zeros: int,
 def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
     """(real, imaginary) stability intervals of a Runge-Kutta method: the sign near the origin
     and unboundedness decided on the polynomials Q(-x)^2 - P(-x)^2 and |Q(iy)|^2 - |P(iy)|^2
-    (exact zeros from the linear order), the end located on R evaluated in stage form."""
-    check_type(tableau, ButcherTableau, "tableau")
+    (exact zeros from the linear order), the end located on R evaluated in stage form.
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+
+    Returns
+    -------
+    (float, float): the lengths of the stable intervals [-x, 0] and [0, i y] (each 0.0, finite or inf).
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     P, P_abs, Q, Q_abs = _rk_numerator_denominator(tableau)
     p_lin = rk_linear_order(tableau)
     out = []
@@ -166,8 +177,19 @@ def rk_stability_intervals(tableau: ButcherTableau) -> tuple[float, float]:
 
 
 def splitting_trace_polynomial(scheme: SplittingScheme) -> tuple[np.ndarray, np.ndarray]:
-    """The trace of the propagator on x'' = -x as a polynomial in h (ascending), with magnitudes."""
-    check_type(scheme, SplittingScheme, "scheme")
+    """The trace of the propagator on x'' = -x as a polynomial in h (ascending), with magnitudes.
+
+    Parameters
+    ----------
+    scheme : SplittingScheme
+
+    Returns
+    -------
+    tuple
+        (trace coefficients, their magnitudes, the propagator's 2x2 entries as polynomials in h,
+        the same over |coefficients|); the last two are nested lists of ndarrays.
+    """
+    check_type(scheme, "splitting", "scheme")
     M = [[np.array([1.0]), np.array([0.0])], [np.array([0.0]), np.array([1.0])]]
     Ma = [[np.array([1.0]), np.array([0.0])], [np.array([0.0]), np.array([1.0])]]
     for kind, c in scheme.sequence:
@@ -184,7 +206,16 @@ def splitting_trace_polynomial(scheme: SplittingScheme) -> tuple[np.ndarray, np.
 
 def splitting_linear_order(scheme: SplittingScheme) -> int:
     """The order of the propagator on x'' = -x against the exact rotation [[cos h, sin h],
-    [-sin h, cos h]]: the method's order on linear problems q'' = -K q (K diagonalisable)."""
+    [-sin h, cos h]]: the method's order on linear problems q'' = -K q (K diagonalisable).
+
+    Parameters
+    ----------
+    scheme : SplittingScheme
+
+    Returns
+    -------
+    int: the largest p such that the propagator matches the rotation through h^p.
+    """
     _, _, M, Ma = splitting_trace_polynomial(scheme)
     top = max(m.size for row in M for m in row)
     exact = [[lambda k: (-1) ** (k // 2) / math.factorial(k) if k % 2 == 0 else 0.0,
@@ -207,14 +238,33 @@ def splitting_linear_order(scheme: SplittingScheme) -> int:
 def splitting_hw_limit(scheme: SplittingScheme) -> float:
     """The first instability of a splitting on x'' = -omega^2 x: the largest h omega with
     |tr M| < 2 on (0, h omega), decided exactly on the trace polynomial (every band:
-    `harness.theory.newtonian.splitting_hw_bands`)."""
-    check_type(scheme, SplittingScheme, "scheme")
+    `harness.theory.newtonian.splitting_hw_bands`).
+
+    Parameters
+    ----------
+    scheme : SplittingScheme
+
+    Returns
+    -------
+    float: the limit (inf when stable up to the search bound of the exact bands).
+    """
+    check_type(scheme, "splitting", "scheme")
     return exact_hw_bands(scheme).limit
 
 
 def exact_hw_bands(coefficients: Any):
     """`harness.theory.newtonian.hw_bands` of a Newtonian coefficient object, computed once per
-    coefficients (exact root isolation takes up to seconds for 15-stage compositions)."""
+    coefficients (exact root isolation takes up to seconds for 15-stage compositions).
+
+    Parameters
+    ----------
+    coefficients : SplittingScheme or SecondOrderMultistep
+        A Newtonian coefficient object (anything with `fingerprint()` that `hw_bands` knows).
+
+    Returns
+    -------
+    HwBands or None: its exact stability bands, None for another family.
+    """
     return _bands_cached(coefficients.fingerprint(), (coefficients,))
 
 
@@ -234,7 +284,19 @@ def lmm_real_interval(method: LinearMultistep, scanned: float) -> float:
     first crossing beyond which the method is unstable ends the interval. When the scan found
     the method stable up to its limit (`scanned` = inf) and the locus never crosses the negative
     real axis beyond it, while every root of sigma lies inside the unit disc (the roots as
-    z -> -inf), the whole axis is stable: inf, proven. Otherwise the scanned figure stands."""
+    z -> -inf), the whole axis is stable: inf, proven. Otherwise the scanned figure stands.
+
+    Parameters
+    ----------
+    method : LinearMultistep
+    scanned : float, the interval found by scanning the amplification (`real_stability_interval`).
+
+    Returns
+    -------
+    float
+        The interval length x of [-x, 0]: `scanned` when finite; otherwise the first locus
+        crossing beyond which the method is unstable, inf when proven, else `scanned`.
+    """
     from scipy.optimize import brentq
 
     alpha, beta = method.alpha, method.beta
@@ -272,22 +334,33 @@ def analytic_stability(coefficients: Any, *, limit: float = tol.STABILITY_SEARCH
     """Stability figures from a coefficient object, or None when it has none (or an unknown
     kind). First-order families: {'kind': 'first-order', 'amplification': z -> |R|,
     'real_interval', 'imag_interval'}; Newtonian: {'kind': 'newtonian', 'amplification':
-    hw -> spectral radius, 'hw_limit'}."""
-    if isinstance(coefficients, ButcherTableau):
+    hw -> spectral radius, 'hw_limit'}.
+
+    Parameters
+    ----------
+    coefficients : coefficient object, any object; read by the `family` it declares.
+    limit : float, optional, the scan limit of the multistep intervals (STABILITY_SEARCH_LIMIT).
+
+    Returns
+    -------
+    dict or None: the figures described above; Newtonian ones also carry 'hw_bands'.
+    """
+    family = family_of(coefficients)
+    if family == "runge-kutta":
         def amp(z):
             return np.abs(amplification.rk_stability_function(coefficients, z))
         real, imag = rk_stability_intervals(coefficients)
         return {"kind": "first-order", "amplification": amp, "real_interval": real,
                 "imag_interval": imag}
-    if isinstance(coefficients, LinearMultistep):
+    if family == "multistep":
         def amp(z):
             return amplification.lmm_amplification(coefficients, z)
         real = amplification.real_stability_interval(amp, limit=limit)
         return {"kind": "first-order", "amplification": amp,
                 "real_interval": lmm_real_interval(coefficients, real),
                 "imag_interval": amplification.imag_stability_interval(amp, limit=limit)}
-    if isinstance(coefficients, SplittingScheme | SecondOrderMultistep):
-        if isinstance(coefficients, SplittingScheme):
+    if family in ("splitting", "second-order multistep"):
+        if family == "splitting":
             def hw_amp(hw):
                 return amplification.splitting_amplification(coefficients, hw)
         else:

@@ -32,10 +32,10 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import TYPE_CHECKING
 
 from harness import tolerances as tol
-from harness.coefficients import SecondOrderMultistep, SplittingScheme
-from harness.theory.checks import check_type
+from harness.theory.checks import check_type, family_of
 from harness.theory.roots import (
     Poly,
     count_roots_between,
@@ -51,6 +51,9 @@ from harness.theory.roots import (
     squarefree,
     sturm_sequence,
 )
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import SecondOrderMultistep, SplittingScheme
 
 __all__ = ["HwBands", "splitting_trace_exact", "splitting_hw_bands", "lmm2_hw_bands", "hw_bands",
            "velocity_weights"]
@@ -77,7 +80,12 @@ class HwBands:
     hw_max: float
 
     def describe(self) -> str:
-        """The bands as one line of text."""
+        """The bands as one line of text.
+
+        Returns
+        -------
+        str: "stable for every h omega (<criterion>)" or "unstable on [a, b], ...".
+        """
         if not self.bands:
             return f"stable for every h omega ({self.criterion})"
         parts = [f"[{a:.10g}, {b:.10g}]" if math.isfinite(b) else f"[{a:.10g}, inf)" for a, b in self.bands]
@@ -132,8 +140,17 @@ def _bands(critical: list[Poly], stable: Callable[[Fraction], bool], hw_max: flo
 
 def splitting_trace_exact(scheme: SplittingScheme) -> Poly:
     """tr M of a splitting's propagator on x'' = -x as an exact polynomial in x = h^2 (the
-    trace is even in h: M(-h) = S M(h) S with S = diag(1, -1))."""
-    check_type(scheme, SplittingScheme, "scheme")
+    trace is even in h: M(-h) = S M(h) S with S = diag(1, -1)).
+
+    Parameters
+    ----------
+    scheme : SplittingScheme, the composition (its exact form when it has one).
+
+    Returns
+    -------
+    Poly: the trace's coefficients in ascending powers of x = h^2.
+    """
+    check_type(scheme, "splitting", "scheme")
     seq = scheme.exact if scheme.exact is not None else scheme.sequence
     one, zero = (Fraction(1),), ()
     M = [[one, zero], [zero, one]]  # entries: polynomials in h
@@ -148,7 +165,17 @@ def splitting_trace_exact(scheme: SplittingScheme) -> Poly:
 
 
 def splitting_hw_bands(scheme: SplittingScheme, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwBands:
-    """Every h omega band where the splitting is unstable: |tr M| > 2 (det M = 1)."""
+    """Every h omega band where the splitting is unstable: |tr M| > 2 (det M = 1).
+
+    Parameters
+    ----------
+    scheme : SplittingScheme
+    hw_max : float, optional, the end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+
+    Returns
+    -------
+    HwBands: the exact unstable bands that start at or below `hw_max`.
+    """
     T = splitting_trace_exact(scheme)
     two = (Fraction(2),)
 
@@ -185,8 +212,17 @@ def _w_polynomial(c: list[Fraction]) -> Poly:
 
 def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwBands:
     """Every h omega band where a second-order multistep method is unstable (see the module
-    docstring: periodicity for symmetric methods, spectral radius <= 1 otherwise)."""
-    check_type(method, SecondOrderMultistep, "method")
+    docstring: periodicity for symmetric methods, spectral radius <= 1 otherwise).
+
+    Parameters
+    ----------
+    method : SecondOrderMultistep; hw_max : as for `splitting_hw_bands`.
+
+    Returns
+    -------
+    HwBands: as for `splitting_hw_bands`.
+    """
+    check_type(method, "second-order multistep", "method")
     k = method.steps
     alpha, beta = _exact_table(method)
     lead = poly([alpha[k], beta[k]])
@@ -238,17 +274,37 @@ def lmm2_hw_bands(method: SecondOrderMultistep, hw_max: float = tol.STABILITY_HW
 
 
 def hw_bands(coefficients, hw_max: float = tol.STABILITY_HW_SEARCH_LIMIT) -> HwBands | None:
-    """The exact bands of a Newtonian coefficient object, or None for another kind."""
-    if isinstance(coefficients, SplittingScheme):
+    """The exact bands of a Newtonian coefficient object, or None for another kind.
+
+    Parameters
+    ----------
+    coefficients : coefficient object, any object; read by the `family` it declares.
+    hw_max : float, optional, the end of the search in h omega (STABILITY_HW_SEARCH_LIMIT).
+
+    Returns
+    -------
+    HwBands or None: `splitting_hw_bands` or `lmm2_hw_bands`; None for a first-order family.
+    """
+    family = family_of(coefficients)
+    if family == "splitting":
         return splitting_hw_bands(coefficients, hw_max)
-    if isinstance(coefficients, SecondOrderMultistep):
+    if family == "second-order multistep":
         return lmm2_hw_bands(coefficients, hw_max)
     return None
 
 
 def velocity_weights(m: int) -> list[Fraction]:
     """c_0..c_(m-1) of v_n = (x_n - x_(n-1)) / h + h sum_j c_j a_(n-j): c_j = int_0^1 u l_j(u) du
-    with l_j the Lagrange basis on the nodes u_j = 1 - j (order m + 1)."""
+    with l_j the Lagrange basis on the nodes u_j = 1 - j (order m + 1).
+
+    Parameters
+    ----------
+    m : int, number of weights.
+
+    Returns
+    -------
+    list of Fraction: c_0, ..., c_(m-1), exact.
+    """
     nodes = [Fraction(1 - j) for j in range(m)]
     out = []
     for j, uj in enumerate(nodes):

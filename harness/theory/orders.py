@@ -14,14 +14,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep, SplittingScheme
-from harness.theory.checks import check_int, check_type
+from harness.theory.checks import check_int, check_type, family_of
 from harness.theory.series import splitting_order
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMultistep
 
 __all__ = ["MAX_TREE_ORDER", "RootedTree", "OrderCondition", "rooted_trees", "rk_order", "elementary_weights",
            "condition_tolerance",
@@ -56,6 +58,14 @@ def rooted_trees(max_order: int = 8) -> tuple[RootedTree, ...]:
 
     A tree of order n is a multiset of subtrees whose orders sum to n - 1, grafted on a new root;
     multisets are enumerated as non-increasing index sequences, so every tree appears once.
+
+    Parameters
+    ----------
+    max_order : int, optional, the largest number of vertices, 1 to MAX_TREE_ORDER (default 8).
+
+    Returns
+    -------
+    tuple of RootedTree: the trees, each tree's `index` its position in the tuple.
     """
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
     trees: list[RootedTree] = [RootedTree(0, (), 1, 1, "*")]
@@ -96,7 +106,18 @@ class OrderCondition:
 def elementary_weights(tableau: ButcherTableau, max_order: int,
                         weights: np.ndarray | None = None) -> tuple[list[float], list[float]]:
     """Phi(t) = b^T g(t) for every tree up to `max_order`, and the same sum taken over the
-    magnitudes |b|, |A| (the size the rounding of Phi(t) scales with)."""
+    magnitudes |b|, |A| (the size the rounding of Phi(t) scales with).
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+    max_order : int, the largest tree order.
+    weights : ndarray, optional, weights used in place of b (an embedded method).
+
+    Returns
+    -------
+    (list of float, list of float): phi(t) and its magnitude sum, indexed like `rooted_trees(max_order)`.
+    """
     trees = rooted_trees(max_order)
     A, b = tableau.A, tableau.b if weights is None else weights
     absA, absb = np.abs(A), np.abs(b)
@@ -118,7 +139,19 @@ def condition_tolerance(t: RootedTree, size: float, precision: float = 0.0) -> f
     roundings per vertex of the sum of magnitudes, and never less than ORDER_CONDITION_TOL
     relative to the condition's value 1/gamma(t) nor ORDER_CONDITION_FLOOR (tableaux published
     with 13-14 digits); for coefficients printed to `precision` (`published_precision`), each of
-    a product's t.order factors may be off by that much (twice, for safety)."""
+    a product's t.order factors may be off by that much (twice, for safety).
+
+    Parameters
+    ----------
+    t : RootedTree, the tree of the condition.
+    size : float, phi(t) taken over |b| and |A| (`elementary_weights`).
+    precision : float, optional
+        The coefficients' printed precision (0 for exact or full float64 coefficients).
+
+    Returns
+    -------
+    float: the allowed |Phi(t) - 1/gamma(t)|.
+    """
     return max(tol.ORDER_CONDITION_ULPS * tol.EPS * t.order * size,
                tol.ORDER_CONDITION_TOL / t.gamma, tol.ORDER_CONDITION_FLOOR,
                2.0 * precision * t.order * max(1.0, size))
@@ -127,8 +160,18 @@ def condition_tolerance(t: RootedTree, size: float, precision: float = 0.0) -> f
 def rk_order_conditions(tableau: ButcherTableau, order: int) -> list[OrderCondition]:
     """The order conditions of exactly `order` (one per rooted tree with `order` vertices),
     with residual Phi(t) - 1/gamma(t); satisfied when |residual| is within rounding
-    (`condition_tolerance`)."""
-    check_type(tableau, ButcherTableau, "tableau")
+    (`condition_tolerance`).
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+    order : int, the order whose conditions are listed, 1 to MAX_TREE_ORDER.
+
+    Returns
+    -------
+    list of OrderCondition: one per tree of that order, in the order of `rooted_trees`.
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     order = check_int(order, "order", 1, MAX_TREE_ORDER)
     trees = rooted_trees(order)
     phi, size = elementary_weights(tableau, order)
@@ -150,8 +193,19 @@ def rk_order(tableau: ButcherTableau, max_order: int | None = None,
     condition of order <= p holds to rounding (`condition_tolerance`, scaled by the size of the
     coefficients). By default `max_order` is the highest order the tableau could have (s for
     an explicit s-stage method, 2s otherwise), capped at MAX_TREE_ORDER; a result equal to
-    MAX_TREE_ORDER means "at least that". `weights` replaces b (an embedded method)."""
-    check_type(tableau, ButcherTableau, "tableau")
+    MAX_TREE_ORDER means "at least that". `weights` replaces b (an embedded method).
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+    max_order : int, optional, the highest order checked, 1 to MAX_TREE_ORDER.
+    weights : ndarray, optional, weights used in place of b.
+
+    Returns
+    -------
+    int: the order p (0 when even the first-order condition fails).
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     if max_order is None:
         max_order = min(MAX_TREE_ORDER, tableau.stages if tableau.explicit else 2 * tableau.stages)
     max_order = check_int(max_order, "max_order", 1, MAX_TREE_ORDER)
@@ -164,7 +218,17 @@ def rk_order(tableau: ButcherTableau, max_order: int | None = None,
 
 def rk_stability_coefficients(tableau: ButcherTableau, degree: int) -> tuple[np.ndarray, np.ndarray]:
     """Taylor coefficients r_k = b^T A^(k-1) e of R(z) for k = 0..degree (r_0 = 1), and the same
-    products over |b|, |A| (their rounding scale)."""
+    products over |b|, |A| (their rounding scale).
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+    degree : int, the last k.
+
+    Returns
+    -------
+    (ndarray, ndarray): r_0 ... r_degree, and the same products over |b|, |A|.
+    """
     r, r_abs = [1.0], [1.0]
     v, v_abs = np.ones(tableau.stages), np.ones(tableau.stages)
     for _ in range(degree):
@@ -178,8 +242,17 @@ def rk_linear_order(tableau: ButcherTableau) -> int:
     """The order of R(z) against e^z: the largest p with r_k = 1/k! for k <= p. It is the
     method's order on linear constant-coefficient problems, at least its order and higher for
     some methods (several SSP methods, Merson's). Checked up to 2s + 2 (beyond any s-stage
-    order) and capped there."""
-    check_type(tableau, ButcherTableau, "tableau")
+    order) and capped there.
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+
+    Returns
+    -------
+    int: the linear order p, at most min(2s + 2, 40).
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     top = min(2 * tableau.stages + 2, 40)
     r, r_abs = rk_stability_coefficients(tableau, top)
     for k in range(1, top + 1):
@@ -209,10 +282,26 @@ def _constants(alpha: np.ndarray, beta: np.ndarray, q_max: int, shift: int):
 
 def lmm_error_constants(method: LinearMultistep, q_max: int | None = None) -> np.ndarray:
     """C_0 ... C_{q_max} of a linear multistep method (default q_max = 2k + 1, beyond the
-    highest order any k-step method reaches)."""
-    check_type(method, LinearMultistep, "method")
-    q_max = 2 * method.steps + 1 if q_max is None else check_int(q_max, "q_max", 0, 40)
-    return _constants(method.alpha, method.beta, q_max, 1)[0]
+    highest order any k-step method reaches).
+
+    Parameters
+    ----------
+    method : LinearMultistep
+    q_max : int, optional, the last constant, 0 to 40.
+
+    Returns
+    -------
+    ndarray: C_0 ... C_{q_max}.
+    """
+    return _lmm_constants(method, "multistep", 1, q_max)[0]
+
+
+def _lmm_constants(method: Any, kind: str, derivative: int, q_max: int | None):
+    # (C, scale) of a multistep method for y' = f (derivative 1) or x'' = a (2), up to q_max
+    # (default 2k + derivative), after checking that `method` is of `kind`
+    check_type(method, kind, "method")
+    q_max = 2 * method.steps + derivative if q_max is None else check_int(q_max, "q_max", 0, 40)
+    return _constants(method.alpha, method.beta, q_max, derivative)
 
 
 def _order_from_constants(C: np.ndarray, scale: np.ndarray, offset: int) -> int:
@@ -224,36 +313,61 @@ def _order_from_constants(C: np.ndarray, scale: np.ndarray, offset: int) -> int:
 def lmm_order(method: LinearMultistep) -> int:
     """The order p of a linear multistep method: C_0 = ... = C_p = 0 and C_{p+1} != 0 (each
     constant compared with ORDER_CONDITION_TOL times the size of its terms). 0 means not even
-    consistent (which `LinearMultistep` already refuses)."""
-    check_type(method, LinearMultistep, "method")
-    C, scale = _constants(method.alpha, method.beta, 2 * method.steps + 1, 1)
-    return _order_from_constants(C, scale, 1)
+    consistent (which `LinearMultistep` already refuses).
+
+    Parameters
+    ----------
+    method : LinearMultistep
+
+    Returns
+    -------
+    int: the order p.
+    """
+    return _order_from_constants(*_lmm_constants(method, "multistep", 1, None), 1)
 
 
 def second_order_lmm_error_constants(method: SecondOrderMultistep, q_max: int | None = None):
-    """C_0 ... C_{q_max} of a multistep method for x'' = a (default q_max = 2k + 2)."""
-    check_type(method, SecondOrderMultistep, "method")
-    q_max = 2 * method.steps + 2 if q_max is None else check_int(q_max, "q_max", 0, 40)
-    return _constants(method.alpha, method.beta, q_max, 2)[0]
+    """C_0 ... C_{q_max} of a multistep method for x'' = a (default q_max = 2k + 2).
+
+    Parameters
+    ----------
+    method : SecondOrderMultistep; q_max : as for `lmm_error_constants`.
+
+    Returns
+    -------
+    ndarray: C_0 ... C_{q_max}.
+    """
+    return _lmm_constants(method, "second-order multistep", 2, q_max)[0]
 
 
 def second_order_lmm_order(method: SecondOrderMultistep) -> int:
     """The order p of a multistep method for x'' = a: C_0 = ... = C_{p+1} = 0 (Stormer's rule
-    alpha = (1, -2, 1), beta = (0, 1, 0) has C_4 = 1/12, order 2)."""
-    check_type(method, SecondOrderMultistep, "method")
-    C, scale = _constants(method.alpha, method.beta, 2 * method.steps + 2, 2)
-    return _order_from_constants(C, scale, 2)
+    alpha = (1, -2, 1), beta = (0, 1, 0) has C_4 = 1/12, order 2).
+
+    Parameters
+    ----------
+    method : SecondOrderMultistep, a table for x'' = a.
+
+    Returns
+    -------
+    int: the order p.
+    """
+    return _order_from_constants(*_lmm_constants(method, "second-order multistep", 2, None), 2)
 
 def order_from_coefficients(stepper: Any) -> int | None:
     """The order implied by a stepper's coefficient object (`stepper.coefficients`), or None
-    when it has none (external, adaptive, Taylor) or of a kind this module does not know."""
+    when it has none (external, adaptive, Taylor) or of a kind this module does not know.
+
+    Parameters
+    ----------
+    stepper : Stepper, any stepper; only its `coefficients` attribute is read.
+
+    Returns
+    -------
+    int or None: the order its coefficients imply.
+    """
     coeffs = getattr(stepper, "coefficients", None)
-    if isinstance(coeffs, ButcherTableau):
-        return rk_order(coeffs)
-    if isinstance(coeffs, LinearMultistep):
-        return lmm_order(coeffs)
-    if isinstance(coeffs, SecondOrderMultistep):
-        return second_order_lmm_order(coeffs)
-    if isinstance(coeffs, SplittingScheme):
-        return splitting_order(coeffs)
-    return None
+    order_of = {"runge-kutta": rk_order, "multistep": lmm_order,
+                "second-order multistep": second_order_lmm_order, "splitting": splitting_order}
+    family = family_of(coeffs)
+    return None if family is None else order_of[family](coeffs)

@@ -1,6 +1,7 @@
-"""Exact polynomial arithmetic over the rationals and real-root isolation (Sturm sequences).
+"""Real-root isolation over the rationals (Sturm sequences), resultants and the Schur-Cohn test.
 
-A polynomial is a tuple of `Fraction` coefficients in ascending powers. Every float coefficient
+A polynomial is a tuple of `Fraction` coefficients in ascending powers (the arithmetic, in
+`harness.theory.polynomials`, is re-exported here). Every float coefficient
 of a method is a dyadic rational, so polynomials built from a method's coefficients (the trace of
 a splitting's propagator, a multistep method's characteristic polynomial) are exact, and so is
 every sign decided on them: a root is isolated in an interval with rational ends, never found by
@@ -20,90 +21,38 @@ sampling a function that may dip below a threshold between two samples.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from fractions import Fraction
+
+from harness.theory.polynomials import (
+    Poly,
+    det_exact,
+    padd,
+    pderiv,
+    pdivmod,
+    peval,
+    pgcd,
+    pmul,
+    poly,
+    pscale,
+    psub,
+)
 
 __all__ = ["Poly", "poly", "padd", "psub", "pmul", "pscale", "peval", "pderiv", "pdivmod", "pgcd",
            "squarefree", "sturm_sequence", "count_roots_between", "isolate_real_roots",
            "root_bound", "resultant_in_x", "schur_all_inside", "det_exact"]
 
-Poly = tuple[Fraction, ...]
-
-
-def poly(coefficients: Sequence) -> Poly:
-    """An exact polynomial from ascending coefficients (ints, Fractions or floats, taken exactly),
-    trailing zeros removed."""
-    out = [Fraction(c) for c in coefficients]
-    while out and out[-1] == 0:
-        out.pop()
-    return tuple(out)
-
-
-def padd(a: Poly, b: Poly) -> Poly:
-    n = max(len(a), len(b))
-    return poly([(a[i] if i < len(a) else 0) + (b[i] if i < len(b) else 0) for i in range(n)])
-
-
-def pscale(a: Poly, c) -> Poly:
-    return poly([c * x for x in a])
-
-
-def psub(a: Poly, b: Poly) -> Poly:
-    return padd(a, pscale(b, -1))
-
-
-def pmul(a: Poly, b: Poly) -> Poly:
-    if not a or not b:
-        return ()
-    out = [Fraction(0)] * (len(a) + len(b) - 1)
-    for i, x in enumerate(a):
-        if x:
-            for j, y in enumerate(b):
-                out[i + j] += x * y
-    return poly(out)
-
-
-def peval(a: Poly, x: Fraction) -> Fraction:
-    """a(x), exactly (Horner)."""
-    acc = Fraction(0)
-    for c in reversed(a):
-        acc = acc * x + c
-    return acc
-
-
-def pderiv(a: Poly) -> Poly:
-    return poly([i * a[i] for i in range(1, len(a))])
-
-
-def pdivmod(a: Poly, b: Poly) -> tuple[Poly, Poly]:
-    """Quotient and remainder of a / b (b not zero)."""
-    if not b:
-        raise ZeroDivisionError("polynomial division by zero")
-    r = list(a)
-    q = [Fraction(0)] * max(len(a) - len(b) + 1, 0)
-    lead = b[-1]
-    for shift in range(len(a) - len(b), -1, -1):
-        c = r[shift + len(b) - 1] / lead
-        q[shift] = c
-        if c:
-            for j, y in enumerate(b):
-                r[shift + j] -= c * y
-    return poly(q), poly(r[: len(b) - 1])
-
-
-def _monic(a: Poly) -> Poly:
-    return pscale(a, 1 / a[-1]) if a else a
-
-
-def pgcd(a: Poly, b: Poly) -> Poly:
-    """The monic greatest common divisor."""
-    while b:
-        a, b = b, pdivmod(a, b)[1]
-    return _monic(a)
-
-
 def squarefree(a: Poly) -> Poly:
-    """a divided by gcd(a, a'): the same roots, each simple."""
+    """a divided by gcd(a, a'): the same roots, each simple.
+
+    Parameters
+    ----------
+    a : Poly, a non-zero polynomial.
+
+    Returns
+    -------
+    Poly: a / gcd(a, a') (`a` itself when the gcd is constant).
+    """
     g = _chain(_integer(a))[-1]
     if len(g) == 1:
         return a
@@ -159,7 +108,17 @@ def _chain(a: tuple[int, ...]) -> list[tuple[int, ...]]:
 
 
 def sturm_sequence(a: Poly) -> list[tuple[int, ...]]:
-    """The Sturm chain of `a` (see `_chain`), as integer polynomials."""
+    """The Sturm chain of `a` (see `_chain`), as integer polynomials.
+
+    Parameters
+    ----------
+    a : Poly, a non-zero polynomial (square-free for Sturm's count of distinct roots).
+
+    Returns
+    -------
+    list of tuple of int
+        p_0 = a, p_1 = a', p_{k+1} = -rem(p_{k-1}, p_k), each scaled to integer coefficients.
+    """
     return _chain(_integer(a))
 
 
@@ -198,13 +157,34 @@ def _sign_changes(seq: list, x: Fraction | None) -> int:
 
 def count_roots_between(a: Poly, lo: Fraction, hi: Fraction | None,
                         seq: list[Poly] | None = None) -> int:
-    """The number of distinct real roots of `a` in (lo, hi] (hi None: (lo, infinity))."""
+    """The number of distinct real roots of `a` in (lo, hi] (hi None: (lo, infinity)).
+
+    Parameters
+    ----------
+    a : Poly, a non-zero polynomial.
+    lo : Fraction, left end (excluded).
+    hi : Fraction or None, right end (included); None for infinity.
+    seq : list of Poly, optional, the Sturm sequence of a's square-free part, when already computed.
+
+    Returns
+    -------
+    int: the count, by Sturm's theorem (sign changes at lo minus sign changes at hi).
+    """
     seq = seq if seq is not None else sturm_sequence(squarefree(a))
     return _sign_changes(seq, lo) - _sign_changes(seq, hi)
 
 
 def root_bound(a: Poly) -> Fraction:
-    """Cauchy's bound: every root has modulus below 1 + max |a_i / a_n|."""
+    """Cauchy's bound: every root has modulus below 1 + max |a_i / a_n|.
+
+    Parameters
+    ----------
+    a : Poly, a polynomial of degree >= 1.
+
+    Returns
+    -------
+    Fraction: 1 + max_i |a_i / a_n|.
+    """
     return 1 + max((abs(c / a[-1]) for c in a[:-1]), default=Fraction(0))
 
 
@@ -227,7 +207,21 @@ def isolate_real_roots(a: Poly, lo: Fraction, hi: Fraction | None = None, *,
     """The distinct real roots of the non-zero polynomial `a` in (lo, hi] (hi None: up to
     Cauchy's bound), in increasing order, each as an interval (left, right] holding exactly one
     root, refined by bisection on the sign of the square-free part until right - left <=
-    rel_width * |right| (an exact root found on the way is returned as (root, root))."""
+    rel_width * |right| (an exact root found on the way is returned as (root, root)).
+
+    Parameters
+    ----------
+    a : Poly
+    lo : Fraction, left end of the search (excluded).
+    hi : Fraction or None, optional, right end (included); None for Cauchy's bound (`root_bound`).
+    rel_width : Fraction, optional, the relative width each interval is refined to (default 2^-60).
+
+    Returns
+    -------
+    list of (Fraction, Fraction)
+        One isolating interval (left, right] per root, in increasing order; empty for a
+        constant `a`.
+    """
     if len(a) <= 1:
         return []
     q = squarefree(a)
@@ -283,27 +277,6 @@ def isolate_real_roots(a: Poly, lo: Fraction, hi: Fraction | None = None, *,
     return out
 
 
-def det_exact(rows: list[list[Fraction]]) -> Fraction:
-    """The determinant of a square matrix of Fractions (Gaussian elimination, exact)."""
-    m = [list(r) for r in rows]
-    n = len(m)
-    det = Fraction(1)
-    for col in range(n):
-        pivot = next((i for i in range(col, n) if m[i][col] != 0), None)
-        if pivot is None:
-            return Fraction(0)
-        if pivot != col:
-            m[col], m[pivot] = m[pivot], m[col]
-            det = -det
-        det *= m[col][col]
-        for i in range(col + 1, n):
-            f = m[i][col] / m[col][col]
-            if f:
-                for j in range(col, n):
-                    m[i][j] -= f * m[col][j]
-    return det
-
-
 def _sylvester(p: tuple, q: tuple) -> Fraction:
     """The Sylvester determinant of p and q (ascending coefficient tuples of nominal degrees
     len - 1 >= 1, leading coefficients possibly zero): their resultant."""
@@ -338,7 +311,18 @@ def resultant_in_x(p_of: Callable[[Fraction], Poly], q_of: Callable[[Fraction], 
     """Res_zeta(p(., x), q(., x)) as a polynomial in x, where `p_of(x)` and `q_of(x)` give the
     polynomials in zeta at a rational x, of nominal degrees `zeta_degrees` (the Sylvester matrix
     keeps these sizes, leading coefficients may vanish at some x) and the resultant has degree
-    at most `degree_bound` in x. Found at degree_bound + 1 integer points and interpolated."""
+    at most `degree_bound` in x. Found at degree_bound + 1 integer points and interpolated.
+
+    Parameters
+    ----------
+    p_of, q_of : callable, ``p_of(x)`` -> Poly in zeta at a rational x (and likewise `q_of`).
+    degree_bound : int, an upper bound on the resultant's degree in x.
+    zeta_degrees : (int, int), the nominal degrees (m, n) of p and q in zeta.
+
+    Returns
+    -------
+    Poly: the resultant as a polynomial in x.
+    """
     m, n = zeta_degrees
     xs = [Fraction(i) for i in range(degree_bound + 1)]
     ys = []
@@ -352,7 +336,16 @@ def resultant_in_x(p_of: Callable[[Fraction], Poly], q_of: Callable[[Fraction], 
 def schur_all_inside(a: Poly) -> bool:
     """True when every root of the real polynomial `a` (degree >= 1) lies strictly inside the
     unit disc: the Schur-Cohn recursion a -> (a_n a(z) - a_0 a*(z)) / z with a* the reversed
-    polynomial, which needs |a_0| < |a_n| at every stage."""
+    polynomial, which needs |a_0| < |a_n| at every stage.
+
+    Parameters
+    ----------
+    a : Poly or sequence, the polynomial, ascending powers.
+
+    Returns
+    -------
+    bool: whether every root satisfies |z| < 1.
+    """
     a = poly(a)
     while len(a) > 1:
         lead, const = a[-1], a[0]

@@ -10,10 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, SplittingScheme
 from harness.theory.checks import check_int, check_type
+
+if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
+    from harness.coefficients import ButcherTableau, SplittingScheme
 
 __all__ = ["splitting_local_error_series", "splitting_order", "rk_order_series"]
 
@@ -49,22 +52,82 @@ class Series:
         self.zero = mp.mpf(0)
 
     def const(self, c) -> list:
+        """A constant as a series.
+
+        Parameters
+        ----------
+        c : number or str, the constant (converted with ``mp.mpf``).
+
+        Returns
+        -------
+        list: [c, 0, ..., 0], N + 1 coefficients.
+        """
         return [self.mp.mpf(c)] + [self.zero] * self.N
 
     def add(self, *terms: list) -> list:
+        """The sum of series.
+
+        Parameters
+        ----------
+        *terms : list, series of degree N.
+
+        Returns
+        -------
+        list: their coefficient-wise sum.
+        """
         return [sum((t[n] for t in terms), self.zero) for n in range(self.N + 1)]
 
     def scale(self, c, a: list) -> list:
+        """A series times a constant.
+
+        Parameters
+        ----------
+        c : mpmath number, the factor.
+        a : list
+
+        Returns
+        -------
+        list: c a.
+        """
         return [c * x for x in a]
 
     def mul(self, a: list, b: list) -> list:
+        """The product of two series, truncated at degree N (Cauchy product).
+
+        Parameters
+        ----------
+        a, b : list, series of degree N.
+
+        Returns
+        -------
+        list: a b mod h^(N+1).
+        """
         return [sum((a[k] * b[n - k] for k in range(n + 1)), self.zero) for n in range(self.N + 1)]
 
     def shift(self, a: list) -> list:
-        """Multiply by the series variable (h or t)."""
+        """Multiply by the series variable (h or t).
+
+        Parameters
+        ----------
+        a : list, a series (its coefficient of degree N drops out).
+
+        Returns
+        -------
+        list: h a, truncated at degree N.
+        """
         return [self.zero, *a[: self.N]]
 
     def exp(self, a: list) -> list:
+        """exp of a series (the recurrence from e' = a' e).
+
+        Parameters
+        ----------
+        a : list
+
+        Returns
+        -------
+        list: exp(a), truncated at degree N.
+        """
         e = [self.mp.exp(a[0])]
         for n in range(1, self.N + 1):
             e.append(sum((k * a[k] * e[n - k] for k in range(1, n + 1)), self.zero) / n)
@@ -72,6 +135,20 @@ class Series:
 
 
 def newton_accel(S: Series, P: dict, q: list[list]) -> list[list]:
+    """The acceleration a(q) = -grad U of the generic separable test problem, on series.
+
+    U(q) = k1 q1^2/2 + k2 q2^2/2 + kap q1 q2 + c1 q1^2 q2 + c2 q2^3/3 + eps exp(al q1 + be q2).
+
+    Parameters
+    ----------
+    S : Series, the series arithmetic.
+    P : dict, the coefficients of U by name (`NEWTON_COEFFS`, as mpmath numbers).
+    q : list of two series, the positions q1, q2.
+
+    Returns
+    -------
+    list of two series: a_1(q), a_2(q).
+    """
     q1, q2 = q
     E = S.exp(S.add(S.scale(P["al"], q1), S.scale(P["be"], q2)))
     q1q2 = S.mul(q1, q2)
@@ -94,7 +171,18 @@ def _first_rhs(S: Series, P: dict, y: list[list]) -> list[list]:
 
 def exact_flow(S: Series, F: Callable[[list], list], y0: list) -> list[list]:
     """Taylor coefficients of the exact solution of y' = F(y), y(0) = y0, by Picard iteration
-    on series (each sweep fixes one more coefficient)."""
+    on series (each sweep fixes one more coefficient).
+
+    Parameters
+    ----------
+    S : Series, the series arithmetic (degree N).
+    F : callable, the vector field on lists of series.
+    y0 : list, the initial state (numbers).
+
+    Returns
+    -------
+    list of series: y_i(h) to degree N, one per component.
+    """
     y = [S.const(c) for c in y0]
     for _ in range(S.N):
         f = F(y)
@@ -111,8 +199,18 @@ def _error_profile(S: Series, numeric: list[list], exact: list[list]):
 def splitting_local_error_series(scheme: SplittingScheme, degree: int = 11) -> list[float]:
     """|e_n|, n = 0..degree: the coefficients of h^n in the local error of `scheme` on the
     generic problem (max over components and the two starting points), in units of the size of
-    the exact solution's h^n coefficient (at least 1)."""
-    check_type(scheme, SplittingScheme, "scheme")
+    the exact solution's h^n coefficient (at least 1).
+
+    Parameters
+    ----------
+    scheme : SplittingScheme
+    degree : int, optional, the last power of h, 1 to 16 (default 11).
+
+    Returns
+    -------
+    list of float: |e_0|, ..., |e_degree|.
+    """
+    check_type(scheme, "splitting", "scheme")
     degree = check_int(degree, "degree", 1, 16)
     import mpmath
 
@@ -190,8 +288,17 @@ def splitting_order(scheme: SplittingScheme, max_order: int = 10) -> int:
     spoiled by the float64 rounding of the coefficients themselves (a defect of ~1e-16 h in the
     local error that hides h^9 below h ~ 1e-2). Returns `max_order` when every coefficient up
     to h^(max_order+1) vanishes.
+
+    Parameters
+    ----------
+    scheme : SplittingScheme
+    max_order : int, optional, the highest order checked, 1 to 14 (default 10).
+
+    Returns
+    -------
+    int: the order p.
     """
-    check_type(scheme, SplittingScheme, "scheme")
+    check_type(scheme, "splitting", "scheme")
     max_order = check_int(max_order, "max_order", 1, 14)
     return _splitting_order_cached(scheme.fingerprint(), max_order, (scheme,))
 
@@ -200,8 +307,18 @@ def rk_order_series(tableau: ButcherTableau, max_order: int = 8) -> int:
     """The order of a Runge-Kutta tableau by the same exact series expansion as
     `splitting_order`, on a generic 3-dimensional first-order system: an independent check of
     the rooted-tree count in `rk_order`. The stage equations (implicit or not) are solved on
-    series by fixed-point iteration, which fixes one more power of h per sweep."""
-    check_type(tableau, ButcherTableau, "tableau")
+    series by fixed-point iteration, which fixes one more power of h per sweep.
+
+    Parameters
+    ----------
+    tableau : ButcherTableau
+    max_order : int, optional, as for `splitting_order` but 1 to 12 (default 8).
+
+    Returns
+    -------
+    int: the order p (`max_order` when every coefficient up to h^(max_order+1) vanishes).
+    """
+    check_type(tableau, "runge-kutta", "tableau")
     max_order = check_int(max_order, "max_order", 1, 12)
     import mpmath
 

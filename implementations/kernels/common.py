@@ -13,9 +13,9 @@ from numba import njit
 
 from implementations.kernel_calls import call_state
 
-__all__ = ["CONTRACT", "EXACT", "INLINE", "is_finite", "rhs_all", "accel_all", "lu_factor", "lu_apply",
-           "newton_factor_members", "newton_solve_members", "newton_update", "newton_converged",
-           "newton_stats"]
+__all__ = ["CONTRACT", "EXACT", "INLINE", "is_finite", "rhs_members", "rhs_all", "accel_all", "lu_factor",
+           "lu_apply", "newton_factor_members", "newton_solve_members", "newton_update", "newton_converged",
+           "newton_start", "newton_members_step", "newton_stats"]
 
 #: The explicit one-step and Stormer loops: a*b + c may become one fused multiply-add, as in
 #: heyoka's compiled functions and the BLAS axpy updates of the NumPy loops; no other fast-math
@@ -39,19 +39,23 @@ def is_finite(x):
 
 
 @njit(**INLINE)
-def rhs_all(f_rhs, t, Y, P, Out):
-    dim = Y.shape[0]
-    y = np.empty(dim)
-    out = np.empty(dim)
-    p = np.empty(P.shape[0])
+def rhs_members(f_rhs, t, Y, P, Out, y, out, p):
+    # Out[:, j] = f(t, Y[:, j], P[:, j]) member by member, through the work vectors y, out, p
+    # (the caller's, so that a kernel calling it once per step allocates nothing)
     for j in range(Y.shape[1]):
-        for d in range(dim):
+        for d in range(Y.shape[0]):
             y[d] = Y[d, j]
         for k in range(P.shape[0]):
             p[k] = P[k, j]
         call_state(f_rhs, t, y, p, out)
-        for d in range(dim):
+        for d in range(Y.shape[0]):
             Out[d, j] = out[d]
+
+
+@njit(**INLINE)
+def rhs_all(f_rhs, t, Y, P, Out):
+    dim = Y.shape[0]
+    rhs_members(f_rhs, t, Y, P, Out, np.empty(dim), np.empty(dim), np.empty(P.shape[0]))
 
 
 @njit(**CONTRACT)
@@ -173,6 +177,27 @@ def newton_converged(norm, previous, tol, theta):
         if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
             return True, theta
     return False, theta
+
+
+@njit(**INLINE)
+def newton_start():
+    # (previous, norm, theta, res_norm, converged, status) before the first iteration
+    return np.inf, np.inf, np.nan, np.nan, False, 1
+
+
+@njit(**EXACT)
+def newton_members_step(factor, Mats, Piv, G, DX, rhs_w, sol, X, inv_scale, norm, previous, tol, theta):
+    # one ensemble iteration: factor the new matrices when `factor`, solve, update X, test;
+    # (norm, converged, theta, status): status 2 on a singular matrix (X and norm as they were),
+    # else 1; norm NaN (and not converged) when the increment is not finite
+    if factor and not newton_factor_members(Mats, Piv):
+        return norm, False, theta, 2
+    newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
+    norm = newton_update(X, DX, inv_scale)
+    if norm != norm:
+        return norm, False, theta, 1
+    converged, theta = newton_converged(norm, previous, tol, theta)
+    return norm, converged, theta, 1
 
 
 @njit(**EXACT)

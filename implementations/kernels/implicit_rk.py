@@ -14,10 +14,9 @@ from implementations.kernels.common import (
     lu_apply,
     lu_factor,
     newton_converged,
-    newton_factor_members,
-    newton_solve_members,
+    newton_members_step,
+    newton_start,
     newton_stats,
-    newton_update,
     rhs_all,
 )
 
@@ -98,12 +97,7 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
         else:
             for d in range(dim):
                 X[d] = 0.0
-        previous = np.inf
-        norm = np.inf
-        theta = np.nan
-        res_norm = np.nan
-        converged = False
-        status = 1
+        previous, norm, theta, res_norm, converged, status = newton_start()
         k = 0
         for k in range(1, max_iter + 1):
             # residual g = Z - h a F(Z) - h a_e F_e, kept negated for the solve
@@ -256,12 +250,7 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
             for r in range(m):
                 for j in range(N):
                     X[r, j] = 0.0
-        previous = np.inf
-        norm = np.inf
-        theta = np.nan
-        res_norm = np.nan
-        converged = False
-        status = 1
+        previous, norm, theta, res_norm, converged, status = newton_start()
         k = 0
         for k in range(1, max_iter + 1):
             # residual g = Z - h A_ii F(Z) - h A_ie F_e
@@ -320,17 +309,10 @@ def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, ha
                                         v += 1.0
                                     Mats[j, i * dim + a, q * dim + bb] = v
                 n_jac += impl if full else 1
-                if not newton_factor_members(Mats, Piv):
-                    n_iter += 1
-                    status = 2
-                    break
             n_iter += 1
-            newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
-            norm = newton_update(X, DX, inv_scale)
-            if norm != norm:
-                break
-            converged, theta = newton_converged(norm, previous, tol, theta)
-            if converged:
+            norm, converged, theta, status = newton_members_step(
+                k == 1 or full, Mats, Piv, G, DX, rhs_w, sol, X, inv_scale, norm, previous, tol, theta)
+            if converged or status == 2 or norm != norm:
                 break
             previous = norm
         if not converged:

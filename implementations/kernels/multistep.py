@@ -15,14 +15,51 @@ from implementations.kernels.common import (
     EXACT,
     INLINE,
     is_finite,
-    newton_converged,
-    newton_factor_members,
-    newton_solve_members,
+    newton_members_step,
+    newton_start,
     newton_stats,
-    newton_update,
+    rhs_members,
 )
 
 __all__ = ["lmm_explicit_single", "lmm_explicit_advance", "lmm_implicit_advance"]
+
+
+@njit(**INLINE)
+def lmm_terms(alpha, beta, h, k, alpha_sign, beta_kind):
+    # the explicit formula's nonzero terms over j < k in the NumPy loop's order (j ascending,
+    # alpha before beta): (kind, index j, coefficient, count), an alpha term of kind 0 with
+    # coefficient alpha_sign * alpha_j (exact for a sign), a beta term of kind `beta_kind` with h beta_j
+    kind = np.empty(2 * k, dtype=np.int64)
+    index = np.empty(2 * k, dtype=np.int64)
+    coef = np.empty(2 * k)
+    nt = 0
+    for jj in range(k):
+        if alpha[jj] != 0.0:
+            kind[nt] = 0
+            index[nt] = jj
+            coef[nt] = alpha_sign * alpha[jj]
+            nt += 1
+        if beta[jj] != 0.0:
+            kind[nt] = beta_kind
+            index[nt] = jj
+            coef[nt] = h * beta[jj]
+            nt += 1
+    return kind, index, coef, nt
+
+
+@njit(**INLINE)
+def lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p):
+    # f at the history points (index jj at time t - (k - 1 - jj) h, in ring slot slots[jj]) that
+    # a nonzero beta needs and whose f is not known yet; the number of evaluations
+    k = H.shape[0]
+    evals = 0
+    for jj in range(k):
+        slot = slots[jj]
+        if beta[jj] != 0.0 and not fvalid[slot]:
+            rhs_members(f_rhs, t - (k - 1 - jj) * h, H[slot], P, F[slot], y, out, p)
+            fvalid[slot] = True
+            evals += 1
+    return evals
 
 
 # Linear multistep, shared part: f at the history points a beta needs (each evaluated once, when
@@ -34,21 +71,7 @@ def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slo
     for jj in range(k):
         slot = head + jj
         slots[jj] = slot - k if slot >= k else slot
-    evals = 0
-    for jj in range(k):
-        slot = slots[jj]
-        if beta[jj] != 0.0 and not fvalid[slot]:
-            tj = t - (k - 1 - jj) * h
-            for m in range(N):
-                for d in range(dim):
-                    y[d] = H[slot, d, m]
-                for q in range(P.shape[0]):
-                    p[q] = P[q, m]
-                call_state(f_rhs, tj, y, p, out)
-                for d in range(dim):
-                    F[slot, d, m] = out[d]
-            fvalid[slot] = True
-            evals += 1
+    evals = lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p)
     for m in range(N):
         for d in range(dim):
             acc = 0.0
@@ -121,21 +144,7 @@ def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
     p = np.empty(P.shape[0])
     for q in range(P.shape[0]):
         p[q] = P[q, 0]
-    tkind = np.empty(2 * k, dtype=np.int64)
-    tindex = np.empty(2 * k, dtype=np.int64)
-    tcoef = np.empty(2 * k)
-    nt = 0
-    for jj in range(k):
-        if alpha[jj] != 0.0:
-            tkind[nt] = 0
-            tindex[nt] = jj
-            tcoef[nt] = -alpha[jj]
-            nt += 1
-        if beta[jj] != 0.0:
-            tkind[nt] = k
-            tindex[nt] = jj
-            tcoef[nt] = h * beta[jj]
-            nt += 1
+    tkind, tindex, tcoef, nt = lmm_terms(alpha, beta, h, k, -1.0, k)
     off = np.empty(k * nt, dtype=np.uint64)
     for ph in range(k):
         for q in range(nt):
@@ -226,23 +235,8 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
     out = np.empty(dim)
     p = np.empty(npar)
     slots = np.empty(k, dtype=np.int64)
-    # the formula's nonzero terms in the NumPy loop's order (j ascending, alpha before beta):
-    # kind 0 is -alpha_j y_j, kind 1 is + h beta_j f_j
-    kind = np.empty(2 * k, dtype=np.int64)
-    index = np.empty(2 * k, dtype=np.int64)
-    coef = np.empty(2 * k)
-    nt = 0
-    for jj in range(k):
-        if alpha[jj] != 0.0:
-            kind[nt] = 0
-            index[nt] = jj
-            coef[nt] = alpha[jj]
-            nt += 1
-        if beta[jj] != 0.0:
-            kind[nt] = 1
-            index[nt] = jj
-            coef[nt] = h * beta[jj]
-            nt += 1
+    # kind 0 is -alpha_j y_j (subtracted with coefficient alpha_j), kind 1 is + h beta_j f_j
+    kind, index, coef, nt = lmm_terms(alpha, beta, h, k, 1.0, 1)
     evals = 0
     head = 0
     for n in range(nsteps):
@@ -264,20 +258,7 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
                     H[slot, d, m] = np.nan
             fvalid[slot] = False
             continue
-        for jj in range(k):
-            sl = slots[jj]
-            if beta[jj] != 0.0 and not fvalid[sl]:
-                tj = t - (k - 1 - jj) * h
-                for m in range(N):
-                    for d in range(dim):
-                        y[d] = H[sl, d, m]
-                    for q in range(npar):
-                        p[q] = P[q, m]
-                    call_state(f_rhs, tj, y, p, out)
-                    for d in range(dim):
-                        F[sl, d, m] = out[d]
-                fvalid[sl] = True
-                evals += 1
+        evals += lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p)
         for m in range(N):
             for d in range(dim):
                 acc = 0.0
@@ -335,12 +316,7 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                 for q in range(k):
                     acc += wpred[q] * H[slots[q], d, j]
                 X[d, j] = acc
-        previous = np.inf
-        norm = np.inf
-        theta = np.nan
-        res_norm = np.nan
-        converged = False
-        status = 1
+        previous, norm, theta, res_norm, converged, status = newton_start()
         it = 0
         for it in range(1, max_iter + 1):
             res_norm = 0.0
@@ -376,17 +352,10 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
                                 v += 1.0
                             Mats[j, a, bb] = v
                 n_jac += 1
-                if not newton_factor_members(Mats, Piv):
-                    n_iter += 1
-                    status = 2
-                    break
             n_iter += 1
-            newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
-            norm = newton_update(X, DX, inv_scale)
-            if norm != norm:
-                break
-            converged, theta = newton_converged(norm, previous, tol, theta)
-            if converged:
+            norm, converged, theta, status = newton_members_step(
+                it == 1 or full, Mats, Piv, G, DX, rhs_w, sol, X, inv_scale, norm, previous, tol, theta)
+            if converged or status == 2 or norm != norm:
                 break
             previous = norm
         if not converged:

@@ -25,6 +25,30 @@ __all__ = ["rk_advance", "rk_advance_cols", "split_advance", "split_advance_cols
 COLUMN_BLOCK = 256
 
 
+@njit(**INLINE)
+def rk_block(W, e, dst, term, coef, q0, q1):
+    # one block of four entries: W[dst + e + i] = W[e + i] + sum_q coef[q] W[term[q] + e + i]
+    # (q from q0 to q1 - 1, added in order), formed in registers; offsets unsigned
+    U1 = np.uint64(1)
+    U2 = np.uint64(2)
+    U3 = np.uint64(3)
+    a0 = W[e]
+    a1 = W[e + U1]
+    a2 = W[e + U2]
+    a3 = W[e + U3]
+    for q in range(q0, q1):
+        cq = coef[q]
+        o = term[q] + e
+        a0 += cq * W[o]
+        a1 += cq * W[o + U1]
+        a2 += cq * W[o + U2]
+        a3 += cq * W[o + U3]
+    W[dst + e] = a0
+    W[dst + e + U1] = a1
+    W[dst + e + U2] = a2
+    W[dst + e + U3] = a3
+
+
 # Explicit Runge-Kutta (Hairer, Norsett & Wanner I, II.1, eq. (1.8)):
 # k_i = f(t + c_i h, y + h sum_j a_ij k_j), y <- y + h sum_i b_i k_i; zero coefficients skipped.
 @njit(**CONTRACT)
@@ -65,9 +89,7 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
     W = np.zeros((s + 2) * w)
     p = np.empty(npar)
     uw = np.uint64(w)
-    U1 = np.uint64(1)
-    U2 = np.uint64(2)
-    U3 = np.uint64(3)
+    u0 = np.uint64(0)
     for j in range(Y.shape[1]):
         for d in range(dim):
             W[d] = Y[d, j]
@@ -82,40 +104,10 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
                     call_state_into(f_rhs, t + hc[i], W, 0, p, W, (i + 2) * w)
                     continue
                 for bb in range(nb):
-                    e = np.uint64(4) * np.uint64(bb)
-                    a0 = W[e]
-                    a1 = W[e + U1]
-                    a2 = W[e + U2]
-                    a3 = W[e + U3]
-                    for q in range(q0, q1):
-                        cq = coef[q]
-                        o = term[q] + e
-                        a0 += cq * W[o]
-                        a1 += cq * W[o + U1]
-                        a2 += cq * W[o + U2]
-                        a3 += cq * W[o + U3]
-                    W[uw + e] = a0
-                    W[uw + e + U1] = a1
-                    W[uw + e + U2] = a2
-                    W[uw + e + U3] = a3
+                    rk_block(W, np.uint64(4) * np.uint64(bb), uw, term, coef, q0, q1)
                 call_state_into(f_rhs, t + hc[i], W, w, p, W, (i + 2) * w)
             for bb in range(nb):
-                e = np.uint64(4) * np.uint64(bb)
-                a0 = W[e]
-                a1 = W[e + U1]
-                a2 = W[e + U2]
-                a3 = W[e + U3]
-                for q in range(nw):
-                    cq = wcoef[q]
-                    o = wterm[q] + e
-                    a0 += cq * W[o]
-                    a1 += cq * W[o + U1]
-                    a2 += cq * W[o + U2]
-                    a3 += cq * W[o + U3]
-                W[e] = a0
-                W[e + U1] = a1
-                W[e + U2] = a2
-                W[e + U3] = a3
+                rk_block(W, np.uint64(4) * np.uint64(bb), u0, wterm, wcoef, 0, nw)
         for d in range(dim):
             Y[d, j] = W[d]
     return s * nsteps
@@ -151,25 +143,38 @@ def rk_advance_cols(f_rhs_cols, A, b, c, t0, n0, h, nsteps, Y, K, Stage, P):
     return s * nsteps
 
 
+# One member of a Newtonian ensemble in working vectors: (q, v) from the rows of Y, its force
+# from Acc and its parameters from P, and back after its steps.
+@njit(**INLINE)
+def take_member(Y, Acc, P, j, q, v, a, p):
+    nq = q.shape[0]
+    for d in range(nq):
+        q[d] = Y[d, j]
+        v[d] = Y[nq + d, j]
+        a[d] = Acc[d, j]
+    for k in range(p.shape[0]):
+        p[k] = P[k, j]
+
+
+@njit(**INLINE)
+def put_member(Y, Acc, j, q, v, a):
+    nq = q.shape[0]
+    for d in range(nq):
+        Y[d, j] = q[d]
+        Y[nq + d, j] = v[d]
+        Acc[d, j] = a[d]
+
+
 # Drift/kick splitting (Hairer, Lubich & Wanner, GNI, II.5): drifts q += a_i h v, kicks
 # v += b_i h a(q, t + tau_i h); a scheme that begins and ends with a kick reuses the last force.
 @njit(**CONTRACT)
 def split_advance(f_accel, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
     nops = kick.shape[0]
     nq = Acc.shape[0]
-    npar = P.shape[0]
-    q = np.empty(nq)
-    v = np.empty(nq)
-    a = np.empty(nq)
-    p = np.empty(npar)
+    q, v, a, p = np.empty(nq), np.empty(nq), np.empty(nq), np.empty(P.shape[0])
     evals = 0
     for j in range(Y.shape[1]):
-        for d in range(nq):
-            q[d] = Y[d, j]
-            v[d] = Y[nq + d, j]
-            a[d] = Acc[d, j]
-        for k in range(npar):
-            p[k] = P[k, j]
+        take_member(Y, Acc, P, j, q, v, a, p)
         valid = valid0
         e = 0
         for n in range(nsteps):
@@ -185,10 +190,7 @@ def split_advance(f_accel, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y
                     for d in range(nq):
                         q[d] += v[d] * hcoef[i]
             valid = fsal
-        for d in range(nq):
-            Y[d, j] = q[d]
-            Y[nq + d, j] = v[d]
-            Acc[d, j] = a[d]
+        put_member(Y, Acc, j, q, v, a)
         evals = e
     return evals
 
@@ -226,18 +228,9 @@ def split_advance_cols(f_accel_cols, kick, hcoef, htau, fsal, valid0, t0, n0, h,
 @njit(**CONTRACT)
 def leapfrog_advance(f_accel, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
     nq = Acc.shape[0]
-    npar = P.shape[0]
-    q = np.empty(nq)
-    v = np.empty(nq)
-    a = np.empty(nq)
-    p = np.empty(npar)
+    q, v, a, p = np.empty(nq), np.empty(nq), np.empty(nq), np.empty(P.shape[0])
     for j in range(Y.shape[1]):
-        for d in range(nq):
-            q[d] = Y[d, j]
-            v[d] = Y[nq + d, j]
-            a[d] = Acc[d, j]
-        for k in range(npar):
-            p[k] = P[k, j]
+        take_member(Y, Acc, P, j, q, v, a, p)
         for n in range(nsteps):
             t = t0 + (n0 + n + 1) * h
             for d in range(nq):
@@ -245,10 +238,7 @@ def leapfrog_advance(f_accel, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
             call_state(f_accel, t, q, p, a)
             for d in range(nq):
                 v[d] += a[d] * hkick
-        for d in range(nq):
-            Y[d, j] = q[d]
-            Y[nq + d, j] = v[d]
-            Acc[d, j] = a[d]
+        put_member(Y, Acc, j, q, v, a)
     return nsteps
 
 
@@ -334,20 +324,11 @@ def controlled_advance(f_accel, kick, coef, fsal, valid0, reversible, pos_power,
                        nsteps, Y, Acc, Time, Z, P):
     nops = kick.shape[0]
     nq = Acc.shape[0]
-    npar = P.shape[0]
-    q = np.empty(nq)
-    v = np.empty(nq)
-    a = np.empty(nq)
-    p = np.empty(npar)
+    q, v, a, p = np.empty(nq), np.empty(nq), np.empty(nq), np.empty(P.shape[0])
     half = 0.5 * pos_power
     evals = 0
     for j in range(Y.shape[1]):
-        for d in range(nq):
-            q[d] = Y[d, j]
-            v[d] = Y[nq + d, j]
-            a[d] = Acc[d, j]
-        for k in range(npar):
-            p[k] = P[k, j]
+        take_member(Y, Acc, P, j, q, v, a, p)
         time = Time[j]
         z = Z[j]
         valid = valid0
@@ -385,10 +366,7 @@ def controlled_advance(f_accel, kick, coef, fsal, valid0, reversible, pos_power,
                     r2 += q[d] * q[d]
                     qv += q[d] * v[d]
                 z += h * ((-pos_power) * qv / r2)
-        for d in range(nq):
-            Y[d, j] = q[d]
-            Y[nq + d, j] = v[d]
-            Acc[d, j] = a[d]
+        put_member(Y, Acc, j, q, v, a)
         Time[j] = time
         Z[j] = z
         evals = e

@@ -14,8 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from implementations.kernel_calls import call_state
-from implementations.kernels.common import EXACT
+from implementations.kernels.common import EXACT, rhs_members
 
 __all__ = ["lmm2_explicit_advance"]
 
@@ -58,15 +57,7 @@ def lmm2_explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, kno
             for jj in range(k):  # stored points -k .. -1 are x_n .. x_(n+k-1)
                 slot = (head + keep - k + jj) % keep
                 if beta[jj] != 0.0 and known[slot] == 0:
-                    t = tc + (jj - k + 1) * h
-                    for j in range(N):
-                        for d in range(nq):
-                            x[d] = X[slot, d, j]
-                        for q in range(npar):
-                            p[q] = P[q, j]
-                        call_state(f_accel, t, x, p, a)
-                        for d in range(nq):
-                            A[slot, d, j] = a[d]
+                    rhs_members(f_accel, tc + (jj - k + 1) * h, X[slot], P, A[slot], x, a, p)
                     known[slot] = 1
                     evals += 1
         out = head  # the oldest slot takes the new point

@@ -27,7 +27,8 @@ def _convergence_judged(view: RunView) -> pd.DataFrame:
     gate = view.gate()
     if not len(gate) or summ.empty:
         return summ.assign(passed=None, reason="")
-    cols = [c for c in ("stepper", "problem", "passed", "reason", "expected") if c in gate]
+    cols = [c for c in ("stepper", "problem", "passed", "outcome", "reason", "expected",
+                        "measured_coefficient", "predicted_coefficient", "prediction_note") if c in gate]
     return summ.merge(gate[cols], on=["stepper", "problem"], how="left")
 
 
@@ -95,6 +96,14 @@ def convergence(view: RunView, sec: Section) -> None:
              "used, the thin line alone beyond them where points were excluded (pre-asymptotic, "
              "roundoff or reference floor; the CSV says which point is which); dashed, the fitted "
              "slope over that range; dotted, the reference floor.")
+    sec.note("Error constants: measured C is the smallest fitted error over h^p at its step (p the "
+             "expected order); predicted C is the leading global error term h^p e(T) from the "
+             "coefficients' defects and the problem's elementary differentials carried to the final "
+             "time by the variational equation (HNW I, II.8, Theorem 8.1), for Runge-Kutta tableaus "
+             "where an h^p law is expected. It follows the problem's own start while the measured "
+             "error is the largest over the ensemble, so measured/predicted is about 1 or above, far "
+             "above where the leading term nearly cancels at the own start's final time; a cell "
+             "without a prediction says why. Information only: the verdict judges the slope.")
     for problem in problems_in(view, judged):
         g = part(view, rows, "problem", problem) if "problem" in rows else pd.DataFrame()
         ref = part(view, judged, "problem", problem)["reference_error"].astype(float)
@@ -108,7 +117,8 @@ def convergence(view: RunView, sec: Section) -> None:
     cols = [("stepper", "stepper"), ("problem", "problem"), ("claimed_order", "claimed"),
             ("measured_order", "measured"), ("order_ci_low", "95% CI low"),
             ("order_ci_high", "95% CI high"), ("fit_points", "fit points"), ("verdict", "verdict"),
-            ("reason", "why")]
+            ("reason", "why"), ("measured_coefficient", "measured C"),
+            ("predicted_coefficient", "predicted C"), ("prediction_note", "why no prediction")]
     sec.table(df_table(judged, cols, f"Per cell: {len(judged)} stepper × problem fits",
                        experiment="convergence", digits=4))
 

@@ -13,7 +13,7 @@ For one (stepper, problem) cell:
    `t_end`) and `adaptive_ensemble` members (each output step costs a solver call per member).
    A run past the problem's span (unless `t_end` asks for it) stops where its orbit leaves the
    span's dynamical regime (a closer encounter than any within the span, a state that runs
-   off: `harness.scales.regime_end`), and its message says where and why.
+   off: `harness.regimes.regime_end`), and its message says where and why.
 2. The state is saved on a log-spaced grid of step indices (`samples_per_decade`) merged with a
    uniform grid (`uniform_samples`). The relative energy error |E(t) - E0| / |E0| is taken as the
    maximum over members; for problems with an angular momentum invariant the relative error of
@@ -21,11 +21,16 @@ For one (stepper, problem) cell:
 3. The envelope is the running maximum M(n) of the error, read on the log grid. Its growth
    exponent is the Theil-Sen slope of log M against log n over the later decades: n from
    max(n_end / 10^fit_decades, FIT_MIN_PERIODS natural periods) to n_end.
-   Classes (thresholds in `harness.tolerances`): `unstable` (non-finite, an error above
-   ENERGY_BLOWUP_ERROR = 10 %, growth faster than linear, or an implicit solve that broke
-   down), `linear` (drift proportional to t; `drift_slope` is the Theil-Sen slope of M
-   against t), `sqrt` (random-walk growth proportional to sqrt(t), the
-   signature of rounding), `bounded` (no secular trend).
+   Classes (thresholds in `harness.tolerances`) follow the growth, not the size: `unstable`
+   (non-finite, growth faster than linear, an implicit solve that broke down, an error risen to
+   ENERGY_BLOWUP_ERROR = 10 %), `linear` (drift ~ t; `drift_slope` is the Theil-Sen slope of M
+   against t), `sqrt` (random walk ~ sqrt(t), rounding's signature), `bounded` (no secular
+   trend). An error that large in the first period already, within ENERGY_BOUNDED_RISE of it at
+   the end, and swinging back below ENERGY_RETURN_FRACTION of its size in the fit window is a
+   bounded oscillation, classified by growth: a modified energy H~ is conserved, so the error
+   (H - H~)(y_n) - (H - H~)(y_0) is O(h^p) uniformly in time and returns near 0 as the orbit
+   revisits its start's phase (HLW IX.8, Thm 8.1; velocity Verlet on x'' = -w^2 x keeps
+   p^2 + (1 - h^2 w^2/4) w^2 q^2: at h w = 1.5 its energy error swings between 0 and 56 %).
 4. Verdicts. A stepper claimed symplectic must be `bounded`, or show a secular growth within
    what rounding explains (Brouwer's law: rounding makes the energy error a random walk,
    ~ sqrt(n) eps; HLW VIII.5): `as-claimed`, else `claim-false`. Whether a method is symplectic
@@ -81,16 +86,9 @@ from harness.experiments.energy.section import SECTION
 from harness.invariant_checks import check_invariants_along_flow
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
-__all__ = [
-    "EnergyExperiment",
-    "classify_drift",
-    "conserves_quadratic_invariants",
-    "ROW_COLUMNS",
-    "SUMMARY_COLUMNS",
-]
+__all__ = ["EnergyExperiment", "classify_drift", "conserves_quadratic_invariants", "ROW_COLUMNS",
+           "SUMMARY_COLUMNS"]
 
-
-DRIFT_CLASSES = ("bounded", "sqrt", "linear", "unstable")
 
 ROW_COLUMNS = [
     "stepper", "problem", "quantity", "invariant", "step", "t", "error", "running_max", "h", "tol",
@@ -117,16 +115,12 @@ def conserves_quadratic_invariants(stepper: Stepper) -> bool:
 
 
 # -- classification -------------------------------------------------------------------------------
-def classify_drift(
-    steps: np.ndarray,
-    t: np.ndarray,
-    error: np.ndarray,
-    *,
-    fit_start: int,
-    checkpoints_per_decade: int = 20,
-    min_decades: float = 1.0,
-) -> dict[str, Any]:
-    """Classify the envelope of a relative error sampled at step indices `steps` (times `t`).
+def classify_drift(steps: np.ndarray, t: np.ndarray, error: np.ndarray, *, fit_start: int,
+                   checkpoints_per_decade: int = 20, min_decades: float = 1.0,
+                   period_steps: float = 0.0) -> dict[str, Any]:
+    """Classify the envelope of a relative error sampled at step indices `steps` (times `t`);
+    `period_steps` (steps per natural period, 0: unknown) lets an error of ENERGY_BLOWUP_ERROR
+    or more that was as large in the first period be classified by growth (module item 3).
 
     Returns drift_class, drift_exponent (log-log slope of the running maximum over the fit
     window), drift_slope (slope of the running maximum against t, per unit time),
@@ -144,7 +138,12 @@ def classify_drift(
         out["max_error"] = float("inf")
         return out
     out["max_error"] = float(np.max(error)) if error.size else float("nan")
-    if error.size == 0 or out["max_error"] >= tol.ENERGY_BLOWUP_ERROR:
+    first = error[(steps >= 1) & (steps <= math.ceil(max(period_steps, 1.0)))] if period_steps > 0 else []
+    early = float(np.max(first)) if len(first) else 0.0  # a bounded oscillation's size (docstring)
+    late = error[steps >= fit_start]  # a bounded oscillation swings back (docstring)
+    swings = late.size > 0 and np.min(late) <= tol.ENERGY_RETURN_FRACTION * np.max(late)
+    if error.size == 0 or (out["max_error"] >= tol.ENERGY_BLOWUP_ERROR and not (
+            early > 0 and out["max_error"] <= tol.ENERGY_BOUNDED_RISE * early and swings)):
         return out
     running = np.maximum.accumulate(np.maximum(error, tol.ENERGY_ERROR_FLOOR))
     n_end = float(steps[-1])
@@ -347,7 +346,8 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
         fit_start = encounter["step"]
         min_decades = min(1.0, math.log10(n_end / max(fit_start, 1.0)))
     e = classify_drift(energy.step.values, energy.t.values, energy.error.values,
-                       fit_start=int(fit_start), min_decades=max(min_decades, 1e-3))
+                       fit_start=int(fit_start), min_decades=max(min_decades, 1e-3),
+                       period_steps=steps_per_period)
     if "step failure: " in message:
         e["drift_class"] = "unstable"  # an implicit solve broke down: the motion is destroyed
     from harness.facts import central_field, method_facts
@@ -410,7 +410,8 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
     L = g[g.quantity == "angular_momentum"].sort_values("step")
     problem_obj = _problem(problem)
     if len(L):
-        lc = classify_drift(L.step.values, L.t.values, L.error.values, fit_start=int(fit_start))
+        lc = classify_drift(L.step.values, L.t.values, L.error.values, fit_start=int(fit_start),
+                            period_steps=steps_per_period)
         L_limit = tol.ANGULAR_MOMENTUM_ROUNDING_ULPS * n_end * tol.EPS
         rec.update(max_rel_angular_momentum_error=lc["max_error"],
                    angular_momentum_class=lc["drift_class"], angular_momentum_rounding=L_limit)
@@ -478,7 +479,7 @@ def _last_closest_approach(problem, energy: pd.DataFrame, h: float) -> dict | No
     its maximum over the run, when that is more than ENCOUNTER_RATE_RISE times the rate at the
     start (a close encounter the run meets late); None otherwise (an oscillator, a Kepler orbit
     whose pericentre comes within the first period) or when the orbit cannot be had."""
-    from harness.scales import fastest_approach
+    from harness.regimes import fastest_approach
 
     found = fastest_approach(problem, float(energy.t.iloc[-1]))
     if found is None:  # no float64 orbit: no correction

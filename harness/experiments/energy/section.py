@@ -4,15 +4,7 @@ from __future__ import annotations
 
 from harness import tolerances as tol
 from harness.experiments.energy.figures import angular_momentum_figure, energy_figure
-from harness.kit import (
-    Measure,
-    RunView,
-    ScoreColumn,
-    Section,
-    SectionSpec,
-    anchor,
-    df_table,
-)
+from harness.kit import Measure, RunView, ScoreColumn, Section, SectionSpec, anchor, df_table
 from harness.kit.view import part, problems_in, rows_of
 
 

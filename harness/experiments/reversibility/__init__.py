@@ -12,7 +12,7 @@ truncation error, ~h^p T, far above rounding. One cell is one (stepper, problem,
    (the stepper's own `_reverse`, which also reorders a multistep history), N steps back. A
    `t_end` setting replaces the list of N by the one N that reaches it. An N whose span would
    leave the dynamical regime of the problem's span is cut to the largest N that does not
-   (`harness.scales.regime_end`), and that cell's message says why.
+   (`harness.regimes.regime_end`), and that cell's message says why.
 2. The return error is the max-norm of (returned - start) over components and members; in
    ulps it is divided by eps * max|y_start| per member (the largest over members is reported).
 3. What rounding explains. Each step of a symmetric method adds about one ulp of rounding, and

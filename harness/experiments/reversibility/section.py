@@ -8,17 +8,7 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.experiments.reversibility.figures import reversibility_figure
-from harness.kit import (
-    Measure,
-    RunView,
-    ScoreColumn,
-    Section,
-    SectionSpec,
-    anchor,
-    df_table,
-    fmt,
-    is_missing,
-)
+from harness.kit import Measure, RunView, ScoreColumn, Section, SectionSpec, anchor, df_table, fmt, is_missing
 from harness.kit.section import claimed_measured
 from harness.kit.view import rows_of
 

@@ -3,12 +3,7 @@
 from __future__ import annotations
 
 from harness.experiments.roundoff.figures import roundoff_figure
-from harness.kit import (
-    RunView,
-    Section,
-    SectionSpec,
-    df_table,
-)
+from harness.kit import RunView, Section, SectionSpec, df_table
 
 
 def roundoff(view: RunView, sec: Section) -> None:

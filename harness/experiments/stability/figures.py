@@ -6,16 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from harness.kit.figure_style import (
-    Palette,
-    label_text,
-    new_figure,
-    panel_legend,
-    panels,
-    small_multiples,
-    small_ticks,
-    styled,
-)
+from harness.kit import figure_style as fs
 from harness.kit.figure_svg import Figure, to_svg
 
 __all__ = ['stability_overlay_figure', 'hw_limits_figure']
@@ -33,8 +24,8 @@ def _grid(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray] | Non
     return pivot.columns.to_numpy(float), pivot.index.to_numpy(float), pivot.to_numpy(float)
 
 
-@styled
-def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | None:
+@fs.styled
+def stability_overlay_figure(rows: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     """Boundaries |R(z)| = 1 of the first-order methods, overlaid one panel per family; the
     stable side is shaded lightly for each method."""
     from matplotlib.lines import Line2D
@@ -42,8 +33,8 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | N
     names = [s for s, g in rows.groupby("stepper", sort=False) if _grid(g) is not None]
     if not names:
         return None
-    groups = panels(names, palette.families)
-    fig, axes = small_multiples(len(groups), panel=(3.1, 2.8), sharex=True, sharey=True)
+    groups = fs.panels(names, palette.families)
+    fig, axes = fs.small_multiples(len(groups), panel=(3.1, 2.8), sharex=True, sharey=True)
     data = []
     for ax, (title, members) in zip(axes, groups, strict=True):
         handles = []
@@ -54,19 +45,19 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | N
             if np.nanmin(z) > 1 or np.nanmax(z) <= 1:
                 where = "stable on the whole grid" if np.nanmax(z) <= 1 else "unstable on the grid"
                 handles.append(Line2D([], [], color=c, lw=0, marker="s",
-                                      label=f"{label_text(stepper)} ({where})"))
+                                      label=f"{fs.label_text(stepper)} ({where})"))
                 continue
             ax.contourf(x, y, z, levels=[-1.0, 1.0], colors=[c], alpha=0.08)
             cs = ax.contour(x, y, z, levels=[1.0], colors=[c], linewidths=1.1)
             for seg in cs.allsegs[0]:
                 data.append(pd.DataFrame({"stepper": stepper, "re": seg[:, 0], "im": seg[:, 1]}))
-            handles.append(Line2D([], [], color=c, lw=1.1, label=label_text(stepper)))
+            handles.append(Line2D([], [], color=c, lw=1.1, label=fs.label_text(stepper)))
         ax.axhline(0, color="0.5", lw=0.5)
         ax.axvline(0, color="0.5", lw=0.5)
         ax.set_aspect("equal")
         ax.set_title(title)
-        small_ticks(ax)
-        panel_legend(ax, handles, loc="upper left")
+        fs.small_ticks(ax)
+        fs.panel_legend(ax, handles, loc="upper left")
     fig.supxlabel("Re(hλ)", fontsize=8)
     fig.supylabel("Im(hλ)", fontsize=8)
     fig.suptitle("Stability boundaries |R(hλ)| = 1 (probe)", fontsize=8.5)
@@ -74,14 +65,14 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: Palette) -> Figure | N
                   pd.concat(data, ignore_index=True) if data else None)
 
 
-@styled
-def hw_limits_figure(summary: pd.DataFrame, palette: Palette) -> Figure | None:
+@fs.styled
+def hw_limits_figure(summary: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     """Bar chart of the h omega stability limits of the Newtonian steppers (unbounded: hatched
     bar to the search limit)."""
     s = summary[summary["form"] == "newtonian"]
     if s.empty:
         return None
-    fig, axes = new_figure(size=(6.4, 0.22 * len(s) + 1.0))
+    fig, axes = fs.new_figure(size=(6.4, 0.22 * len(s) + 1.0))
     ax = axes[0][0]
     names = [str(n) for n in s["stepper"]]
     values = s["hw_limit"].astype(float).to_numpy()
@@ -94,7 +85,7 @@ def hw_limits_figure(summary: pd.DataFrame, palette: Palette) -> Figure | None:
         else:
             ax.barh(i, cap, color="none", edgecolor=palette.colour(name), hatch="//")
             ax.text(cap, i, " unbounded", va="center", fontsize=6.5)
-    ax.set_yticks(range(len(names)), [label_text(n) for n in names])
+    ax.set_yticks(range(len(names)), [fs.label_text(n) for n in names])
     ax.tick_params(labelsize=6.5)
     ax.invert_yaxis()
     ax.set_xlabel("largest stable hω (harmonic oscillator x'' = -ω²x)")

@@ -9,16 +9,7 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.experiments.stability.figures import hw_limits_figure, stability_overlay_figure
-from harness.kit import (
-    Measure,
-    RunView,
-    ScoreColumn,
-    Section,
-    SectionSpec,
-    anchor,
-    df_table,
-    fmt,
-)
+from harness.kit import Measure, RunView, ScoreColumn, Section, SectionSpec, anchor, df_table, fmt
 from harness.kit.view import rows_of
 
 

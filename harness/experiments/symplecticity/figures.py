@@ -5,22 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from harness.kit.figure_style import (
-    LOG_FLOOR,
-    Palette,
-    clip_log,
-    label_text,
-    loglog_axes,
-    new_figure,
-    styled,
-)
+from harness.kit import figure_style as fs
 from harness.kit.figure_svg import Figure, to_svg
 
 __all__ = ['symplecticity_figure']
 
 
-@styled
-def symplecticity_figure(summary: pd.DataFrame, palette: Palette) -> Figure | None:
+@fs.styled
+def symplecticity_figure(summary: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     """Deviation from symplecticity per stepper (x, grouped by family) and problem (one point
     each), log scale, with the finite-difference threshold the verdict uses; claimed-symplectic
     steppers filled, the others hollow."""
@@ -28,13 +20,13 @@ def symplecticity_figure(summary: pd.DataFrame, palette: Palette) -> Figure | No
         return None
     s = summary.assign(_d=summary["deviation"].astype(float))
     names = sorted(dict.fromkeys(s["stepper"]), key=lambda n: (palette.family(n), n))
-    fig, axes = new_figure(size=(max(5.0, 0.2 * len(names) + 1.6), 3.4))
+    fig, axes = fs.new_figure(size=(max(5.0, 0.2 * len(names) + 1.6), 3.4))
     ax = axes[0][0]
     for i, name in enumerate(names):
         g = s[s["stepper"] == name]
         claimed = bool(g["claimed_symplectic"].iloc[0]) if "claimed_symplectic" in g else False
         c = palette.colour(name)
-        ax.plot(np.full(len(g), i), clip_log(g["_d"]), linestyle="none", marker=palette.marker(name),
+        ax.plot(np.full(len(g), i), fs.clip_log(g["_d"]), linestyle="none", marker=palette.marker(name),
                 ms=4, color=c, markerfacecolor=c if claimed else "none")
     if "threshold" in s:
         thr = s["threshold"].astype(float)
@@ -43,10 +35,10 @@ def symplecticity_figure(summary: pd.DataFrame, palette: Palette) -> Figure | No
             ax.axhline(float(thr.max()), color="k", ls=":", lw=1.0)
             ax.text(len(names) - 0.5, float(thr.max()), " threshold", fontsize=6.5, va="bottom",
                     ha="right")
-    loglog_axes(ax, x=False)
-    ax.set_xticks(range(len(names)), [label_text(n) for n in names], rotation=60, ha="right", fontsize=6.5)
+    fs.loglog_axes(ax, x=False)
+    ax.set_xticks(range(len(names)), [fs.label_text(n) for n in names], rotation=60, ha="right", fontsize=6.5)
     ax.set_xlim(-0.6, len(names) - 0.4)
-    ax.set_ylabel(f"‖JᵀΩJ − Ω‖ / ‖J‖² (0 at {LOG_FLOOR:g})", fontsize=7.5)
+    ax.set_ylabel(f"‖JᵀΩJ − Ω‖ / ‖J‖² (0 at {fs.LOG_FLOOR:g})", fontsize=7.5)
     ax.set_title("Symplecticity: filled = claimed symplectic, hollow = not claimed", fontsize=8)
     ax.tick_params(axis="y", labelsize=6.5)
     cols = [c for c in ("stepper", "problem", "h", "deviation", "threshold", "claimed_symplectic",

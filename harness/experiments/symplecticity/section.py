@@ -6,15 +6,7 @@ import numpy as np
 
 from harness import tolerances as tol
 from harness.experiments.symplecticity.figures import symplecticity_figure
-from harness.kit import (
-    Measure,
-    RunView,
-    ScoreColumn,
-    Section,
-    SectionSpec,
-    anchor,
-    df_table,
-)
+from harness.kit import Measure, RunView, ScoreColumn, Section, SectionSpec, anchor, df_table
 from harness.kit.section import claimed_measured
 from harness.kit.view import rows_of
 

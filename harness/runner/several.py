@@ -1,0 +1,121 @@
+"""Several experiments in one call: one listing of every cell (so the progress total does not
+grow), one progress display and one Dask connection, each experiment run by `run_experiment`."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import pandas as pd
+
+from harness.errors import InputError, UnknownNameError
+from harness.experiments.base import Experiment
+from harness.progress import Progress
+from harness.runner.checks import (
+    check_names,
+    check_plugins,
+    check_scheduler,
+    progress_display,
+    resolve_config,
+    resolve_experiment,
+)
+from harness.runner.executors import dask_client
+from harness.runner.orchestration import RunOptions, no_cells_error, run_experiment
+from harness.runner.result import RunResult
+
+__all__ = ["run_experiments"]
+
+
+def run_experiments(
+    experiments: Sequence[str | Experiment] | None = None,
+    steppers: Sequence[str] | None = None,
+    problems: Sequence[str] | None = None,
+    *,
+    configs: Mapping[str, Mapping[str, Any]] | None = None,
+    quick: bool = False,
+    jobs: int | None = None,
+    scheduler: str | Any | None = None,
+    fresh: bool = False,
+    cache: bool = True,
+    cache_dir: str | os.PathLike | None = None,
+    plugins: Sequence[str | os.PathLike] = (),
+    cell_timeout: float | None = None,
+    progress: Progress | bool | str | None = None,
+) -> dict[str, RunResult]:
+    """`run_experiment` for several experiments (None: every registered one), in order, with one
+    progress display and one Dask connection.
+
+    Parameters
+    ----------
+    experiments : sequence of str or Experiment, optional, the experiments (None: every registered one).
+    steppers, problems : sequence of str, optional, registered names (None: every one).
+    configs : mapping, optional, experiment name -> overrides of its settings.
+    quick, jobs, scheduler, fresh, cache, cache_dir, plugins, cell_timeout, progress
+        As in `run_experiment`.
+
+    Returns
+    -------
+    dict of str to RunResult: by experiment name; pass it to `harness.store.save_run`.
+    """
+    from harness.experiments import EXPERIMENTS
+
+    if experiments is None:
+        experiments = list(EXPERIMENTS)
+    if isinstance(experiments, str | Experiment):
+        experiments = [experiments]
+    exps = [resolve_experiment(e) for e in experiments]
+    if configs is not None and not isinstance(configs, Mapping):
+        raise InputError(f"`configs` must map experiment names to settings, got {type(configs).__name__}")
+    unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
+    if unknown:
+        raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
+    sched = check_scheduler(scheduler)
+    from harness.registry import load_plugin
+
+    plugin_paths = check_plugins(plugins)
+    for p in plugin_paths:
+        load_plugin(p)
+    options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
+                         cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
+    stepper_names = check_names("steppers", steppers)
+    problem_names = check_names("problems", problems)
+    bar, own_bar = progress_display(progress, "cells")
+    # Every experiment's cells are listed once, here: the whole run's size first, so the
+    # display's total does not grow; each `run_experiment` takes its list.
+    listed: dict[str, tuple[list, list]] = {}
+    versions: dict[tuple[str, str], Any] = {}
+    for exp in exps:
+        try:
+            cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
+            cells, skips = exp.cells(stepper_names, problem_names, cfg)
+            listed[exp.name] = (list(cells), list(skips))
+        except Exception:  # run_experiment lists it again and reports the failure properly
+            break
+    counted = len(listed) == len(exps)
+    if counted:
+        bar.add_total(sum(len(cells) for cells, _ in listed.values()))
+    client = None
+    own_client = False
+    out: dict[str, RunResult] = {}
+    try:
+        if sched is not None:
+            client, own_client = dask_client(sched)
+        for i, exp in enumerate(exps, 1):
+            bar.set_description(f"[{i}/{len(exps)}] {exp.name}")
+            out[exp.name] = run_experiment(
+                exp, stepper_names, problem_names, config=(configs or {}).get(exp.name),
+                options=options, progress=bar, _client=client, _counted=counted, allow_empty=True,
+                _listed=listed.get(exp.name), _versions=versions,
+            )
+            if sched is not None:
+                out[exp.name].options["scheduler"] = sched if isinstance(sched, str) else None
+    finally:
+        if own_client and client is not None:
+            client.close()
+        if own_bar:
+            bar.close()
+    if out and not any(r.n_cells for r in out.values()):
+        raise no_cells_error(list(out), pd.concat([r.skips for r in out.values()], ignore_index=True),
+                             stepper_names, problem_names)
+    return out
