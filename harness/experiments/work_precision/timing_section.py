@@ -48,7 +48,8 @@ def time_precision_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette,
     best = best_per_family(frame, palette.families, cost="t_min_s")
     bold = set(best.values())
     longest = max([len(fs.label_text(s)) + len(f) + 8 for f, s in best.items()] + [22])
-    fig, axes = fs.small_multiples(1, ncols=1, panel=(4.2, 3.0), right=longest * fs.LEGEND_CHAR_W * 0.85 + 0.5)
+    fig, axes = fs.small_multiples(1, ncols=1, panel=(4.2, 3.0),
+                                   right=longest * fs.LEGEND_CHAR_W * 0.85 + 0.5)
     ax = axes[0]
     for stepper, s in frame.groupby("stepper", sort=False):
         # joined in sweep order (coarse to fine), as SciMLBenchmarks draws it: noise in a time
@@ -82,8 +83,8 @@ def time_precision_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette,
     handles.append(Line2D([], [], color="0.6", lw=0.6, alpha=0.5, label="other methods (faint)"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0,
               frameon=False, fontsize=6.5)
-    fig.suptitle(f"Error against time on {fs.label_text(problem)} (target {WORK_TARGET_ERROR:g} for 'fastest')",
-                 fontsize=8.5)
+    fig.suptitle(f"Error against time on {fs.label_text(problem)} "
+                 f"(target {WORK_TARGET_ERROR:g} for 'fastest')", fontsize=8.5)
     cols = [c for c in ("stepper", "implementation", "h", "tol", "n_steps", "error", "t_min_s",
                         "t_median_s", "t_spread", "t_repeats", "t_stop", "first_call_s", "baseline",
                         "baseline_units", "pareto_time", "load_1min") if c in frame]
