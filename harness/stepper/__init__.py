@@ -47,6 +47,7 @@ from harness.stepper.records import (
     StepFailure,
     StepperInfo,
     Trajectory,
+    WorkLimitFailure,
     check_compatible,
     check_step_size,
     check_steps,
@@ -59,6 +60,7 @@ __all__ = [
     "Carry",
     "Trajectory",
     "StepFailure",
+    "WorkLimitFailure",
     "check_compatible",
     "check_step_size",
     "check_steps",
@@ -80,13 +82,11 @@ class Stepper(NonfiniteReplay, ABC):
 
         Parameters
         ----------
-        problem : Problem
-            The problem.
+        problem : Problem, checked already against the declared form (`check_compatible`)
 
         Returns
         -------
-        str or None
-            The reason (this base class has none; subclasses may).
+        str or None: the reason (this base class has none; subclasses may).
         """
         return None
 
@@ -95,8 +95,7 @@ class Stepper(NonfiniteReplay, ABC):
 
         Parameters
         ----------
-        problem : Problem
-            The problem.
+        problem : Problem, any registered or user problem
 
         Returns
         -------
