@@ -54,7 +54,7 @@ class RunView:
 
         Returns
         -------
-        bool
+        bool: False also when it ran but recorded nothing.
         """
         return name in self.summaries and name in self.meta.get("experiments", {})
 

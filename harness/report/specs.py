@@ -16,11 +16,11 @@ def section_spec(experiment: str) -> SectionSpec:
 
     Parameters
     ----------
-    experiment : str, the experiment's name.
+    experiment : str, the experiment's name (registered or not).
 
     Returns
     -------
-    SectionSpec
+    SectionSpec: the experiment's own, else `generic_spec`'s.
     """
     exp = EXPERIMENTS.get(experiment)
     spec = getattr(exp, "section", None)
