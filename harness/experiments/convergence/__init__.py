@@ -22,7 +22,6 @@ For one (stepper, problem) cell:
 6. The local (one-step) error is measured as well, from exact history for multistep methods:
    `local_exponent` q in error ~ h^q (q = p + 1 for a one-step method of order p), on the whole
    state and, for Newtonian problems, on positions alone (`local_exponent_q`).
-
 7. Where the float64 floor ends the sweep with too few asymptotic points (an order 8-10 method
    whose local slopes still drift when the floor arrives), the same coefficients run again in
    real128 from the problem's start against a 192-bit reference (`harness.extended`) and those
@@ -51,6 +50,13 @@ from harness.coefficient_floors import coefficient_floor, coefficient_rounding_f
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
 from harness.experiments.convergence.extended import extended_if_floor_bound
+from harness.experiments.convergence.reference_error import (
+    best_reference,
+    error_amplification,
+    max_error,
+    reference_at_clocks,
+    state_scale,
+)
 from harness.experiments.convergence.section import SECTION
 from harness.order_fit import classify_points, fit_order
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper, WorkLimitFailure
@@ -93,9 +99,31 @@ class ConvergenceExperiment(Experiment):
     quick_config: Mapping[str, Any] = {"ensemble": 8, "work_budget": tol.SWEEP_WORK_BUDGET // 4}
 
     def cells(self, steppers, problems, config):
+        """Every pair the stepper can run: no problem is left out for its kind.
+
+        Parameters
+        ----------
+        steppers, problems : sequence of str, the registered names of the selection.
+        config : mapping, unused here (the sweeps read it).
+
+        Returns
+        -------
+        (list of Cell, list of Skip): a Skip only for a pair the stepper cannot run.
+        """
         return problem_cells(self.name, steppers, problems, lambda problem: None)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The step sweep (module items 1-4, 6-7), or an adaptive stepper's tolerance sweep.
+
+        Parameters
+        ----------
+        cell : Cell, the (stepper, problem) pair.
+        config : mapping, the sweep's settings (`ensemble`, `work_budget`, `tolerances`, ...).
+
+        Returns
+        -------
+        DataFrame: one row per step size and kind ('global', 'local', 'local-q') or tolerance.
+        """
         from harness.registry import get_problem, get_stepper
 
         stepper = get_stepper(cell.stepper)
@@ -105,42 +133,36 @@ class ConvergenceExperiment(Experiment):
         return _shrinking_sweep(stepper, problem, config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The fitted order and verdict per cell (`judge.summarize_cell`, module item 5).
+
+        Parameters
+        ----------
+        rows : DataFrame, the sweeps' rows of every cell.
+        config : mapping, not read: the verdict follows from the rows.
+
+        Returns
+        -------
+        DataFrame: SUMMARY_COLUMNS.
+        """
         from harness.experiments.convergence.judge import summarize_cell
 
         return summary_per_cell(rows, SUMMARY_COLUMNS, summarize_cell)
 
 
-def _scale(*arrays: np.ndarray) -> float:
-    """The size of the state (max-norm over components, members and the arrays given): errors,
-    the start threshold and the rounding level are measured against it."""
-    return max(tol.SCALE_FLOOR, max(float(np.max(np.abs(a))) for a in arrays))
-
-
-def _errors(y: np.ndarray, ref: np.ndarray) -> float:
-    with np.errstate(all="ignore"):
-        d = np.abs(y - ref)
-    if not np.all(np.isfinite(d)):
-        return float("inf")
-    return float(np.max(d))
-
-
-def _best_reference(problem, T: float, y0: np.ndarray):
-    """The ground truth at T, certified to float64 rounding of the state where heyoka's levels
-    allow it, else the best certified level; points the reference cannot judge are excluded
-    later by the REFERENCE_MARGIN rule, never silently used."""
-    from harness.errors import ReferenceError_
-    from harness.ground_truth import reference
-
-    try:
-        return reference(problem, np.array([T]), y0, required_error=tol.EPS * _scale(y0))
-    except ReferenceError_:
-        return reference(problem, np.array([T]), y0)
-
-
 def step_budget(stepper: Stepper, config: Mapping[str, Any]) -> int:
     """Steps a sweep may spend: the work budget (right-hand-side evaluations) over the
     stepper's declared cost per step; implicit steps also pay for Newton's linear solves.
-    Deterministic, so a verdict never depends on how busy the machine was."""
+    Deterministic, so a verdict never depends on how busy the machine was.
+
+    Parameters
+    ----------
+    stepper : Stepper, its declared evaluations per step and whether it is explicit.
+    config : mapping, `step_budget` (an explicit count that wins) or `work_budget`.
+
+    Returns
+    -------
+    int: the number of steps.
+    """
     if config.get("step_budget") is not None:  # an explicit step count wins
         return int(config["step_budget"])
     info = stepper.info
@@ -180,7 +202,7 @@ def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         T = new_T
     frame = extended_if_floor_bound(
         stepper, problem, frame, config,
-        amplification=lambda T: _flow_amplification(problem, T - problem.t0, problem.y0))
+        amplification=lambda T: error_amplification(problem, T - problem.t0, problem.y0))
     if notes:
         frame["message"] = frame["message"].fillna("").astype(str)
         frame.loc[frame.kind == "global", "message"] = [
@@ -196,17 +218,17 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     T0 = problem.t0
     span = T - T0
     y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]), scale=config.get("perturbation"))
-    ref = _best_reference(problem, T, y0)
+    ref = best_reference(problem, T, y0)
     y_ref = ref.y[-1]
     ref_err = float(np.max(ref.error[-1]))
-    scale = _scale(y0, y_ref)
+    scale = state_scale(y0, y_ref)
     budget = step_budget(stepper, config)
     ratio = float(config["ratio"])
     records: dict[int, dict] = {}
     spent = 0
     # Rounding committed along the way is carried to T by the flow: the floor is sqrt(n) eps |y|
     # times the flow's sensitivity over the horizon (at least 1), as in the reversibility bound.
-    amplification = _flow_amplification(problem, T - T0, y0[:, 0])
+    amplification = error_amplification(problem, T - T0, y0[:, 0])
     # The error the record's own digits leave (None where its defects are float64 rounding).
     floor_of = coefficient_floor(getattr(stepper, "coefficients", None), problem, span=span,
                                  scale=scale, noise=tol.EPS)
@@ -231,8 +253,8 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
                 finite = bool(np.all((clocks >= T0) & (clocks <= problem.t0 + tol.CLOCK_LIMIT_SPANS
                                                         * (problem.t_end - problem.t0))))
                 if finite:
-                    target, target_err = _reference_at_clocks(problem, clocks, y0, T0)
-            err = _errors(tr.final, target) if finite else float("inf")
+                    target, target_err = reference_at_clocks(problem, clocks, y0, T0)
+            err = max_error(tr.final, target) if finite else float("inf")
             evals = tr.evals
             msg = ""
         except StepFailure as exc:
@@ -335,29 +357,6 @@ def _first_or_zero(values: np.ndarray | None) -> float:
     return 0.0 if values is None else float(values[0])
 
 
-def _reference_at_clocks(problem, times: np.ndarray, y0: np.ndarray, t0: float):
-    """The ground truth of each member at its own time (steppers whose h is a control
-    parameter report per-member clocks, `Trajectory.member_t`): (states, certified error)."""
-    out = np.empty_like(y0)
-    worst = 0.0
-    for i, t in enumerate(np.asarray(times, dtype=float)):
-        ref = _best_reference(problem, float(t), y0[:, i : i + 1])
-        out[:, i] = ref.y[-1][:, 0]
-        worst = max(worst, float(np.max(ref.error[-1])))
-    return out, worst
-
-
-def _flow_amplification(problem, span: float, y0: np.ndarray) -> float:
-    """max(1, ||d Phi_span||) (`harness.flow.flow_amplification`), 1 where it cannot be had."""
-    from harness.flow import flow_amplification
-
-    try:
-        value = flow_amplification(problem, span, y0)
-    except Exception:  # a problem whose float64 Taylor orbit fails: the plain rounding level
-        return 1.0
-    return max(1.0, value) if math.isfinite(value) else 1.0
-
-
 def _frame(records: dict[int, dict]) -> pd.DataFrame:
     return pd.DataFrame([records[k] for k in sorted(records)])
 
@@ -389,14 +388,14 @@ def _local_sweep(stepper: Stepper, problem, y0: np.ndarray, global_frame: pd.Dat
             records.append({"h": h, "error": np.nan, "message": str(exc)})
             continue
         exact, exact_err = at(problem.t0 + k * h)
-        scale = _scale(y0, exact)
+        scale = state_scale(y0, exact)
         rec = {
-            "h": float(h), "n_steps": 1, "error": _errors(y1, exact),
+            "h": float(h), "n_steps": 1, "error": max_error(y1, exact),
             "reference_error": exact_err,
             "rounding_level": tol.EPS * scale, "message": "",
         }
         if nq:
-            rec["error_q"] = _errors(y1[:nq], exact[:nq])
+            rec["error_q"] = max_error(y1[:nq], exact[:nq])
         records.append(rec)
     frame = pd.DataFrame(records)
     frame["excluded"] = classify_points(frame.h.values, frame.error.values,
@@ -418,9 +417,9 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     T0, T = problem.t0, config.get("t_end") or problem.convergence_t_end
     members = min(int(config["ensemble"]), tol.TOLERANCE_SWEEP_ENSEMBLE)
     y0 = problem.ensemble(members, seed=int(config["seed"]), scale=config.get("perturbation"))
-    ref = _best_reference(problem, T, y0)
+    ref = best_reference(problem, T, y0)
     y_ref = ref.y[-1]
-    scale = _scale(y0, y_ref)
+    scale = state_scale(y0, y_ref)
     records = []
     spent, costs = 0.0, []  # internal steps per member: summed, and per tolerance run
     for tolerance in config["tolerances"]:
@@ -445,7 +444,7 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
         s = stepper.with_tolerance(tolerance)
         try:
             tr = s.integrate(problem, h=T - T0, n_steps=1, y0=y0, t0=T0)
-            err = _errors(tr.final, y_ref) if tr.finite else float("inf")
+            err = max_error(tr.final, y_ref) if tr.finite else float("inf")
             evals, msg, capped = tr.evals, "", False
         except StepFailure as exc:  # the harness's own evaluation cap: a tolerance not run, with why
             err, evals, msg, capped = float("nan"), {}, str(exc), isinstance(exc, WorkLimitFailure)
@@ -473,7 +472,7 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
     frame.loc[skipped, "kind"] = "tolerance-not-run"
     # how much the flow amplifies an error over the horizon: the rules' allowance for the
     # global error of a locally controlled run (`harness.rules.tolerance_allowance`)
-    frame["flow_amplification"] = _flow_amplification(problem, T - T0, y0[:, 0])
+    frame["flow_amplification"] = error_amplification(problem, T - T0, y0[:, 0])
     frame["reference_precision"] = ref.precision
     frame["stepper"] = stepper.info.name
     frame["problem"] = problem.name
