@@ -38,6 +38,19 @@ def _fit_kind(g: pd.DataFrame, kind: str) -> float:
 
 
 def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
+    """The summary record of one convergence cell: the fit over the asymptotic points, the
+    local exponents and the verdict (module docstring), with the reason in `message`.
+
+    Parameters
+    ----------
+    stepper : Stepper, the cell's method (its claimed order).
+    problem : str, the problem's name.
+    g : DataFrame, the cell's rows (all kinds).
+
+    Returns
+    -------
+    dict: one value per column of the convergence experiment's SUMMARY_COLUMNS.
+    """
     info = stepper.info
     base = {
         "stepper": info.name, "problem": problem, "claimed_order": info.claimed_order,
@@ -163,7 +176,16 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
 
 def summarise_clauses(clauses: list[str]) -> str:
     """The clauses joined by '; ', each said once: clauses that differ only in their numbers
-    (one note per step size or member) are kept at their first, with how many more there were."""
+    (one note per step size or member) are kept at their first, with how many more there were.
+
+    Parameters
+    ----------
+    clauses : list of str, the notes (empty ones dropped).
+
+    Returns
+    -------
+    str
+    """
     variants: dict[str, dict[str, None]] = {}  # shape -> its distinct texts, in order
     for c in clauses:
         if c:
@@ -177,7 +199,17 @@ def insufficient_range_reason(gl: pd.DataFrame, fit_points: int) -> str:
     floor or the reference's accuracy (the finest step's error is judged there), else the work
     budget (the sweep ran out of steps while the errors were still pre-asymptotic); with the
     horizon and the errors the sweep reached, so a user can decide what to change. A finest
-    point at the coefficients' own floor names that limit instead."""
+    point at the coefficients' own floor names that limit instead.
+
+    Parameters
+    ----------
+    gl : DataFrame, the cell's global rows, coarsest step first.
+    fit_points : int, the asymptotic points found.
+
+    Returns
+    -------
+    str: one sentence.
+    """
     finest = gl.iloc[-1]
     horizon = float(gl["t_end"].iloc[0]) if "t_end" in gl else float("nan")
     limit = {

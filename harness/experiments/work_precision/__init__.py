@@ -58,7 +58,17 @@ COLUMNS = [
 def pareto_front(df: pd.DataFrame, cost: str = "rhs_evals") -> pd.DataFrame:
     """The points of `df` that no other point of the same problem beats in both `cost` and
     `error` (finite errors only), sorted by problem and cost. Evaluation counts are compared
-    only within one unit (`evals_unit`: a Taylor step is not an f evaluation)."""
+    only within one unit (`evals_unit`: a Taylor step is not an f evaluation).
+
+    Parameters
+    ----------
+    df : DataFrame, work-precision rows (problem, error and the `cost` column).
+    cost : str, optional, the cost column ('rhs_evals' default, 'wall_s', 't_min_s').
+
+    Returns
+    -------
+    DataFrame: the front's rows (a copy of `df` when it is empty).
+    """
     if df.empty:
         return df.copy()
     keep = np.zeros(len(df), dtype=bool)
@@ -106,6 +116,18 @@ class WorkPrecisionExperiment(Experiment):
     }
 
     def cells(self, steppers, problems, config):
+        """Every pair the stepper can run, once the settings (counts, timing budget, the list of
+        tolerances in (0, 1)) pass their checks.
+
+        Parameters
+        ----------
+        steppers, problems : sequence of str, the chosen names.
+        config : mapping, checked here; a bad `tolerances` raises `InputError`.
+
+        Returns
+        -------
+        (list of Cell, list of Skip)
+        """
         check_config(config, counts=("ensemble", "work_budget", "n_start", "timing_max_repeats"),
                      positives=("timing_budget_s",), optional_positives=("t_end", "perturbation"))
         tolerances = config.get("tolerances")
@@ -119,6 +141,19 @@ class WorkPrecisionExperiment(Experiment):
         return problem_cells(self.name, steppers, problems, lambda problem: None)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
+        """The convergence experiment's sweep (step sizes, or tolerances for an adaptive
+        stepper) without the local error, to the published end point of a test-set problem, with
+        evaluation counts in one unit and each point timed by the timing protocol.
+
+        Parameters
+        ----------
+        cell : Cell, one stepper on one problem.
+        config : mapping, this experiment's settings over the convergence defaults.
+
+        Returns
+        -------
+        DataFrame: the COLUMNS present, one row per point.
+        """
         from harness.registry import get_problem, get_stepper
 
         stepper = get_stepper(cell.stepper)
@@ -156,6 +191,18 @@ class WorkPrecisionExperiment(Experiment):
         return frame[keep].reset_index(drop=True)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
+        """All rows, each marked when it is on the Pareto front of evaluations, of wall time
+        or of warm time.
+
+        Parameters
+        ----------
+        rows : DataFrame, every cell's points.
+        config : mapping, not used.
+
+        Returns
+        -------
+        DataFrame: COLUMNS with `pareto_evals`, `pareto_wall`, `pareto_time`.
+        """
         if rows.empty:
             return pd.DataFrame(columns=COLUMNS)
         out = rows.reset_index(drop=True).copy()

@@ -34,7 +34,18 @@ MARKERS_PER_LINE = 8
 def best_per_family(rows: pd.DataFrame, families: Mapping[str, str], cost: str = "rhs_evals"
                     ) -> dict[str, str]:
     """family -> its method that reaches WORK_TARGET_ERROR for the least `cost` on these rows
-    (one problem); a family where none reaches it: the method with the lowest error."""
+    (one problem); a family where none reaches it: the method with the lowest error.
+
+    Parameters
+    ----------
+    rows : DataFrame, one problem's work-precision rows.
+    families : mapping of str to str, stepper -> family.
+    cost : str, optional, the cost column (default 'rhs_evals').
+
+    Returns
+    -------
+    dict of str to str: empty when `rows` is empty or lacks `cost`.
+    """
     best: dict[str, tuple[int, float, str]] = {}
     if rows.empty or cost not in rows:
         return {}
@@ -59,7 +70,19 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     Adaptive peers dashed with hollow markers. Wall times are not drawn: on a shared machine
     they rank nothing the evaluations do not (the section's table gives each method's wall
     time to reach the target, the CSV every point's); a run without evaluation counts draws
-    wall time instead."""
+    wall time instead.
+
+    Parameters
+    ----------
+    problem : str, the problem's name.
+    rows : DataFrame, its work-precision rows.
+    palette : Palette, colours and families.
+    adaptive : mapping of str to bool, which steppers are adaptive (dashed).
+
+    Returns
+    -------
+    Figure or None: None when nothing finite can be drawn.
+    """
     from matplotlib.lines import Line2D
 
     err = rows["error"].astype(float) if "error" in rows else pd.Series(dtype=float)

@@ -53,7 +53,13 @@ def _work_table(summ: pd.DataFrame) -> pd.DataFrame:
 
 
 def work_precision(view: RunView, sec: Section) -> None:
-    """Add the work-precision figures and tables to `sec`, read from `view`."""
+    """Add the work-precision figures and tables to `sec`, read from `view`.
+
+    Parameters
+    ----------
+    view : RunView, the run: work-precision rows and the steppers' adaptive flags.
+    sec : Section, the work-precision section (a warning note when the rows have no errors).
+    """
     name = "work-precision"
     rows = view.rowtable(name)
     adaptive = view.flag("adaptive")

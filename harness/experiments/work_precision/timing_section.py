@@ -33,7 +33,19 @@ def time_precision_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette,
                           adaptive: Mapping[str, bool]) -> Figure | None:
     """Error against warm time (`t_min_s`) on one problem, one line per stepper: each family's
     fastest to the target error bold, the others faint, adaptive ones dashed; the Pareto front
-    (`pareto_time`) as a black step line with open circles."""
+    (`pareto_time`) as a black step line with open circles.
+
+    Parameters
+    ----------
+    problem : str, the problem's name.
+    rows : DataFrame, its timed rows (`t_min_s`, `error`, `pareto_time`).
+    palette : Palette
+    adaptive : mapping of str to bool, which steppers draw dashed.
+
+    Returns
+    -------
+    Figure or None: None when no point has a finite, positive time and error.
+    """
     from matplotlib.lines import Line2D
 
     from harness.experiments.work_precision.figures import WORK_TARGET_ERROR, best_per_family
@@ -187,7 +199,13 @@ def _machine_note(rows: pd.DataFrame) -> str:
 
 
 def add_time_sections(view: RunView, sec: Section) -> None:
-    """Append the timed part to the work-precision section `sec` (module docstring)."""
+    """Append the timed part to the work-precision section `sec` (module docstring).
+
+    Parameters
+    ----------
+    view : RunView, the run (its work-precision summary, else its rows).
+    sec : Section, the work-precision section, appended to.
+    """
     from harness.timing import PROTOCOL, same_method_groups, time_to_target_table
 
     name = "work-precision"
