@@ -36,6 +36,8 @@ def lmm2_explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, kno
     -------
     (evaluations, head): acceleration evaluations of the whole ensemble (one per stored point,
     as the NumPy loop counts its batched calls) and the new oldest slot.
+
+    nsteps : int, the number of steps.
     """
     keep, nq, N = X.shape
     k = alpha.shape[0] - 1
