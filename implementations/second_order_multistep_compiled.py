@@ -49,6 +49,17 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
             extra={**base.info.extra, "numpy_implementation": base.info.name})
 
     def incompatibility(self, problem: Problem) -> str | None:
+        """Why this loop cannot run `problem`: the NumPy stepper's reason, or an acceleration the
+        compiled functions do not support.
+
+        Parameters
+        ----------
+        problem : Problem, the candidate.
+
+        Returns
+        -------
+        str or None: the reason.
+        """
         reason = self.base.incompatibility(problem)
         if reason:
             return reason
@@ -59,7 +70,13 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
         return None
 
     def fingerprint(self) -> str:
-        # this module's and its kernel's code: a change to either changes every cell's key
+        """The stepper's fingerprint with the code versions of this module and of its kernel, so a
+        change to either changes every cell's key.
+
+        Returns
+        -------
+        str: the fingerprint.
+        """
         return "\n".join([super().fingerprint(),
                           module_version("implementations.second_order_multistep_compiled"),
                           module_version("implementations.kernels.second_order_multistep")])
