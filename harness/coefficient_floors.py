@@ -4,6 +4,7 @@
   arithmetic removes (`harness.theory.defects`); a sweep excludes points near it (`coefficients`);
 - `coefficient_rounding_floor`: coefficients rounded to float64 miss the conditions by their
   rounding times their size, part of the float64 rounding floor (large extrapolation weights);
+  `rounded_coefficient_floor` is the same at another unit roundoff (the real128 sweep's);
 - `order_bound` and `mark_above_order`: no problem shows a slope above max(order, linear order)
   asymptotically (the linear order counts the tall trees, which every class keeps), so a fitted
   slope above it by more than ABOVE_ORDER_TOL is higher-order terms still dominating; a black
@@ -21,8 +22,8 @@ import numpy as np
 from harness import tolerances as tol
 from harness.stepper import Stepper
 
-__all__ = ["coefficient_floor", "coefficient_rounding_floor", "order_bound", "mark_above_order",
-           "problem_rate"]
+__all__ = ["coefficient_floor", "coefficient_rounding_floor", "rounded_coefficient_floor", "order_bound",
+           "mark_above_order", "problem_rate"]
 
 
 def problem_rate(problem) -> float:
@@ -75,6 +76,33 @@ def coefficient_rounding_floor(coefficients, problem, *, span: float,
         return none
     rate = problem_rate(problem)
     return lambda h: defect_floor(defects, 0.0, h, span=span, rate=rate, scale=scale)
+
+
+def rounded_coefficient_floor(coefficients, problem, *, span: float, scale: float,
+                              eps: float) -> Callable[[np.ndarray], np.ndarray] | None:
+    """h -> what rounding a tableau's coefficients to the unit roundoff `eps` leaves, for the
+    real128 sweep: each order condition off by about eps times the size of its products
+    (`harness.theory.defects`), as large as 1e-29 in real128 for extrapolation weights summing
+    |b| to 1e5.
+
+    Parameters
+    ----------
+    coefficients : the method's coefficient object; problem : Problem, whose rate sizes the
+    elementary differentials; span : float, the integration time; scale : float, the solution's
+    size; eps : float, the unit roundoff of the arithmetic run.
+
+    Returns
+    -------
+    callable or None: h array -> floor array; None for other families than ButcherTableau.
+    """
+    from harness.coefficients import ButcherTableau
+    from harness.theory.defects import condition_defects, defect_floor
+
+    if not isinstance(coefficients, ButcherTableau):
+        return None
+    sizes = [(eps * size, size) for _, size in condition_defects(coefficients, coefficients.order())]
+    rate = problem_rate(problem)
+    return lambda h: defect_floor(sizes, 0.0, h, span=span, rate=rate, scale=scale)
 
 
 def coefficient_floor(coefficients, problem, *, span: float, scale: float,
