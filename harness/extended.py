@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme, exact_value
+from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
 
 __all__ = ["NotMeasurable", "exact_form", "extended_sweep", "refine_composition_weights", "EXTENDED_EPS",
            "extended_reference"]
