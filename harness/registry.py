@@ -1,12 +1,11 @@
 """The registry of steppers and problems: entry points (built-ins included) and users' plugin files.
 
-- Every entry comes through the entry-point groups `harness.steppers` and `harness.problems`,
-  the built-ins too: this project's own distribution declares `implementations:builtin_steppers`
-  and `problems:builtin_problems` there (pyproject.toml), so the registry names neither
-  catalogue package. An entry point names a Stepper/Problem instance, a class, or a callable
-  returning one or a list of them. They are loaded lazily, on the first lookup: this project's
-  own first (origin 'builtin'; one that fails raises, never a silently smaller registry), then
-  other distributions' by distribution and entry-point name.
+- Every entry, the built-ins too, comes through the entry-point groups `harness.steppers` and
+  `harness.problems`: this project's distribution declares `implementations:builtin_steppers` and
+  `problems:builtin_problems` there (pyproject.toml), so the registry names neither catalogue
+  package. An entry point names a Stepper/Problem instance, a class, or a callable returning one
+  or a list of them, loaded on the first lookup: this project's own first (origin 'builtin'; one
+  that fails raises, never a silently smaller registry), then others' by distribution and name.
 - `load_plugin(path)` imports a user's own file (`--plugin FILE.py`) and registers every
   module-level Stepper or Problem it defines (or those listed in `STEPPERS` / `PROBLEMS`).
 A third party's file or entry point that fails to import is reported by name (`PluginError`);
@@ -42,17 +41,8 @@ from harness.errors import InputError, PluginError, UnknownNameError
 from harness.problem import Problem
 from harness.stepper import Stepper
 
-__all__ = [
-    "Registry",
-    "steppers",
-    "problems",
-    "get_stepper",
-    "get_problem",
-    "load_plugin",
-    "plugin_errors",
-    "expand",
-    "group_entry_points",
-]
+__all__ = ["Registry", "steppers", "problems", "get_stepper", "get_problem", "load_plugin",
+           "plugin_errors", "expand", "group_entry_points"]
 
 T = TypeVar("T")
 
@@ -148,14 +138,12 @@ class Registry(Generic[T]):
 
         Parameters
         ----------
-        obj : an instance of this registry's class (InputError otherwise); origin : str, where it
-        came from, shown when a later registration clashes; replace : bool, let it replace another
-        object of the same name (else InputError).
+        obj : an instance of this registry's class; origin : str, where it came from (shown on a
+        clash); replace : bool, may replace another object of that name (else InputError).
 
         Returns
         -------
-        The object registered, so the method can serve as a decorator.
-        """
+        The object registered, so the method can serve as a decorator."""
         if not isinstance(obj, self.cls):
             raise InputError(f"only {self.cls.__name__} objects can be registered as {self.kind}s")
         name = _name_of(obj)
@@ -175,8 +163,7 @@ class Registry(Generic[T]):
 
         Parameters
         ----------
-        name : str, the registered name.
-        """
+        name : str, the registered name."""
         with self._lock:
             self._items.pop(name, None)
             self._origin.pop(name, None)
@@ -190,9 +177,7 @@ class Registry(Generic[T]):
 
         Returns
         -------
-        The registered object. Raises UnknownNameError with the closest names (or, for a stepper
-        refused at load time, the reason).
-        """
+        The object; UnknownNameError names the closest names (or why a record was refused)."""
         self._ensure()
         if not isinstance(name, str) or not name:
             raise UnknownNameError(f"{self.kind} name must be a non-empty string, got {name!r}")
@@ -217,15 +202,14 @@ class Registry(Generic[T]):
 
         Returns
         -------
-        str: 'builtin', 'user', 'entry point NAME (VALUE)' or a plugin's description.
-        """
+        str: 'builtin', 'user', 'entry point NAME (VALUE)' or a plugin's description."""
         self._ensure()
         return self._origin[name]
 
     def names(self, *, variants: bool = False) -> list[str]:
-        """Registered names. Entries listed on request (`_is_variant`: a compiled variant has the
-        same facts and verdicts as the method it implements; experiment-specific entries) are
-        looked up by name but listed, and scheduled by default, only with `variants=True`.
+        """Registered names. Entries listed on request (`_is_variant`: compiled variants, which
+        share the facts and verdicts of their methods; experiment-specific entries) are found by
+        name but listed (and scheduled by default) only with `variants=True`.
 
         Parameters
         ----------
@@ -233,13 +217,12 @@ class Registry(Generic[T]):
 
         Returns
         -------
-        list of str: the names, in registration order.
-        """
+        list of str: the names, in registration order."""
         self._ensure()
         return [n for n, obj in self._items.items() if variants or not _is_variant(obj)]
 
     def all(self, *, variants: bool = False) -> list[T]:
-        """The registered objects, in registration order (see `names` for `variants`).
+        """The registered objects, in registration order.
 
         Parameters
         ----------
@@ -247,8 +230,7 @@ class Registry(Generic[T]):
 
         Returns
         -------
-        list: the objects.
-        """
+        list: the objects."""
         self._ensure()
         return [obj for obj in self._items.values() if variants or not _is_variant(obj)]
 
@@ -275,8 +257,7 @@ def expand(loaded: Any, cls: type) -> list:
 
     Returns
     -------
-    list: the `cls` instances, in order.
-    """
+    list: the `cls` instances, in order."""
     if isinstance(loaded, cls):
         return [loaded]
     if isinstance(loaded, type) and issubclass(loaded, cls):
@@ -309,8 +290,7 @@ def get_stepper(name: str) -> Stepper:
 
     Returns
     -------
-    Stepper: raises UnknownNameError naming the closest names.
-    """
+    Stepper: raises UnknownNameError naming the closest names."""
     return steppers.get(name)
 
 
@@ -323,8 +303,7 @@ def get_problem(name: str) -> Problem:
 
     Returns
     -------
-    Problem: raises UnknownNameError naming the closest names.
-    """
+    Problem: raises UnknownNameError naming the closest names."""
     return problems.get(name)
 
 
@@ -333,8 +312,7 @@ def plugin_errors() -> list[str]:
 
     Returns
     -------
-    list of str: one line per failure, steppers' first, then problems', then plugin files'.
-    """
+    list of str: one line per failure, steppers' first, then problems', then plugin files'."""
     return [*steppers.errors, *problems.errors, *_plugin_errors]
 
 
@@ -370,8 +348,7 @@ def probe_plugin(path: str | Path) -> None:
 
     Parameters
     ----------
-    path : str or Path, the plugin file.
-    """
+    path : str or Path, the plugin file."""
     p = Path(path)
     try:
         digest = hashlib.sha256(p.read_bytes()).hexdigest()
@@ -431,8 +408,7 @@ def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) ->
 
     Returns
     -------
-    list of str: the names registered (those of the first load when the file was loaded before).
-    """
+    list of str: the names registered (those of the first load when the file was loaded before)."""
     p = Path(path)
     key = str(p.resolve()) if p.exists() else str(p)
     if key in _plugins:
