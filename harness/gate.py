@@ -35,14 +35,14 @@ from harness.facts import MethodFacts, method_facts, problem_facts
 from harness.perturbation_law import judge_split_map
 from harness.rules import convergence_expectation, judge_convergence
 
-__all__ = ["judge", "gate_table", "claim_contradictions", "GATE_COLUMNS", "NOT_VERIFIED"]
+__all__ = ["judge", "gate_table", "stiff_span_flag", "claim_contradictions", "GATE_COLUMNS", "NOT_VERIFIED"]
 
 # The outcome of a stepper's `(any)` row when no cell measured its claim.
 NOT_VERIFIED = "not-verified"
 
 GATE_COLUMNS = [
     "stepper", "problem", "claimed_order", "coefficient_order", "measured_order",
-    "order_ci_low", "order_ci_high", "fit_points", "fit_h_min", "fit_h_max", "verdict",
+    "order_ci_low", "order_ci_high", "fit_points", "fit_h_min", "fit_h_max", "t_end", "verdict",
     "expected", "expected_order", "predicted_coefficient", "measured_coefficient",
     "prediction_note", "outcome", "passed", "reason",
 ]
@@ -84,14 +84,50 @@ def _judge(record: Mapping, facts: MethodFacts | None = None,
     split = judge_split_map(record, stepper, problem)  # a declared error law in eps h^p
     if split is not None:
         return (*split, np.nan, "not predicted: judged by its declared error law in the perturbation")
-    expectation = convergence_expectation(facts, problem_facts(problem))
+    pfacts = problem_facts(problem)
+    expectation = convergence_expectation(facts, pfacts)
     outcome, reason = judge_convergence(dict(record), expectation)
     if outcome == "fail" and _slope_above(record, expectation):
         outcome, reason, predicted = _explain_slope(record, stepper, problem, expectation, reason)
         note = "" if np.isfinite(predicted) else _leading_term(stepper, problem, expectation)[1]
     else:
         predicted, note = _leading_term(stepper, problem, expectation)
-    return outcome, expectation.verdict, reason, expectation.order, predicted, note
+    flag = stiff_span_flag(pfacts.stiffness, problem.t0, problem.t_end, record.get("t_end"))
+    return (outcome, expectation.verdict, "; ".join(x for x in (reason, flag) if x), expectation.order,
+            predicted, note)
+
+
+def stiff_span_flag(stiffness: float, t0: float, t_end: float, measured_end) -> str:
+    """The flag of a problem stiff over its declared span (stiffness x span above STIFF_STEP_COUNT:
+    an explicit step of stability interval ~1 needs that many steps) whose measured span is not:
+    its points test nothing stiff. '' when the flag does not apply.
+
+    Parameters
+    ----------
+    stiffness : float
+        The largest -Re(lambda) along the reference (`ProblemFacts.stiffness`).
+    t0, t_end : float
+        The problem's declared span.
+    measured_end : float or None
+        The end of the span the cell measured (its summary's `t_end`).
+
+    Returns
+    -------
+    str
+        The flag with its numbers, or ''.
+    """
+    try:
+        T = float(measured_end)
+    except (TypeError, ValueError):
+        return ""
+    if not (np.isfinite(T) and np.isfinite(stiffness) and stiffness > 0):
+        return ""
+    span, measured = stiffness * (t_end - t0), stiffness * (T - t0)
+    if span <= tol.STIFF_STEP_COUNT or measured > tol.STIFF_STEP_COUNT:
+        return ""
+    return (f"stiff problem not stiff over the measured span: -Re(lambda) x span = {measured:.3g} "
+            f"over t <= {T:.6g} (at most {tol.STIFF_STEP_COUNT:g}), {span:.3g} over the declared "
+            f"span to {t_end:.6g}")
 
 
 def _leading_term(stepper, problem, expectation) -> tuple[float, str]:

@@ -46,8 +46,16 @@ Verdicts that say "not measurable here" rather than "wrong" (`tolerated`):
 - `unstable` too, when the problem is stiff for this method: the stability interval divided
   by the stiffness (largest -Re(lambda) along the reference) asks for more than
   STIFF_STEP_COUNT steps over the horizon, where the error is already near the rounding floor;
+- `converged` when the problem is stiff for this method and the fitted steps reach above its
+  stable step (real stability interval / stiffness): h lambda lies outside the stability region
+  there, and the slope is that of an amplified mode, not of the error expansion (HW II, IV.2);
 - `exact` when not predicted: the error was at the rounding floor even at the coarsest step
   sizes the sweep tried, so no order can be read off (an order-8 method on a short smooth span).
+- `failed` of an implicit method whose every step size failed in its implicit solve, when even
+  the finest of them has h x stiffness >= NEWTON_GUARANTEE_STEPS: the stage equations' iteration
+  is guaranteed to converge only for h L |a| < 1 (L a Lipschitz constant, at least the
+  stiffness; |a| the implicit coefficient; HNW I, II.7, Theorem 7.2, and Hairer & Wanner II,
+  IV.8 for Newton's iteration), so a failure beyond it says nothing about the method's order.
 The gate also needs at least one cell per stepper that measures the claim: a stepper judged on
 nothing does not pass.
 
@@ -92,7 +100,7 @@ theorem backs it; elsewhere the cell is informational (`no-claim`):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from harness import tolerances as tol
 from harness.facts import MethodFacts, ProblemFacts, class_key
@@ -112,6 +120,8 @@ class Expectation:
     tolerated: tuple[str, ...]
     reason: str
     order_low: float | None = None
+    implicit_stiffness: float | None = None  # the problem's stiffness, for an implicit method
+    stable_h: float | None = None  # real stability interval / stiffness, where stiff for the method
 
 
 def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
@@ -127,6 +137,15 @@ def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
 
 def convergence_expectation(method: MethodFacts, problem: ProblemFacts) -> Expectation:
     """The expected convergence verdict of a (method, problem) pair; see the module docstring."""
+    expectation = _expectation(method, problem)
+    if _stiff_steps(method, problem) > tol.STIFF_STEP_COUNT:
+        expectation = replace(expectation, stable_h=float(method.real_interval / problem.stiffness))
+    if not method.explicit and not method.adaptive and problem.stiffness > 0:
+        return replace(expectation, implicit_stiffness=float(problem.stiffness))
+    return expectation
+
+
+def _expectation(method: MethodFacts, problem: ProblemFacts) -> Expectation:
     if method.adaptive or method.order is None:
         return Expectation("meets-tolerance", None, (), "adaptive: judged by its tolerance sweep")
     tolerated = ["insufficient-range", "exact"]
@@ -204,6 +223,15 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
         if verdict == "insufficient-range":  # no tolerance of the sweep inside the library's range
             return "not-measurable", msg or "adaptive stepper: no tolerance of the sweep could run"
         return "fail", f"adaptive stepper: {verdict}" + (f": {msg}" if msg else "")
+    stable_h = expectation.stable_h
+    above = stable_h is not None and float(record.get("fit_h_max", math.nan)) > stable_h
+    if verdict == "converged" and above:  # a fit over steps outside the stability interval
+        return "not-measurable", (
+            f"the fitted steps reach h = {float(record['fit_h_max']):.3g}, above the stable step "
+            f"{expectation.stable_h:.3g} (real stability interval / stiffness): there h lambda lies "
+            f"outside the stability region and the error is an amplified mode, not the expansion "
+            f"C h^p the order is read from (HW II, IV.2)"
+            + (f"; {expectation.reason}" if expectation.reason else ""))
     if verdict == expectation.verdict:
         if expectation.order is None:
             return "pass", expectation.reason
@@ -228,9 +256,29 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
         }[verdict]
         detail = "; ".join(x for x in (msg, expectation.reason) if x)
         return "not-measurable", f"{why}" + (f": {detail}" if detail else "")
+    unguaranteed = _unguaranteed_solve(record, expectation)
+    if unguaranteed:
+        return "not-measurable", "; ".join(x for x in (unguaranteed, msg) if x)
     expected = expectation.verdict + (f" at order {expectation.order:g}" if expectation.order else "")
     return "fail", (f"expected {expected}, got {verdict}" + (f": {msg}" if msg else "")
                     + (f" ({expectation.reason})" if expectation.reason else ""))
+
+
+def _unguaranteed_solve(record: dict, expectation: Expectation) -> str:
+    """Why a `failed` implicit cell is not measurable (module docstring), or '' when it stands:
+    every step size failed in its implicit solve and even the finest one lies where no theorem
+    guarantees that the stage equations' iteration converges."""
+    stiffness = expectation.implicit_stiffness
+    h = float(record.get("finest_h", math.nan))
+    if record["verdict"] != "failed" or not stiffness or not math.isfinite(h):
+        return ""
+    if h * stiffness < tol.NEWTON_GUARANTEE_STEPS:
+        return ""
+    return (f"the implicit solve failed at every step size the work budget allowed, down to h = "
+            f"{h:.3g}, where h x stiffness = {h * stiffness:.3g} >= {tol.NEWTON_GUARANTEE_STEPS:g}: "
+            f"the stage equations' iteration is guaranteed to converge only for h L |a| < 1 (HNW I, "
+            f"II.7, Theorem 7.2; Hairer & Wanner II, IV.8), so the failure says nothing about the "
+            f"method's order")
 
 
 def tolerance_allowance(steps_per_trajectory: float, amplification: float) -> tuple[float, str]:

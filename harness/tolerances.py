@@ -104,6 +104,11 @@ STIFF_STEP_COUNT = 1000.0
 # horizon (-Re(lambda) x horizon): the transient it leaves is then far below any error measured,
 # and an implicit method's stages see h|lambda| >> 1 at the sweep's coarse steps.
 STIFF_HORIZON_DECAYS = 100.0
+# An implicit method's stage equations y = h a f(y) + ... are guaranteed solvable by iteration for
+# h L |a| < 1 (HNW I, II.7, Thm 7.2), L >= the stiffness; at h x stiffness >= this no registered
+# implicit method (|a| >= 0.1: backward Euler 1, BDF2 2/3, AM3 5/12, Gauss 4 ~0.25) is covered, so
+# a solve that fails every step size there is not evidence against the method.
+NEWTON_GUARANTEE_STEPS = 10.0
 
 # Ensemble: members and the relative size of the perturbation of the initial state.
 ENSEMBLE_SIZE = 16

@@ -33,7 +33,7 @@ import warnings
 import numpy as np
 
 from harness.problem import Dynamics
-from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo
+from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo, WorkLimitFailure
 from harness.tolerances import ADAPTIVE_MAX_EVALS, SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
 from harness.work_projection import projected_work
 
@@ -116,6 +116,11 @@ class _WorkLimit(Exception):
                 f"would need about {projected:.3g} evaluations (projected from the recent ones), "
                 f"more than {ADAPTIVE_MAX_EVALS}")
         return f"{need} (stopped at t={reached!r})"
+
+
+def is_work_limit(exc: BaseException) -> bool:
+    """True for the adapter's own evaluation cap (`MemberDynamics`), not a solver's failure."""
+    return isinstance(exc, _WorkLimit)
 
 
 # A hopeless span is recognised before the whole budget is spent: every PROJECTION_EVERY calls
@@ -303,7 +308,7 @@ class ScipyStepper(MemberByMemberStepper):
                 "to zero)"
             ) from None
         except _WorkLimit as limit:
-            raise StepFailure(
+            raise WorkLimitFailure(
                 f"stepper {self.info.name!r}: scipy {self.method}, ensemble member {m} between "
                 f"t={t!r} and t={target!r}: {limit}; the span is too long for tol={self.tol:g}"
             ) from None

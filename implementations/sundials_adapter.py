@@ -31,10 +31,10 @@ from __future__ import annotations
 import numpy as np
 
 from harness.c_streams import library_output_captured
-from harness.stepper import AdaptiveStepper, StepFailure
+from harness.stepper import AdaptiveStepper, StepFailure, WorkLimitFailure
 from harness.tolerances import SCIPY_MIN_RTOL
 from implementations import optional_library
-from implementations.external import MemberByMemberStepper, MemberDynamics
+from implementations.external import MemberByMemberStepper, MemberDynamics, is_work_limit
 
 __all__ = ["STEPPERS", "UNAVAILABLE", "INSTALL", "SUNDAE_VERSION", "CvodeStepper"]
 
@@ -95,9 +95,9 @@ class CvodeStepper(MemberByMemberStepper):
             with library_output_captured() as printed:
                 sol = self._solver(member).solve(np.array([t, target]), y)
         except Exception as exc:  # the adapter's work limit, or CVODE refusing the input
-            raise StepFailure(f"stepper {self.info.name!r}: CVODE stopped for ensemble "
-                              f"member {m} between t={t!r} and t={target!r}: "
-                              f"{type(exc).__name__}: {exc}") from None
+            failure = WorkLimitFailure if is_work_limit(exc) else StepFailure
+            raise failure(f"stepper {self.info.name!r}: CVODE stopped for ensemble member {m} between "
+                          f"t={t!r} and t={target!r}: {type(exc).__name__}: {exc}") from None
         if not sol.success:
             said = printed.last_line()
             raise StepFailure(f"stepper {self.info.name!r}: CVODE failed for ensemble member "

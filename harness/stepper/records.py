@@ -16,8 +16,8 @@ from harness.problem.checks import check_count, check_time
 if TYPE_CHECKING:
     from harness.stepper import Stepper
 
-__all__ = ["FORMS", "MAX_STEPS", "StepFailure", "StepperInfo", "Carry", "Trajectory", "check_step_size",
-           "check_steps", "check_compatible"]
+__all__ = ["FORMS", "MAX_STEPS", "StepFailure", "WorkLimitFailure", "StepperInfo", "Carry", "Trajectory",
+           "check_step_size", "check_steps", "check_compatible"]
 
 
 FORMS = ("first-order", "newtonian")
@@ -25,6 +25,11 @@ MAX_STEPS = 100_000_000
 
 class StepFailure(HarnessError):
     """A step could not be completed (an implicit stage solve did not converge)."""
+
+
+class WorkLimitFailure(StepFailure):
+    """The harness's own evaluation cap stopped a black box's solve (its projected cost is over
+    the cap): the solver did not fail, the harness would not pay for the run."""
 
 
 @dataclass(frozen=True)

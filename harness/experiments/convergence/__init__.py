@@ -53,7 +53,7 @@ from harness.experiments.common import perturbation_used, problem_cells, summary
 from harness.experiments.convergence.extended import extended_if_floor_bound
 from harness.experiments.convergence.section import SECTION
 from harness.order_fit import classify_points, fit_order
-from harness.stepper import AdaptiveStepper, StepFailure, Stepper
+from harness.stepper import AdaptiveStepper, StepFailure, Stepper, WorkLimitFailure
 
 __all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
 
@@ -66,7 +66,7 @@ SUMMARY_COLUMNS = [
     "stepper", "problem", "claimed_order", "measured_order", "order_ci_low", "order_ci_high",
     "fit_residual", "fit_points", "fit_h_min", "fit_h_max", "fit_error_min", "fit_error_max",
     "local_exponent", "local_exponent_q", "verdict", "reference_error", "reference_precision",
-    "points", "total_steps", "perturbation", "implementation", "wall_s", "message",
+    "points", "total_steps", "perturbation", "implementation", "wall_s", "message", "finest_h", "t_end",
 ]
 
 
@@ -446,15 +446,15 @@ def _tolerance_sweep(stepper: AdaptiveStepper, problem, config) -> pd.DataFrame:
         try:
             tr = s.integrate(problem, h=T - T0, n_steps=1, y0=y0, t0=T0)
             err = _errors(tr.final, y_ref) if tr.finite else float("inf")
-            evals, msg = tr.evals, ""
-        except StepFailure as exc:
-            err, evals, msg = float("nan"), {}, str(exc)
+            evals, msg, capped = tr.evals, "", False
+        except StepFailure as exc:  # the harness's own evaluation cap: a tolerance not run, with why
+            err, evals, msg, capped = float("nan"), {}, str(exc), isinstance(exc, WorkLimitFailure)
         records.append({
             "tol": tolerance, "h": np.nan, "n_steps": int(evals.get("internal_steps", 0)),
             "error": err, "reference_error": float(np.max(ref.error[-1])),
             "rounding_level": tol.EPS * scale, "rhs_evals": float(evals.get("rhs", 0)),
             "force_evals": float(evals.get("accel", 0)),
-            "wall_s": time.perf_counter() - started, "message": msg, "not_run": False,
+            "wall_s": time.perf_counter() - started, "message": msg, "not_run": capped,
         })
         costs.append(int(evals.get("internal_steps", 0)) / members)
         spent += costs[-1]

@@ -9,8 +9,9 @@ Verdicts, in the order they are decided:
 - `failed`: no step size produced a finite error, and a step failure says why;
 - `exact`: every point is at the roundoff floor or the reference's accuracy;
 - `converged`: at least MIN_FIT_POINTS points in the asymptotic range; the order is their fit;
-- `unstable`: every step size above the floor blew up (the method is stable only where its
-  error is already rounding), or the finest step size blew up;
+- `insufficient-range` also when every coarse step size blew up and every stable one is at the
+  floor (a decaying problem at its end point): stable, with no range to read an order from;
+- `unstable`: the finest step size blew up (or no step size gave a finite error);
 - `insufficient-range`: finite errors, but fewer than MIN_FIT_POINTS points in the asymptotic
   range within the work budget.
 """
@@ -54,6 +55,10 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
         if "implementation" in g and g["implementation"].notna().any() else "numpy",
         "perturbation": float(g["perturbation"].iloc[0]) if "perturbation" in g else np.nan,
         "message": "",
+        # the sweep's finest step and its horizon (a shortened one included): the judge reads a
+        # step failure and the stiffness over the measured span against them
+        "finest_h": float(g.loc[g.kind == "global", "h"].min()) if (g.kind == "global").any() else np.nan,
+        "t_end": float(g["t_end"].iloc[0]) if "t_end" in g and len(g) else np.nan,
     }
     messages = [m for m in g.get("message", pd.Series(dtype=str)).fillna("") if m]
     not_run = g[g.kind == "tolerance-not-run"]
@@ -132,6 +137,14 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
             "fit_h_max": float(kept.h.max()), "fit_error_min": float(kept.error.min()),
             "fit_error_max": float(kept.error.max()),
         })
+    elif blew_up.any() and (blew_up | at_floor).all() and at_floor.iloc[-1]:
+        # stable at the finest steps, where the error is already at the floor (a decaying problem
+        # at its end point): a convergent method's behaviour, with no range to read an order from
+        stable = gl[at_floor]
+        base["verdict"] = "insufficient-range"
+        base["message"] = (f"every step size from h = {float(gl[blew_up].h.min()):.3g} up blew up and every "
+                           f"stable one (h <= {float(stable.h.max()):.3g}) is already at the floor (errors "
+                           f"{float(stable.error.max()):.3g} and below): no asymptotic range on this problem")
     elif (finite.empty or not np.isfinite(gl.error.iloc[-1]) or gl.error.iloc[-1] > tol.BLOWUP_ERROR
           or (blew_up.any() and (blew_up | at_floor).all())):
         base["verdict"] = "unstable"

@@ -1,7 +1,8 @@
 """Work-precision: error at the final time against cost (evaluations and wall time).
 
 Every stepper runs on the same problem to the same final time (the problem's
-`convergence_t_end`) against the same certified ground truth:
+`convergence_t_end`; a test-set problem's published end point, `Problem.published`, as the test
+set's own reports do) against the same certified ground truth:
 
 - every problem applies; fixed-step steppers by a step-size sweep, and adaptive steppers by a
   tolerance sweep (`AdaptiveStepper.with_tolerance`), both the convergence experiment's own
@@ -81,7 +82,7 @@ class WorkPrecisionExperiment(Experiment):
     finite_columns = ("n_steps", "t_end", "rhs_evals", "wall_s")
     description = "Error at the final time against evaluations and wall time (step-size or tolerance sweep)."
     default_config: Mapping[str, Any] = {
-        "t_end": None,  # None: the problem's convergence horizon
+        "t_end": None,  # None: the published end point of a test-set problem, else its convergence horizon
         "perturbation": None,  # None: the problem's (used when `ensemble` > 1)
         "ensemble": 1,
         "seed": 0,
@@ -126,6 +127,8 @@ class WorkPrecisionExperiment(Experiment):
         from harness.experiments.base import get_experiment
 
         cfg = {**get_experiment("convergence").default_config, **config, "local": False}
+        if cfg.get("t_end") is None and problem.published is not None:
+            cfg["t_end"] = float(problem.t_end)  # the published end point, rounded to float64
         if isinstance(stepper, AdaptiveStepper):
             frame = tolerance_sweep(stepper, problem, cfg)
             kind = "tolerance"
