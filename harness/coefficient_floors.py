@@ -87,9 +87,8 @@ def rounded_coefficient_floor(coefficients, problem, *, span: float, scale: floa
 
     Parameters
     ----------
-    coefficients : the method's coefficient object; problem : Problem, whose rate sizes the
-    elementary differentials; span : float, the integration time; scale : float, the solution's
-    size; eps : float, the unit roundoff of the arithmetic run.
+    coefficients, problem, span, scale : as in `coefficient_floor`; eps : float, the unit roundoff
+    the coefficients are rounded to.
 
     Returns
     -------

@@ -295,15 +295,15 @@ def get_stepper(name: str) -> Stepper:
 
 
 def get_problem(name: str) -> Problem:
-    """The registered problem `name`.
+    """The registered problem `name` (see `get_stepper`).
 
     Parameters
     ----------
-    name : str, a problem's registered name.
+    name : str.
 
     Returns
     -------
-    Problem: raises UnknownNameError naming the closest names."""
+    Problem."""
     return problems.get(name)
 
 

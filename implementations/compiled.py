@@ -331,8 +331,7 @@ class CompiledStormer(_Compiled):
         self.beta1 = float(table.beta[1])
 
     def incompatibility(self, problem: Problem) -> str | None:
-        """Why the compiled Stormer loop cannot run `problem` (a velocity-dependent force), or the
-        general reasons.
+        """Why the compiled Stormer loop cannot run `problem`, or None.
 
         Parameters
         ----------
@@ -340,7 +339,8 @@ class CompiledStormer(_Compiled):
 
         Returns
         -------
-        str or None: the reason.
+        str or None: a velocity-dependent force (its implicit velocity is NumPy only), else what
+        every compiled stepper checks.
         """
         if problem.velocity_dependent:
             return (
@@ -619,16 +619,16 @@ class CompiledControlledSplitting(_Compiled, ControlledSplittingStepper):
         self.op_coefficients = np.array([coeff for _, coeff in seq], dtype=np.float64)
 
     def incompatibility(self, problem: Problem) -> str | None:
-        """Why the compiled controlled loop cannot run `problem`: the NumPy stepper's reason, a
-        velocity-dependent force, or the general reasons.
+        """Whether the compiled controlled loop can run `problem`.
 
         Parameters
         ----------
-        problem : Problem, the candidate.
+        problem : Problem to be run.
 
         Returns
         -------
-        str or None: the reason.
+        None when it can, else the NumPy stepper's reason, a velocity-dependent force, or a
+        general one.
         """
         reason = self.base.incompatibility(problem)
         if reason is None and problem.velocity_dependent:

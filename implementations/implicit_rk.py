@@ -307,8 +307,7 @@ class NewtonStepper(Stepper):
 
         Parameters
         ----------
-        mode : str or None, 'simplified' or 'full'; tol : float or None, the Newton tolerance;
-        max_iter : int or None, the iteration limit.
+        mode, tol, max_iter : as in `NewtonSettings.keywords`.
 
         Returns
         -------

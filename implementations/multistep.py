@@ -149,15 +149,16 @@ class LinearMultistepStepper(NewtonStepper):
         return self._rebuild(starter=starter)
 
     def incompatibility(self, problem) -> str | None:
-        """Why this stepper cannot run `problem` (its starter unusable or incompatible), or None.
+        """Why this stepper cannot run `problem`, or None.
 
         Parameters
         ----------
-        problem : Problem, the candidate.
+        problem : the Problem asked about.
 
         Returns
         -------
-        str or None: the reason.
+        str or None: its starter is unusable or cannot run the problem (never with the reference
+        starter).
         """
         if self.starter_name == "reference":
             return None

@@ -295,15 +295,15 @@ class ReboundIAS15(_ReboundBase, AdaptiveStepper):
         )
 
     def with_tolerance(self, tol: float) -> ReboundIAS15:
-        """A copy with tolerance `tol` (IAS15's epsilon), its record rebuilt.
+        """A copy whose IAS15 epsilon is `tol`, its record rebuilt.
 
         Parameters
         ----------
-        tol : float, a positive finite tolerance.
+        tol : float, positive and finite.
 
         Returns
         -------
-        ReboundIAS15: the copy.
+        ReboundIAS15: a new stepper; this one is unchanged.
         """
         clone = super().with_tolerance(tol)
         clone.info = clone.info_record()

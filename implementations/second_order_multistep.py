@@ -109,11 +109,11 @@ def cowell_table(k: int) -> SecondOrderMultistep:
 
     Parameters
     ----------
-    k : int, the highest backward difference.
+    k : int, the highest backward difference (the table may have fewer steps).
 
     Returns
     -------
-    SecondOrderMultistep: named 'cowell<k>', coefficients exact.
+    SecondOrderMultistep: the exact table 'cowell<k>'.
     """
     sigma = _sigma(k + 1, False)
     steps = k
@@ -216,15 +216,15 @@ class SecondOrderMultistepStepper(Stepper):
         return get_stepper(self.starter)
 
     def incompatibility(self, problem) -> str | None:
-        """Why this stepper cannot run `problem` (its own family's reason, or its starter's), or None.
+        """The family's own reason not to run `problem`, else its starter's, else None.
 
         Parameters
         ----------
-        problem : Problem, the candidate.
+        problem : a Problem.
 
         Returns
         -------
-        str or None: the reason.
+        str or None: one sentence.
         """
         own = super().incompatibility(problem)
         if own:

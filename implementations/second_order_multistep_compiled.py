@@ -49,16 +49,15 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
             extra={**base.info.extra, "numpy_implementation": base.info.name})
 
     def incompatibility(self, problem: Problem) -> str | None:
-        """Why this loop cannot run `problem`: the NumPy stepper's reason, or an acceleration the
-        compiled functions do not support.
+        """Why this loop cannot run `problem`.
 
         Parameters
         ----------
-        problem : Problem, the candidate.
+        problem : Problem, whose acceleration must compile.
 
         Returns
         -------
-        str or None: the reason.
+        str or None: the NumPy stepper's reason, or the unsupported expression; None when it runs.
         """
         reason = self.base.incompatibility(problem)
         if reason:
