@@ -112,13 +112,11 @@ def derive_time_scale(problem) -> TimeScale:
 
     Parameters
     ----------
-    problem : Problem
-        The problem.
+    problem : Problem, the definition whose flow is sampled (its fingerprint keys the memo)
 
     Returns
     -------
-    TimeScale
-        Its period, fastest rate, step size h and rate contrast, with their source and reason.
+    TimeScale: its period, fastest rate, step size h and rate contrast, with source and reason.
     """
     fields = remembered("harness.scales", "time_scale", [problem.fingerprint()],
                         lambda: _derive_time_scale(problem).__dict__)
@@ -235,13 +233,11 @@ def derive_perturbation(problem) -> Perturbation:
 
     Parameters
     ----------
-    problem : Problem
-        The problem.
+    problem : Problem, the definition whose ensemble members are to be perturbed
 
     Returns
     -------
-    Perturbation
-        Its relative size and per-component scale, with their source and reason.
+    Perturbation: the relative size and per-component scale, with their source and reason.
     """
     size, scale, source, reason = remembered(
         "harness.scales", "derive_perturbation", (problem.fingerprint(),),

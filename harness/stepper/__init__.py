@@ -82,13 +82,11 @@ class Stepper(NonfiniteReplay, ABC):
 
         Parameters
         ----------
-        problem : Problem
-            The problem.
+        problem : Problem, checked already against the declared form (`check_compatible`)
 
         Returns
         -------
-        str or None
-            The reason (this base class has none; subclasses may).
+        str or None: the reason (this base class has none; subclasses may).
         """
         return None
 
@@ -97,8 +95,7 @@ class Stepper(NonfiniteReplay, ABC):
 
         Parameters
         ----------
-        problem : Problem
-            The problem.
+        problem : Problem, any registered or user problem
 
         Returns
         -------

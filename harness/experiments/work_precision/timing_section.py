@@ -19,17 +19,8 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.kit import RunView, Section, df_table
+from harness.kit import figure_style as fs
 from harness.kit.elements import Block, csv_download
-from harness.kit.figure_style import (
-    LEGEND_CHAR_W,
-    LOG_CEILING,
-    Palette,
-    label_text,
-    loglog_axes,
-    small_multiples,
-    small_ticks,
-    styled,
-)
 from harness.kit.figure_svg import Figure, to_svg
 
 __all__ = ["time_precision_figure", "add_time_sections", "twin_rows", "fastest_table", "group_summary"]
@@ -37,8 +28,8 @@ __all__ = ["time_precision_figure", "add_time_sections", "twin_rows", "fastest_t
 MARKERS_PER_LINE = 8
 
 
-@styled
-def time_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
+@fs.styled
+def time_precision_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette,
                           adaptive: Mapping[str, bool]) -> Figure | None:
     """Error against warm time (`t_min_s`) on one problem, one line per stepper: each family's
     fastest to the target error bold, the others faint, adaptive ones dashed; the Pareto front
@@ -51,13 +42,14 @@ def time_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
         return None
     err = rows["error"].astype(float)
     cost = rows["t_min_s"].astype(float)
-    frame = rows[np.isfinite(err) & (err > 0) & (err <= LOG_CEILING) & np.isfinite(cost) & (cost > 0)]
+    frame = rows[np.isfinite(err) & (err > 0) & (err <= fs.LOG_CEILING) & np.isfinite(cost) & (cost > 0)]
     if frame.empty:
         return None
     best = best_per_family(frame, palette.families, cost="t_min_s")
     bold = set(best.values())
-    longest = max([len(label_text(s)) + len(f) + 8 for f, s in best.items()] + [22])
-    fig, axes = small_multiples(1, ncols=1, panel=(4.2, 3.0), right=longest * LEGEND_CHAR_W * 0.85 + 0.5)
+    longest = max([len(fs.label_text(s)) + len(f) + 8 for f, s in best.items()] + [22])
+    fig, axes = fs.small_multiples(1, ncols=1, panel=(4.2, 3.0),
+                                   right=longest * fs.LEGEND_CHAR_W * 0.85 + 0.5)
     ax = axes[0]
     for stepper, s in frame.groupby("stepper", sort=False):
         # joined in sweep order (coarse to fine), as SciMLBenchmarks draws it: noise in a time
@@ -78,21 +70,21 @@ def time_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
                     color="black", lw=0.7, zorder=4)
             ax.plot(front["t_min_s"].astype(float), front["error"].astype(float), "o", ms=4.0,
                     markerfacecolor="none", markeredgecolor="black", mew=0.6, zorder=5)
-    loglog_axes(ax)
+    fs.loglog_axes(ax)
     ax.set_xlabel("warm time, minimum of repeats (s)", fontsize=7.5)
     ax.set_ylabel("error at the final time", fontsize=7.5)
-    small_ticks(ax)
+    fs.small_ticks(ax)
     handles = [Line2D([], [], color=palette.colour(s), marker=palette.marker(s), ms=3, lw=1.6,
                       ls="--" if adaptive.get(s) else "-",
-                      label=f"{label_text(s)} (fastest {fam or 'method'})")
+                      label=f"{fs.label_text(s)} (fastest {fam or 'method'})")
                for fam, s in best.items()]
     handles.append(Line2D([], [], color="black", lw=0.7, marker="o", markerfacecolor="none", ms=4,
                           label="Pareto front (time, error)"))
     handles.append(Line2D([], [], color="0.6", lw=0.6, alpha=0.5, label="other methods (faint)"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0,
               frameon=False, fontsize=6.5)
-    fig.suptitle(f"Error against time on {label_text(problem)} (target {WORK_TARGET_ERROR:g} for 'fastest')",
-                 fontsize=8.5)
+    fig.suptitle(f"Error against time on {fs.label_text(problem)} "
+                 f"(target {WORK_TARGET_ERROR:g} for 'fastest')", fontsize=8.5)
     cols = [c for c in ("stepper", "implementation", "h", "tol", "n_steps", "error", "t_min_s",
                         "t_median_s", "t_spread", "t_repeats", "t_stop", "first_call_s", "baseline",
                         "baseline_units", "pareto_time", "load_1min") if c in frame]
