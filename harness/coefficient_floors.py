@@ -118,7 +118,7 @@ def coefficient_floor(coefficients, problem, *, span: float, scale: float,
 
     Returns
     -------
-    callable: h array -> floor array, or -> None when there is no such floor.
+    callable: h array -> floor array; its value is None where the defects are within noise.
     """
     from harness.coefficients import ButcherTableau
     from harness.theory.defects import condition_defects, defect_floor

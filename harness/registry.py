@@ -173,7 +173,7 @@ class Registry(Generic[T]):
 
         Parameters
         ----------
-        name : str, a registered name.
+        name : the str it was registered under.
 
         Returns
         -------

@@ -623,7 +623,7 @@ class CompiledControlledSplitting(_Compiled, ControlledSplittingStepper):
 
         Parameters
         ----------
-        problem : Problem to be run.
+        problem : Problem, whose force must not depend on the velocity.
 
         Returns
         -------

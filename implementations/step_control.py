@@ -225,7 +225,7 @@ class ControlledSplittingStepper(Stepper):
 
         Parameters
         ----------
-        problem : Problem, the candidate.
+        problem : the Problem in question.
 
         Returns
         -------
