@@ -37,7 +37,12 @@ class Captured:
         self.text = ""
 
     def last_line(self) -> str:
-        """The last non-empty line printed (SUNDIALS' reason for a failure), or ''."""
+        """The last non-empty line printed (SUNDIALS' reason for a failure), or ''.
+
+        Returns
+        -------
+        str: the line, stripped.
+        """
         lines = [ln.strip() for ln in self.text.splitlines() if ln.strip()]
         return lines[-1] if lines else ""
 

@@ -29,7 +29,12 @@ _configured: Path | None = None
 
 def cache_dir() -> Path:
     """The harness's cache root, created when missing (`OutputError` naming the path when it
-    cannot be)."""
+    cannot be).
+
+    Returns
+    -------
+    Path: `HARNESS_CACHE_DIR` when set, else the project's (or the current directory's) `.cache`.
+    """
     env = os.environ.get("HARNESS_CACHE_DIR")
     if env:
         root = Path(env)
@@ -42,7 +47,12 @@ def cache_dir() -> Path:
 def code_dir() -> Path:
     """The root of the compiled-code caches (`numba/`, `heyoka/`): `HARNESS_CODE_CACHE_DIR` when
     set, else `cache_dir()`; created when missing (`OutputError` naming the path when it cannot
-    be)."""
+    be).
+
+    Returns
+    -------
+    Path: the folder, existing.
+    """
     env = os.environ.get("HARNESS_CODE_CACHE_DIR")
     return _created(Path(env)) if env else cache_dir()
 
@@ -67,14 +77,32 @@ COMPACT_MODE_SIZE = 1000
 
 def compact_mode(problem) -> bool:
     """Whether heyoka should compile `problem`'s Taylor integrators in compact mode (its
-    right-hand side is longer than COMPACT_MODE_SIZE characters printed)."""
+    right-hand side is longer than COMPACT_MODE_SIZE characters printed).
+
+    Parameters
+    ----------
+    problem : Problem, whose `rhs` expressions are measured.
+
+    Returns
+    -------
+    bool: True for a large right-hand side.
+    """
     return sum(len(str(e)) for e in problem.rhs) > COMPACT_MODE_SIZE
 
 
 def float64_taylor_settings(problem) -> dict[str, Any]:
     """The settings of every float64 Taylor integrator of `problem` (orbits, time scales, flow
     amplification, the float64 ground truth): tolerance eps, high accuracy, compact mode by
-    `compact_mode`; heyoka's disk cache then holds one compiled integrator per batch size."""
+    `compact_mode`; heyoka's disk cache then holds one compiled integrator per batch size.
+
+    Parameters
+    ----------
+    problem : Problem, the problem integrated.
+
+    Returns
+    -------
+    dict: keyword arguments 'tol', 'high_accuracy', 'compact_mode' of heyoka's integrators.
+    """
     from harness import tolerances as tol
 
     return {"tol": tol.EPS, "high_accuracy": True, "compact_mode": compact_mode(problem)}
@@ -138,7 +166,12 @@ def _abandon(status: int) -> None:
 
 def set_exit_status(status: int) -> None:
     """The status the process ends with if a compile was abandoned (`interruptible`, rule 2);
-    without an abandoned compile the process ends normally and this does nothing."""
+    without an abandoned compile the process ends normally and this does nothing.
+
+    Parameters
+    ----------
+    status : int, the exit status.
+    """
     if _exit_status:
         _exit_status[0] = status
 
@@ -156,7 +189,12 @@ def _exit_past_the_compile() -> None:
 
 def configure_heyoka_cache() -> Path:
     """Point heyoka's on-disk JIT cache at `code_dir() / "heyoka"` (again only when that
-    changed)."""
+    changed).
+
+    Returns
+    -------
+    Path: the cache folder heyoka now uses.
+    """
     global _configured
     target = code_dir() / "heyoka"
     if _configured != target:
@@ -178,7 +216,18 @@ class IntegratorPool:
         self._lock = threading.Lock()
 
     def get(self, key: Hashable, build: Callable[[], Any]) -> tuple[threading.Lock, Any]:
-        """(lock, integrator) for `key`; the integrator is `build()` on first use."""
+        """(lock, integrator) for `key`; the integrator is `build()` on first use.
+
+        Parameters
+        ----------
+        key : hashable, what identifies the integrator (problem, settings, batch size);
+        build : callable with no argument, making the integrator.
+
+        Returns
+        -------
+        tuple (threading.Lock, integrator): hold the lock while using the integrator; on a race the
+        first one built is kept.
+        """
         with self._lock:
             found = self._entries.get(key)
         if found is not None:

@@ -182,7 +182,12 @@ def _parsed(kind: str, name: str, text: str) -> dict[str, Any]:
 @functools.lru_cache(maxsize=1)
 def project_files() -> tuple[str, ...]:
     """The project's module files, as paths relative to the project root, sorted (read once
-    per process): what import names resolve against, and what a module version depends on."""
+    per process): what import names resolve against, and what a module version depends on.
+
+    Returns
+    -------
+    tuple of str: the relative paths of the .py files of PROJECT_PACKAGES.
+    """
     out = []
     for package in PROJECT_PACKAGES:
         for root, dirs, files in os.walk(PROJECT_ROOT / package):
@@ -240,7 +245,16 @@ def _measuring_nodes(tree: ast.Module, judging_roots: set[str]) -> list[ast.AST]
 
 
 def experiment_modules(experiment) -> list[str]:
-    """The modules of an experiment's classes, most derived first, without the contract's own."""
+    """The modules of an experiment's classes, most derived first, without the contract's own.
+
+    Parameters
+    ----------
+    experiment : an Experiment instance.
+
+    Returns
+    -------
+    list of str: module names, without repeats.
+    """
     return list(dict.fromkeys(
         c.__module__ for c in type(experiment).__mro__
         if c.__module__ not in ("abc", "builtins", "harness.experiments.base")))
@@ -254,6 +268,10 @@ def measuring_modules(experiment) -> tuple[dict[str, str], set[str]]:
     ----------
     experiment : a `harness.experiments.base.Experiment`; its classes' modules are read, the
         contract's own (`harness.experiments.base`) not.
+
+    Returns
+    -------
+    tuple (dict, set): the source counted per module, and the thresholds read.
     """
     own = experiment_modules(experiment)
     counted: dict[str, str] = {}
@@ -309,7 +327,17 @@ def module_version(*names: str, judging: bool = False, extra: str = "") -> str:
     """sha256 of project modules' source and of every project module they import, directly or
     through others (imports inside functions count; judging-only modules are followed only with
     `judging`), with the values of the thresholds they read: what a value computed by those
-    modules depends on."""
+    modules depends on.
+
+    Parameters
+    ----------
+    names : the modules' dotted names; judging : bool, follow judging-only modules too;
+    extra : str, text hashed along (a caller's own part of the key).
+
+    Returns
+    -------
+    str: hex sha256 digest.
+    """
     def skipped(m: str) -> bool:
         if judging:
             return m == "harness.experiments" or any(m == x or m.startswith(x + ".") for x in LISTING_MODULES)
@@ -333,7 +361,16 @@ def module_version(*names: str, judging: bool = False, extra: str = "") -> str:
 
 
 def tolerance_values(names: set[str]) -> str:
-    """The values of the thresholds `names` of `harness.tolerances`, as JSON text."""
+    """The values of the thresholds `names` of `harness.tolerances`, as JSON text.
+
+    Parameters
+    ----------
+    names : set of str, names in `harness.tolerances` (a missing one shows as '<missing>').
+
+    Returns
+    -------
+    str: JSON object name -> repr of the value, keys sorted.
+    """
     import importlib
 
     tol = importlib.import_module(TOLERANCES)

@@ -4,6 +4,7 @@
   arithmetic removes (`harness.theory.defects`); a sweep excludes points near it (`coefficients`);
 - `coefficient_rounding_floor`: coefficients rounded to float64 miss the conditions by their
   rounding times their size, part of the float64 rounding floor (large extrapolation weights);
+  `rounded_coefficient_floor` is the same at another unit roundoff (the real128 sweep's);
 - `order_bound` and `mark_above_order`: no problem shows a slope above max(order, linear order)
   asymptotically (the linear order counts the tall trees, which every class keeps), so a fitted
   slope above it by more than ABOVE_ORDER_TOL is higher-order terms still dominating; a black
@@ -21,13 +22,22 @@ import numpy as np
 from harness import tolerances as tol
 from harness.stepper import Stepper
 
-__all__ = ["coefficient_floor", "coefficient_rounding_floor", "order_bound", "mark_above_order",
-           "problem_rate"]
+__all__ = ["coefficient_floor", "coefficient_rounding_floor", "rounded_coefficient_floor", "order_bound",
+           "mark_above_order", "problem_rate"]
 
 
 def problem_rate(problem) -> float:
     """The problem's fastest rate along its orbit (`harness.scales`), the size of an elementary
-    differential per order; 1 per unit time where it cannot be derived."""
+    differential per order; 1 per unit time where it cannot be derived.
+
+    Parameters
+    ----------
+    problem : Problem, whose time scale is derived.
+
+    Returns
+    -------
+    float: a positive rate, 1.0 when it cannot be derived.
+    """
     from harness.scales import derive_time_scale
 
     try:
@@ -43,7 +53,18 @@ def coefficient_rounding_floor(coefficients, problem, *, span: float,
     defects in the order conditions as run, `harness.theory.defects`): part of the float64
     rounding floor, which it raises only for coefficients of large magnitude (an order-11
     extrapolation tableau's weights sum |b| to ~1e5 and lose ~1e-11); None where every defect
-    is within DEFECT_NOISE_ULPS roundings, as for coefficients of ordinary size."""
+    is within DEFECT_NOISE_ULPS roundings, as for coefficients of ordinary size.
+
+    Parameters
+    ----------
+    coefficients : the method's coefficient object (only explicit ButcherTableau count);
+    problem : Problem, whose rate sizes the elementary differentials; span : float, the
+    integration time; scale : float, the solution's size.
+
+    Returns
+    -------
+    callable: h array -> floor array, or -> None when there is no such floor.
+    """
     from harness.coefficients import ButcherTableau
     from harness.theory.defects import condition_defects, defect_floor
 
@@ -57,11 +78,48 @@ def coefficient_rounding_floor(coefficients, problem, *, span: float,
     return lambda h: defect_floor(defects, 0.0, h, span=span, rate=rate, scale=scale)
 
 
+def rounded_coefficient_floor(coefficients, problem, *, span: float, scale: float,
+                              eps: float) -> Callable[[np.ndarray], np.ndarray] | None:
+    """h -> what rounding a tableau's coefficients to the unit roundoff `eps` leaves, for the
+    real128 sweep: each order condition off by about eps times the size of its products
+    (`harness.theory.defects`), as large as 1e-29 in real128 for extrapolation weights summing
+    |b| to 1e5.
+
+    Parameters
+    ----------
+    coefficients, problem, span, scale : as in `coefficient_floor`; eps : float, the unit roundoff
+    the coefficients are rounded to.
+
+    Returns
+    -------
+    callable or None: h array -> floor array; None for other families than ButcherTableau.
+    """
+    from harness.coefficients import ButcherTableau
+    from harness.theory.defects import condition_defects, defect_floor
+
+    if not isinstance(coefficients, ButcherTableau):
+        return None
+    sizes = [(eps * size, size) for _, size in condition_defects(coefficients, coefficients.order())]
+    rate = problem_rate(problem)
+    return lambda h: defect_floor(sizes, 0.0, h, span=span, rate=rate, scale=scale)
+
+
 def coefficient_floor(coefficients, problem, *, span: float, scale: float,
                       noise: float) -> Callable[[np.ndarray], np.ndarray | None]:
     """h -> the error floor an explicit Runge-Kutta tableau's defects in the order conditions
     leave (`harness.theory.defects.defect_floor`), or None where those defects are within
-    `noise` (the arithmetic's unit roundoff) of rounding or `coefficients` is no such tableau."""
+    `noise` (the arithmetic's unit roundoff) of rounding or `coefficients` is no such tableau.
+
+    Parameters
+    ----------
+    coefficients : the method's coefficient object; problem : Problem, whose rate sizes the
+    elementary differentials; span : float, the integration time; scale : float, the solution's
+    size; noise : float, the unit roundoff of the arithmetic run.
+
+    Returns
+    -------
+    callable: h array -> floor array; its value is None where the defects are within noise.
+    """
     from harness.coefficients import ButcherTableau
     from harness.theory.defects import condition_defects, defect_floor
 
@@ -85,7 +143,16 @@ def order_bound(stepper: Stepper) -> int | None:
     claims (`claimed_order`, and `extra["linear_order"]` where declared): a slope above the
     claimed order does not contradict the claim (the error is O(h^p) still) and cannot be read as
     the order either, so those points are pre-asymptotic as for a tableau. None when neither is
-    known (no coefficients and no claimed order)."""
+    known (no coefficients and no claimed order).
+
+    Parameters
+    ----------
+    stepper : Stepper, its coefficients or its declared claims (an adaptive one has no bound).
+
+    Returns
+    -------
+    int or None: the bound.
+    """
     coefficients = getattr(stepper, "coefficients", None)
     try:
         return max(int(coefficients.order()), int(coefficients.linear_order()))
@@ -101,7 +168,18 @@ def order_bound(stepper: Stepper) -> int | None:
 def mark_above_order(h: np.ndarray, error: np.ndarray, reasons: np.ndarray,
                      bound: int | None) -> str:
     """Where the points kept (reason '') fit a slope above `bound` + ABOVE_ORDER_TOL, mark them
-    `pre-asymptotic` in place and return the reason; else ''."""
+    `pre-asymptotic` in place and return the reason; else ''.
+
+    Parameters
+    ----------
+    h, error : step sizes and errors of the points; reasons : str array, each point's exclusion
+    reason ('' when kept), changed in place; bound : int or None, from `order_bound` (None: no
+    check).
+
+    Returns
+    -------
+    str: the reason given to the marked points, or ''.
+    """
     kept = np.flatnonzero(reasons == "")
     if bound is None or kept.size < 2:
         return ""

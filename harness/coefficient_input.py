@@ -33,7 +33,18 @@ def _real(v) -> float:
 
 def as_float_array(values: Sequence, name: str, ndim: int) -> np.ndarray:
     """Convert coefficients (floats, ints, Fractions, decimal or rational strings such as "2/3",
-    nested lists) to a read-only float64 array."""
+    nested lists) to a read-only float64 array.
+
+    Parameters
+    ----------
+    values : sequence (nested for ndim 2) of numbers or strings; name : str, the argument's name
+    in errors; ndim : int, 1 or 2.
+
+    Returns
+    -------
+    ndarray: read-only float64. Raises CoefficientError for a non-number, a wrong shape or a
+    non-finite value.
+    """
     try:
         arr = np.array(
             [[_real(v) for v in row] for row in values] if ndim == 2 else [_real(v) for v in values],
@@ -86,7 +97,16 @@ def published_precision(*values) -> float:
 def exact_value(x) -> Fraction | None:
     """`x` as an exact rational when it is given exactly (int, Fraction, Decimal, a decimal
     string, or a float that is a short dyadic such as 0.5), else None: a float like 1/3 is only
-    a float64 approximation, and extended-precision runs (`harness.extended`) need better."""
+    a float64 approximation, and extended-precision runs (`harness.extended`) need better.
+
+    Parameters
+    ----------
+    x : a number or a string.
+
+    Returns
+    -------
+    Fraction or None.
+    """
     from decimal import Decimal
 
     if isinstance(x, bool):
@@ -103,7 +123,16 @@ def exact_value(x) -> Fraction | None:
 
 
 def exact_rows(values, ndim: int):
-    """Nested tuples of `exact_value`s, or None when any entry is not exact."""
+    """Nested tuples of `exact_value`s, or None when any entry is not exact.
+
+    Parameters
+    ----------
+    values : a sequence (ndim 1) or a sequence of rows (ndim 2); ndim : int, 1 or 2.
+
+    Returns
+    -------
+    tuple of Fraction (ndim 1), tuple of tuples (ndim 2), or None.
+    """
     try:
         rows = [values] if ndim == 1 else list(values)
         out = tuple(tuple(exact_value(x) for x in row) for row in rows)
@@ -122,6 +151,16 @@ _EXACT_DYADIC = 1 << 20
 def close_to_rounding(a: float, b: float, size: float = 1.0, terms: int = 1) -> bool:
     """a == b up to the rounding of the coefficients that produced them: `size` is the sum of
     the magnitudes of the `terms` numbers summed (a tableau whose weights sum |b| to 2842 rounds
-    its sum to ~1e-13, and that is no defect)."""
+    its sum to ~1e-13, and that is no defect).
+
+    Parameters
+    ----------
+    a, b : float, the values compared; size : float, the magnitudes' sum; terms : int, how many
+    numbers were summed.
+
+    Returns
+    -------
+    bool: True within COEFFICIENT_TOL or COEFFICIENT_ULPS roundings of the size.
+    """
     scale = max(1.0, abs(a), abs(b), float(size))
     return abs(a - b) <= max(COEFFICIENT_TOL, COEFFICIENT_ULPS * EPS * (terms + 1) * scale)

@@ -95,7 +95,16 @@ class OutputError(HarnessError, OSError):
 def describe_os_error(exc: OSError, path: object = None) -> tuple[str, int]:
     """(one line naming the path and the problem, sysexits-style exit status) for an ordinary OS
     error: a file where a directory belongs or the reverse (73), a full disk or another I/O error
-    (74), no permission (77), a closed pipe (141, as a SIGPIPE death would give)."""
+    (74), no permission (77), a closed pipe (141, as a SIGPIPE death would give).
+
+    Parameters
+    ----------
+    exc : OSError, the error; path : the path meant, used when `exc` names none.
+
+    Returns
+    -------
+    tuple (str, int): the message and the exit status.
+    """
     import errno
     import os
 

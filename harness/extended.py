@@ -1,22 +1,17 @@
 """Convergence order in extended precision, for methods whose asymptotic range float64 cannot reach.
 
 A high-order method (order 8-10) on an orbit meets the float64 rounding floor (about 1e-16 |y|
-times the flow's sensitivity) while its local slopes are still drifting towards the order; the
-float64 sweep then ends `insufficient-range`. The same coefficients are run here in real128
-(113-bit significand, ~34 digits, heyoka's numpy dtype; one step of the method is one real128
-`heyoka.cfunc` built from the problem's own symbolic definition and the exact coefficients), on
-the problem's own start (one
-trajectory), against a ground truth in 192-bit `heyoka.real` certified by a 256-bit rerun. The
-floor drops by ~18 decades, so the slopes settle and the order is fitted by the same rules as
-the float64 sweep (`harness.experiments.convergence.classify_points`).
+times the flow's sensitivity) while its local slopes still drift towards the order; the float64
+sweep then ends `insufficient-range`. The same coefficients run here in real128 (113-bit
+significand, ~34 digits, heyoka's numpy dtype; one step is one real128 `heyoka.cfunc` built from
+the problem's symbolic definition and the exact coefficients) from the problem's own start (one
+trajectory), against a 192-bit `heyoka.real` ground truth certified by a 256-bit rerun. The
+floor drops by ~18 decades, so the slopes settle and the order is fitted by the float64 sweep's
+rules (`harness.order_fit.classify_points`).
 
-Extended precision gains nothing unless the coefficients are themselves exact beyond float64: a
-1e-16 error in a coefficient breaks the order conditions at 1e-16 h. The coefficient objects
-keep an exact form (`ButcherTableau.exact`, `SplittingScheme.exact`: Fractions, from integers,
-Fractions or decimal strings in the record); a method given only as float64 numbers is reported
-as not measurable here, with that reason. `refine_composition_weights` computes the weights of
-a symmetric composition (Yoshida's) to any number of digits from the exact local-error series
-(`harness.theory`), Newton's method started at the published 15-digit values.
+This gains nothing unless the coefficients are exact beyond float64 (a 1e-16 error in one
+breaks the order conditions at 1e-16 h): the coefficient objects keep an exact form (`exact`,
+Fractions); a method given only in float64 is not measurable here, with that reason.
 
 References: Hairer, Norsett & Wanner, *Solving ODEs I*, II.3-II.4 (order, error constants);
 H. Yoshida, Phys. Lett. A 150 (1990) 262-268 (compositions); Hairer, Lubich & Wanner, *Geometric
@@ -33,12 +28,10 @@ from typing import Any
 import numpy as np
 
 from harness import tolerances as tol
-from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme, exact_value
+from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
 
-__all__ = [
-    "NotMeasurable", "exact_form", "extended_sweep", "refine_composition_weights",
-    "EXTENDED_EPS", "extended_reference",
-]
+__all__ = ["NotMeasurable", "exact_form", "extended_sweep", "refine_composition_weights", "EXTENDED_EPS",
+           "extended_reference"]
 
 #: Unit roundoff of real128 (113-bit significand).
 EXTENDED_EPS = 2.0**-113
@@ -52,7 +45,15 @@ class NotMeasurable(Exception):
 
 # -- exact coefficients -----------------------------------------------------------------------------
 def exact_form(coefficients: Any) -> Any:
-    """The coefficient object's exact form (Fractions), or NotMeasurable with the reason."""
+    """The coefficient object's exact form (Fractions), or NotMeasurable with the reason.
+
+    Parameters
+    ----------
+    coefficients : an explicit ButcherTableau, a SplittingScheme or a SecondOrderMultistep.
+
+    Returns
+    -------
+    Its `exact` attribute."""
     if not isinstance(coefficients, (ButcherTableau, SplittingScheme, SecondOrderMultistep)):
         raise NotMeasurable("extended precision runs explicit Runge-Kutta tableaux, drift/kick "
                             "compositions and second-order multistep tables; this method is none")
@@ -85,10 +86,18 @@ def _composition_residuals(mp, base_exact, free, order: int) -> list:
 
 def refine_composition_weights(base: SplittingScheme, weights: list, order: int,
                                digits: int = 40) -> list[str]:
-    """The free weights (w_1..w_m) of a symmetric composition of `base` with the given order,
-    to `digits` significant digits: Gauss-Newton on the exact local-error coefficients, started
-    at `weights` (for instance a paper's 15-digit values). Raises NotMeasurable when it does
-    not converge (the start is not near a solution)."""
+    """The free weights (w_1..w_m) of a symmetric composition of `base` to `digits` significant
+    digits: Gauss-Newton on the exact local-error series (`harness.theory`) from a start.
+
+    Parameters
+    ----------
+    base : SplittingScheme with exact coefficients; weights : the start (for instance a paper's
+        15-digit values); order : int, the composition's order; digits : int.
+
+    Returns
+    -------
+    list of str: decimal strings. NotMeasurable when it does not converge (a start not near a
+    solution)."""
     import mpmath
 
     if base.exact is None:
@@ -116,9 +125,17 @@ def refine_composition_weights(base: SplittingScheme, weights: list, order: int,
 
 
 def composition_defect(base: SplittingScheme, weights: list, order: int) -> float:
-    """Largest |coefficient of h^n|, n <= order, of the local error of the symmetric composition
-    with free weights `weights` (decimal strings or Fractions), in 60-digit arithmetic: ~0 when
-    the weights are accurate, ~1e-16 for float64 weights."""
+    """Largest |coefficient of h^n|, n <= order, of the local error of the symmetric composition,
+    in 60-digit arithmetic.
+
+    Parameters
+    ----------
+    base : SplittingScheme with exact coefficients; weights : the free weights (decimal strings
+        or Fractions); order : int, the order checked.
+
+    Returns
+    -------
+    float: ~0 when the weights are accurate, ~1e-16 for float64 weights."""
     import mpmath
 
     with mpmath.workdps(60):
@@ -167,15 +184,13 @@ def _with_parameter_values(problem, exprs: list) -> list:
 
 def _step_function(problem, step: list, evals_per_step: int):
     """(y0, span, n) -> (y_n, evaluations) with h = span / n: `step` (y_{k+1} as expressions of
-    y_k and h = par[0])
-    compiled once in real128 and called n times."""
+    y_k and h = par[0]) compiled once in real128 and called n times."""
     import heyoka as hy
 
     from harness import cache
 
     cache.configure_heyoka_cache()
-    fn = hy.cfunc(step, list(problem.variables), fp_type=hy.real128,
-                  compact_mode=cache.compact_mode(problem))
+    fn = hy.cfunc(step, list(problem.variables), fp_type=hy.real128, compact_mode=cache.compact_mode(problem))
 
     def run(y0: np.ndarray, span: float, n: int) -> tuple[np.ndarray, int]:
         # h = span / n rounded once in real128: a float64 h would end the run ~1e-16 T off the
@@ -347,8 +362,15 @@ def _taylor(problem, T, prec: int, times: list | None = None) -> list:
 
 
 def extended_reference(problem, T: float) -> tuple[list, float]:
-    """The state at T in 192-bit arithmetic and its certified error (max over components of the
-    difference with a 256-bit rerun)."""
+    """The state at T in 192-bit arithmetic and its certified error.
+
+    Parameters
+    ----------
+    problem : Problem, from its own start; T : float, the end time.
+
+    Returns
+    -------
+    tuple: (state as heyoka reals, max over components of the difference with a 256-bit rerun)."""
     ref = _taylor(problem, T, _REFERENCE_PREC)
     cert = _taylor(problem, T, _CERTIFIER_PREC)
     return ref, max(float(abs(a - b)) for a, b in zip(ref, cert, strict=True))
@@ -374,16 +396,23 @@ def _settled(rows: list[dict]) -> bool:
 # -- the sweep ------------------------------------------------------------------------------------
 def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget: float | None = None,
                    amplification: float = 1.0, order_bound: int | None = None) -> dict:
-    """Global error against step size in real128 for one trajectory from the problem's start,
-    n = 1, 2, 4, ... steps until the asymptotic window holds TARGET_FIT_POINTS points whose
-    slopes have settled, the real128 floor or the coefficients' own floor (their defects in the
-    order conditions, `harness.theory.defects`) is reached, or `work_budget` function
-    evaluations are spent; then step sizes between the last ones (ratio sqrt 2) fill in a window
-    the floor cut short. A slope above `order_bound` (max of order and linear order) is never
-    settled. Returns the rows (h, n_steps, error, reference_error, rounding_level, excluded),
-    the fit (order, points, h range) or None, and the reference error. Raises NotMeasurable
-    with the reason."""
-    from harness.coefficient_floors import mark_above_order
+    """Global error against step size in real128, one trajectory from the problem's start: n = 1,
+    2, 4, ... steps until TARGET_FIT_POINTS points have settled slopes, a floor is reached (real128's,
+    or the coefficients' own order-condition defects, `harness.theory.defects`) or `work_budget`
+    evaluations are spent; then steps between the last ones (ratio sqrt 2) fill in a window a floor
+    cut short. A slope above `order_bound` never settles. Raises NotMeasurable with the reason.
+
+    Parameters
+    ----------
+    coefficients : the method's coefficient object; problem : Problem; T : the end time (default
+        its convergence horizon); work_budget : evaluations allowed (default EXTENDED_WORK_BUDGET);
+        amplification : the flow's rounding amplification; order_bound : max(order, linear order) or None.
+
+    Returns
+    -------
+    dict: 'rows' (h, n_steps, error, reference_error, rounding_level, excluded), 'fit' (order,
+    points, h range) or None, 'reference_error', 'stopped_by', 'note', 'evals' and more."""
+    from harness.coefficient_floors import coefficient_floor, mark_above_order, rounded_coefficient_floor
     from harness.order_fit import classify_points, fit_order
 
     runner = _runner(coefficients, problem)
@@ -393,12 +422,12 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     started = time.perf_counter()
     ref, ref_err = extended_reference(problem, T)
     y0 = _to_real128([float(v) for v in problem.y0])
-    scale = max(tol.SCALE_FLOOR, float(np.max(np.abs(problem.y0))),
-                max(abs(float(r)) for r in ref))
+    scale = max(tol.SCALE_FLOOR, float(np.max(np.abs(problem.y0))), max(abs(float(r)) for r in ref))
     start_error = tol.SWEEP_START_ERROR * scale
     span = T - float(problem.t0)
-    floor_of = _defect_floor(coefficients, problem, span, scale)
-    rounded_of = _coefficient_rounding(coefficients, problem, span, scale)
+    floor_of = coefficient_floor(coefficients, problem, span=span, scale=scale, noise=EXTENDED_EPS)
+    floor_of = floor_of if floor_of(np.array([1.0])) is not None else None
+    rounded_of = rounded_coefficient_floor(coefficients, problem, span=span, scale=scale, eps=EXTENDED_EPS)
     rows: list[dict] = []
     spent = 0
     note = ""
@@ -469,32 +498,3 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
             "local_slopes": [float(s) for s in slopes], "precision": "real128",
             "reference_precision": f"real{_REFERENCE_PREC} certified by real{_CERTIFIER_PREC}"}
 
-
-def _coefficient_rounding(coefficients, problem, span: float, scale: float):
-    """h -> what rounding a tableau's coefficients to real128 leaves: each order condition off by
-    about EXTENDED_EPS times the size of its products (`harness.theory.defects`), as large as
-    1e-29 for extrapolation weights summing |b| to 1e5; None for other families."""
-    if not isinstance(coefficients, ButcherTableau):
-        return None
-    from harness.coefficient_floors import problem_rate
-    from harness.theory.defects import condition_defects, defect_floor
-
-    sizes = [(EXTENDED_EPS * size, size) for _, size in condition_defects(coefficients, coefficients.order())]
-    rate = problem_rate(problem)
-    return lambda h: defect_floor(sizes, 0.0, h, span=span, rate=rate, scale=scale)
-
-
-def _defect_floor(coefficients, problem, span: float, scale: float):
-    """h -> the error floor of a tableau's defects in the order conditions at real128, or None."""
-    from harness.coefficient_floors import coefficient_floor
-
-    floor = coefficient_floor(coefficients, problem, span=span, scale=scale, noise=EXTENDED_EPS)
-    return floor if floor(np.array([1.0])) is not None else None
-
-
-def exact_weights(values) -> list[Fraction]:
-    """Helper for records: decimal strings or Fractions as Fractions (None entries rejected)."""
-    out = [exact_value(v) for v in values]
-    if any(v is None for v in out):
-        raise NotMeasurable("a weight is not given exactly")
-    return out

@@ -49,7 +49,16 @@ GATE_COLUMNS = [
 
 
 def claim_contradictions(stepper) -> list[str]:
-    """Declared claims that the stepper's coefficients contradict (empty for a black box)."""
+    """Declared claims that the stepper's coefficients contradict (empty for a black box).
+
+    Parameters
+    ----------
+    stepper : Stepper, with its declared `info` and, when it has one, its coefficient object.
+
+    Returns
+    -------
+    list of str: one sentence per contradicted claim (order, symmetry, symplecticity).
+    """
     facts = method_facts(stepper)
     if facts.source != "coefficients":
         return []
@@ -68,7 +77,18 @@ def claim_contradictions(stepper) -> list[str]:
 
 def judge(record: Mapping, facts: MethodFacts | None = None,
           problem=None) -> tuple[str, str, str, float | None]:
-    """(outcome, expected verdict, reason, expected order) for one convergence summary record."""
+    """(outcome, expected verdict, reason, expected order) for one convergence summary record.
+
+    Parameters
+    ----------
+    record : mapping, the record (its `stepper` and `problem` names are looked up in the
+    registry); facts : MethodFacts or None, the stepper's facts (derived when None);
+    problem : Problem or None, the problem run (looked up when None).
+
+    Returns
+    -------
+    tuple: (outcome, expected verdict, reason, expected order or None).
+    """
     return _judge(record, facts, problem)[:4]
 
 

@@ -129,7 +129,17 @@ def composition(levels: Sequence[str], name: str, top_factor: Fraction = Fractio
     """The symmetric composition of velocity Verlet raised one level per entry of `levels`
     ('triple' or 'suzuki'): order 2 + 2 len(levels). `top_factor` d moves the outer weights of
     the last level to w (1 + d) and the middle one so they still sum to one: symmetric and
-    consistent, of the order below (a subtle mutant)."""
+    consistent, of the order below (a subtle mutant).
+
+    Parameters
+    ----------
+    levels : sequence of 'triple' or 'suzuki', one per level; name : str, the scheme's name;
+    top_factor : Fraction, d (0: the correct composition).
+
+    Returns
+    -------
+    SplittingScheme: the composed scheme, coefficients exact.
+    """
     from harness.coefficients import SplittingScheme
 
     half = Fraction(1, 2)  # velocity Verlet, kick-drift-kick: the symmetric base of order 2
@@ -150,7 +160,17 @@ def null_space_weights(A, b, order: int, size: float = 0.05) -> list[float] | No
     """b + d, d of max-norm `size` orthogonal to g(t) for every tree of order < `order` (the
     conditions are linear in b; d is the last right singular vector of their matrix, in float64),
     so every condition below `order` still holds to rounding and the order-`order` ones break;
-    None where the conditions leave no such direction."""
+    None where the conditions leave no such direction.
+
+    Parameters
+    ----------
+    A, b : the tableau's matrix and weights; order : int, the first order whose conditions break;
+    size : float, the max-norm of the move.
+
+    Returns
+    -------
+    list of float or None: the moved weights.
+    """
     from harness.theory import rooted_trees
 
     A_arr, b_arr = np.array(A, dtype=float), np.array(b, dtype=float)
@@ -172,7 +192,17 @@ def null_space_weights(A, b, order: int, size: float = 0.05) -> list[float] | No
 def draw_high_order(family: str, rng, max_order: int = 12):
     """One correct member: (coefficients description, claimed order), or None for a draw above
     `max_order`. Extrapolation: a random increasing step sequence; compositions: a random
-    choice of triple jump or Suzuki's five-fold at each level (at most 125 Verlet steps)."""
+    choice of triple jump or Suzuki's five-fold at each level (at most 125 Verlet steps).
+
+    Parameters
+    ----------
+    family : str, a key of HIGH_ORDER_PROBLEMS (ValueError otherwise); rng : numpy Generator;
+    max_order : int, the highest order drawn.
+
+    Returns
+    -------
+    tuple or None: (spec, order); spec is ('rk', A, b) or ('compose', levels).
+    """
     if family == "extrap-euler":
         p = int(rng.integers(5, min(12, max_order) + 1))
         steps = sorted(int(x) for x in rng.choice(np.arange(1, p + 3), size=p, replace=False))
@@ -191,7 +221,17 @@ def draw_high_order(family: str, rng, max_order: int = 12):
 
 
 def build_high_order(spec, name: str):
-    """The coefficient object of a drawn member."""
+    """The coefficient object of a drawn member.
+
+    Parameters
+    ----------
+    spec : a spec of `draw_high_order`, `perturb_high_order` or `subtle_high_order`; name : str,
+    the method's name.
+
+    Returns
+    -------
+    ButcherTableau or SplittingScheme.
+    """
     from harness.coefficients import ButcherTableau, SplittingScheme
 
     if spec[0] == "rk":
@@ -208,7 +248,16 @@ def build_high_order(spec, name: str):
 
 def perturb_high_order(spec, rng):
     """One coefficient moved by 1/20: an entry of A (the node follows the row sum), or the
-    first drift of the top-level composition against the last (no longer symmetric)."""
+    first drift of the top-level composition against the last (no longer symmetric).
+
+    Parameters
+    ----------
+    spec : a correct member's spec; rng : numpy Generator, which entry and which sign.
+
+    Returns
+    -------
+    tuple: the mutant's spec.
+    """
     if spec[0] == "rk":
         A = [list(row) for row in spec[1]]
         i = int(rng.integers(1, len(A)))
@@ -221,7 +270,16 @@ def perturb_high_order(spec, rng):
 def subtle_high_order(spec, claimed: int):
     """A mutant keeping every condition below the claimed order: Runge-Kutta weights moved in
     the null space of the lower-order conditions, or the top composition level's outer weights
-    moved symmetrically (order two below); None where there is no such freedom."""
+    moved symmetrically (order two below); None where there is no such freedom.
+
+    Parameters
+    ----------
+    spec : a correct member's spec; claimed : int, its order.
+
+    Returns
+    -------
+    tuple or None: the mutant's spec.
+    """
     if spec[0] == "rk":
         b = null_space_weights(spec[1], spec[2], claimed)
         return None if b is None else ("rk", spec[1], b)

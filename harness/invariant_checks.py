@@ -21,7 +21,12 @@ __all__ = ["check_invariants_along_flow"]
 
 def check_invariants_along_flow(problem) -> None:
     """Raise `ProblemError` when a declared invariant is not conserved by the problem's own
-    exact flow (see the module docstring); remembered per definition (`harness.derived`)."""
+    exact flow (see the module docstring); remembered per definition (`harness.derived`).
+
+    Parameters
+    ----------
+    problem : Problem, with its declared invariants.
+    """
     if not problem.invariants:
         return
     from harness.derived import remembered

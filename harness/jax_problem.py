@@ -162,12 +162,31 @@ class JaxFunctions:
         return jnp.asarray(self.problem.y0[:, None], dtype=jnp.float64)
 
     def ensemble(self, size: int, seed: int = 0) -> Any:
+        """The problem's start ensemble as a JAX float64 array.
+
+        Parameters
+        ----------
+        size : int, the number of members; seed : int, the random seed.
+
+        Returns
+        -------
+        jax.Array: the states, as `Problem.ensemble` gives them.
+        """
         import jax.numpy as jnp
 
         return jnp.asarray(self.problem.ensemble(size, seed=seed), dtype=jnp.float64)
 
     def bind(self, pars: np.ndarray | None) -> tuple[Callable, Callable, Callable | None]:
-        """(f, jac, accel) with `pars` (P, N) fixed: functions of (t, y) or (t, q, v)."""
+        """(f, jac, accel) with `pars` (P, N) fixed: functions of (t, y) or (t, q, v).
+
+        Parameters
+        ----------
+        pars : (P, N) parameter values, or None for the problem's own.
+
+        Returns
+        -------
+        tuple: (f, jac, accel), accel None without a Newtonian form.
+        """
         import jax.numpy as jnp
 
         p = self._pars(pars)

@@ -55,7 +55,16 @@ def judging_version(experiment: Experiment) -> str:
     """sha256 of everything an experiment's `summarize` may run: the experiment's modules and
     every project module they import (judging modules such as the rules and the gate included,
     listing modules not), the modules every cell steps through (`MEASURING_MODULES`) and every
-    threshold. A summary cached under it is recomputed whenever a rule or threshold changes."""
+    threshold. A summary cached under it is recomputed whenever a rule or threshold changes.
+
+    Parameters
+    ----------
+    experiment : Experiment, whose classes' modules are followed.
+
+    Returns
+    -------
+    str: hex sha256 digest.
+    """
     import importlib
 
     every = {n for n in dir(importlib.import_module(TOLERANCES)) if n.isupper()}
@@ -66,7 +75,16 @@ def judging_version(experiment: Experiment) -> str:
 def experiment_fingerprint(experiment: Experiment) -> str:
     """The experiment's measuring-code version: its own `fingerprint()` when it defines one,
     else the measuring source found from its import graph (module docstring), plus the values
-    of the thresholds it reads and the harness version."""
+    of the thresholds it reads and the harness version.
+
+    Parameters
+    ----------
+    experiment : Experiment, the experiment measured.
+
+    Returns
+    -------
+    str: hex sha256 digest.
+    """
     from harness import __version__
 
     parts = [__version__, type(experiment).__qualname__, str(experiment.name)]
@@ -85,7 +103,17 @@ def code_version(stepper: str, problem: str) -> str:
     """Hash of the fingerprints of a stepper (with those of its faster implementations, which
     the experiments may run in its place: `harness.step_loops.fastest`) and a problem (looked up
     in the registry); an empty name stands for 'none' (a cell that uses no stepper, or no
-    problem)."""
+    problem).
+
+    Parameters
+    ----------
+    stepper : str, a registered stepper's name, or ''; problem : str, a registered problem's
+    name, or ''.
+
+    Returns
+    -------
+    str: 32 hex digits. Raises HarnessError when a fingerprint is not a string.
+    """
     from harness.registry import get_problem, get_stepper
     from harness.step_loops import implementations_of
 
@@ -106,7 +134,18 @@ def code_version(stepper: str, problem: str) -> str:
 def cell_key(cell: Cell, config: Mapping[str, Any], experiment_version: str, sp_version: str) -> str:
     """The cache key of `cell`: `Cell.key` over the experiment's resolved configuration and a
     code version combining the stepper/problem version, the experiment's fingerprint and the
-    cell file schema."""
+    cell file schema.
+
+    Parameters
+    ----------
+    cell : Cell, the cell; config : mapping, the experiment's resolved configuration;
+    experiment_version : str, from `experiment_fingerprint`; sp_version : str, from
+    `code_version`.
+
+    Returns
+    -------
+    str: the key `Cell.key` makes.
+    """
     from harness.store import CELL_SCHEMA
 
     code = hashlib.sha256(f"{sp_version}\n{experiment_version}\n{CELL_SCHEMA}".encode()).hexdigest()[:32]

@@ -25,7 +25,18 @@ __all__ = ["kept"]
 def kept(directory: str, key: str, compute: Callable[[], Any], label: str = "") -> Any:
     """The JSON value stored under `key` in `<cache root>/<directory>`, else `compute()`, then
     stored (atomically). A file that cannot be read or parsed is recomputed and replaced; a
-    cache that cannot be written costs only time."""
+    cache that cannot be written costs only time.
+
+    Parameters
+    ----------
+    directory : str, the folder under the cache root; key : str, the hex key (its first two
+    characters name the subfolder); compute : callable with no argument returning JSON-serialisable
+    data; label : str, the function's name stored with the value.
+
+    Returns
+    -------
+    The stored or computed value.
+    """
     try:
         path = cache_dir() / directory / key[:2] / f"{key}.json"
     except OutputError:  # no cache directory: the value is computed every time

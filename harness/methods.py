@@ -83,13 +83,23 @@ class Method:
         return self.coefficients.name
 
     def stepper(self) -> Stepper:
-        """The stepper running this method with its family's step loop."""
+        """The stepper running this method with its family's step loop.
+
+        Returns
+        -------
+        Stepper: built by `harness.step_loops.build_stepper`.
+        """
         from harness.step_loops import build_stepper
 
         return build_stepper(self)
 
     def steppers(self) -> list[Stepper]:
-        """This method's stepper and, for a Runge-Kutta pair, its embedded method's."""
+        """This method's stepper and, for a Runge-Kutta pair, its embedded method's.
+
+        Returns
+        -------
+        list of Stepper: one, or two for a pair with b_hat (the embedded one's name ends '@embedded').
+        """
         out = [self.stepper()]
         b_hat = getattr(self.coefficients, "b_hat", None)
         if b_hat is not None:
@@ -121,7 +131,16 @@ def _family(record: Mapping[str, Any]) -> str:
 
 
 def from_record(record: Mapping[str, Any]) -> Stepper:
-    """The stepper a method record declares (`method_from_record(record).stepper()`)."""
+    """The stepper a method record declares (`method_from_record(record).stepper()`).
+
+    Parameters
+    ----------
+    record : mapping, a method record.
+
+    Returns
+    -------
+    Stepper: raises as `method_from_record` does.
+    """
     return method_from_record(record).stepper()
 
 
@@ -149,7 +168,16 @@ def _multistep(name: str, alpha, beta):
 def method_from_record(record: Mapping[str, Any]) -> Method:
     """The `Method` a plain mapping declares (see the module docstring).
 
-    Raises `InputError` (or `CoefficientError`) naming the record and the rule it breaks."""
+    Raises `InputError` (or `CoefficientError`) naming the record and the rule it breaks.
+
+    Parameters
+    ----------
+    record : mapping, with 'name', 'claimed_order', 'reference' and the family's coefficients.
+
+    Returns
+    -------
+    Method: the coefficient object with its claims.
+    """
     from harness.method_checks import check_record
 
     name = check_record(record)  # types, sizes and numbers first (`harness.method_checks`)

@@ -28,7 +28,16 @@ __all__ = ["not_converged", "format_not_converged", "main"]
 def not_converged(gate: pd.DataFrame) -> pd.DataFrame:
     """The rows of a gate table (`harness.gate.gate_table`) whose verdict is not `converged`
     (the stepper-level `(any)` rows included), with a `group` column: predicted,
-    not-measurable, not-verified or fail."""
+    not-measurable, not-verified or fail.
+
+    Parameters
+    ----------
+    gate : DataFrame, the gate table.
+
+    Returns
+    -------
+    DataFrame: the rows, fail first, then not-verified, not-measurable, predicted.
+    """
     rows = gate[(gate.verdict != "converged") | (gate.outcome != "pass")].copy()
     rows["group"] = rows.outcome.map({"pass": "predicted"}).fillna(rows.outcome)
     order = {"fail": 0, "not-verified": 1, "not-measurable": 2, "predicted": 3}
@@ -37,7 +46,16 @@ def not_converged(gate: pd.DataFrame) -> pd.DataFrame:
 
 
 def format_not_converged(rows: pd.DataFrame, total: int) -> str:
-    """One line per cell, grouped, and a count line."""
+    """One line per cell, grouped, and a count line.
+
+    Parameters
+    ----------
+    rows : DataFrame from `not_converged`; total : int, the number of cells of the gate table.
+
+    Returns
+    -------
+    str: the lines joined.
+    """
     lines = []
     for group, g in rows.groupby("group", sort=False):
         lines.append(f"{group} ({len(g)}):")
@@ -62,6 +80,16 @@ def _latest(results: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """List the cells of a run whose convergence verdict is not `converged`, grouped.
+
+    Parameters
+    ----------
+    argv : the command-line arguments (default: sys.argv[1:]): a run directory, `--plugin FILE`.
+
+    Returns
+    -------
+    int: 0, 1 when a cell fails, 2 on bad input.
+    """
     from harness.errors import InputError
     from harness.gate import gate_table
     from harness.registry import load_plugin

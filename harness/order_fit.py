@@ -29,7 +29,16 @@ def _local_slopes(h: np.ndarray, e: np.ndarray) -> np.ndarray:
 
 def fit_order(h: Sequence[float], error: Sequence[float]) -> dict[str, float]:
     """Least-squares slope of log(error) against log(h), with RMS residual (in log10 units) and
-    a 95 % confidence interval from Student's t."""
+    a 95 % confidence interval from Student's t.
+
+    Parameters
+    ----------
+    h, error : sequences of positive step sizes and errors (ValueError for fewer than two).
+
+    Returns
+    -------
+    dict: 'order' (the slope), 'intercept', 'residual', 'ci_low', 'ci_high' (NaN for two points).
+    """
     from scipy import stats
 
     x = np.log(np.asarray(h, dtype=float))
@@ -57,7 +66,16 @@ def asymptotic_window(h: np.ndarray, error: np.ndarray, usable: np.ndarray) -> t
     of consecutive usable points nearest the floor, extended from its small-h end towards
     larger h for as long as each local slope stays within the plateau tolerance of the slopes
     next to the floor. Anchoring at the small-h end keeps a slowly drifting pre-asymptotic
-    start out of the fit. Returns (first, last) indices, or None for fewer than two points."""
+    start out of the fit.
+
+    Parameters
+    ----------
+    h, error : arrays of step sizes and errors; usable : bool array, the points not excluded.
+
+    Returns
+    -------
+    tuple (first, last) of indices, or None for fewer than two points.
+    """
     idx = np.flatnonzero(usable)
     if idx.size < 2:
         return None
@@ -118,7 +136,18 @@ def classify_points(
     Points must be ordered from the largest h to the smallest; `start_error` is absolute (the
     caller scales it by the state's size); `coefficient_floor` is the error the coefficients'
     own defects in the order conditions leave at each h (`harness.theory.defects`), and a point
-    within COEFFICIENT_FLOOR_MARGIN of it measures the record's digits, not the method."""
+    within COEFFICIENT_FLOOR_MARGIN of it measures the record's digits, not the method.
+
+    Parameters
+    ----------
+    h, error : step sizes and errors; reference_error : each point's reference error;
+    rounding_level : each point's expected rounding error; start_error : float or None;
+    coefficient_floor : array or None.
+
+    Returns
+    -------
+    ndarray of str: '', 'blow-up', 'reference', 'roundoff', 'coefficients' or 'pre-asymptotic'.
+    """
     n = h.size
     reason = np.array([""] * n, dtype=object)
     for i in range(n):

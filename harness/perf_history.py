@@ -102,7 +102,16 @@ def _rows_of_file(data: dict, machine: str, meta: dict) -> list[dict]:
 def load_history(results_dir: str | Path = ".asv/results") -> pd.DataFrame:
     """Every finite asv result under `results_dir` as a DataFrame with columns
     benchmark, params, commit, date, value, unit, machine (sorted by date); an empty DataFrame
-    with these columns when there are none. Unreadable files are skipped."""
+    with these columns when there are none. Unreadable files are skipped.
+
+    Parameters
+    ----------
+    results_dir : str or Path, asv's results folder (InputError for another type).
+
+    Returns
+    -------
+    DataFrame: the results, one row per benchmark, parameter set and commit.
+    """
     if not isinstance(results_dir, str | Path):
         raise InputError(f"`results_dir` must be a path, got {type(results_dir).__name__}")
     root = Path(results_dir)

@@ -52,11 +52,27 @@ class ErrorLaw:
     kepler_flow_exact: bool
 
     def describe(self) -> str:
+        """The law in words, as a sum of terms eps^a h^b.
+
+        Returns
+        -------
+        str: e.g. 'eps h^2 + eps^2 h^4'.
+        """
         return " + ".join(f"eps{'' if a == 1 else '^' + str(a)} h^{b}" for a, b in self.terms)
 
 
 def error_law(stepper) -> ErrorLaw | None:
-    """The declared error law of `stepper` in the perturbation, or None when it declares none."""
+    """The declared error law of `stepper` in the perturbation, or None when it declares none.
+
+    Parameters
+    ----------
+    stepper : a stepper; its `info.extra['perturbation_error']` lists the law's (a, b) powers and
+    `info.extra['kepler_flow_exact']` whether its drift is the Kepler flow.
+
+    Returns
+    -------
+    ErrorLaw or None.
+    """
     extra = getattr(getattr(stepper, "info", None), "extra", None) or {}
     raw = extra.get("perturbation_error")
     if not raw:
@@ -67,7 +83,16 @@ def error_law(stepper) -> ErrorLaw | None:
 
 def perturbation_size(problem: Problem) -> float | None:
     """eps: the largest mass other than the central one over the central mass (0 for a problem
-    whose bodies move on unperturbed Kepler orbits); None without an N-body structure."""
+    whose bodies move on unperturbed Kepler orbits); None without an N-body structure.
+
+    Parameters
+    ----------
+    problem : Problem, read through its `structure`.
+
+    Returns
+    -------
+    float or None: eps.
+    """
     s = getattr(problem, "structure", None)
     if not isinstance(s, NBody):
         return None
@@ -99,7 +124,18 @@ def perturbation_expectation(law: ErrorLaw, eps: float, tau: float,
                              h_range: tuple[float, float] | None) -> Expectation:
     """The expectation for a map with error law `law` on a problem with perturbation `eps` and
     time scale `tau` over the fitted steps `h_range` (None: no fit): verdict `between` when no
-    single term dominates there (see the module docstring)."""
+    single term dominates there (see the module docstring).
+
+    Parameters
+    ----------
+    law : ErrorLaw, the map's declared law; eps : float, the perturbation size; tau : float, the
+    problem's time scale (period / 2 pi); h_range : (h_min, h_max) of the fit, or None.
+
+    Returns
+    -------
+    Expectation: the expected verdict ('exact', 'converged' with the dominant power, or
+    'between'), the verdicts tolerated and the reason.
+    """
     tolerated = ("insufficient-range", "exact")
     if eps == 0.0 and law.kepler_flow_exact:
         return Expectation("exact", None, ("insufficient-range",),
@@ -162,7 +198,17 @@ def judge_split_map(record: Mapping, stepper, problem: Problem
     """(outcome, expected verdict, reason, expected order) of one convergence record of a map with
     a declared error law on an N-body problem; None when the rule does not apply (no law, no
     N-body structure, an adaptive run, or a claimed order that is none of the law's powers: that
-    claim is then judged plainly, and fails where the law holds)."""
+    claim is then judged plainly, and fails where the law holds).
+
+    Parameters
+    ----------
+    record : one convergence record (its verdict and fitted h range are read); stepper : the
+    stepper run; problem : Problem, the problem run.
+
+    Returns
+    -------
+    tuple or None: (outcome, expected verdict, reason, expected order or None).
+    """
     law = error_law(stepper)
     eps = perturbation_size(problem)
     if law is None or eps is None or record.get("verdict") == "meets-tolerance":

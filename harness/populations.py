@@ -259,7 +259,19 @@ def generate(size_per_family: int, *, seed: int = 0, families: Sequence[str] = F
              max_order: int = 12) -> list[Member]:
     """`size_per_family` correct members of each family, and a perturbed and an overclaimed
     mutant of each. Every correct member's order from its coefficients equals its claim.
-    High-order families (HIGH_FAMILIES) draw orders up to `max_order`."""
+    High-order families (HIGH_FAMILIES) draw orders up to `max_order`.
+
+    Parameters
+    ----------
+    size_per_family : int, correct members per family; seed : int, the random seed;
+    families : names from FAMILIES; max_order : int, the highest order of the high-order
+    families.
+
+    Returns
+    -------
+    list of Member: correct members and their mutants. Raises RuntimeError when a family keeps
+    drawing degenerate members.
+    """
     rng = np.random.default_rng(seed)
     out: list[Member] = []
     for family in families:
@@ -306,7 +318,17 @@ def error_rates(members: Sequence[Member], *, config: dict | None = None,
     """Run the convergence experiment and the gate over `members` (correct ones on every problem
     of their family, mutants on the first `mutant_problems`) in this process. Returns the
     per-method table and the rates (per family and overall) for the full gate and for the
-    measurement alone."""
+    measurement alone.
+
+    Parameters
+    ----------
+    members : the population (from `generate`); config : convergence settings overriding the
+    defaults (local off, ensemble 4); mutant_problems : int, how many problems each mutant runs.
+
+    Returns
+    -------
+    tuple of DataFrame: (one row per method and problem, `rates` of that table).
+    """
     from harness.experiments.base import Cell
     from harness.experiments.convergence import ConvergenceExperiment
     from harness.facts import method_facts, problem_facts
@@ -354,7 +376,16 @@ def error_rates(members: Sequence[Member], *, config: dict | None = None,
 
 
 def rates(table: pd.DataFrame) -> pd.DataFrame:
-    """False-alarm and miss rates per family and overall, for the gate and the measurement alone."""
+    """False-alarm and miss rates per family and overall, for the gate and the measurement alone.
+
+    Parameters
+    ----------
+    table : the per-method table of `error_rates`.
+
+    Returns
+    -------
+    DataFrame: one row per family and 'all', with counts and rates of false alarms and misses.
+    """
     out = []
     for family, g in [*table.groupby("family", sort=False), ("all", table)]:
         good, bad = g[g.kind == "correct"], g[g.kind != "correct"]

@@ -98,6 +98,10 @@ def propagated_tree_terms(problem: Problem, order: int) -> dict[str, Any]:
     """E_t(T) for every tree of `order` vertices (module docstring), at the problem's
     convergence horizon from its own start; kept on disk (`harness.derived`).
 
+    Parameters
+    ----------
+    problem : Problem, the problem; order : int, the trees' number of vertices.
+
     Returns
     -------
     dict with `trees` (labels), `terms` (one list of dim numbers per tree, in the problem's
@@ -208,6 +212,10 @@ def explain_slope(measured: float, expected: float, prediction: dict[str, Any],
     measured, expected : the fitted slope and the expected order p.
     prediction : the `predicted_error` dict of the cell.
     h_range, error_range : (smallest, largest) fitted step and measured error.
+
+    Returns
+    -------
+    tuple (bool, str): (explained, the reason with the numbers).
     """
     C = float(prediction.get("coefficient", math.nan))
     if not math.isfinite(C):

@@ -25,7 +25,16 @@ LINE_MIN_GAP_S = 1.0
 
 
 def choose_mode(stream: IO[str] | None = None) -> str:
-    """'bar' on an interactive terminal outside CI, else 'lines'."""
+    """'bar' on an interactive terminal outside CI, else 'lines'.
+
+    Parameters
+    ----------
+    stream : the text stream progress is written to (default: standard error).
+
+    Returns
+    -------
+    str: 'bar' or 'lines'.
+    """
     stream = sys.stderr if stream is None else stream
     try:
         tty = bool(stream.isatty())
@@ -74,19 +83,36 @@ class Progress:
 
     # -- counting ---------------------------------------------------------------------------------
     def add_total(self, n: int) -> None:
-        """Announce `n` more cells (a run over several experiments grows as each is listed)."""
+        """Announce `n` more cells (a run over several experiments grows as each is listed).
+
+        Parameters
+        ----------
+        n : int, the number of cells added.
+        """
         self.total += int(n)
         if self._bar is not None:
             self._bar.total = self.total
             self._bar.refresh()
 
     def set_description(self, desc: str) -> None:
+        """Set the label shown before the counts.
+
+        Parameters
+        ----------
+        desc : str, the label.
+        """
         self.desc = str(desc)
         if self._bar is not None:
             self._bar.set_description_str(self.desc)
 
     def update(self, n: int = 1, *, failed: int = 0, cached: int = 0) -> None:
-        """`n` more cells finished, of which `failed` failed and `cached` came from the cache."""
+        """`n` more cells finished, of which `failed` failed and `cached` came from the cache.
+
+        Parameters
+        ----------
+        n : int, cells finished; failed : int, of them failed; cached : int, of them taken from the
+        cache.
+        """
         self.done += int(n)
         self.failed += int(failed)
         self.cached += int(cached)
@@ -99,6 +125,12 @@ class Progress:
 
     # -- plain lines ------------------------------------------------------------------------------
     def line(self) -> str:
+        """The progress as one line of text.
+
+        Returns
+        -------
+        str: label, cells done of the total (and percent), seconds elapsed, failures, cached cells.
+        """
         elapsed = time.monotonic() - self.started
         pct = f" ({100.0 * self.done / self.total:.0f}%)" if self.total else ""
         extra = f", {self.cached} cached" if self.cached else ""
@@ -122,6 +154,7 @@ class Progress:
 
     # -- ending -----------------------------------------------------------------------------------
     def close(self) -> None:
+        """Close the bar, or write the last line when it is not written yet; a second call does nothing."""
         if self._closed:
             return
         self._closed = True

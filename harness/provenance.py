@@ -52,7 +52,17 @@ _DISTRIBUTIONS = {
 def default_directory(given: Any, env_var: str, name: str) -> Any:
     """`given` when it is not None, else the environment variable `env_var` when set, else
     `<project>/<name>` (the current directory's `<name>` when the package is installed outside
-    a checkout). The caller checks what it gets."""
+    a checkout). The caller checks what it gets.
+
+    Parameters
+    ----------
+    given : the directory the caller was given, or None; env_var : str, the environment variable
+    read next; name : str, the folder's name under the project.
+
+    Returns
+    -------
+    `given` itself, the variable's string, or a Path.
+    """
     if given is not None:
         return given
     env = os.environ.get(env_var)
@@ -82,7 +92,16 @@ def _git(args: list[str], cwd: Path) -> str | None:
 def git_info(root: str | Path | None = None) -> dict[str, Any]:
     """`{"sha", "short_sha", "dirty", "available"}` of the checkout at `root` (default: the
     project). `dirty` is True when tracked files differ from the commit; all values are None when
-    `git` is missing or `root` is not inside a repository."""
+    `git` is missing or `root` is not inside a repository.
+
+    Parameters
+    ----------
+    root : str, Path or None, a folder inside the checkout.
+
+    Returns
+    -------
+    dict: the four fields above.
+    """
     where = Path(root) if root is not None else PROJECT_ROOT
     sha = _git(["rev-parse", "HEAD"], where) if where.is_dir() else None
     if not sha:
@@ -99,7 +118,12 @@ def git_info(root: str | Path | None = None) -> dict[str, Any]:
 def versions() -> dict[str, str | None]:
     """Versions of Python, the harness and the numerical libraries (None when not installed).
 
-    Read from the installed distributions' metadata, so nothing heavy is imported."""
+    Read from the installed distributions' metadata, so nothing heavy is imported.
+
+    Returns
+    -------
+    dict: name -> version string or None; 'python' and 'harness' always set.
+    """
     from harness import __version__
 
     out: dict[str, str | None] = {"python": platform.python_version(), "harness": __version__}
@@ -112,7 +136,12 @@ def versions() -> dict[str, str | None]:
 
 
 def cpu_model() -> str:
-    """The CPU's model name (Linux: /proc/cpuinfo), else what `platform` knows."""
+    """The CPU's model name (Linux: /proc/cpuinfo), else what `platform` knows.
+
+    Returns
+    -------
+    str: the model name; 'unknown' when nothing says.
+    """
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
             for line in fh:
@@ -124,7 +153,12 @@ def cpu_model() -> str:
 
 
 def machine_info() -> dict[str, Any]:
-    """CPU model, logical cores, total memory, operating system."""
+    """CPU model, logical cores, total memory, operating system.
+
+    Returns
+    -------
+    dict: 'cpu', 'logical_cores', 'memory_bytes' (None without psutil), 'os', 'machine'.
+    """
     try:
         import psutil
 
@@ -141,13 +175,28 @@ def machine_info() -> dict[str, Any]:
 
 
 def utc_now() -> _dt.datetime:
+    """The current time, timezone-aware in UTC.
+
+    Returns
+    -------
+    datetime.datetime: now.
+    """
     return _dt.datetime.now(_dt.UTC)
 
 
 def to_jsonable(value: Any) -> Any:
     """`value` as plain JSON data: NumPy scalars and arrays become numbers and lists, tuples
     become lists, non-finite floats become the strings 'nan', 'inf', '-inf', anything else its
-    `repr`. Used for configurations, which may hold any Python value."""
+    `repr`. Used for configurations, which may hold any Python value.
+
+    Parameters
+    ----------
+    value : any Python value (mappings and sequences converted recursively, sets sorted by repr).
+
+    Returns
+    -------
+    None, bool, int, float, str, list or dict.
+    """
     if value is None or isinstance(value, bool | str):
         return value
     if isinstance(value, int | np.integer) and not isinstance(value, bool):
@@ -170,7 +219,17 @@ def to_jsonable(value: Any) -> Any:
 
 
 def collect(config: Mapping[str, Any] | None = None, *, root: str | Path | None = None) -> dict:
-    """The full provenance record of a run started now with `config`."""
+    """The full provenance record of a run started now with `config`.
+
+    Parameters
+    ----------
+    config : the run's settings (made JSON-safe by `to_jsonable`), or None; root : the checkout
+    for `git_info` (default: the project).
+
+    Returns
+    -------
+    dict: 'date_utc', 'git', 'versions', 'machine', 'config'; JSON-serialisable.
+    """
     record = {
         "date_utc": utc_now().isoformat(timespec="seconds"),
         "git": git_info(root),

@@ -1,12 +1,11 @@
 """The registry of steppers and problems: entry points (built-ins included) and users' plugin files.
 
-- Every entry comes through the entry-point groups `harness.steppers` and `harness.problems`,
-  the built-ins too: this project's own distribution declares `implementations:builtin_steppers`
-  and `problems:builtin_problems` there (pyproject.toml), so the registry names neither
-  catalogue package. An entry point names a Stepper/Problem instance, a class, or a callable
-  returning one or a list of them. They are loaded lazily, on the first lookup: this project's
-  own first (origin 'builtin'; one that fails raises, never a silently smaller registry), then
-  other distributions' by distribution and entry-point name.
+- Every entry, the built-ins too, comes through the entry-point groups `harness.steppers` and
+  `harness.problems`: this project's distribution declares `implementations:builtin_steppers` and
+  `problems:builtin_problems` there (pyproject.toml), so the registry names neither catalogue
+  package. An entry point names a Stepper/Problem instance, a class, or a callable returning one
+  or a list of them, loaded on the first lookup: this project's own first (origin 'builtin'; one
+  that fails raises, never a silently smaller registry), then others' by distribution and name.
 - `load_plugin(path)` imports a user's own file (`--plugin FILE.py`) and registers every
   module-level Stepper or Problem it defines (or those listed in `STEPPERS` / `PROBLEMS`).
 A third party's file or entry point that fails to import is reported by name (`PluginError`);
@@ -42,17 +41,8 @@ from harness.errors import InputError, PluginError, UnknownNameError
 from harness.problem import Problem
 from harness.stepper import Stepper
 
-__all__ = [
-    "Registry",
-    "steppers",
-    "problems",
-    "get_stepper",
-    "get_problem",
-    "load_plugin",
-    "plugin_errors",
-    "expand",
-    "group_entry_points",
-]
+__all__ = ["Registry", "steppers", "problems", "get_stepper", "get_problem", "load_plugin",
+           "plugin_errors", "expand", "group_entry_points"]
 
 T = TypeVar("T")
 
@@ -144,6 +134,16 @@ class Registry(Generic[T]):
                 self.errors.append(f"entry point {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}")
 
     def register(self, obj: T, *, origin: str = "user", replace: bool = False) -> T:
+        """Add `obj` under its own name.
+
+        Parameters
+        ----------
+        obj : an instance of this registry's class; origin : str, where it came from (shown on a
+        clash); replace : bool, may replace another object of that name (else InputError).
+
+        Returns
+        -------
+        The object registered, so the method can serve as a decorator."""
         if not isinstance(obj, self.cls):
             raise InputError(f"only {self.cls.__name__} objects can be registered as {self.kind}s")
         name = _name_of(obj)
@@ -159,11 +159,25 @@ class Registry(Generic[T]):
         return obj
 
     def unregister(self, name: str) -> None:
+        """Remove the entry `name` (nothing happens when there is none).
+
+        Parameters
+        ----------
+        name : str, the registered name."""
         with self._lock:
             self._items.pop(name, None)
             self._origin.pop(name, None)
 
     def get(self, name: Any) -> T:
+        """The entry named `name`, the built-ins and entry points loaded first.
+
+        Parameters
+        ----------
+        name : the str it was registered under.
+
+        Returns
+        -------
+        The object; UnknownNameError names the closest names (or why a record was refused)."""
         self._ensure()
         if not isinstance(name, str) or not name:
             raise UnknownNameError(f"{self.kind} name must be a non-empty string, got {name!r}")
@@ -180,17 +194,43 @@ class Registry(Generic[T]):
             ) from None
 
     def origin(self, name: str) -> str:
+        """Where the entry `name` was registered from.
+
+        Parameters
+        ----------
+        name : str, a registered name (KeyError otherwise).
+
+        Returns
+        -------
+        str: 'builtin', 'user', 'entry point NAME (VALUE)' or a plugin's description."""
         self._ensure()
         return self._origin[name]
 
     def names(self, *, variants: bool = False) -> list[str]:
-        """Registered names. Entries listed on request (`_is_variant`: a compiled variant has the
-        same facts and verdicts as the method it implements; experiment-specific entries) are
-        looked up by name but listed, and scheduled by default, only with `variants=True`."""
+        """Registered names. Entries listed on request (`_is_variant`: compiled variants, which
+        share the facts and verdicts of their methods; experiment-specific entries) are found by
+        name but listed (and scheduled by default) only with `variants=True`.
+
+        Parameters
+        ----------
+        variants : bool, list the entries listed on request too.
+
+        Returns
+        -------
+        list of str: the names, in registration order."""
         self._ensure()
         return [n for n, obj in self._items.items() if variants or not _is_variant(obj)]
 
     def all(self, *, variants: bool = False) -> list[T]:
+        """The registered objects, in registration order.
+
+        Parameters
+        ----------
+        variants : bool, include the entries listed on request.
+
+        Returns
+        -------
+        list: the objects."""
         self._ensure()
         return [obj for obj in self._items.values() if variants or not _is_variant(obj)]
 
@@ -209,7 +249,15 @@ def _name_of(obj: Any) -> str:
 
 def expand(loaded: Any, cls: type) -> list:
     """The `cls` objects an entry point or plugin names: an instance, a subclass (instantiated),
-    a callable returning either or a list of them, or a list; else `PluginError`."""
+    a callable returning either or a list of them, or a list; else `PluginError`.
+
+    Parameters
+    ----------
+    loaded : what the entry point or plugin names; cls : the class the registry holds.
+
+    Returns
+    -------
+    list: the `cls` instances, in order."""
     if isinstance(loaded, cls):
         return [loaded]
     if isinstance(loaded, type) and issubclass(loaded, cls):
@@ -234,15 +282,37 @@ _plugin_errors: list[str] = []
 
 
 def get_stepper(name: str) -> Stepper:
+    """The registered stepper `name`.
+
+    Parameters
+    ----------
+    name : str, a stepper's registered name.
+
+    Returns
+    -------
+    Stepper: raises UnknownNameError naming the closest names."""
     return steppers.get(name)
 
 
 def get_problem(name: str) -> Problem:
+    """The registered problem `name` (see `get_stepper`).
+
+    Parameters
+    ----------
+    name : str.
+
+    Returns
+    -------
+    Problem."""
     return problems.get(name)
 
 
 def plugin_errors() -> list[str]:
-    """Every plugin file or entry point that failed to load, with its reason."""
+    """Every plugin file or entry point that failed to load, with its reason.
+
+    Returns
+    -------
+    list of str: one line per failure, steppers' first, then problems', then plugin files'."""
     return [*steppers.errors, *problems.errors, *_plugin_errors]
 
 
@@ -274,7 +344,11 @@ def probe_plugin(path: str | Path) -> None:
     """Import the plugin file in a child process first; raise `PluginError` naming the file when
     the import ends that process (`os._exit`, a fatal signal), leaves a non-daemon thread
     running, or takes longer than PLUGIN_PROBE_TIMEOUT_S. An ordinary exception is left to the
-    real import, which reports it. Results are kept per file content for this process."""
+    real import, which reports it. Results are kept per file content for this process.
+
+    Parameters
+    ----------
+    path : str or Path, the plugin file."""
     p = Path(path)
     try:
         digest = hashlib.sha256(p.read_bytes()).hexdigest()
@@ -326,7 +400,15 @@ def load_plugin(path: str | Path, *, strict: bool = True, probe: bool = True) ->
     `strict=False`, records the error in `plugin_errors()` and returns []). With `probe` (the
     default) the file is first imported in a guarded child process (`probe_plugin`); worker
     processes pass `probe=False`.
-    """
+
+    Parameters
+    ----------
+    path : str or Path, a .py file; strict : bool, raise on failure (else record it);
+    probe : bool, import it in a guarded child process first.
+
+    Returns
+    -------
+    list of str: the names registered (those of the first load when the file was loaded before)."""
     p = Path(path)
     key = str(p.resolve()) if p.exists() else str(p)
     if key in _plugins:

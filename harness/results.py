@@ -43,6 +43,15 @@ def load(
     `experiment` None, the tables of all experiments in the run are stacked, with an
     `experiment` column first (columns one experiment lacks are NaN for its rows).
 
+    Parameters
+    ----------
+    run : run id or path, or None for the latest run; experiment : str or None, one experiment's
+        name; table : str, which table; root : the results directory (default: the project's).
+
+    Returns
+    -------
+    DataFrame: the table.
+
     >>> from harness import results
     >>> df = results.load(experiment="convergence", table="summary")   # doctest: +SKIP
     >>> df[["stepper", "problem", "claimed_order", "measured_order", "verdict"]]  # doctest: +SKIP
@@ -53,10 +62,29 @@ def load(
 
 def meta(run: str | os.PathLike | None = None, *, root: str | os.PathLike | None = None) -> dict:
     """The run's `meta.json`: provenance (git SHA and dirty flag, versions, CPU, date), the full
-    configuration, per-experiment wall times and cell counts, failed and skipped cells."""
+    configuration, per-experiment wall times and cell counts, failed and skipped cells.
+
+    Parameters
+    ----------
+    run : run id or path, or None for the latest run; root : the results directory (default: the
+    project's).
+
+    Returns
+    -------
+    dict: the parsed `meta.json`.
+    """
     return load_run(run, root=root).meta
 
 
 def runs(root: str | os.PathLike | None = None) -> list[str]:
-    """Saved run ids under the results directory, oldest first."""
+    """Saved run ids under the results directory, oldest first.
+
+    Parameters
+    ----------
+    root : the results directory (default: the project's).
+
+    Returns
+    -------
+    list of str: run ids.
+    """
     return list_runs(root)

@@ -136,7 +136,17 @@ def _stiff_steps(method: MethodFacts, problem: ProblemFacts) -> float:
 
 
 def convergence_expectation(method: MethodFacts, problem: ProblemFacts) -> Expectation:
-    """The expected convergence verdict of a (method, problem) pair; see the module docstring."""
+    """The expected convergence verdict of a (method, problem) pair; see the module docstring.
+
+    Parameters
+    ----------
+    method : MethodFacts, the method's facts; problem : ProblemFacts, the problem's facts.
+
+    Returns
+    -------
+    Expectation: the verdict, order and reason, with the stable step for stiff pairs and the
+    stiffness for an implicit fixed-step method on a stiff problem.
+    """
     expectation = _expectation(method, problem)
     if _stiff_steps(method, problem) > tol.STIFF_STEP_COUNT:
         expectation = replace(expectation, stable_h=float(method.real_interval / problem.stiffness))
@@ -214,7 +224,17 @@ def _stiff_reduced_order(method: MethodFacts, problem: ProblemFacts) -> tuple[in
 
 def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]:
     """(outcome, reason) of one convergence summary record: outcome is `pass`, `fail` or
-    `not-measurable` (a tolerated verdict: neither evidence for nor against the claim)."""
+    `not-measurable` (a tolerated verdict: neither evidence for nor against the claim).
+
+    Parameters
+    ----------
+    record : dict, with 'verdict', 'message' and, for a fit, 'measured_order' and 'fit_h_max';
+    expectation : Expectation, from `convergence_expectation`.
+
+    Returns
+    -------
+    tuple (str, str): (outcome, reason).
+    """
     verdict = record["verdict"]
     msg = str(record.get("message") or "")
     if expectation.verdict == "meets-tolerance":
@@ -284,7 +304,17 @@ def _unguaranteed_solve(record: dict, expectation: Expectation) -> str:
 def tolerance_allowance(steps_per_trajectory: float, amplification: float) -> tuple[float, str]:
     """(factor, reason): the global error an adaptive run may reach, in units of tol x |y| (see
     the module docstring). Without a step count or an amplification, the fixed
-    TOLERANCE_FACTOR (ten thousand steps' worth), and the reason says so."""
+    TOLERANCE_FACTOR (ten thousand steps' worth), and the reason says so.
+
+    Parameters
+    ----------
+    steps_per_trajectory : float, the run's steps; amplification : float, the flow's error
+    amplification.
+
+    Returns
+    -------
+    tuple (float, str): (factor, reason).
+    """
     if not (math.isfinite(steps_per_trajectory) and steps_per_trajectory > 0
             and math.isfinite(amplification) and amplification > 0):
         return tol.TOLERANCE_FACTOR, (f"the fixed {tol.TOLERANCE_FACTOR:g} (no step count or flow "
@@ -300,7 +330,16 @@ def energy_expectation(method: MethodFacts, declared_symplectic: bool = False) -
     symplectic method keeps the energy error bounded (HLW IX.8, Theorem 8.1; rounding adds a
     sqrt(t) random walk, Brouwer's law, HLW VIII.5). A declared claim is held to that too, even
     where the coefficients contradict it (the gate fails the contradiction itself). Every
-    other method gets ('', ''): no claim (see `drift_prediction`)."""
+    other method gets ('', ''): no claim (see `drift_prediction`).
+
+    Parameters
+    ----------
+    method : MethodFacts, its `symplectic` fact; declared_symplectic : bool, the stepper's claim.
+
+    Returns
+    -------
+    tuple (str, str): ('bounded' or '', the reason).
+    """
     if method.symplectic:
         return "bounded", ("symplectic" + (" by its coefficients" if method.source == "coefficients"
                                           else " (declared)") + ": the energy error stays bounded")

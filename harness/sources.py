@@ -19,7 +19,16 @@ def source_of(obj: object) -> str:
     """`inspect.getsource(obj)`, cached per version of the file that defines `obj`.
 
     Raises what `inspect.getsource` raises (`OSError` when there is no source, `TypeError` for
-    a built-in object)."""
+    a built-in object).
+
+    Parameters
+    ----------
+    obj : a module, class, function or method.
+
+    Returns
+    -------
+    str: the source text.
+    """
     path = inspect.getsourcefile(obj)  # type: ignore[arg-type]
     if path is None or not os.path.isfile(path):
         return inspect.getsource(obj)  # type: ignore[arg-type]

@@ -22,7 +22,17 @@ def projected_work(checkpoints: Sequence[tuple[float, float]], work: float, posi
     """The total work to reach `end`: `work` done so far (at `position`) plus the rest at the
     rate since the latest of `checkpoints` ((work, position) pairs, the first at zero work) with
     at most half of `work`; inf when the position has not advanced since then. Positions may
-    run either way (towards an `end` below the start too)."""
+    run either way (towards an `end` below the start too).
+
+    Parameters
+    ----------
+    checkpoints : sequence of (work, position); work : float, the work done; position : float,
+    where it is now; end : float, where it goes.
+
+    Returns
+    -------
+    float: the projected total work, or inf.
+    """
     since_work, since_position = max((c for c in checkpoints if c[0] <= work / 2),
                                      key=lambda c: c[0])
     covered = abs(position - since_position)

@@ -63,7 +63,16 @@ class ProblemCache:
         self._lock = threading.Lock()
 
     def get(self, key, build):
-        """The object stored under `key`, built by `build()` on first use (once, under the lock)."""
+        """The object stored under `key`, built by `build()` on first use (once, under the lock).
+
+        Parameters
+        ----------
+        key : hashable, what identifies the object; build : callable with no argument.
+
+        Returns
+        -------
+        The stored object.
+        """
         with self._lock:
             if key not in self._items:
                 self._items[key] = build()
@@ -84,7 +93,12 @@ def _modules(names: tuple[str, ...]) -> list:
 
 
 def builtin_steppers() -> list:
-    """Every stepper of the modules in FAMILY_MODULES, in that order."""
+    """Every stepper of the modules in FAMILY_MODULES, in that order.
+
+    Returns
+    -------
+    list of Stepper: the built-in steppers.
+    """
     return [s for module in _modules(FAMILY_MODULES) for s in module.STEPPERS]
 
 
@@ -93,7 +107,17 @@ def coefficient_info(coefficients, *, family: str, form: str = "first-order", **
     symmetry are asked of the coefficients (False where the family has no such notion, as for
     linear multistep methods' symplecticity), never typed by hand; a Newtonian form is for
     velocity-independent forces. `fields` gives the rest (claimed order, cost, reference) and
-    may override a derived value."""
+    may override a derived value.
+
+    Parameters
+    ----------
+    coefficients : the coefficient object; family : str, the stepper family; form : str,
+    'first-order' or 'newtonian'; fields : further StepperInfo fields.
+
+    Returns
+    -------
+    StepperInfo: the derived values, `fields` applied over them.
+    """
     from harness.stepper import StepperInfo
 
     derived = {
@@ -107,7 +131,12 @@ def coefficient_info(coefficients, *, family: str, form: str = "first-order", **
 
 def unavailable_steppers() -> dict[str, str]:
     """Optional adapters whose library is not installed: library -> how to install it. A module
-    says so in `UNAVAILABLE` and registers no steppers, instead of failing to import."""
+    says so in `UNAVAILABLE` and registers no steppers, instead of failing to import.
+
+    Returns
+    -------
+    dict: library name -> installation hint.
+    """
     out: dict[str, str] = {}
     for module in _modules(FAMILY_MODULES + OPTIONAL_MODULES):
         out.update(getattr(module, "UNAVAILABLE", {}))

@@ -331,6 +331,17 @@ class CompiledStormer(_Compiled):
         self.beta1 = float(table.beta[1])
 
     def incompatibility(self, problem: Problem) -> str | None:
+        """Why the compiled Stormer loop cannot run `problem`, or None.
+
+        Parameters
+        ----------
+        problem : Problem, the candidate.
+
+        Returns
+        -------
+        str or None: a velocity-dependent force (its implicit velocity is NumPy only), else what
+        every compiled stepper checks.
+        """
         if problem.velocity_dependent:
             return (
                 "the compiled Stormer loop needs an acceleration independent of the velocity "
@@ -608,6 +619,17 @@ class CompiledControlledSplitting(_Compiled, ControlledSplittingStepper):
         self.op_coefficients = np.array([coeff for _, coeff in seq], dtype=np.float64)
 
     def incompatibility(self, problem: Problem) -> str | None:
+        """Whether the compiled controlled loop can run `problem`.
+
+        Parameters
+        ----------
+        problem : Problem, whose force must not depend on the velocity.
+
+        Returns
+        -------
+        None when it can, else the NumPy stepper's reason, a velocity-dependent force, or a
+        general one.
+        """
         reason = self.base.incompatibility(problem)
         if reason is None and problem.velocity_dependent:
             reason = "the compiled controlled loop needs an acceleration independent of the velocity"
@@ -631,7 +653,17 @@ def compiled_variant(stepper: Stepper) -> Stepper:
     """The compiled implementation (named `<name>@compiled`) of a stepper whose method is a
     coefficient object: explicit or implicit `ButcherTableau`, `SplittingScheme` (a
     `StaggeredLeapfrog` keeps its staggered form), `LinearMultistep`, `SecondOrderMultistep`, or
-    a splitting scheme under a step controller (`ControlledSplittingStepper`)."""
+    a splitting scheme under a step controller (`ControlledSplittingStepper`).
+
+    Parameters
+    ----------
+    stepper : Stepper, a NumPy stepper of one of those families (InputError otherwise, or when
+    it is already compiled).
+
+    Returns
+    -------
+    Stepper: the compiled stepper.
+    """
     if not isinstance(stepper, Stepper):
         raise InputError(f"`stepper` must be a Stepper, got {type(stepper).__name__}")
     if stepper.info.implementation == "compiled":

@@ -84,7 +84,16 @@ def _compile_lock(stem: str):
 
 def problem_functions(problem: Problem, part: str = "functions") -> dict[str, NativeFunction]:
     """`problem`'s loaded functions of `part`: 'functions' (rhs, rhs_cols, and accel, accel_cols
-    for an acceleration of the positions alone) or 'jacobian' (jac); raises UnsupportedExpression."""
+    for an acceleration of the positions alone) or 'jacobian' (jac); raises UnsupportedExpression.
+
+    Parameters
+    ----------
+    problem : the problem; part : 'functions' or 'jacobian'.
+
+    Returns
+    -------
+    dict: function name -> NativeFunction. Raises InputError for another `part`.
+    """
     if part not in PARTS:
         raise InputError(f"`part` must be one of {PARTS}, got {part!r}")
     if part == "jacobian":
@@ -98,13 +107,31 @@ def problem_functions(problem: Problem, part: str = "functions") -> dict[str, Na
 
 def address(problem: Problem, name: str) -> int:
     """The address of `problem`'s function `name` ('rhs', 'rhs_cols', 'accel', 'accel_cols' or
-    'jac'); raises UnsupportedExpression."""
+    'jac'); raises UnsupportedExpression.
+
+    Parameters
+    ----------
+    problem : the problem; name : the function's name.
+
+    Returns
+    -------
+    int: the compiled function's address.
+    """
     return function_address(problem, name)
 
 
 def call_kernel(name: str, *args: Any) -> Any:
     """Call the family kernel `name` with `args`; its first call in this process records its
-    compile (or cache load) time in COMPILE_LOG."""
+    compile (or cache load) time in COMPILE_LOG.
+
+    Parameters
+    ----------
+    name : str, a key of KERNELS (InputError otherwise); args : the kernel's arguments.
+
+    Returns
+    -------
+    Whatever the kernel returns (its evaluation count, or None).
+    """
     if name not in KERNELS:
         raise InputError(f"`name` must be one of {list(KERNELS)}, got {name!r}")
     with _lock:

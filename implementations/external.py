@@ -119,7 +119,16 @@ class _WorkLimit(Exception):
 
 
 def is_work_limit(exc: BaseException) -> bool:
-    """True for the adapter's own evaluation cap (`MemberDynamics`), not a solver's failure."""
+    """True for the adapter's own evaluation cap (`MemberDynamics`), not a solver's failure.
+
+    Parameters
+    ----------
+    exc : the exception raised by a solve.
+
+    Returns
+    -------
+    bool: whether it is the evaluation cap.
+    """
     return isinstance(exc, _WorkLimit)
 
 
@@ -147,7 +156,12 @@ class MemberDynamics:
         self.reset()
 
     def reset(self, start: float | None = None, target: float | None = None) -> None:
-        """Start counting one solve from `start` to `target` (without them: no projection)."""
+        """Start counting one solve from `start` to `target` (without them: no projection).
+
+        Parameters
+        ----------
+        start, target : float or None, the solve's start and end times.
+        """
         self._last_t = None
         self._same_t = 0
         self._calls = 0
@@ -155,6 +169,17 @@ class MemberDynamics:
         self._checkpoints = [(0, 0.0)]  # (calls, fraction of the span reached), every PROJECTION_EVERY calls
 
     def f(self, t: float, y: np.ndarray) -> np.ndarray:
+        """The right-hand side for one member, counted: past ADAPTIVE_MAX_EVALS calls (or a projected
+        excess) it raises the work limit, and SCIPY_STALL_CALLS calls at one time value raise a stall.
+
+        Parameters
+        ----------
+        t : float, the time; y : (dim,) the member's state.
+
+        Returns
+        -------
+        ndarray (dim,): f(t, y).
+        """
         self._calls += 1
         if self._calls > ADAPTIVE_MAX_EVALS:
             raise _WorkLimit(t, None)
@@ -170,6 +195,16 @@ class MemberDynamics:
         return self._view.f(t, np.ascontiguousarray(y).reshape(-1, 1))[:, 0]
 
     def jac(self, t: float, y: np.ndarray) -> np.ndarray:
+        """The Jacobian for one member (not counted).
+
+        Parameters
+        ----------
+        t : float, the time; y : (dim,) the member's state.
+
+        Returns
+        -------
+        ndarray (dim, dim): df/dy at (t, y).
+        """
         return self._view.jac(t, np.ascontiguousarray(y).reshape(-1, 1))[:, :, 0]
 
     def _project(self, t: float) -> None:
@@ -187,7 +222,16 @@ def component_atol(dyn: Dynamics, tol: float) -> np.ndarray:
     """Per-component absolute tolerances tol x s_i: s_i = max |y_i| along the problem's sampled
     orbit (a component that stays zero takes its block's scale; `harness.scales`), but never
     above the start's largest component (or 1 when it is zero), so an orbit that runs away (a
-    blow-up) cannot loosen the tolerance past atol = tol x |y0|."""
+    blow-up) cannot loosen the tolerance past atol = tol x |y0|.
+
+    Parameters
+    ----------
+    dyn : Dynamics, the problem run; tol : float, the stepper's tolerance.
+
+    Returns
+    -------
+    ndarray: one absolute tolerance per component.
+    """
     problem = dyn.problem
     scale = np.asarray(problem.ensemble_perturbation.component_scale, dtype=np.float64)
     start = float(np.max(np.abs(problem.y0))) or 1.0
@@ -277,7 +321,12 @@ class ScipyStepper(MemberByMemberStepper):
 
     def extra_info(self) -> dict:
         """The record's `extra` entries for this tolerance: scipy's rtol/atol, method and
-        Jacobian use, and the unit the evaluation counts are in."""
+        Jacobian use, and the unit the evaluation counts are in.
+
+        Returns
+        -------
+        dict: the entries, JSON-safe.
+        """
         return {
             "tol": self.tol,
             "rtol": max(self.tol, SCIPY_MIN_RTOL),

@@ -89,13 +89,29 @@ class NewtonSettings:
         object.__setattr__(self, "max_iter", int(self.max_iter))
 
     def describe(self) -> str:
+        """These settings in words, for a stepper's description.
+
+        Returns
+        -------
+        str: mode, tolerance and iteration limit.
+        """
         return f"{self.mode} Newton, tolerance {self.tol:.0e}, at most {self.max_iter} iterations"
 
     def keywords(
         self, mode: str | None = None, tol: float | None = None, max_iter: int | None = None
     ) -> dict:
         """These settings as a stepper's constructor keywords, with `mode`, `tol` and `max_iter`
-        replacing them where given (how `with_newton` and its kin rebuild a stepper)."""
+        replacing them where given (how `with_newton` and its kin rebuild a stepper).
+
+        Parameters
+        ----------
+        mode : str or None, 'simplified' or 'full'; tol : float or None, the Newton tolerance;
+        max_iter : int or None, the iteration limit.
+
+        Returns
+        -------
+        dict: 'newton', 'newton_tol', 'newton_max_iter'.
+        """
         return {
             "newton": self.mode if mode is None else mode,
             "newton_tol": self.tol if tol is None else tol,
@@ -104,7 +120,16 @@ class NewtonSettings:
 
 
 def scaled_norm(dx: np.ndarray, inv_scale: np.ndarray) -> float:
-    """max_i |dx_i| / scale_i over components and ensemble members (NaN propagates)."""
+    """max_i |dx_i| / scale_i over components and ensemble members (NaN propagates).
+
+    Parameters
+    ----------
+    dx : array, the increment; inv_scale : array of the same shape, the reciprocal scales.
+
+    Returns
+    -------
+    float: the scaled max-norm.
+    """
     return float(np.abs(dx * inv_scale).max())
 
 
@@ -128,6 +153,17 @@ def newton_solve(
     estimated remaining error theta / (1 - theta) * |dx| at most `settings.tol` (Hairer & Wanner
     II, IV.8, eq. 8.10). Iterations are added to counts['newton_iterations']. Raises `StepFailure`
     naming `stepper`, the time, the increment and the residual when it does not converge.
+
+    Parameters
+    ----------
+    residual : callable, x (m, N) -> residual (m, N); matrix : callable, x -> (N, m, m) iteration
+    matrices; x : (m, N) the first iterate; inv_scale : (m, N) reciprocal scales;
+    settings : NewtonSettings, mode, tolerance and iteration limit; counts : dict of counters
+    (updated); stepper : str, the stepper's name for errors; t : float, the step's time for errors.
+
+    Returns
+    -------
+    ndarray (m, N): the converged iterate.
     """
     tol = settings.tol
     previous = math.inf
@@ -171,7 +207,16 @@ def extrapolation_matrix(nodes: np.ndarray) -> np.ndarray | None:
     """E with Z_new_i ~ sum_j E_ij Z_prev_j: the polynomial u(tau) through (0, 0) and
     (c_j, Z_j) (the previous step's collocation polynomial, in units of h, relative to y_{n-1}),
     evaluated at 1 + c_i and taken relative to u(1). None when the nodes are not distinct and
-    nonzero (no such polynomial)."""
+    nonzero (no such polynomial).
+
+    Parameters
+    ----------
+    nodes : (s,) the implicit stages' nodes c_i.
+
+    Returns
+    -------
+    ndarray (s, s) or None: the extrapolation matrix E.
+    """
     pts = np.concatenate([[0.0], nodes])
     if np.any(nodes == 0.0) or np.unique(pts).size != pts.size:
         return None
@@ -212,7 +257,17 @@ class StageSplit:
 
 def stage_split(tableau: ButcherTableau, label: str) -> StageSplit:
     """`tableau` split into explicit and implicit stages; `InputError` starting with `label`
-    (how the caller names the tableau) when the implicit block of A is singular."""
+    (how the caller names the tableau) when the implicit block of A is singular.
+
+    Parameters
+    ----------
+    tableau : ButcherTableau, the method's tableau; label : str, the tableau's name in errors.
+
+    Returns
+    -------
+    StageSplit: the stage indices, the blocks of A, d, w, the last row of A_ii^{-1}, whether the
+    first stage repeats the last, and the predictor `extrapolation_matrix`.
+    """
     A, b, c = tableau.A, tableau.b, tableau.c
     zero_rows = np.all(A == 0.0, axis=1)
     expl, impl = np.flatnonzero(zero_rows), np.flatnonzero(~zero_rows)
@@ -248,7 +303,16 @@ class NewtonStepper(Stepper):
 
     def with_newton(self, mode: str | None = None, tol: float | None = None,
                     max_iter: int | None = None) -> Stepper:
-        """The same method with other Newton settings (unchanged where None)."""
+        """The same method with other Newton settings (unchanged where None).
+
+        Parameters
+        ----------
+        mode, tol, max_iter : as in `NewtonSettings.keywords`.
+
+        Returns
+        -------
+        Stepper: a new stepper of the same method.
+        """
         return self._rebuild(**self.newton.keywords(mode, tol, max_iter))
 
 

@@ -49,7 +49,19 @@ def _call_state_form(builder, address, t, out_ptr, x_ptr, p_ptr) -> None:
 
 @intrinsic
 def call_state(typingctx, address, t, x, p, out):
-    """Call the state-form function at `address` with the arrays' data."""
+    """Call the state-form function at `address` with the arrays' data.
+
+    Call the state-form function at `address` with the arrays' data (a numba intrinsic).
+
+    Parameters
+    ----------
+    typingctx : numba's typing context (passed by numba); address : the function's address;
+    t : float, the time; x, p, out : the state, parameters and output arrays.
+
+    Returns
+    -------
+    tuple: (signature, codegen), as a numba intrinsic returns them.
+    """
     sig = types.void(address, t, x, p, out)
 
     def codegen(context, builder, signature, args):
@@ -63,7 +75,19 @@ def call_state(typingctx, address, t, x, p, out):
 @intrinsic
 def call_state_into(typingctx, address, t, x, x_offset, p, out, out_offset):
     """As `call_state`, reading `x`'s data from element `x_offset` on and writing `out`'s from
-    element `out_offset` on (rows of a flat array, without making views)."""
+    element `out_offset` on (rows of a flat array, without making views).
+
+    As `call_state`, reading `x`'s data from element `x_offset` on and writing `out`'s from
+    element `out_offset` on (rows of a flat array, without making views).
+
+    Parameters
+    ----------
+    typingctx, address, t, x, p, out : as in `call_state`; x_offset, out_offset : element offsets.
+
+    Returns
+    -------
+    tuple: (signature, codegen), as a numba intrinsic returns them.
+    """
     sig = types.void(address, t, x, x_offset, p, out, out_offset)
 
     def codegen(context, builder, signature, args):
@@ -80,7 +104,22 @@ def call_state_into(typingctx, address, t, x, x_offset, p, out, out_offset):
 def call_columns(typingctx, address, t, X, P, Out, j0, j1):
     """Call the columns-form function `address` = (batch, width, strided) for members
     j0 <= j < j1 of `X`: the SIMD batch function on whole blocks of `width` members, the one-point
-    strided function on the rest."""
+    strided function on the rest.
+
+    Call the columns-form function `address` = (batch, width, strided) for members j0 <= j < j1
+    of `X`: the SIMD batch function on whole blocks of `width` members, the one-point strided
+    function on the rest.
+
+    Parameters
+    ----------
+    typingctx : numba's typing context; address : the (batch, width, strided) tuple; t : float,
+    the time; X : (dim, n) states; P : (n_par, n) parameters; Out : (dim, n) written; j0, j1 : the
+    members' range.
+
+    Returns
+    -------
+    tuple: (signature, codegen), as a numba intrinsic returns them.
+    """
     sig = types.void(address, t, X, P, Out, j0, j1)
 
     def codegen(context, builder, signature, args):

@@ -136,10 +136,30 @@ class LinearMultistepStepper(NewtonStepper):
         )
 
     def with_starter(self, starter: str | Stepper) -> LinearMultistepStepper:
-        """The same method with another source of starting values."""
+        """The same method with another source of starting values.
+
+        Parameters
+        ----------
+        starter : a registered stepper's name, a Stepper, or 'reference' (the ground truth).
+
+        Returns
+        -------
+        LinearMultistepStepper: a new stepper.
+        """
         return self._rebuild(starter=starter)
 
     def incompatibility(self, problem) -> str | None:
+        """Why this stepper cannot run `problem`, or None.
+
+        Parameters
+        ----------
+        problem : the Problem asked about.
+
+        Returns
+        -------
+        str or None: its starter is unusable or cannot run the problem (never with the reference
+        starter).
+        """
         if self.starter_name == "reference":
             return None
         try:
@@ -165,7 +185,18 @@ class LinearMultistepStepper(NewtonStepper):
 
     def starting_values(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> list:
         """y_1 .. y_{k-1} from the starter (its evaluations counted in `dyn`); shared with the
-        compiled loop of the same method."""
+        compiled loop of the same method.
+
+        Parameters
+        ----------
+        dyn : Dynamics, the problem run; t0 : float, the start time; y0 : (dim, N) the start states;
+        h : float, the step.
+
+        Returns
+        -------
+        list of ndarray: k - 1 states, y_1 first. Raises IncompatibleError when the starter cannot run
+        the problem.
+        """
         count = self.coefficients.steps - 1
         if count == 0:
             return []

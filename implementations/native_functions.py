@@ -116,7 +116,16 @@ _target: list[Any] = []
 
 
 def native_function(problem: Problem, name: str) -> NativeFunction:
-    """`problem`'s function `name` (one of NAMES), loaded; raises UnsupportedExpression."""
+    """`problem`'s function `name` (one of NAMES), loaded; raises UnsupportedExpression.
+
+    Parameters
+    ----------
+    problem : Problem (InputError otherwise); name : str, one of NAMES (InputError otherwise).
+
+    Returns
+    -------
+    NativeFunction: loaded once per problem and name (a refusal is remembered too).
+    """
     if name not in NAMES:
         raise InputError(f"`name` must be one of {list(NAMES)}, got {name!r}")
     if not isinstance(problem, Problem):
@@ -137,7 +146,16 @@ def native_function(problem: Problem, name: str) -> NativeFunction:
 
 def function_address(problem: Problem, name: str) -> int | tuple[int, int, int]:
     """The address of `problem`'s function `name` (a columns-form function: the triple `call_columns`
-    takes); raises UnsupportedExpression."""
+    takes); raises UnsupportedExpression.
+
+    Parameters
+    ----------
+    problem : Problem, the problem; name : str, one of NAMES.
+
+    Returns
+    -------
+    int, or (batch, width, strided) for a columns-form function.
+    """
     return native_function(problem, name).address
 
 

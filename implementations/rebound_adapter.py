@@ -269,7 +269,12 @@ class ReboundIAS15(_ReboundBase, AdaptiveStepper):
         self.info = self.info_record()
 
     def info_record(self) -> StepperInfo:
-        """The stepper record at this tolerance."""
+        """The stepper record at this tolerance.
+
+        Returns
+        -------
+        StepperInfo: claims and references, `tol` as IAS15's epsilon.
+        """
         return StepperInfo(
             name="rebound-ias15", family="external", claimed_order=15, explicit=True,
             symplectic=False, symmetric=True, evals_per_step=_IAS15_EVALS_PER_STEP,
@@ -290,6 +295,16 @@ class ReboundIAS15(_ReboundBase, AdaptiveStepper):
         )
 
     def with_tolerance(self, tol: float) -> ReboundIAS15:
+        """A copy whose IAS15 epsilon is `tol`, its record rebuilt.
+
+        Parameters
+        ----------
+        tol : float, positive and finite.
+
+        Returns
+        -------
+        ReboundIAS15: a new stepper; this one is unchanged.
+        """
         clone = super().with_tolerance(tol)
         clone.info = clone.info_record()
         return clone

@@ -88,7 +88,16 @@ def _backward_to_table(sigma: list[Fraction], newest: int, k: int) -> list[Fract
 
 
 def stormer_table(k: int) -> SecondOrderMultistep:
-    """Stormer's explicit k-step method, order k (k >= 2)."""
+    """Stormer's explicit k-step method, order k (k >= 2).
+
+    Parameters
+    ----------
+    k : int, the number of steps.
+
+    Returns
+    -------
+    SecondOrderMultistep: named 'stormer<k>', coefficients exact.
+    """
     beta = _backward_to_table(_sigma(k, True), 0, k)
     alpha = [Fraction(0)] * (k - 2) + [Fraction(1), Fraction(-2), Fraction(1)]
     return SecondOrderMultistep(f"stormer{k}", alpha, beta)
@@ -96,7 +105,16 @@ def stormer_table(k: int) -> SecondOrderMultistep:
 
 def cowell_table(k: int) -> SecondOrderMultistep:
     """Cowell's implicit method with differences up to nabla^k of a_(n+1) (k >= 2), over the
-    k + 1 points n+1 .. n+1-k; trailing zero coefficients (sigma*_3 = 0) shorten it."""
+    k + 1 points n+1 .. n+1-k; trailing zero coefficients (sigma*_3 = 0) shorten it.
+
+    Parameters
+    ----------
+    k : int, the highest backward difference (the table may have fewer steps).
+
+    Returns
+    -------
+    SecondOrderMultistep: the exact table 'cowell<k>'.
+    """
     sigma = _sigma(k + 1, False)
     steps = k
     while steps > 2 and sigma[steps] == 0:
@@ -198,6 +216,16 @@ class SecondOrderMultistepStepper(Stepper):
         return get_stepper(self.starter)
 
     def incompatibility(self, problem) -> str | None:
+        """The family's own reason not to run `problem`, else its starter's, else None.
+
+        Parameters
+        ----------
+        problem : a Problem.
+
+        Returns
+        -------
+        str or None: one sentence.
+        """
         own = super().incompatibility(problem)
         if own:
             return own

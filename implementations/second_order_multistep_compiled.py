@@ -49,6 +49,16 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
             extra={**base.info.extra, "numpy_implementation": base.info.name})
 
     def incompatibility(self, problem: Problem) -> str | None:
+        """Why this loop cannot run `problem`.
+
+        Parameters
+        ----------
+        problem : Problem, whose acceleration must compile.
+
+        Returns
+        -------
+        str or None: the NumPy stepper's reason, or the unsupported expression; None when it runs.
+        """
         reason = self.base.incompatibility(problem)
         if reason:
             return reason
@@ -59,7 +69,13 @@ class CompiledSecondOrderMultistep(SecondOrderMultistepStepper):
         return None
 
     def fingerprint(self) -> str:
-        # this module's and its kernel's code: a change to either changes every cell's key
+        """The stepper's fingerprint with the code versions of this module and of its kernel, so a
+        change to either changes every cell's key.
+
+        Returns
+        -------
+        str: the fingerprint.
+        """
         return "\n".join([super().fingerprint(),
                           module_version("implementations.second_order_multistep_compiled"),
                           module_version("implementations.kernels.second_order_multistep")])

@@ -76,7 +76,16 @@ class StepDensity:
                 )
 
     def radius_and_momentum(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """|q|^2, q.v and |q ^ v| per member (states shaped (nq, N))."""
+        """|q|^2, q.v and |q ^ v| per member (states shaped (nq, N)).
+
+        Parameters
+        ----------
+        q, v : (nq, N) positions and velocities.
+
+        Returns
+        -------
+        tuple of three (N,) arrays: (r2, qv, L).
+        """
         r2 = np.einsum("ij,ij->j", q, q)
         qv = np.einsum("ij,ij->j", q, v)
         v2 = np.einsum("ij,ij->j", v, v)
@@ -84,10 +93,26 @@ class StepDensity:
         return r2, qv, L
 
     def sigma(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The step density sigma = |q|^position_power |L|^momentum_power per member.
+
+        Parameters
+        ----------
+        q, v : (nq, N) positions and velocities.
+
+        Returns
+        -------
+        ndarray (N,): sigma; the physical step is h sigma.
+        """
         r2, _, L = self.radius_and_momentum(q, v)
         return r2 ** (0.5 * self.position_power) * L**self.momentum_power
 
     def describe(self) -> str:
+        """The density's formula in words.
+
+        Returns
+        -------
+        str: sigma with its powers.
+        """
         return f"sigma = |q|^{self.position_power:g} |L|^{self.momentum_power:g}"
 
 
@@ -126,6 +151,12 @@ class ControlledScheme:
         return f"{self.scheme.name}+{self.density.name}-{self.controller}"
 
     def fingerprint(self) -> str:
+        """What identifies the scheme in cache keys: controller, powers and the underlying scheme's own.
+
+        Returns
+        -------
+        str: the fingerprint.
+        """
         d = self.density
         return (f"controlled:{self.controller}:{d.position_power!r}:{d.momentum_power!r}:"
                 + self.scheme.fingerprint())
@@ -181,9 +212,25 @@ class ControlledSplittingStepper(Stepper):
         )
 
     def fingerprint(self) -> str:
+        """The stepper's fingerprint followed by the controlled scheme's.
+
+        Returns
+        -------
+        str: the fingerprint.
+        """
         return super().fingerprint() + "\n" + self.record.fingerprint()
 
     def incompatibility(self, problem: Problem) -> str | None:
+        """Why this stepper cannot run `problem`, or None when it can.
+
+        Parameters
+        ----------
+        problem : the Problem in question.
+
+        Returns
+        -------
+        str or None: the problem must declare a central force and not depend on t.
+        """
         if not problem.central_force:
             return ("the step density is measured about the origin and needs a central force "
                     "there (the problem does not declare `central_force`)")

@@ -72,6 +72,13 @@ class CvodeStepper(MemberByMemberStepper):
         )
 
     def extra_info(self) -> dict:
+        """The record's `extra` entries for this tolerance: CVODE's rtol/atol and method, the
+        scikit-sundae version, and the unit the evaluation counts are in.
+
+        Returns
+        -------
+        dict: the entries, JSON-safe.
+        """
         return {"tol": self.tol, "rtol": max(self.tol, SCIPY_MIN_RTOL),
                 "atol": self.tol, "atol_per_component": "tol x max|y_i| along the orbit",
                 # scikit-sundae documents rtol in [1e-15, 1e-3]

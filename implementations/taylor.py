@@ -61,6 +61,16 @@ class TaylorStepper(AdaptiveStepper):
         )
 
     def with_tolerance(self, tol: float) -> TaylorStepper:
+        """A copy with tolerance `tol`, recorded in its `info.extra['tol']` too.
+
+        Parameters
+        ----------
+        tol : float, a positive finite tolerance.
+
+        Returns
+        -------
+        TaylorStepper: the copy.
+        """
         clone = super().with_tolerance(tol)
         clone.info = dataclasses.replace(clone.info, extra={**clone.info.extra, "tol": clone.tol})
         return clone

@@ -60,7 +60,16 @@ class _VelocityStructure:
 
 def solve_members(M: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve M[:, :, j] x[:, j] = rhs[:, j] for every ensemble member j (M of shape (1, 1, N):
-    a division)."""
+    a division).
+
+    Parameters
+    ----------
+    M : (m, m, N) matrices; rhs : (m, N) right-hand sides.
+
+    Returns
+    -------
+    ndarray (m, N): the solutions.
+    """
     if M.shape[0] == 1:
         return rhs / M[0]
     x = np.linalg.solve(np.moveaxis(M, -1, 0), np.moveaxis(rhs, -1, 0)[..., None])
@@ -69,7 +78,17 @@ def solve_members(M: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 def stormer_carry(dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
     """The carry of Stormer's two-step rule at its start: the starting velocity `v0`, the
-    current positions `cur` and room for the previous ones `prev` (NumPy and compiled loops)."""
+    current positions `cur` and room for the previous ones `prev` (NumPy and compiled loops).
+
+    Parameters
+    ----------
+    dyn : Dynamics, the problem run (its `nq`); t0 : float, the start time; y0 : (2 nq, N) the
+    start states; h : float, the step.
+
+    Returns
+    -------
+    Carry: the carry with `v0`, `cur` and `prev`.
+    """
     c = Carry(t0, h, y0)
     c.v0 = y0[dyn.nq:].copy()
     c.cur = y0[:dyn.nq].copy()
@@ -245,7 +264,16 @@ class TwoStepVerlet(Stepper):
     def observed_state(c: Carry, nq: int) -> np.ndarray:
         """(x_n, v_n) of a carry (prev, cur, nxt) = (x_{n-1}, x_n, x_{n+1}): the start velocity
         before the first step, else the central difference (x_{n+1} - x_{n-1}) / 2h. Shared with
-        the compiled loop of the same carry."""
+        the compiled loop of the same carry.
+
+        Parameters
+        ----------
+        c : Carry, the two-step carry; nq : int, the number of positions.
+
+        Returns
+        -------
+        ndarray (2 nq, N): positions over velocities.
+        """
         out = np.empty_like(c.y)
         out[:nq] = c.cur
         if c.at_start:
@@ -258,7 +286,12 @@ class TwoStepVerlet(Stepper):
     @staticmethod
     def reverse_neighbours(c: Carry) -> None:
         """The carry's neighbours for the reversed direction (after h changed sign): swapped, or
-        the Taylor start in the new direction when x_{-1} was never formed."""
+        the Taylor start in the new direction when x_{-1} was never formed.
+
+        Parameters
+        ----------
+        c : Carry, changed in place.
+        """
         if c.at_start:
             h = c.h
             c.prev = c.nxt

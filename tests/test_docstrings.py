@@ -31,6 +31,17 @@ SCOPE = (
     "harness/derived.py", "harness/facts.py", "harness/api.py", "harness/pytest_plugin.py",
     "harness/tolerances.py", "problems",
     "harness/kit", "harness/report", "harness/experiments",
+    "implementations", "harness/__init__.py", "harness/__main__.py", "harness/c_streams.py",
+    "harness/cache.py", "harness/code_versions.py", "harness/coefficient_floors.py",
+    "harness/coefficient_input.py", "harness/entry_points.py", "harness/errors.py",
+    "harness/extended.py", "harness/gate.py", "harness/high_order.py",
+    "harness/invariant_checks.py", "harness/jax_problem.py", "harness/keys.py", "harness/memo.py",
+    "harness/method_checks.py", "harness/methods.py", "harness/names.py",
+    "harness/not_converged.py", "harness/order_fit.py", "harness/perf_history.py",
+    "harness/perturbation_law.py", "harness/populations.py", "harness/prediction.py",
+    "harness/progress.py", "harness/provenance.py", "harness/registry.py", "harness/results.py",
+    "harness/rules.py", "harness/sources.py", "harness/step_loops.py", "harness/timing.py",
+    "harness/work_projection.py",
 )
 _PROPERTIES = {"property", "cached_property", "functools.cached_property", "setter", "deleter"}
 

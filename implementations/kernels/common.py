@@ -34,14 +34,30 @@ INLINE = {"cache": True, "error_model": "numpy", "inline": "always"}
 
 @njit(**INLINE)
 def is_finite(x):
-    # np.isfinite on a scalar: the same test, without the per-element library call it compiles to
+    """Whether scalar `x` is finite: np.isfinite's test without the per-element library call.
+
+    Parameters
+    ----------
+    x : float, the value tested.
+
+    Returns
+    -------
+    bool: False for inf, -inf and NaN.
+    """
     return abs(x) <= 1.7976931348623157e308
 
 
 @njit(**INLINE)
 def rhs_members(f_rhs, t, Y, P, Out, y, out, p):
-    # Out[:, j] = f(t, Y[:, j], P[:, j]) member by member, through the work vectors y, out, p
-    # (the caller's, so that a kernel calling it once per step allocates nothing)
+    """Out[:, j] = f(t, Y[:, j], P[:, j]) member by member, through the caller's work vectors (so a
+    kernel calling it once per step allocates nothing).
+
+    Parameters
+    ----------
+    f_rhs : compiled problem function `f(t, y, p, out)`; t : float, the time.
+    Y : (dim, n) states; P : (n_par, n) parameters; Out : (dim, n) written in place.
+    y, out : (dim,) work vectors; p : (n_par,) work vector.
+    """
     for j in range(Y.shape[1]):
         for d in range(Y.shape[0]):
             y[d] = Y[d, j]
@@ -54,13 +70,26 @@ def rhs_members(f_rhs, t, Y, P, Out, y, out, p):
 
 @njit(**INLINE)
 def rhs_all(f_rhs, t, Y, P, Out):
+    """Out[:, j] = f(t, Y[:, j], P[:, j]) for every member, with work vectors of its own.
+
+    Parameters
+    ----------
+    f_rhs : compiled problem function; t : float, the time; Y : (dim, n) states;
+    P : (n_par, n) parameters; Out : (dim, n) written in place.
+    """
     dim = Y.shape[0]
     rhs_members(f_rhs, t, Y, P, Out, np.empty(dim), np.empty(dim), np.empty(P.shape[0]))
 
 
 @njit(**CONTRACT)
 def accel_all(f_accel, t, Q, P, Out):
-    # the acceleration of every member: the same member loop as the right-hand side's
+    """The acceleration of every member: the same member loop as the right-hand side's.
+
+    Parameters
+    ----------
+    f_accel : compiled acceleration `a(t, q, p, out)`; t : float, the time; Q : (dim, n) positions;
+    P : (n_par, n) parameters; Out : (dim, n) written in place.
+    """
     rhs_all(f_accel, t, Q, P, Out)
 
 
@@ -70,8 +99,18 @@ def accel_all(f_accel, t, Q, P, Out):
 # (8.10)); LU with partial pivoting per member. Status 1: no convergence; 2: singular matrix.
 @njit(**INLINE)
 def lu_factor(M, piv):
-    # M = P L U in place (Gaussian elimination with partial pivoting, whole rows swapped, the
-    # multipliers stored below the diagonal); False on an exactly zero pivot
+    """M = P L U in place: Gaussian elimination with partial pivoting, whole rows swapped, the
+    multipliers stored below the diagonal.
+
+    Parameters
+    ----------
+    M : (m, m) float array, overwritten by its factors; piv : (m,) int array, the pivot row of each
+    column (written).
+
+    Returns
+    -------
+    bool: False on an exactly zero pivot (M then partly factored), else True.
+    """
     m = M.shape[0]
     for col in range(m):
         p = col
@@ -100,8 +139,14 @@ def lu_factor(M, piv):
 
 @njit(**INLINE)
 def lu_apply(M, piv, b, x):
-    # x = M^-1 b from `lu_factor`'s factors: every row swap first, then the two substitutions (each
-    # entry sees the same operations in the same order as elimination interleaved with the swaps)
+    """x = M^-1 b from `lu_factor`'s factors: every row swap first, then the two substitutions (each
+    entry sees the same operations in the same order as elimination interleaved with the swaps).
+
+    Parameters
+    ----------
+    M, piv : the factors and pivots written by `lu_factor`; b : (m,) right-hand side (read);
+    x : (m,) the solution (written).
+    """
     m = b.shape[0]
     for i in range(m):
         x[i] = b[i]
@@ -125,8 +170,17 @@ def lu_apply(M, piv, b, x):
 
 @njit(**EXACT)
 def newton_factor_members(Mats, Piv):
-    # every member's Newton matrix factored in place (once per matrix, whatever the number of
-    # iterations that solve with it); False on a singular matrix
+    """Every member's Newton matrix factored in place, once per matrix whatever the number of
+    iterations that solve with it.
+
+    Parameters
+    ----------
+    Mats : (n, m, m) matrices, overwritten by their factors; Piv : (n, m) pivots (written).
+
+    Returns
+    -------
+    bool: False as soon as one matrix is singular.
+    """
     for j in range(Mats.shape[0]):
         if not lu_factor(Mats[j], Piv[j]):
             return False
@@ -135,7 +189,13 @@ def newton_factor_members(Mats, Piv):
 
 @njit(**EXACT)
 def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
-    # DX[:, j] = -Mats[j]^-1 G[:, j] for every member, from the factors of `newton_factor_members`
+    """DX[:, j] = -Mats[j]^-1 G[:, j] for every member, from the factors of `newton_factor_members`.
+
+    Parameters
+    ----------
+    Mats, Piv : the factored matrices and pivots; G : (m, n) residuals; DX : (m, n) increments
+    (written); rhs_w, sol : (m,) work vectors.
+    """
     m = rhs_w.shape[0]
     for j in range(G.shape[1]):
         for r in range(m):
@@ -147,8 +207,17 @@ def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
 
 @njit(**EXACT)
 def newton_update(X, DX, inv_scale):
-    # X += DX; the increment's max-norm scaled by inv_scale (rows i * dim + d use row d), NaN
-    # when any scaled entry is not finite
+    """X += DX, and the increment's max-norm scaled by `inv_scale`.
+
+    Parameters
+    ----------
+    X : (s * dim, n) stage values, updated in place; DX : (s * dim, n) increments;
+    inv_scale : (dim, n) inverse error scales (row i * dim + d of X uses row d).
+
+    Returns
+    -------
+    float: the scaled max-norm of DX; NaN when any scaled entry is not finite.
+    """
     dim = inv_scale.shape[0]
     norm = 0.0
     nan_seen = False
@@ -169,7 +238,18 @@ def newton_update(X, DX, inv_scale):
 
 @njit(**EXACT)
 def newton_converged(norm, previous, tol, theta):
-    # (converged, contraction): the increment at most tol, or theta / (1 - theta) |dx| at most tol
+    """The simplified-Newton stopping test (Hairer & Wanner, Solving ODEs II, IV.8).
+
+    Parameters
+    ----------
+    norm : float, this increment's scaled norm; previous : float, the last one (inf before the
+    second iteration); tol : float, the Newton tolerance; theta : float, the contraction so far.
+
+    Returns
+    -------
+    tuple (bool, float): (converged, contraction), converged when the increment is at most tol or
+    theta / (1 - theta) |dx| is at most tol.
+    """
     if norm <= tol:
         return True, theta
     if is_finite(previous):
@@ -181,15 +261,30 @@ def newton_converged(norm, previous, tol, theta):
 
 @njit(**INLINE)
 def newton_start():
-    # (previous, norm, theta, res_norm, converged, status) before the first iteration
+    """The Newton iteration's state before its first iteration.
+
+    Returns
+    -------
+    tuple: (previous, norm, theta, res_norm, converged, status) = (inf, inf, NaN, NaN, False, 1).
+    """
     return np.inf, np.inf, np.nan, np.nan, False, 1
 
 
 @njit(**EXACT)
 def newton_members_step(factor, Mats, Piv, G, DX, rhs_w, sol, X, inv_scale, norm, previous, tol, theta):
-    # one ensemble iteration: factor the new matrices when `factor`, solve, update X, test;
-    # (norm, converged, theta, status): status 2 on a singular matrix (X and norm as they were),
-    # else 1; norm NaN (and not converged) when the increment is not finite
+    """One ensemble Newton iteration: factor the new matrices when `factor`, solve, update X, test.
+
+    Parameters
+    ----------
+    factor : bool, whether Mats hold new (unfactored) matrices; Mats, Piv, G, DX, rhs_w, sol : as
+    in `newton_solve_members`; X, inv_scale : as in `newton_update`; norm, previous, tol, theta :
+    as in `newton_converged`.
+
+    Returns
+    -------
+    tuple: (norm, converged, theta, status); status 2 on a singular matrix (X and norm as they
+    were), else 1; norm NaN (and not converged) when the increment is not finite.
+    """
     if factor and not newton_factor_members(Mats, Piv):
         return norm, False, theta, 2
     newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
@@ -202,6 +297,14 @@ def newton_members_step(factor, Mats, Piv, G, DX, rhs_w, sol, X, inv_scale, norm
 
 @njit(**EXACT)
 def newton_stats(stats, n, n_rhs, n_jac, n_iter, iteration, norm, res_norm, theta, status):
+    """The failure record of a Newton solve, written into `stats` in this order.
+
+    Parameters
+    ----------
+    stats : (9,) float array (written); n : the step index; n_rhs, n_jac, n_iter : counts of
+    problem calls, Jacobians and iterations; iteration : the iteration reached; norm, res_norm,
+    theta : the last increment norm, residual norm and contraction; status : the solve's status.
+    """
     stats[0] = n
     stats[1] = n_rhs
     stats[2] = n_jac

@@ -31,8 +31,15 @@ __all__ = ["irk_single", "irk_advance"]
 @njit(**EXACT)
 def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
                full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
-    # irk_advance for one member and one implicit stage (Z = h a f(t + c h, y + Z) - h a_e f(t, y)),
-    # the state in flat arrays: the same operations in the same order
+    """`irk_advance` for one member and one implicit stage (Z = h a f(t + c h, y + Z) - h a_e f(t, y)),
+    the state in flat arrays: the same operations in the same order.
+
+    Parameters
+    ----------
+    f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal, full,
+    tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats : as in `irk_advance`, with
+    one member and one implicit stage.
+    """
     dim = Y.shape[0]
     npar = P.shape[0]
     a00 = h * A_ii[0, 0]
@@ -188,6 +195,22 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
 @njit(**EXACT)
 def irk_advance(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,
                 full, tol, max_iter, t0, n0, h, nsteps, Y, Fstart, Zprev, flags, P, stats):
+    """`nsteps` implicit Runge-Kutta steps of every member (see the comment above for the scheme).
+
+    Parameters
+    ----------
+    f_rhs, f_jac : compiled right-hand side and Jacobian; A_ii : the implicit block of A;
+    aie_sum : row sums of its explicit columns; c_impl : the implicit stages' nodes;
+    dvec : d = A_ii^{-T} b_impl; wsum : the sum of the explicit weights w; last_inv : the last row
+    of A_ii^{-1} (f at the step's end, first same as last); E : the stage extrapolation matrix;
+    has_pred, has_expl, fsal : bool, whether E, an explicit stage and first-same-as-last apply;
+    full : bool, a new Jacobian at every iteration; tol : float, the Newton tolerance;
+    max_iter : int; t0 : float, start time; n0 : int, steps already taken; h : float, the step;
+    nsteps : int; Y : (dim, n) states, Fstart : (dim, n) f at the step's start and
+    Zprev : (impl, dim, n) the last stages, all updated in place; flags : [f_start valid, z_prev
+    valid] (updated); P : (n_par, n) parameters; stats : (9,) float array, written as the
+    comment above says.
+    """
     dim, N = Y.shape
     if N == 1 and c_impl.shape[0] == 1:
         irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has_pred, has_expl, fsal,

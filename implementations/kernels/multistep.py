@@ -26,9 +26,20 @@ __all__ = ["lmm_explicit_single", "lmm_explicit_advance", "lmm_implicit_advance"
 
 @njit(**INLINE)
 def lmm_terms(alpha, beta, h, k, alpha_sign, beta_kind):
-    # the explicit formula's nonzero terms over j < k in the NumPy loop's order (j ascending,
-    # alpha before beta): (kind, index j, coefficient, count), an alpha term of kind 0 with
-    # coefficient alpha_sign * alpha_j (exact for a sign), a beta term of kind `beta_kind` with h beta_j
+    """The explicit formula's nonzero terms over j < k, in the NumPy loop's order (j ascending, alpha
+    before beta).
+
+    Parameters
+    ----------
+    alpha, beta : (k + 1,) the method's coefficients; h : float, the step; k : int, the number of
+    steps; alpha_sign : float, the sign put on alpha terms (exact); beta_kind : int, the kind given
+    to beta terms.
+
+    Returns
+    -------
+    tuple: (kind, index j, coefficient, count); an alpha term has kind 0 and coefficient
+    alpha_sign * alpha_j, a beta term kind `beta_kind` and coefficient h beta_j.
+    """
     kind = np.empty(2 * k, dtype=np.int64)
     index = np.empty(2 * k, dtype=np.int64)
     coef = np.empty(2 * k)
@@ -49,8 +60,20 @@ def lmm_terms(alpha, beta, h, k, alpha_sign, beta_kind):
 
 @njit(**INLINE)
 def lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p):
-    # f at the history points (index jj at time t - (k - 1 - jj) h, in ring slot slots[jj]) that
-    # a nonzero beta needs and whose f is not known yet; the number of evaluations
+    """f at the history points that a nonzero beta needs and whose f is not known yet (index jj at
+    time t - (k - 1 - jj) h, in ring slot slots[jj]).
+
+    Parameters
+    ----------
+    f_rhs : compiled right-hand side; beta : the beta coefficients; t : float, the newest history
+    time; h : float, the step; H, F : (k, dim, n) ring of states and derivatives (F written);
+    fvalid : (k,) bool, which slots of F are known (updated); P : parameters; slots : (k,) ring
+    slot of each history index; y, out, p : work vectors.
+
+    Returns
+    -------
+    int: the number of ensemble evaluations made.
+    """
     k = H.shape[0]
     evals = 0
     for jj in range(k):
@@ -66,7 +89,18 @@ def lmm_history_f(f_rhs, beta, t, h, H, F, fvalid, P, slots, y, out, p):
 # first needed) and psi = -sum_j alpha_j y_{n+j} + h sum_j beta_j f_{n+j} over j < k.
 @njit(**INLINE)
 def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slots):
-    # history index jj (0 = oldest) lives in ring slot (head + jj) % k
+    """psi = sum over j < k of (-alpha_j y_j + h beta_j f_j), the known part of the step's equation;
+    history index jj (0 = oldest) lives in ring slot (head + jj) % k.
+
+    Parameters
+    ----------
+    f_rhs, alpha, beta, t, h, H, F, fvalid, P, y, out, p : as in `lmm_history_f`; head : int, the
+    ring slot of the oldest state; psi : (dim, n) written; slots : (k,) work, filled with the slots.
+
+    Returns
+    -------
+    int: the number of ensemble evaluations made.
+    """
     k, dim, N = H.shape
     for jj in range(k):
         slot = head + jj
@@ -87,6 +121,16 @@ def lmm_psi(f_rhs, alpha, beta, t, h, H, F, fvalid, head, P, psi, y, out, p, slo
 
 @njit(**INLINE)
 def lmm_finite(H, slot):
+    """Whether every entry of the ring slot is finite.
+
+    Parameters
+    ----------
+    H : (k, dim, n) the state ring; slot : int, the slot tested.
+
+    Returns
+    -------
+    bool: False when any entry is inf or NaN.
+    """
     k, dim, N = H.shape
     for d in range(dim):
         for m in range(N):
@@ -97,6 +141,12 @@ def lmm_finite(H, slot):
 
 @njit(**INLINE)
 def lmm_blow_up(H, fvalid, slot):
+    """Mark a slot as blown up: its states NaN for every member, its derivative unknown.
+
+    Parameters
+    ----------
+    H : (k, dim, n) the state ring; fvalid : (k,) known-derivative flags; slot : int, the slot.
+    """
     k, dim, N = H.shape
     for d in range(dim):
         for m in range(N):
@@ -106,8 +156,14 @@ def lmm_blow_up(H, fvalid, slot):
 
 @njit(**EXACT)
 def lmm_unroll(H, F, fvalid, head):
-    # the ring back in history order, oldest first
-    # (element loops: an array-slice assignment compiles to ~5 s of broadcasting code)
+    """Put the ring back in history order, oldest first, in place (element loops: an array-slice
+    assignment compiles to ~5 s of broadcasting code).
+
+    Parameters
+    ----------
+    H, F : (k, dim, n) the state and derivative rings; fvalid : (k,) known-derivative flags;
+    head : int, the ring slot of the oldest entry.
+    """
     k, dim, N = H.shape
     if head == 0:
         return
@@ -128,11 +184,25 @@ def lmm_unroll(H, F, fvalid, head):
 # history is a ring of k slots: a step writes one slot instead of shifting k.
 @njit(**EXACT)
 def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
-    # One member. The history ring lies flat in W in rows of w = dim rounded up to whole blocks
-    # of four (the padding stays zero): states in rows 0..k-1, derivatives in rows k..2k-1. The
-    # formula's terms are (signed coefficient, row) in the NumPy loop's order, their rows
-    # tabulated once for each position of the ring; offsets are unsigned (no negative-index
-    # handling per access). Which derivatives are known is a bit mask over the ring (k <= 62).
+    """`nsteps` explicit multistep steps of one member.
+
+    The history ring lies flat in W in rows of w = dim rounded up to whole blocks of four (the
+    padding stays zero): states in rows 0..k-1, derivatives in rows k..2k-1. The formula's terms
+    are (signed coefficient, row) in the NumPy loop's order, their rows tabulated once for each
+    position of the ring; offsets are unsigned. Which derivatives are known is a bit mask over the
+    ring (k <= 62).
+
+    Parameters
+    ----------
+    f_rhs : compiled right-hand side; alpha, beta : the method's coefficients; t0 : float, start
+    time; n0 : int, steps already taken; h : float, the step; nsteps : int; H, F : (k, dim, 1)
+    history of states and derivatives, oldest first, advanced in place; fvalid : (k,) bool, which
+    derivatives are known (updated); P : (n_par, 1) parameters.
+
+    Returns
+    -------
+    int: right-hand-side evaluations.
+    """
     k, dim, N = H.shape
     w = (dim + 3) // 4 * 4
     nb = w // 4
@@ -227,6 +297,17 @@ def lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
 
 @njit(**EXACT)
 def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P):
+    """`nsteps` explicit multistep steps of every member in lockstep (`lmm_explicit_single` for one).
+
+    Parameters
+    ----------
+    f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P : as in `lmm_explicit_single`, with n
+    members.
+
+    Returns
+    -------
+    int: ensemble right-hand-side evaluations.
+    """
     k, dim, N = H.shape
     if N == 1:
         return lmm_explicit_single(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
@@ -279,6 +360,17 @@ def lmm_explicit_advance(f_rhs, alpha, beta, t0, n0, h, nsteps, H, F, fvalid, P)
 @njit(**EXACT)
 def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, t0, n0, h, nsteps, H, F,
                          fvalid, P, stats):
+    """`nsteps` implicit multistep steps of every member in lockstep, each solved by Newton's method
+    from an extrapolated predictor.
+
+    Parameters
+    ----------
+    f_rhs : compiled right-hand side; f_jac : compiled Jacobian; alpha, beta : the method's
+    coefficients; wpred : (k,) predictor weights over the history; full : bool, a new Jacobian at
+    every iteration (else once per step); tol : float, the Newton tolerance; max_iter : int;
+    t0, n0, h, nsteps, H, F, fvalid, P : as in `lmm_explicit_advance`; stats : (9,) float array,
+    the counts on success (status 0) or the failure record of `newton_stats`.
+    """
     k, dim, N = H.shape
     npar = P.shape[0]
     psi = np.empty((dim, N))

@@ -27,8 +27,14 @@ COLUMN_BLOCK = 256
 
 @njit(**INLINE)
 def rk_block(W, e, dst, term, coef, q0, q1):
-    # one block of four entries: W[dst + e + i] = W[e + i] + sum_q coef[q] W[term[q] + e + i]
-    # (q from q0 to q1 - 1, added in order), formed in registers; offsets unsigned
+    """One block of four entries, formed in registers: W[dst + e + i] = W[e + i] + sum_q coef[q]
+    W[term[q] + e + i], q from q0 to q1 - 1 added in order.
+
+    Parameters
+    ----------
+    W : flat work rows; e : unsigned offset of the block; dst : unsigned offset of the target row;
+    term, coef : row offsets and coefficients of the nonzero terms; q0, q1 : the terms used.
+    """
     U1 = np.uint64(1)
     U2 = np.uint64(2)
     U3 = np.uint64(3)
@@ -53,11 +59,22 @@ def rk_block(W, e, dst, term, coef, q0, q1):
 # k_i = f(t + c_i h, y + h sum_j a_ij k_j), y <- y + h sum_i b_i k_i; zero coefficients skipped.
 @njit(**CONTRACT)
 def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
-    # One member at a time. W holds rows of w = dim rounded up to whole blocks of four (the
-    # padding stays zero): the state, the stage argument, then k_0 .. k_(s-1). The nonzero terms
-    # of each stage (start[i] .. start[i + 1]) and of the update are (coefficient, row offset);
-    # offsets are unsigned (no negative-index handling per access) and each block of four
-    # entries is formed in registers, the terms added in order.
+    """`nsteps` explicit Runge-Kutta steps of every member, one member at a time.
+
+    W holds rows of w = dim rounded up to whole blocks of four (the padding stays zero): the
+    state, the stage argument, then k_0 .. k_(s-1). The nonzero terms of each stage and of the
+    update are (coefficient, unsigned row offset); each block of four is formed in registers.
+
+    Parameters
+    ----------
+    f_rhs : compiled right-hand side; A, b, c : the Butcher tableau; t0 : float, start time;
+    n0 : int, steps already taken (step n starts at t0 + (n0 + n) h); h : float, the step;
+    nsteps : int; Y : (dim, n) states, advanced in place; P : (n_par, n) parameters.
+
+    Returns
+    -------
+    int: right-hand-side evaluations per member (s * nsteps).
+    """
     s = b.shape[0]
     dim = Y.shape[0]
     npar = P.shape[0]
@@ -115,6 +132,17 @@ def rk_advance(f_rhs, A, b, c, t0, n0, h, nsteps, Y, P):
 
 @njit(**CONTRACT)
 def rk_advance_cols(f_rhs_cols, A, b, c, t0, n0, h, nsteps, Y, K, Stage, P):
+    """The column form of `rk_advance`: blocks of COLUMN_BLOCK members advance together.
+
+    Parameters
+    ----------
+    f_rhs_cols : compiled column right-hand side; A, b, c, t0, n0, h, nsteps, Y, P : as in
+    `rk_advance`; K : (s, dim, n) stage derivatives and Stage : (dim, n) stage argument, work.
+
+    Returns
+    -------
+    int: right-hand-side evaluations per member (s * nsteps).
+    """
     s = b.shape[0]
     dim, N = Y.shape
     hA = A * h
@@ -147,6 +175,13 @@ def rk_advance_cols(f_rhs_cols, A, b, c, t0, n0, h, nsteps, Y, K, Stage, P):
 # from Acc and its parameters from P, and back after its steps.
 @njit(**INLINE)
 def take_member(Y, Acc, P, j, q, v, a, p):
+    """Copy member j's position, velocity, acceleration and parameters into the work vectors.
+
+    Parameters
+    ----------
+    Y : (2 nq, n) states (positions over velocities); Acc : (nq, n) accelerations;
+    P : (n_par, n) parameters; j : int, the member; q, v, a, p : work vectors (written).
+    """
     nq = q.shape[0]
     for d in range(nq):
         q[d] = Y[d, j]
@@ -158,6 +193,12 @@ def take_member(Y, Acc, P, j, q, v, a, p):
 
 @njit(**INLINE)
 def put_member(Y, Acc, j, q, v, a):
+    """Copy the work vectors back into member j's columns (the inverse of `take_member`).
+
+    Parameters
+    ----------
+    Y, Acc : as in `take_member` (written); j : int, the member; q, v, a : the work vectors.
+    """
     nq = q.shape[0]
     for d in range(nq):
         Y[d, j] = q[d]
@@ -169,6 +210,21 @@ def put_member(Y, Acc, j, q, v, a):
 # v += b_i h a(q, t + tau_i h); a scheme that begins and ends with a kick reuses the last force.
 @njit(**CONTRACT)
 def split_advance(f_accel, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
+    """`nsteps` steps of a drift/kick splitting for every member, one member at a time.
+
+    Parameters
+    ----------
+    f_accel : compiled acceleration; kick : (nops,) bool, whether operation i is a kick (else a
+    drift); hcoef : (nops,) h times each operation's coefficient; htau : (nops,) time offset of
+    each kick; fsal : bool, whether the last kick's acceleration serves the next step's first;
+    valid0 : bool, whether Acc already holds the acceleration at the start; t0, n0, h, nsteps : as
+    in `rk_advance`; Y : (2 nq, n) states and Acc : (nq, n) accelerations, advanced in place;
+    P : (n_par, n) parameters.
+
+    Returns
+    -------
+    int: acceleration evaluations per member.
+    """
     nops = kick.shape[0]
     nq = Acc.shape[0]
     q, v, a, p = np.empty(nq), np.empty(nq), np.empty(nq), np.empty(P.shape[0])
@@ -197,6 +253,17 @@ def split_advance(f_accel, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y
 
 @njit(**CONTRACT)
 def split_advance_cols(f_accel_cols, kick, hcoef, htau, fsal, valid0, t0, n0, h, nsteps, Y, Acc, P):
+    """The column form of `split_advance`: blocks of COLUMN_BLOCK members advance together.
+
+    Parameters
+    ----------
+    f_accel_cols : compiled column acceleration; kick, hcoef, htau, fsal, valid0, t0, n0, h,
+    nsteps, Y, Acc, P : as in `split_advance`.
+
+    Returns
+    -------
+    int: acceleration evaluations per member.
+    """
     nops = kick.shape[0]
     nq, N = Acc.shape
     evals = 0
@@ -227,6 +294,18 @@ def split_advance_cols(f_accel_cols, kick, hcoef, htau, fsal, valid0, t0, n0, h,
 # Staggered leapfrog: x += d h v_{n+1/2}, v_{n+3/2} = v_{n+1/2} + k h a(x_{n+1}, t_{n+1}).
 @njit(**CONTRACT)
 def leapfrog_advance(f_accel, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
+    """`nsteps` staggered leapfrog steps per member: drift q += v hdrift, then kick v += a(q) hkick.
+
+    Parameters
+    ----------
+    f_accel : compiled acceleration; hdrift, hkick : float, the drift and kick lengths; t0, n0, h,
+    nsteps : as in `rk_advance`; Y : (2 nq, n) states and Acc : (nq, n) accelerations, advanced in
+    place; P : (n_par, n) parameters.
+
+    Returns
+    -------
+    int: acceleration evaluations per member (nsteps).
+    """
     nq = Acc.shape[0]
     q, v, a, p = np.empty(nq), np.empty(nq), np.empty(nq), np.empty(P.shape[0])
     for j in range(Y.shape[1]):
@@ -244,6 +323,17 @@ def leapfrog_advance(f_accel, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
 
 @njit(**CONTRACT)
 def leapfrog_advance_cols(f_accel_cols, hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P):
+    """The column form of `leapfrog_advance`: blocks of COLUMN_BLOCK members advance together.
+
+    Parameters
+    ----------
+    f_accel_cols : compiled column acceleration; hdrift, hkick, t0, n0, h, nsteps, Y, Acc, P : as
+    in `leapfrog_advance`.
+
+    Returns
+    -------
+    int: acceleration evaluations per member (nsteps).
+    """
     nq, N = Acc.shape
     for j0 in range(0, N, COLUMN_BLOCK):
         j1 = min(N, j0 + COLUMN_BLOCK)
@@ -264,6 +354,19 @@ def leapfrog_advance_cols(f_accel_cols, hdrift, hkick, t0, n0, h, nsteps, Y, Acc
 # (x_{n-1}, x_n, x_{n+1}); a step shifts them and forms the new x_{n+1} at t = t_n + h.
 @njit(**CONTRACT)
 def stormer_advance(f_accel, alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur, Nxt, Acc, P):
+    """`nsteps` steps of Stormer's two-step rule x_{n+1} = -alpha0 x_{n-1} - alpha1 x_n + b1hh a(x_n).
+
+    Parameters
+    ----------
+    f_accel : compiled acceleration; alpha0, alpha1 : float, the rule's coefficients; b1hh : float,
+    its force coefficient times h^2; t0, n0, h, nsteps : as in `rk_advance`; Prev, Cur, Nxt :
+    (nq, n) positions x_{n-1}, x_n, x_{n+1}, shifted in place; Acc : (nq, n) the last acceleration
+    (written); P : (n_par, n) parameters.
+
+    Returns
+    -------
+    int: acceleration evaluations per member (nsteps).
+    """
     nq = Cur.shape[0]
     npar = P.shape[0]
     xp = np.empty(nq)
@@ -306,6 +409,16 @@ def stormer_advance(f_accel, alpha0, alpha1, b1hh, t0, n0, h, nsteps, Prev, Cur,
 # exponents -1, 0, 1/2, 1, 2). Each member keeps its own clock Time.
 @njit(**INLINE)
 def numpy_power(x, e):
+    """x ** e as NumPy evaluates `array ** scalar`: exact fast paths for e in -1, 0, 1/2, 1, 2.
+
+    Parameters
+    ----------
+    x : float, the base; e : float, the exponent.
+
+    Returns
+    -------
+    float: x to the power e.
+    """
     if e == 1.0:
         return x
     if e == -1.0:
@@ -322,6 +435,21 @@ def numpy_power(x, e):
 @njit(**EXACT)
 def controlled_advance(f_accel, kick, coef, fsal, valid0, reversible, pos_power, mom_power, t0, h,
                        nsteps, Y, Acc, Time, Z, P):
+    """`nsteps` controlled steps of a drift/kick splitting per member (see the comment above).
+
+    Parameters
+    ----------
+    f_accel : compiled acceleration; kick : (nops,) bool, kick or drift; coef : (nops,) the
+    operations' coefficients; fsal, valid0 : as in `split_advance`; reversible : bool, the
+    reversible controller (else the naive one); pos_power, mom_power : float, the powers of |q| and
+    |L| in sigma; t0 : float, the time passed to the acceleration; h : float, the fictive step;
+    nsteps : int; Y, Acc : as in `split_advance`; Time : (n,) each member's clock and Z : (n,) the
+    controller's z, advanced in place; P : (n_par, n) parameters.
+
+    Returns
+    -------
+    int: acceleration evaluations of the last member.
+    """
     nops = kick.shape[0]
     nq = Acc.shape[0]
     q, v, a, p = np.empty(nq), np.empty(nq), np.empty(nq), np.empty(P.shape[0])

@@ -28,6 +28,7 @@ def lmm2_explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, kno
     f_accel : address of the problem's acceleration a(t, q) (state form).
     alpha, beta : the table (k + 1 values each, oldest first; beta_k = 0).
     h2 : h * h as the NumPy loop forms it; t0, n0, h : the carry's t0, step count and step.
+    nsteps : int, the number of steps.
     X, A : rings (keep, nq, N) of positions and accelerations; `known[s]` says whether A[s]
         holds a(x) for slot s; `head` is the slot of the oldest point. Updated in place.
     P : the problem's parameters (npar, N).
