@@ -197,7 +197,7 @@ def register_experiment(exp: Experiment) -> Experiment:
 
     Parameters
     ----------
-    exp : Experiment, the instance.
+    exp : Experiment, the instance (its `name` is the key).
 
     Returns
     -------
@@ -250,7 +250,7 @@ def get_experiment(name: str) -> Experiment:
 
     Parameters
     ----------
-    name : str, the experiment's CLI name.
+    name : str, as `harness run NAME` takes it (a near miss gets suggestions).
 
     Returns
     -------

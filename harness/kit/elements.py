@@ -220,7 +220,7 @@ def is_missing(v: Any) -> bool:
 
     Parameters
     ----------
-    v : Any, a cell value.
+    v : Any, a cell value (a list or an array reads as not missing).
 
     Returns
     -------

@@ -41,7 +41,7 @@ def clip_log(y: Any) -> np.ndarray:
 
     Parameters
     ----------
-    y : array_like, the values.
+    y : array_like, the values (any shape; read as float).
 
     Returns
     -------
@@ -96,11 +96,12 @@ class Palette:
 
         Parameters
         ----------
-        stepper : str, the method's name.
+        stepper : str, the method; one the palette was not built with is drawn
+            grey.
 
         Returns
         -------
-        str: a hex colour; grey for a method the palette was not built with.
+        str: '#rrggbb'.
         """
         return self._style.get(stepper, ("#4d4d4d", "o"))[0]
 
@@ -109,11 +110,11 @@ class Palette:
 
         Parameters
         ----------
-        stepper : str, the method's name.
+        stepper : str, a method's name (unknown: 'o').
 
         Returns
         -------
-        str: a matplotlib marker code; 'o' for a method the palette was not built with.
+        str: a matplotlib marker code.
         """
         return self._style.get(stepper, ("#4d4d4d", "o"))[1]
 
@@ -122,7 +123,7 @@ class Palette:
 
         Parameters
         ----------
-        stepper : str, the method's name.
+        stepper : str, any name; unknown names have none.
 
         Returns
         -------
@@ -281,7 +282,7 @@ def label_text(text: Any) -> str:
 
     Parameters
     ----------
-    text : Any, the name.
+    text : Any, the name (any object, shown as its `str`).
 
     Returns
     -------

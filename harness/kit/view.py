@@ -76,7 +76,7 @@ class RunView:
 
         Parameters
         ----------
-        name : str, the experiment's name.
+        name : str, an experiment (as the CLI names it).
 
         Returns
         -------

@@ -158,7 +158,7 @@ class DevTools:
 
         Parameters
         ----------
-        expression : str, the JavaScript.
+        expression : str, JavaScript (its value must be JSON-serialisable).
 
         Returns
         -------

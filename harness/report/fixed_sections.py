@@ -145,7 +145,7 @@ def changes_section(view: RunView, verdicts: pd.DataFrame, previous: Any) -> Sec
 
     Returns
     -------
-    Section
+    Section: tables of the changed verdicts and moved figures, or a note.
     """
     from harness.report.compare import compare_runs
 
@@ -195,7 +195,7 @@ def ground_truth(view: RunView) -> Section:
 
     Returns
     -------
-    Section
+    Section: per problem, the reference's precision and certified error.
     """
     from harness.ground_truth import reference
     from harness.registry import get_problem

@@ -261,7 +261,7 @@ def json_text(obj: Any) -> str:
 
     Parameters
     ----------
-    obj : Any, the value.
+    obj : Any, the value (dates, paths and the like via `str`).
 
     Returns
     -------

@@ -220,7 +220,7 @@ class ReversibilityExperiment(Experiment):
 
         Returns
         -------
-        DataFrame: SUMMARY_COLUMNS.
+        DataFrame: SUMMARY_COLUMNS, a row per (stepper, problem, N).
         """
         from harness.registry import get_stepper
 

@@ -154,7 +154,8 @@ class RoundoffExperiment(Experiment):
         return cells, skips
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
-        """The error at the fixed step count for each step size, against the reference.
+        """The error at `n_steps` steps for each step size of `step_sizes`, measured against the
+        certified reference.
 
         Parameters
         ----------

@@ -231,7 +231,7 @@ class StabilityExperiment(Experiment):
 
         Parameters
         ----------
-        cell : Cell
+        cell : Cell, one stepper on the test equation of its form.
         config : mapping, checked here (over the defaults).
 
         Returns

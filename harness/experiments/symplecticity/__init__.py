@@ -242,7 +242,7 @@ class SymplecticityExperiment(Experiment):
 
         Returns
         -------
-        DataFrame: SUMMARY_COLUMNS.
+        DataFrame: one row per cell.
         """
         from harness.registry import get_stepper
 
