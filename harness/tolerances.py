@@ -191,6 +191,12 @@ STABILITY_XTOL = 1e-10
 SCIPY_MIN_RTOL = 100.0 * EPS
 # h*omega limits of Newtonian steppers are searched up to this (the catalogue's are below 4).
 STABILITY_HW_SEARCH_LIMIT = 100.0
+# Exact bands (the trace polynomial and Sturm chains over the rationals) cost steeply more with the
+# trace's degree times its coefficients' bit length (kicks x summed bits of the operations):
+# yoshida8 (16 x 4140 = 7e4) takes 2 s; a 251-operation composition of Verlet (126 x 112115)
+# took 83 s for the trace alone and did not finish isolating in 10 minutes. Above this product
+# the first instability comes from a sampled scan instead, and the bands say so.
+EXACT_BANDS_MAX_WORK = 1.5e5
 # Stability probe against the coefficients' formula: largest relative difference of recurrence
 # coefficients (R(z), c_j, propagator entries) allowed; a step is a few dozen roundings of
 # numbers of the coefficients' size, so this is multiplied by that size (sum of |coefficients|,

@@ -199,3 +199,23 @@ def test_the_stability_experiment_reports_every_band():
     # (3.170, 3.233); the probe's scan and the exact figure agree on the first end
     assert summary["hw_limit"] == pytest.approx(2.2690579964, abs=1e-9)
     assert summary["hw_bands"].count("[") == 3 and "[3.233166079, inf)" in summary["hw_bands"]
+
+
+def test_a_composition_over_the_exact_budget_gets_a_sampled_limit_said_so():
+    """Triple-jump compositions of velocity Verlet nested four times (order 10, 82 kicks after
+    merging, coefficients exact only as the floats given) are over the exact-isolation budget:
+    the limit comes from the sampled spectral radius, marked inexact, and equals the
+    propagator's own first instability on a fine grid; yoshida8 stays exact."""
+    from harness.registry import get_stepper
+
+    seq = [("K", 0.5), ("D", 1.0), ("K", 0.5)]  # velocity Verlet
+    for p in (2, 4, 6, 8):
+        w = 2.0 ** (1.0 / (p + 1))
+        seq = [(k, c * g) for g in (1 / (2 - w), -w / (2 - w), 1 / (2 - w)) for k, c in seq]
+    scheme = SplittingScheme("nested-triple-jump-10", seq)
+    bands = splitting_hw_bands(scheme)
+    assert not bands.exact and "sampled" in bands.describe()
+    grid = np.linspace(1e-3, 2 * bands.limit, 4001)
+    first = grid[np.argmax(splitting_amplification(scheme, grid) > 1 + 1e-9)]
+    assert abs(first - bands.limit) <= 2 * (grid[1] - grid[0])
+    assert splitting_hw_bands(get_stepper("yoshida8").coefficients).exact

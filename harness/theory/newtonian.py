@@ -78,6 +78,7 @@ class HwBands:
     marginal: tuple[float, ...]
     criterion: str
     hw_max: float
+    exact: bool = True  # False: `limit` from a sampled scan, `bands` not derived
 
     def describe(self) -> str:
         """The bands as one line of text.
@@ -86,6 +87,8 @@ class HwBands:
         -------
         str: "stable for every h omega (<criterion>)" or "unstable on [a, b], ...".
         """
+        if not self.exact:
+            return f"first instability at h omega {self.limit:.10g} ({self.criterion})"
         if not self.bands:
             return f"stable for every h omega ({self.criterion})"
         parts = [f"[{a:.10g}, {b:.10g}]" if math.isfinite(b) else f"[{a:.10g}, inf)" for a, b in self.bands]
@@ -176,6 +179,21 @@ def splitting_hw_bands(scheme: SplittingScheme, hw_max: float = tol.STABILITY_HW
     -------
     HwBands: the exact unstable bands that start at or below `hw_max`.
     """
+    check_type(scheme, "splitting", "scheme")
+    seq = scheme.exact if scheme.exact is not None else scheme.sequence
+    # the trace's degree in x is the number of kicks and its coefficients carry about the sum of
+    # the operations' bit lengths (yoshida8: 16 x 4140 against degree 15 x 3982 bits)
+    kicks = sum(1 for kind, _ in seq if kind != "D")
+    bits = sum(max(Fraction(c).numerator.bit_length(), Fraction(c).denominator.bit_length())
+               for _, c in seq)
+    if kicks * bits > tol.EXACT_BANDS_MAX_WORK:
+        from harness.theory.amplification import hw_stability_limit, splitting_amplification
+
+        limit = hw_stability_limit(lambda hw: splitting_amplification(scheme, hw), limit=hw_max)
+        return HwBands(limit, (), (), f"sampled spectral radius, not isolated exactly: a trace of "
+                       f"degree ~{kicks} with ~{bits}-bit coefficients is over the exact budget "
+                       f"(EXACT_BANDS_MAX_WORK); a band narrower than the scan step can be missed",
+                       float(hw_max), exact=False)
     T = splitting_trace_exact(scheme)
     two = (Fraction(2),)
 
