@@ -216,6 +216,20 @@ def test_nan_and_scalar_steppers_are_failed_cells_in_every_experiment(experiment
     assert ("returned a state of float64" in scalar["message"]) or scalar["kind"] == "error"
 
 
+@pytest.mark.parametrize("stepper, problem", [("yoshida8", "henon-heiles"),
+                                               ("yoshida6", "henon-heiles-chaotic")])
+def test_a_composition_overflowing_inside_the_compiled_force_is_a_blow_up_not_a_fault(stepper,
+                                                                                     problem):
+    """At h = 2 a high-order composition's substeps carry the state past 1e103 within one step,
+    the problem's compiled cubic force overflows (which np.errstate cannot trap) and the state
+    comes back NaN with no inf: a blow-up. It was called the stepper's fault and failed five
+    work-precision cells of the default report."""
+    from harness.registry import get_problem, get_stepper
+
+    trajectory = get_stepper(stepper).integrate(get_problem(problem), h=2.0, n_steps=20)
+    assert not np.all(np.isfinite(trajectory.y[-1]))
+
+
 # -- problems at fault: a method is never blamed for the problem's own defect ---------------------------
 _q, _p, _s = hy.make_vars("q", "p", "s")
 FAULTY_PROBLEMS = {  # problem -> (experiment, stepper, what the failed cell says)

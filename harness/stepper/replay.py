@@ -124,9 +124,24 @@ class NonfiniteReplay:
         with np.errstate(all="ignore"):
             if k > 1:
                 self._advance(dyn, c, k - 1)
+        for name in ("f", "accel"):  # a compiled right-hand side overflows without NumPy seeing it
+            setattr(dyn, name, _inf_raises(getattr(dyn, name)))
         try:
             with np.errstate(over="raise", invalid="ignore", divide="ignore", under="ignore"):
                 self._advance(dyn, c, 1)
         except FloatingPointError:
             return True
         return False
+
+
+def _inf_raises(evaluate):
+    """`evaluate` (a problem's f or acceleration), raising FloatingPointError when it returns inf:
+    the problem's compiled function overflowed, which `np.errstate` cannot trap."""
+
+    def checked(*args, **kwargs):
+        out = evaluate(*args, **kwargs)
+        if np.any(np.isinf(out)):
+            raise FloatingPointError("overflow in the problem's compiled function")
+        return out
+
+    return checked
