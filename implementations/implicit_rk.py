@@ -31,7 +31,8 @@ from harness.errors import InputError
 from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, StepFailure, Stepper
-from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
+from harness.tolerances import (EPS, NEWTON_MAX_ITER, NEWTON_ROUNDING_ULPS, NEWTON_STALL_CONTRACTION,
+                                NEWTON_TOL)
 from implementations import coefficient_info
 
 __all__ = [
@@ -43,6 +44,7 @@ __all__ = [
     "StageSplit",
     "stage_split",
     "newton_solve",
+    "newton_stop",
     "scaled_norm",
     "extrapolation_matrix",
     "BACKWARD_EULER",
@@ -133,6 +135,40 @@ def scaled_norm(dx: np.ndarray, inv_scale: np.ndarray) -> float:
     return float(np.abs(dx * inv_scale).max())
 
 
+def newton_stop(norm: float, previous: float, tol: float, theta: float,
+                size: float) -> tuple[bool, float]:
+    """The stopping test of Newton's iteration, rounding-aware (Hairer & Wanner, Solving ODEs II,
+    IV.8); the compiled loops' `newton_converged` is the same rule.
+
+    Converged when the scaled increment `norm` is at most `tol`; or when the contraction
+    theta = norm / previous gives an estimated remaining error theta / (1 - theta) * norm at most
+    `tol` (eq. 8.10); or when the increment has stopped decreasing (theta >=
+    NEWTON_STALL_CONTRACTION) at the rounding level of the iterate, norm <= NEWTON_ROUNDING_ULPS x
+    eps x (1 + size): an ill-conditioned solve whose increments are rounding noise, which no
+    further iteration can lower. A divergent iteration (growing increments far above that level)
+    still fails.
+
+    Parameters
+    ----------
+    norm : float, this increment's scaled max-norm; previous : float, the last one (inf before
+    the second iteration); tol : float, the Newton tolerance; theta : float, the contraction so
+    far; size : float, the scaled max-norm of the iterate after this increment.
+
+    Returns
+    -------
+    tuple (bool, float): (converged, contraction).
+    """
+    if norm <= tol:
+        return True, theta
+    if math.isfinite(previous):
+        theta = norm / previous
+        if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
+            return True, theta
+        if theta >= NEWTON_STALL_CONTRACTION and norm <= NEWTON_ROUNDING_ULPS * EPS * (1.0 + size):
+            return True, theta
+    return False, theta
+
+
 def newton_solve(
     residual: Callable[[np.ndarray], np.ndarray],
     matrix: Callable[[np.ndarray], np.ndarray],
@@ -148,10 +184,10 @@ def newton_solve(
     first iterate `x`; `inv_scale` (m, N) holds the reciprocal componentwise scales.
 
     `matrix(x)` returns the iteration matrix d residual / dx shaped (N, m, m); it is called at the
-    first iterate and, in 'full' mode, at every iterate. Converged when the scaled increment is at
-    most `settings.tol`, or when the contraction rate theta of two successive increments gives an
-    estimated remaining error theta / (1 - theta) * |dx| at most `settings.tol` (Hairer & Wanner
-    II, IV.8, eq. 8.10). Iterations are added to counts['newton_iterations']. Raises `StepFailure`
+    first iterate and, in 'full' mode, at every iterate. Converged by `newton_stop`: the scaled
+    increment at most `settings.tol`, or the contraction rate theta of two successive increments
+    giving an estimated remaining error theta / (1 - theta) * |dx| at most `settings.tol` (Hairer &
+    Wanner II, IV.8, eq. 8.10), or the increment stalled at the rounding level. Iterations are added to counts['newton_iterations']. Raises `StepFailure`
     naming `stepper`, the time, the increment and the residual when it does not converge.
 
     Parameters
@@ -187,12 +223,9 @@ def newton_solve(
         norm = scaled_norm(dx, inv_scale)
         if not math.isfinite(norm):
             break
-        if norm <= tol:
+        converged, theta = newton_stop(norm, previous, tol, theta, scaled_norm(x, inv_scale))
+        if converged:
             return x
-        if math.isfinite(previous):
-            theta = norm / previous
-            if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
-                return x
         previous = norm
     res_norm = scaled_norm(g, inv_scale) if g is not None else math.nan
     raise StepFailure(

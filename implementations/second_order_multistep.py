@@ -24,8 +24,8 @@ The loop (`SecondOrderMultistepStepper`):
   evaluations are counted as the run's (`starter_steps`, `internal_steps`);
 - explicit tables step x_{n+k} directly (one force evaluation per step); implicit (Cowell)
   tables solve x = psi + h^2 beta_k a(x) by simplified Newton iterations (one Jacobian per step)
-  from the polynomial extrapolation of the history, to NEWTON_TOL (a `StepFailure` after
-  NEWTON_MAX_ITER);
+  from the polynomial extrapolation of the history, to NEWTON_TOL or a stall at the rounding
+  level (`implementations.implicit_rk.newton_stop`; a `StepFailure` after NEWTON_MAX_ITER);
 - velocities are reconstructed by v_n = (x_n - x_(n-1)) / h + h sum_(j<m) c_j a_(n-j), the exact
   identity v_n = (x_n - x_(n-1)) / h + (1/h) int (s - t_(n-1)) a(s) ds with a replaced by its
   interpolant at the last m points, c_j = int_0^1 u l_j(u) du: order m + 1. The loop keeps
@@ -47,6 +47,7 @@ from harness.stepper import Carry, StepFailure, Stepper, check_compatible
 from harness.theory.newtonian import velocity_weights
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations import coefficient_info
+from implementations.implicit_rk import newton_stop
 from implementations.verlet import solve_members
 
 __all__ = ["METHODS", "STEPPERS", "SecondOrderMultistepStepper", "stormer_table", "cowell_table",
@@ -307,17 +308,20 @@ class SecondOrderMultistepStepper(Stepper):
         nq = x.shape[0]
         state = np.concatenate([x, np.zeros_like(x)])
         M = np.eye(nq)[:, :, None] - hb * dyn.jac(t_new, state)[nq:, :nq]
-        correction = np.inf
+        correction, previous, theta = np.inf, np.inf, np.nan
         for _ in range(NEWTON_MAX_ITER):
             residual = x - psi - hb * dyn.accel(t_new, x)
             dx = solve_members(M, residual)
             x = x - dx
             correction = float(np.max(np.abs(dx) / (1.0 + np.abs(x))))
-            if correction <= NEWTON_TOL:
-                self._push(c, [x, None, None])
-                return
             if not np.isfinite(correction):
                 break
+            size = float(np.max(np.abs(x) / (1.0 + np.abs(x))))
+            converged, theta = newton_stop(correction, previous, NEWTON_TOL, theta, size)
+            if converged:  # NEWTON_TOL, or stalled at the rounding level
+                self._push(c, [x, None, None])
+                return
+            previous = correction
         raise StepFailure(f"stepper {self.info.name!r}: the implicit position at t={t_new!r} did not "
                           f"converge in {NEWTON_MAX_ITER} simplified Newton iterations (last relative "
                           f"correction {correction:.3g}, tolerance {NEWTON_TOL:g})")

@@ -16,7 +16,8 @@ Python JIT compiler*, LLVM-HPC 2015).
 
 Caching: importing this package imports numba and the kernel modules with numba's cache
 directory set to `harness.cache.code_dir() / "numba" / "kernels-<digest>"`, where the digest
-hashes the text of every kernel module, of the call intrinsics and the numba and Python versions:
+hashes the text of every kernel module, of the call intrinsics, the Newton stop's thresholds
+(compiled in as constants) and the numba and Python versions:
 numba's own index checks only the stamp of the file a function is defined in, so a change to a
 helper in another module, or to the intrinsics, must start a new directory. Nothing else in the
 process is affected (numba reads the setting when a function is decorated).
@@ -43,7 +44,7 @@ from pathlib import Path
 import numba
 from numba.core import config
 
-from harness import cache
+from harness import cache, tolerances
 
 __all__ = ["KERNELS", "MODULES", "CACHE_DIRECTORY", "cache_directory", "kernel"]
 
@@ -57,6 +58,7 @@ KERNELS = {
     "controlled_advance": "one_step", "lmm_explicit_advance": "multistep",
     "lmm_implicit_advance": "multistep", "irk_advance": "implicit_rk", "rhs_all": "common",
     "accel_all": "common", "lmm2_explicit_advance": "second_order_multistep",
+    "newton_converged": "common",
 }
 
 
@@ -71,6 +73,9 @@ def cache_directory() -> Path:
     here = Path(__file__).resolve().parent
     texts = [(here / f"{m}.py").read_bytes() for m in ("__init__", *MODULES)]
     texts.append((here.parent / "kernel_calls.py").read_bytes())
+    # the thresholds the kernels read from harness.tolerances are compiled in as constants
+    texts.append(f"newton stop {tolerances.NEWTON_STALL_CONTRACTION!r} "
+                 f"{tolerances.NEWTON_ROUNDING_ULPS!r} {tolerances.EPS!r}".encode())
     texts.append(f"numba {numba.__version__}, Python {sys.version_info[:3]}".encode())
     digest = hashlib.sha256(b"\0".join(texts)).hexdigest()[:16]
     return cache.code_dir() / "numba" / f"kernels-{digest}"

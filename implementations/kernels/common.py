@@ -11,6 +11,7 @@ in NumPy, and no check blocks vectorisation); `cache=True` (numba's disk cache, 
 import numpy as np
 from numba import njit
 
+from harness.tolerances import EPS, NEWTON_ROUNDING_ULPS, NEWTON_STALL_CONTRACTION
 from implementations.kernel_calls import call_state
 
 __all__ = ["CONTRACT", "EXACT", "INLINE", "is_finite", "rhs_members", "rhs_all", "accel_all", "lu_factor",
@@ -96,7 +97,7 @@ def accel_all(f_accel, t, Q, P, Out):
 # Newton's method on the ensemble axis, as `implementations.implicit_rk.newton_solve`: the
 # increment's max-norm over members and components (scaled by 1 + |y_n|) at most `tol`, or the
 # contraction estimate theta / (1 - theta) |dx| at most `tol` (Hairer & Wanner II, IV.8, eq.
-# (8.10)); LU with partial pivoting per member. Status 1: no convergence; 2: singular matrix.
+# (8.10)), or stalled at the rounding level (`newton_converged`); LU with partial pivoting per member. Status 1: no convergence; 2: singular matrix.
 @njit(**INLINE)
 def lu_factor(M, piv):
     """M = P L U in place: Gaussian elimination with partial pivoting, whole rows swapped, the
@@ -207,7 +208,7 @@ def newton_solve_members(Mats, Piv, G, DX, rhs_w, sol):
 
 @njit(**EXACT)
 def newton_update(X, DX, inv_scale):
-    """X += DX, and the increment's max-norm scaled by `inv_scale`.
+    """X += DX, and the increment's and the new iterate's max-norms scaled by `inv_scale`.
 
     Parameters
     ----------
@@ -216,10 +217,12 @@ def newton_update(X, DX, inv_scale):
 
     Returns
     -------
-    float: the scaled max-norm of DX; NaN when any scaled entry is not finite.
+    tuple (float, float): the scaled max-norm of DX (NaN when any scaled entry is not finite) and
+    the scaled max-norm of the updated X (the iterate's size for the rounding-aware stop).
     """
     dim = inv_scale.shape[0]
     norm = 0.0
+    size = 0.0
     nan_seen = False
     for i in range(X.shape[0] // dim):
         for d in range(dim):
@@ -231,30 +234,39 @@ def newton_update(X, DX, inv_scale):
                     nan_seen = True
                 elif e > norm:
                     norm = e
+                x = abs(X[r, j] * inv_scale[d, j])
+                if x > size:
+                    size = x
     if nan_seen or not is_finite(norm):
-        return np.nan
-    return norm
+        return np.nan, size
+    return norm, size
 
 
 @njit(**EXACT)
-def newton_converged(norm, previous, tol, theta):
-    """The simplified-Newton stopping test (Hairer & Wanner, Solving ODEs II, IV.8).
+def newton_converged(norm, previous, tol, theta, size):
+    """The simplified-Newton stopping test (Hairer & Wanner, Solving ODEs II, IV.8), rounding-aware;
+    the same rule as `implementations.implicit_rk.newton_stop`.
 
     Parameters
     ----------
     norm : float, this increment's scaled norm; previous : float, the last one (inf before the
-    second iteration); tol : float, the Newton tolerance; theta : float, the contraction so far.
+    second iteration); tol : float, the Newton tolerance; theta : float, the contraction so far;
+    size : float, the scaled max-norm of the iterate.
 
     Returns
     -------
-    tuple (bool, float): (converged, contraction), converged when the increment is at most tol or
-    theta / (1 - theta) |dx| is at most tol.
+    tuple (bool, float): (converged, contraction), converged when the increment is at most tol,
+    when theta / (1 - theta) |dx| is at most tol, or when the increment has stopped decreasing
+    (theta >= NEWTON_STALL_CONTRACTION) at the rounding level of the iterate,
+    NEWTON_ROUNDING_ULPS eps (1 + size).
     """
     if norm <= tol:
         return True, theta
     if is_finite(previous):
         theta = norm / previous
         if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
+            return True, theta
+        if theta >= NEWTON_STALL_CONTRACTION and norm <= NEWTON_ROUNDING_ULPS * EPS * (1.0 + size):
             return True, theta
     return False, theta
 
@@ -288,10 +300,10 @@ def newton_members_step(factor, Mats, Piv, G, DX, rhs_w, sol, X, inv_scale, norm
     if factor and not newton_factor_members(Mats, Piv):
         return norm, False, theta, 2
     newton_solve_members(Mats, Piv, G, DX, rhs_w, sol)
-    norm = newton_update(X, DX, inv_scale)
+    norm, size = newton_update(X, DX, inv_scale)
     if norm != norm:
         return norm, False, theta, 1
-    converged, theta = newton_converged(norm, previous, tol, theta)
+    converged, theta = newton_converged(norm, previous, tol, theta, size)
     return norm, converged, theta, 1
 
 

@@ -138,8 +138,10 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
                     break
             n_iter += 1
             lu_apply(M, piv, rhs_w, sol)
-            # X += DX; the increment's max-norm scaled by inv_scale, NaN when any entry is not finite
+            # X += DX; the increment's and the iterate's max-norms scaled by inv_scale (the increment's
+            # NaN when any entry is not finite)
             norm = 0.0
+            size = 0.0
             nan_seen = False
             for d in range(dim):
                 X[d] += sol[d]
@@ -148,10 +150,13 @@ def irk_single(f_rhs, f_jac, A_ii, aie_sum, c_impl, dvec, wsum, last_inv, E, has
                     nan_seen = True
                 elif e > norm:
                     norm = e
+                x = abs(X[d] * inv_scale[d])
+                if x > size:
+                    size = x
             if nan_seen or not is_finite(norm):
                 norm = np.nan
                 break
-            converged, theta = newton_converged(norm, previous, tol, theta)
+            converged, theta = newton_converged(norm, previous, tol, theta, size)
             if converged:
                 break
             previous = norm
