@@ -8,7 +8,10 @@ because a low-order start spoils the measured order:
 - 'reference': the certified ground truth (`harness.ground_truth.reference`) at t0 + h, ...;
 - a registered one-step stepper's name (default 'rk4', the classical Runge-Kutta method), or a
   `Stepper` object, run through the stepper contract with the same `Dynamics`, so its evaluations
-  are counted with the multistep method's.
+  are counted with the multistep method's. An implicit table whose explicit starter would step
+  outside its real stability interval (h x the fastest decay rate at y_0 beyond it: a stiff
+  problem at a coarse step) is started from the certified ground truth instead, counted in
+  `counts['reference_start']`.
 Implicit tables are solved by Newton's method (`implementations.implicit_rk.newton_solve`); the
 derivative at the new point is recovered from the converged equation, not re-evaluated.
 
@@ -201,20 +204,27 @@ class LinearMultistepStepper(NewtonStepper):
         if count == 0:
             return []
         if self.starter_name == "reference":
-            from harness.ground_truth import reference  # lazy: heavy, only for this starter
-
-            times = t0 + h * np.arange(1, count + 1)
-            ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)
-            values = [np.array(ref.y[i], dtype=np.float64) for i in range(count)]
+            return self._reference_start(dyn, t0, y0, h, count)
         else:
             starter = self._starter_stepper()
             try:
                 check_compatible(starter, dyn.problem)
             except IncompatibleError as exc:
                 raise IncompatibleError(f"starter of {self.info.name!r}: {exc}") from None
+            if not self.coefficients.explicit and _start_unstable(starter, dyn, t0, y0, h):
+                dyn.counts["reference_start"] = dyn.counts.get("reference_start", 0) + 1
+                return self._reference_start(dyn, t0, y0, h, count)
             values = starter.first_steps(dyn, t0, y0, h, count)
         dyn.counts["starter_steps"] = dyn.counts.get("starter_steps", 0) + count
         return values
+
+    def _reference_start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float, count: int) -> list:
+        from harness.ground_truth import reference  # lazy: heavy, only for this start
+
+        times = t0 + h * np.arange(1, count + 1)
+        ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)
+        dyn.counts["starter_steps"] = dyn.counts.get("starter_steps", 0) + count
+        return [np.array(ref.y[i], dtype=np.float64) for i in range(count)]
 
     # -- contract ----------------------------------------------------------------------------------
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
@@ -303,6 +313,27 @@ class LinearMultistepStepper(NewtonStepper):
         c.hist_f = [f for _, f in behind]
         c.pending = ahead
         c.y = c.hist_y[-1]
+
+
+def _start_unstable(starter: Stepper, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> bool:
+    """Whether an explicit starter's first steps lie outside its real stability interval: h times
+    the fastest decay rate at the start, max over members of -Re(lambda) of the Jacobian at y0,
+    exceeds the interval derived from the starter's coefficients (`harness.facts.method_facts`;
+    rk4: 2.785). Its starting values would then be amplified by ~|R(h lambda)| >> 1 (rk4 at
+    h lambda = -5e7 on POLLU: y_1 ~ 1e12), which no later step of a zero-stable method undoes
+    (Hairer & Wanner II, IV.2: stability of explicit methods on stiff problems).
+    False for implicit or claim-only starters and when the Jacobian is not finite."""
+    from harness.facts import method_facts  # lazy: the facts layer reads the registry
+
+    facts = method_facts(starter)
+    interval = facts.real_interval
+    if not facts.explicit or interval is None or not math.isfinite(interval):
+        return False
+    jac = dyn.jac(t0, y0)
+    if not np.all(np.isfinite(jac)):
+        return False
+    rates = [-np.linalg.eigvals(jac[:, :, j]).real.min() for j in range(jac.shape[2])]
+    return bool(abs(h) * max(rates) > interval)
 
 
 # -- tables (data), oldest coefficient first ------------------------------------------------------

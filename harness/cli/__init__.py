@@ -69,6 +69,9 @@ def _common(p: argparse.ArgumentParser, *, grid: bool = True) -> None:
                        help="restrict to this stepper (repeatable; default: all)")
         p.add_argument("--problem", action="append", default=[], metavar="NAME",
                        help="restrict to this problem (repeatable; default: all)")
+        p.add_argument("--test-sets", action="store_true",
+                       help="the published test sets' problems (DETEST, the Bari IVP test set; "
+                            "run on request), with any --problem given")
         p.add_argument("--jobs", type=int, default=None, metavar="N",
                        help="worker processes (default: all cores; 1 runs in-process)")
         p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",

@@ -44,6 +44,17 @@ def _names(kind: str, requested: Sequence[str]) -> list[str]:
     return list(dict.fromkeys(requested))
 
 
+def _problem_names(args) -> list[str]:
+    """The problems a grid command runs: `--problem` names, and with `--test-sets` every
+    problem of a published test set (tagged 'test-set': DETEST, Bari) after them."""
+    if not getattr(args, "test_sets", False):
+        return _names("problem", args.problem)
+    from harness.registry import problems
+
+    sets = [p.name for p in problems.all(variants=True) if "test-set" in p.tags]
+    return list(dict.fromkeys([*_names("problem", args.problem), *sets] if args.problem else sets))
+
+
 
 def cmd_population(args) -> int:
     """Generate a population (harness.populations), judge it, save the per-method table and the
@@ -253,7 +264,7 @@ def _run(args, experiment: str):
     result = run_experiment(
         experiment,
         _names("stepper", args.stepper),
-        _names("problem", args.problem),
+        _problem_names(args),
         **_shared_run_settings(args),
         cell_timeout=args.cell_timeout,
         config=overrides or None,
@@ -389,12 +400,15 @@ def cmd_report(args) -> int:
                                grid_options=_grid_options_given(args))
         print(os.fspath(path), file=output_buffer())
         return EXIT_OK
+    # --test-sets: the test sets' own report, error at the end point against work (the
+    # work-precision experiment and its "Published test sets" section), not every experiment
     path = build_report(
         steppers=_names("stepper", args.stepper),
-        problems=_names("problem", args.problem),
+        problems=_problem_names(args),
         **_shared_run_settings(args),
         output=args.output,
         compare=args.compare,
+        experiments=["work-precision"] if args.test_sets else None,
     )
     print(os.fspath(path), file=output_buffer())
     return EXIT_OK
@@ -405,7 +419,7 @@ def _grid_options_given(args) -> list[str]:
     is not one: it loads the steppers of a run measured with plugins, which `--from` never
     imports from the run's own meta.json)."""
     given = [f"--{k}" for k in ("stepper", "problem") if getattr(args, k)]
-    given += [f"--{k}" for k in ("quick", "fresh") if getattr(args, k)]
+    given += [f"--{k.replace('_', '-')}" for k in ("quick", "fresh", "test_sets") if getattr(args, k)]
     given += [f"--{k.replace('_', '-')}" for k in ("jobs", "scheduler", "cell_timeout")
               if getattr(args, k) is not None]
     return given

@@ -194,9 +194,10 @@ def build_report(
     cell_timeout: float | None = None,
     progress: Progress | bool | str | None = None,
     compare: str | os.PathLike | None = None,
+    experiments: Sequence[str] | None = None,
 ) -> Path:
-    """Run every report experiment over `steppers` x `problems`, save the run, and write the
-    HTML report. Failed cells do not stop the report: they are listed in it.
+    """Run every report experiment (or those named) over `steppers` x `problems`, save the run,
+    and write the HTML report. Failed cells do not stop the report: they are listed in it.
 
     Parameters
     ----------
@@ -210,6 +211,8 @@ def build_report(
         plain lines otherwise).
     compare : str or path, optional, the earlier run "what changed" compares with (default the
         newest older run in the results directory).
+    experiments : sequence of str, optional, a subset of `report_experiments()` (None: all;
+        `harness report --test-sets` runs 'work-precision' alone).
 
     Returns
     -------
@@ -231,7 +234,10 @@ def build_report(
         raise InputError("`steppers` must name at least one stepper")
     if not problem_names:
         raise InputError("`problems` must name at least one problem")
-    experiments = report_experiments()
+    every = report_experiments()
+    experiments = every if experiments is None else list(dict.fromkeys(experiments))
+    if not experiments or any(e not in every for e in experiments):
+        raise InputError(f"`experiments` must name some of {every}, got {experiments!r}")
     if compare is not None:
         from harness.store import resolve_run
 
