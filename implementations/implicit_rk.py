@@ -31,8 +31,13 @@ from harness.errors import InputError
 from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, StepFailure, Stepper
-from harness.tolerances import (EPS, NEWTON_MAX_ITER, NEWTON_ROUNDING_ULPS, NEWTON_STALL_CONTRACTION,
-                                NEWTON_TOL)
+from harness.tolerances import (
+    EPS,
+    NEWTON_MAX_ITER,
+    NEWTON_ROUNDING_ULPS,
+    NEWTON_STALL_CONTRACTION,
+    NEWTON_TOL,
+)
 from implementations import coefficient_info
 
 __all__ = [
@@ -187,8 +192,9 @@ def newton_solve(
     first iterate and, in 'full' mode, at every iterate. Converged by `newton_stop`: the scaled
     increment at most `settings.tol`, or the contraction rate theta of two successive increments
     giving an estimated remaining error theta / (1 - theta) * |dx| at most `settings.tol` (Hairer &
-    Wanner II, IV.8, eq. 8.10), or the increment stalled at the rounding level. Iterations are added to counts['newton_iterations']. Raises `StepFailure`
-    naming `stepper`, the time, the increment and the residual when it does not converge.
+    Wanner II, IV.8, eq. 8.10), or the increment stalled at the rounding level. Iterations are
+    added to counts['newton_iterations']. Raises `StepFailure` naming `stepper`, the time, the
+    increment and the residual when it does not converge.
 
     Parameters
     ----------

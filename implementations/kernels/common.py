@@ -97,7 +97,8 @@ def accel_all(f_accel, t, Q, P, Out):
 # Newton's method on the ensemble axis, as `implementations.implicit_rk.newton_solve`: the
 # increment's max-norm over members and components (scaled by 1 + |y_n|) at most `tol`, or the
 # contraction estimate theta / (1 - theta) |dx| at most `tol` (Hairer & Wanner II, IV.8, eq.
-# (8.10)), or stalled at the rounding level (`newton_converged`); LU with partial pivoting per member. Status 1: no convergence; 2: singular matrix.
+# (8.10)), or stalled at the rounding level (`newton_converged`); LU with partial pivoting per
+# member. Status 1: no convergence; 2: singular matrix.
 @njit(**INLINE)
 def lu_factor(M, piv):
     """M = P L U in place: Gaussian elimination with partial pivoting, whole rows swapped, the
