@@ -159,17 +159,10 @@ NEWTON_TOL = 1e-14
 # Iterations allowed before a step counts as failed: full Newton from the step's start needs 2-5;
 # simplified Newton contracts by ~0.1 per iteration at large stiff steps, so ~15 to reach 1e-14.
 NEWTON_MAX_ITER = 20
-# ... but an ill-conditioned solve (h x stiffness >> 1, chemistry Jacobians) cannot reach 1e-14:
-# its increment stops decreasing at the rounding level of the residual times the conditioning of
-# the Newton matrix. Rounding-aware stop (Hairer & Wanner II, IV.8: the iteration is stopped once
-# it no longer contracts at the level of the rounding errors): the iterate counts as converged
-# when the increment has stopped decreasing (contraction theta >= NEWTON_STALL_CONTRACTION: no
-# longer the geometric decrease of a converging iteration) and is at most
-# NEWTON_ROUNDING_ULPS x eps x (1 + max |x| / scale) in the scaled norm, i.e. ~1e4 roundings of the
-# iterate: below every error a float64 sweep measures (its rounding floor is ~1e-13-1e-12), while a
-# divergent or slowly converging iteration stays far above it and still fails.
-NEWTON_STALL_CONTRACTION = 0.5
-NEWTON_ROUNDING_ULPS = 1e4
+# ... or, rounding-aware (Hairer & Wanner II, IV.8), once the increment stops decreasing (theta >= 0.5)
+# at ~1e4 roundings of the iterate, eps (1 + |x|), below every error a sweep measures: where
+# an ill-conditioned solve's noise keeps it above 1e-14, while a divergent iteration still fails.
+NEWTON_STALL_CONTRACTION, NEWTON_ROUNDING_ULPS = 0.5, 1e4
 
 # Order from an exact local-error series (harness.theory): a coefficient of h^n in the local
 # error counts as zero below this, relative to the exact solution's coefficient; float64
