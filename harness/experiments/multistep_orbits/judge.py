@@ -1,0 +1,178 @@
+"""Verdict code of the multistep-orbits experiment: resonances in an error-against-h scan, their
+match with the predictions, and the drift class and rate (module docstring of
+`harness.experiments.multistep_orbits`).
+
+- Onset: the smallest scanned h from which the runs go non-finite or reach an energy error of
+  ENERGY_BLOWUP_ERROR, at it and at the RESONANCE_WINDOW step sizes above it (a lone blow-up
+  between bounded runs is a resonance).
+- Resonance (`find_spikes`): below the onset, a step size whose energy error exceeds by
+  RESONANCE_SPIKE_FACTOR the straight line (log error against log h) fitted through the
+  RESONANCE_WINDOW scanned neighbours on each side (the point itself left out). The onset counts
+  as a resonance too when it exceeds its lower neighbours' trend that way.
+- A resonance is predicted when a predicted h omega lies within RESONANCE_MATCH_REL of it;
+  `chance_fraction` is the share of the scanned h omega range within that distance of any
+  prediction (how often a resonance placed at random would match).
+- Drift: over the stable, non-resonant points whose error is between SPIRAL_MIN_CHANGE and
+  SPIRAL_MAX_ERROR, the drift is secular when the fitted rate times the run's length explains
+  at least SECULAR_FRACTION of the largest error (median over the points), else bounded.
+  Expected (the theorem): symmetric coefficients keep the energy error bounded away from
+  resonances (HLW XV.5: near-conservation of a modified energy by symmetric multistep methods
+  whose parasitic components stay small over long times), the others drift secularly at the principal
+  root's rate (Quinlan 1999, sec. 1). The drift rate's exponent in h is fitted where the points
+  are, beside the exponent of the predicted rates at the same points.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from harness import tolerances as tol
+
+__all__ = ["find_spikes", "summarize_cell", "onset_index"]
+
+
+def find_spikes(h: np.ndarray, error: np.ndarray, *, factor: float = tol.RESONANCE_SPIKE_FACTOR,
+                window: int = tol.RESONANCE_WINDOW) -> list[int]:
+    """Indices whose error stands `factor` above the log-log line through their neighbours.
+
+    Parameters
+    ----------
+    h : ndarray, increasing step sizes.
+    error : ndarray, positive finite errors at them.
+    factor : float, optional, how far above the trend (default RESONANCE_SPIKE_FACTOR).
+    window : int, optional, neighbours on each side (default RESONANCE_WINDOW).
+
+    Returns
+    -------
+    list of int: the spikes' indices, increasing.
+    """
+    h = np.asarray(h, dtype=float)
+    e = np.log(np.maximum(np.asarray(error, dtype=float), tol.ENERGY_ERROR_FLOOR))
+    x = np.log(h)
+    out = []
+    for i in range(len(h)):
+        near = [j for j in range(max(0, i - window), min(len(h), i + window + 1)) if j != i]
+        if len(near) < 2:
+            continue
+        # a robust line: the median of the neighbours' pairwise slopes, then the median intercept
+        xs, ys = x[near], e[near]
+        slopes = [(ys[b] - ys[a]) / (xs[b] - xs[a]) for a in range(len(near))
+                  for b in range(a + 1, len(near)) if xs[b] != xs[a]]
+        slope = float(np.median(slopes)) if slopes else 0.0
+        intercept = float(np.median(ys - slope * xs))
+        if e[i] - (intercept + slope * x[i]) > math.log(factor):
+            out.append(i)
+    return out
+
+
+def onset_index(max_error: np.ndarray, finite: np.ndarray) -> int | None:
+    """The first index from which every run blew up (non-finite, or energy error >=
+    ENERGY_BLOWUP_ERROR) up to RESONANCE_WINDOW points on (a lone blow-up is a resonance).
+
+    Parameters
+    ----------
+    max_error : ndarray, the largest relative energy errors, by increasing h.
+    finite : ndarray of bool, whether each run stayed finite.
+
+    Returns
+    -------
+    int or None
+    """
+    bad = (~np.asarray(finite, dtype=bool)) | ~(np.asarray(max_error, dtype=float) < tol.ENERGY_BLOWUP_ERROR)
+    for i in np.flatnonzero(bad):
+        if np.all(bad[i : i + tol.RESONANCE_WINDOW + 1]):
+            return int(i)
+    return None
+
+
+def _near(value: float, targets: list[float]) -> bool:
+    return any(abs(value - t) <= tol.RESONANCE_MATCH_REL * t for t in targets)
+
+
+def summarize_cell(stepper, problem: str, g: pd.DataFrame) -> dict[str, Any]:
+    """One summary record (module docstring).
+
+    Parameters
+    ----------
+    stepper : Stepper, whose coefficients (a SecondOrderMultistep) are asked.
+    problem : str, the problem's name.
+    g : DataFrame, the cell's rows.
+
+    Returns
+    -------
+    dict: the experiment's SUMMARY_COLUMNS.
+    """
+    method = stepper.coefficients
+    g = g.sort_values("h_omega").reset_index(drop=True)
+    hw = g["h_omega"].to_numpy(float)
+    err = g["max_error"].to_numpy(float)
+    finite = g["finite"].to_numpy(bool)
+    predicted = sorted(g.loc[g["source"] == "prediction", "h_omega"].astype(float))
+    onset = onset_index(err, finite)
+    stable = len(g) if onset is None else onset
+    spikes = find_spikes(hw[:stable], err[:stable]) if stable >= 3 else []
+    events = [float(hw[i]) for i in spikes]
+    if onset is not None and onset >= 2:
+        lower = find_spikes(hw[: onset + 1], np.where(np.isfinite(err[: onset + 1]), err[: onset + 1], 1e300))
+        if onset in lower:
+            events.append(float(hw[onset]))
+    span = (float(hw[0]), float(hw[-1]))
+    covered = sum(2 * tol.RESONANCE_MATCH_REL * p for p in predicted)
+    rec: dict[str, Any] = {
+        "stepper": stepper.info.name, "problem": problem, "symmetric": bool(method.symmetric),
+        "order": int(method.order()), "points": len(g),
+        "predicted": ", ".join(f"{p:.4g}" for p in predicted),
+        "predicted_found": sum(_near(p, events) or any(abs(p - e) <= tol.RESONANCE_MATCH_REL * e
+                                                       for e in events) for p in predicted),
+        "resonances": ", ".join(f"{e:.4g}" for e in events),
+        "resonances_predicted": sum(_near(e, predicted) for e in events),
+        "chance_fraction": min(1.0, covered / max(span[1] - span[0], tol.EPS)) if predicted else 0.0,
+        "onset_h_omega": float(hw[onset]) if onset is not None else math.nan,
+        "expected_class": "bounded" if method.symmetric else "secular",
+        "wall_s": float(g["wall_s"].sum()),
+        "message": "; ".join(dict.fromkeys(m for m in g["message"].fillna("") if m)),
+    }
+    rec.update(_drift(g.iloc[:stable].drop(index=spikes)))
+    if rec["drift_class"] == "":
+        rec.update(verdict="not-measurable", passed=None)
+        rec["message"] = "; ".join(x for x in (rec["message"], (
+            f"no stable, non-resonant step size with an energy error between "
+            f"{tol.SPIRAL_MIN_CHANGE:g} and {tol.SPIRAL_MAX_ERROR:g}")) if x)
+    else:
+        ok = rec["drift_class"] == rec["expected_class"]
+        if ok and not method.symmetric and np.isfinite(rec["rate_ratio"]):
+            ok = bool(rec["sign_agrees"]) and (1 / tol.SPIRAL_RATE_FACTOR <= rec["rate_ratio"]
+                                               <= tol.SPIRAL_RATE_FACTOR)
+        rec.update(verdict="as-expected" if ok else "differs", passed=ok)
+    return rec
+
+
+def _drift(g: pd.DataFrame) -> dict[str, Any]:
+    """Drift class, measured and predicted exponents, rate ratio and sign over the usable points."""
+    out: dict[str, Any] = {"drift_class": "", "drift_points": 0, "drift_exponent": math.nan,
+                           "predicted_exponent": math.nan, "rate_ratio": math.nan,
+                           "sign_agrees": None}
+    use = g[g["finite"].astype(bool) & (g["max_error"] >= tol.SPIRAL_MIN_CHANGE)
+            & (g["max_error"] < tol.SPIRAL_MAX_ERROR)]
+    if use.empty:
+        return out
+    explained = np.abs(use["drift_rate"]) * use["steps"] * use["h"] / use["max_error"]
+    secular = float(np.median(explained)) >= tol.SECULAR_FRACTION
+    out.update(drift_class="secular" if secular else "bounded", drift_points=len(use))
+    if not secular:
+        return out
+    rate = use["drift_rate"].to_numpy(float)
+    pred = use["predicted_rate"].to_numpy(float)
+    x = np.log(use["h_omega"].to_numpy(float))
+    if len(use) >= 2 and np.all(rate != 0):
+        out["drift_exponent"] = float(np.polyfit(x, np.log(np.abs(rate)), 1)[0])
+    if np.all(np.isfinite(pred)) and np.all(pred != 0):
+        out["sign_agrees"] = bool(np.all(np.sign(pred) == np.sign(rate)))
+        out["rate_ratio"] = float(np.median(rate / pred))
+        if len(use) >= 2:
+            out["predicted_exponent"] = float(np.polyfit(x, np.log(np.abs(pred)), 1)[0])
+    return out
