@@ -495,33 +495,14 @@ PREDICTION_TAYLOR_TOL = 1e-10
 # fraction of the measured error over the fit: the fitted points are then set by later terms.
 SLOPE_EXPLAINED_RATIO = 0.3
 
-# -- second-order multistep methods on orbits (harness.experiments.multistep_orbits) ------------
-# A root of rho / (zeta - 1)^2 counts as on the unit circle within this distance: float64 root
-# finding of the quotient (simple roots) is good to ~1e-13; Stormer-Cowell roots sit at 0.
-PARASITIC_UNIT_CIRCLE = 1e-8
-# A scanned step size is a resonance when its energy error exceeds the trend of its neighbours
-# (a straight line in log error against log h through RESONANCE_WINDOW points on each side) by
-# this factor: the sampled maximum of a bounded oscillation scatters by ~2x about the trend,
-# the resonances measured on QT8 stand 1e2-1e8 above it (one decade keeps both apart).
-RESONANCE_SPIKE_FACTOR = 10.0
-RESONANCE_WINDOW = 3
-# A measured resonance matches a prediction within this relative distance in h omega: the
-# parasitic roots move by O((h omega)^2) from their h = 0 angles (QT8 on the circular orbit:
-# predicted pi/30, band measured at 0.1042-0.1060, centre +0.5 %).
-RESONANCE_MATCH_REL = 0.02
-# Harmonics of the Jacobian along the orbit that couple parasitic components: amplitude at least
-# this fraction of the largest non-constant harmonic (the circular orbit's 2 omega is alone; the
-# others are at rounding, 1e-15).
-JACOBIAN_HARMONIC_FLOOR = 0.05
-# Spiralling is read where the run stays a small perturbation of the orbit (relative energy
-# error below SPIRAL_MAX_ERROR: the leading-order drift law holds) and the drift over the run
-# is above rounding (rate x T above SPIRAL_MIN_CHANGE).
-SPIRAL_MAX_ERROR = 1e-2
-SPIRAL_MIN_CHANGE = 1e-11
-# An energy error is secular when the fitted drift over the run explains at least this fraction
-# of the largest error (a bounded oscillation's Theil-Sen slope times T is a small fraction).
-SECULAR_FRACTION = 0.5
-# The measured drift rate agrees with the prediction 2 g |v|^2 / |E| when their ratio lies within
-# this factor of 1 (leading order only: the next term is O(h omega) smaller; measured stormer4-6,
-# cowell4 at h omega <= 0.1: 1.00 +- 0.02).
-SPIRAL_RATE_FACTOR = 2.0
+# Second-order multistep tables on orbits (harness.experiments.multistep_orbits), one reason each:
+PARASITIC_UNIT_CIRCLE = 1e-8  # |root| - 1 of a root on the circle: float64 roots of simple roots ~1e-13
+# A resonance: energy error this far above the log-log trend of RESONANCE_WINDOW neighbours a side
+# (bounded runs scatter ~2x about it; QT8's resonances stand 1e2-1e8 above it).
+RESONANCE_SPIKE_FACTOR, RESONANCE_WINDOW = 10.0, 3
+RESONANCE_MATCH_REL = 0.02  # parasitic roots move O((h omega)^2): QT8's band centre sits 0.5 % off
+JACOBIAN_HARMONIC_FLOOR = 0.05  # share of the largest harmonic (a circular orbit's others: 1e-15)
+# Drift read where the run stays near the orbit and above rounding (leading-order law holds), and
+# called secular when slope x T explains this share of the largest error (bounded: a small share).
+SPIRAL_MAX_ERROR, SPIRAL_MIN_CHANGE, SECULAR_FRACTION = 1e-2, 1e-10, 0.5
+SPIRAL_RATE_FACTOR = 2.0  # measured / predicted drift rate (leading order; stormer4-6: 1.00 +- 0.02)

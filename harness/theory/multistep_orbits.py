@@ -162,8 +162,8 @@ def combination_resonances(method: SecondOrderMultistep, harmonics: list[int],
             for j in range(i, len(base)):
                 for kind in ("sum", "difference"):
                     for m in sorted(set(int(x) for x in harmonics)):
-                        for l in range(0, int(m * h_omega_max / (2 * math.pi)) + 2):
-                            hw = _settle(method, base, i, j, kind, m, l, c)
+                        for turns in range(0, int(m * h_omega_max / (2 * math.pi)) + 2):
+                            hw = _settle(method, base, i, j, kind, m, turns, c)
                             if hw is not None and h_omega_min <= hw <= h_omega_max:
                                 key = round(hw, 9)
                                 if key not in found or found[key].harmonic > m:
@@ -171,9 +171,9 @@ def combination_resonances(method: SecondOrderMultistep, harmonics: list[int],
     return [found[k] for k in sorted(found)]
 
 
-def _settle(method, base: list[float], i: int, j: int, kind: str, m: int, l: int,
+def _settle(method, base: list[float], i: int, j: int, kind: str, m: int, turns: int,
             curvature: float) -> float | None:
-    """The fixed point hw = (theta_j(hw) +- theta_i(hw) + 2 pi l) / m, or None."""
+    """The fixed point hw = (theta_j(hw) +- theta_i(hw) + 2 pi turns) / m, or None."""
     angles = base
     hw = math.nan
     for _ in range(30):
@@ -182,7 +182,7 @@ def _settle(method, base: list[float], i: int, j: int, kind: str, m: int, l: int
         combo = angles[j] + angles[i] if kind == "sum" else angles[j] - angles[i]
         if combo <= 0.0:
             return None
-        new = (combo + 2 * math.pi * l) / m
+        new = (combo + 2 * math.pi * turns) / m
         if abs(new - hw) <= 1e-12 * new:
             return new
         hw = new

@@ -10,7 +10,9 @@ class, never its name) and the problem an orbit with a declared period and an en
 2. Step sizes: `points` values of x = h rho_max evenly from `x_min` to `x_max` (rho_max the
    problem's fastest rate, `Problem.time_scale`), plus, for a symmetric table, every resonant
    h omega the characteristic polynomial predicts in that range
-   (`harness.theory.multistep_orbits.combination_resonances`).
+   (`harness.theory.multistep_orbits.combination_resonances`) when there are at most
+   `max_predicted` of them (more crowd the range, as on eccentric orbits: they are listed, and
+   the summary says how often a resonance would match one by chance, but not run).
 3. At each h, `steps` steps (an implicit table without a compiled loop: `implicit_steps`) from
    the problem's start, by the fastest implementation of the method (`harness.step_loops`);
    the state saved at `samples` even steps. Measured: the largest relative energy error, its
@@ -49,12 +51,13 @@ from harness.theory.multistep_orbits import combination_resonances, principal_gr
 __all__ = ["MultistepOrbitsExperiment", "orbit_facts", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
 
 ROW_COLUMNS = [
-    "stepper", "problem", "h", "h_omega", "x", "source", "prediction", "steps", "t_end",
+    "stepper", "problem", "h", "h_omega", "x", "source", "prediction", "predictions", "steps", "t_end",
     "max_error", "end_error", "drift_rate", "predicted_rate", "max_L_error", "finite",
     "implementation", "wall_s", "message",
 ]
 SUMMARY_COLUMNS = [
-    "stepper", "problem", "symmetric", "order", "points", "predicted", "predicted_found",
+    "stepper", "problem", "symmetric", "order", "points", "predicted", "predicted_testable",
+    "predicted_found",
     "resonances", "resonances_predicted", "chance_fraction", "onset_h_omega", "expected_class",
     "drift_class", "drift_points", "drift_exponent", "predicted_exponent", "rate_ratio",
     "sign_agrees", "verdict", "passed", "wall_s", "message",
@@ -93,7 +96,8 @@ def orbit_facts(problem) -> dict[str, Any]:
     curvatures = [float(c) / omega**2 for c in np.linalg.eigvalsh((mean + mean.T) / 2)]
     v = np.stack([ref.y[i][nq:, 0] for i in range(M)])
     speed2 = np.sum(v * v, axis=1)
-    energy = problem.invariant_values(np.asarray(problem.y0, dtype=float)[:, None])[primary_invariant(problem)][0]
+    start = np.asarray(problem.y0, dtype=float)[:, None]
+    energy = problem.invariant_values(start)[primary_invariant(problem)][0]
     return {"harmonics": harmonics, "curvatures": curvatures, "omega": omega,
             "v2_over_energy": float(np.mean(speed2)) / max(abs(float(energy)), tol.EPS),
             "circular": bool(np.ptp(speed2) <= 1e-8 * np.mean(speed2))}
@@ -125,6 +129,7 @@ class MultistepOrbitsExperiment(Experiment):
         "steps": 20_000,
         "implicit_steps": 4_000,
         "samples": 200,
+        "max_predicted": 24,
     }
     quick_config: Mapping[str, Any] = {"points": 18, "steps": 5_000, "implicit_steps": 2_000}
     finite_columns = ("h", "h_omega", "x", "steps", "t_end")
@@ -147,12 +152,13 @@ class MultistepOrbitsExperiment(Experiment):
         from harness.registry import get_problem, get_stepper
         from harness.stepper import check_compatible
 
-        check_config(config, counts=("points", "steps", "implicit_steps", "samples"),
+        check_config(config, counts=("points", "steps", "implicit_steps", "samples", "max_predicted"),
                      positives=("x_min", "x_max"), name_lists=("problems",))
         if config["x_min"] >= config["x_max"]:
             from harness.errors import InputError
 
-            raise InputError(f"config `x_min` must be below `x_max` ({config['x_max']!r}), got {config['x_min']!r}")
+            raise InputError(f"config `x_min` must be below `x_max` ({config['x_max']!r}), "
+                             f"got {config['x_min']!r}")
         want = list(config["problems"])
         cells: list[Cell] = []
         skips: list[Skip] = []
@@ -160,14 +166,17 @@ class MultistepOrbitsExperiment(Experiment):
             problem = get_problem(p)
             reason = None
             if p not in want:
-                reason = f"problem {p!r} is not in this experiment's orbits ({', '.join(want)}; config `problems`)"
+                reason = (f"problem {p!r} is not in this experiment's orbits ({', '.join(want)}; "
+                          "config `problems`)")
             elif problem.newtonian is None or problem.period is None or not problem.invariants:
-                reason = f"problem {p!r} is not a Newtonian orbit with a declared period and an energy invariant"
+                reason = (f"problem {p!r} is not a Newtonian orbit with a declared period and an "
+                          "energy invariant")
             for s in steppers:
                 stepper = get_stepper(s)
                 why = reason
+                table = getattr(stepper, "coefficients", None)
                 if why is None and (isinstance(stepper, AdaptiveStepper)
-                                    or not isinstance(getattr(stepper, "coefficients", None), SecondOrderMultistep)):
+                                    or not isinstance(table, SecondOrderMultistep)):
                     why = (f"stepper {s!r} is not a second-order multistep table: the predictions "
                            "need its characteristic polynomial")
                 if why is None:
@@ -205,9 +214,10 @@ class MultistepOrbitsExperiment(Experiment):
         to_hw = omega / problem.time_scale.fastest_rate
         grid = np.linspace(float(config["x_min"]), float(config["x_max"]), int(config["points"])) * to_hw
         points = {round(float(hw), 12): ("grid", "") for hw in grid}
-        if method.symmetric:
-            for r in combination_resonances(method, facts["harmonics"], facts["curvatures"],
-                                            float(grid[0]), float(grid[-1])):
+        predicted = (combination_resonances(method, facts["harmonics"], facts["curvatures"],
+                                            float(grid[0]), float(grid[-1])) if method.symmetric else [])
+        if len(predicted) <= int(config["max_predicted"]):
+            for r in predicted:
                 points[round(r.h_omega, 12)] = ("prediction", r.describe())
         slow = not method.explicit and runner is stepper
         n = int(config["implicit_steps"] if slow else config["steps"])
@@ -220,7 +230,8 @@ class MultistepOrbitsExperiment(Experiment):
                                    "prediction": points[hw][1], "steps": n, "t_end": problem.t0 + n * h,
                                    "max_error": math.inf, "end_error": math.inf, "drift_rate": math.nan,
                                    "max_L_error": math.inf, "finite": False, "message": ""}
-            growth = principal_growth(method, hw)
+            # symmetric: the principal root stays on the unit circle (roots in pairs zeta, 1/zeta)
+            growth = 0.0 if method.symmetric else principal_growth(method, hw)
             rec["predicted_rate"] = (2.0 * growth * omega * facts["v2_over_energy"]
                                      if facts["circular"] else math.nan)
             try:
@@ -241,6 +252,7 @@ class MultistepOrbitsExperiment(Experiment):
             rec["implementation"] = runner.info.implementation
             records.append(rec)
         rows = pd.DataFrame(records)
+        rows["predictions"] = " ".join(repr(r.h_omega) for r in predicted)
         rows["stepper"] = stepper.info.name
         rows["problem"] = problem.name
         return rows[ROW_COLUMNS]

@@ -7,9 +7,11 @@ match with the predictions, and the drift class and rate (module docstring of
   between bounded runs is a resonance).
 - Resonance (`find_spikes`): below the onset, a step size whose energy error exceeds by
   RESONANCE_SPIKE_FACTOR the straight line (log error against log h) fitted through the
-  RESONANCE_WINDOW scanned neighbours on each side (the point itself left out). The onset counts
+  RESONANCE_WINDOW scanned neighbours on each side (the point itself left out; the line no lower
+  than what rounding alone adds over the run, `energy.judge.rounding_growth`). The onset counts
   as a resonance too when it exceeds its lower neighbours' trend that way.
-- A resonance is predicted when a predicted h omega lies within RESONANCE_MATCH_REL of it;
+- A resonance is predicted when a predicted h omega lies within RESONANCE_MATCH_REL of it (and
+  a prediction at most at the onset is found when a resonance lies that close to it);
   `chance_fraction` is the share of the scanned h omega range within that distance of any
   prediction (how often a resonance placed at random would match).
 - Drift: over the stable, non-resonant points whose error is between SPIRAL_MIN_CHANGE and
@@ -31,13 +33,15 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
+from harness.experiments.energy.judge import rounding_growth
 
 __all__ = ["find_spikes", "summarize_cell", "onset_index"]
 
 
 def find_spikes(h: np.ndarray, error: np.ndarray, *, factor: float = tol.RESONANCE_SPIKE_FACTOR,
-                window: int = tol.RESONANCE_WINDOW) -> list[int]:
-    """Indices whose error stands `factor` above the log-log line through their neighbours.
+                window: int = tol.RESONANCE_WINDOW, floor: float = 0.0) -> list[int]:
+    """Indices whose error stands `factor` above the log-log line through their neighbours (at
+    least one on each side), or above `floor` where the line runs below it.
 
     Parameters
     ----------
@@ -45,28 +49,32 @@ def find_spikes(h: np.ndarray, error: np.ndarray, *, factor: float = tol.RESONAN
     error : ndarray, positive finite errors at them.
     factor : float, optional, how far above the trend (default RESONANCE_SPIKE_FACTOR).
     window : int, optional, neighbours on each side (default RESONANCE_WINDOW).
+    floor : float, optional, the error rounding alone leaves (default 0).
 
     Returns
     -------
     list of int: the spikes' indices, increasing.
     """
-    h = np.asarray(h, dtype=float)
+    x = np.log(np.asarray(h, dtype=float))
     e = np.log(np.maximum(np.asarray(error, dtype=float), tol.ENERGY_ERROR_FLOOR))
-    x = np.log(h)
     out = []
-    for i in range(len(h)):
-        near = [j for j in range(max(0, i - window), min(len(h), i + window + 1)) if j != i]
-        if len(near) < 2:
-            continue
-        # a robust line: the median of the neighbours' pairwise slopes, then the median intercept
-        xs, ys = x[near], e[near]
-        slopes = [(ys[b] - ys[a]) / (xs[b] - xs[a]) for a in range(len(near))
-                  for b in range(a + 1, len(near)) if xs[b] != xs[a]]
-        slope = float(np.median(slopes)) if slopes else 0.0
-        intercept = float(np.median(ys - slope * xs))
-        if e[i] - (intercept + slope * x[i]) > math.log(factor):
+    for i in range(1, len(x) - 1):
+        near = [j for j in range(max(0, i - window), min(len(x), i + window + 1)) if j != i]
+        if _excess(x, e, i, near, floor) > math.log(factor):
             out.append(i)
     return out
+
+
+def _excess(x: np.ndarray, e: np.ndarray, i: int, near: list[int], floor: float) -> float:
+    """log error at i minus the robust line (median pairwise slope, median intercept) through
+    the points `near`, that line raised to log `floor` where below it."""
+    xs, ys = x[near], e[near]
+    slopes = [(ys[b] - ys[a]) / (xs[b] - xs[a]) for a in range(len(near))
+              for b in range(a + 1, len(near)) if xs[b] != xs[a]]
+    slope = float(np.median(slopes)) if slopes else 0.0
+    intercept = float(np.median(ys - slope * xs))
+    trend = max(intercept + slope * x[i], math.log(max(floor, tol.ENERGY_ERROR_FLOOR)))
+    return float(e[i] - trend)
 
 
 def onset_index(max_error: np.ndarray, finite: np.ndarray) -> int | None:
@@ -111,23 +119,29 @@ def summarize_cell(stepper, problem: str, g: pd.DataFrame) -> dict[str, Any]:
     hw = g["h_omega"].to_numpy(float)
     err = g["max_error"].to_numpy(float)
     finite = g["finite"].to_numpy(bool)
-    predicted = sorted(g.loc[g["source"] == "prediction", "h_omega"].astype(float))
+    listed = str(g["predictions"].iloc[0]) if "predictions" in g and len(g) else ""
+    predicted = sorted(float(x) for x in listed.split() if x)
     onset = onset_index(err, finite)
     stable = len(g) if onset is None else onset
-    spikes = find_spikes(hw[:stable], err[:stable]) if stable >= 3 else []
+    floor = rounding_growth(float(g["steps"].max()))
+    spikes = find_spikes(hw[:stable], err[:stable], floor=floor) if stable >= 3 else []
     events = [float(hw[i]) for i in spikes]
-    if onset is not None and onset >= 2:
-        lower = find_spikes(hw[: onset + 1], np.where(np.isfinite(err[: onset + 1]), err[: onset + 1], 1e300))
-        if onset in lower:
+    if onset is not None and onset >= 2:  # the onset against its lower neighbours' trend
+        logs = np.log(np.maximum(np.where(np.isfinite(err), err, 1e300), tol.ENERGY_ERROR_FLOOR))
+        near = list(range(max(0, onset - tol.RESONANCE_WINDOW), onset))
+        if _excess(np.log(hw), logs, onset, near, floor) > math.log(tol.RESONANCE_SPIKE_FACTOR):
             events.append(float(hw[onset]))
     span = (float(hw[0]), float(hw[-1]))
+    limit = span[1] if onset is None else float(hw[onset]) * (1 + tol.RESONANCE_MATCH_REL)
+    testable = [p for p in predicted if p <= limit]  # above the onset every run blew up
     covered = sum(2 * tol.RESONANCE_MATCH_REL * p for p in predicted)
     rec: dict[str, Any] = {
         "stepper": stepper.info.name, "problem": problem, "symmetric": bool(method.symmetric),
         "order": int(method.order()), "points": len(g),
-        "predicted": ", ".join(f"{p:.4g}" for p in predicted),
-        "predicted_found": sum(_near(p, events) or any(abs(p - e) <= tol.RESONANCE_MATCH_REL * e
-                                                       for e in events) for p in predicted),
+        "predicted": (", ".join(f"{p:.4g}" for p in predicted) if len(predicted) <= 12 else
+                      f"{len(predicted)} step sizes from {predicted[0]:.4g} to {predicted[-1]:.4g}"),
+        "predicted_testable": len(testable),
+        "predicted_found": sum(_near(p, events) for p in testable),
         "resonances": ", ".join(f"{e:.4g}" for e in events),
         "resonances_predicted": sum(_near(e, predicted) for e in events),
         "chance_fraction": min(1.0, covered / max(span[1] - span[0], tol.EPS)) if predicted else 0.0,

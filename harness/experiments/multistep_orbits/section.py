@@ -31,7 +31,8 @@ def multistep_orbits(view: RunView, sec: Section) -> None:
                    "predicted from the principal root's growth, 2 g |v|² / |E|.")
     cols = [("stepper", "stepper"), ("problem", "problem"), ("symmetric", "symmetric"),
             ("points", "h scanned"), ("predicted", "predicted h ω"),
-            ("predicted_found", "predicted found"), ("resonances", "resonances found (h ω)"),
+            ("predicted_testable", "predicted, at most the onset"),
+            ("predicted_found", "of them found"), ("resonances", "resonances found (h ω)"),
             ("resonances_predicted", "of them predicted"), ("chance_fraction", "chance match"),
             ("onset_h_omega", "unstable from h ω"), ("message", "why")]
     sec.table(df_table(summ, cols, "Resonant step sizes", experiment="multistep-orbits", status=None))

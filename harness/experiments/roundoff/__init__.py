@@ -194,7 +194,8 @@ class RoundoffExperiment(Experiment):
                         int(config["points_per_decade"]))
         y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
         nq = len(problem.newtonian.positions)
-        growth_n = np.unique(np.geomspace(max(n // 100, 1), n, int(config.get("growth_points", 9))).astype(np.int64))
+        growth_n = np.unique(np.geomspace(max(n // 100, 1), n,
+                                          int(config.get("growth_points", 9))).astype(np.int64))
         times = np.unique(np.concatenate([problem.t0 + n * hs, problem.t0 + growth_n * hs[-1]]))
         ref = reference(problem, times, y0)
         records = []
