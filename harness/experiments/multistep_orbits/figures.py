@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from harness import tolerances as tol
 from harness.kit import figure_style as fs
 from harness.kit.figure_svg import Figure, to_svg
 
@@ -61,7 +62,8 @@ def scan_figure(problem: str, rows: pd.DataFrame, summary: pd.DataFrame,
 @fs.styled
 def drift_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     """|drift rate| of the relative energy against h omega: measured (markers, filled when the
-    sign is the predicted one) and predicted (lines) where the orbit is circular.
+    sign is the predicted one) and predicted (lines) where the orbit is circular, at the step
+    sizes whose energy error stayed below SPIRAL_MAX_ERROR.
 
     Parameters
     ----------
@@ -74,7 +76,8 @@ def drift_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette) -> Figur
     Figure or None: None when no row has a predicted rate.
     """
     pred = rows["predicted_rate"].astype(float)
-    g = rows[np.isfinite(pred) & (pred != 0) & rows["finite"].astype(bool)]
+    near = rows["max_error"].astype(float) < tol.SPIRAL_MAX_ERROR  # where the drift law is read
+    g = rows[np.isfinite(pred) & (pred != 0) & rows["finite"].astype(bool) & near]
     if g.empty:
         return None
     fig, axes = fs.new_figure(1, 1, size=(7.2, 3.6))
