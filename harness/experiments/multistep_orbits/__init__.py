@@ -24,6 +24,11 @@ The summary (`judge.py`) finds the resonances (spikes over the trend of the neig
 of instability), matches them with the predictions, and reads the drift: bounded for symmetric
 coefficients, secular otherwise, its rate's exponent in h against the predicted one.
 
+The default scan costs seconds per cell (compiled loops, 36 step sizes x 2e4 steps); a bigger
+one on request: `harness run multistep-orbits --steps 100000` for longer runs, or
+`harness.runner.run_experiment("multistep-orbits", steppers, config={"points": 200, "x_max": 1.0})`
+for a finer or wider scan.
+
 References: G.D. Quinlan & S. Tremaine, AJ 100 (1990) 1694; G.D. Quinlan, astro-ph/9901136
 (1999); Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed., XV.5-XV.8.
 """
