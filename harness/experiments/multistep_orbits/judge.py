@@ -18,7 +18,7 @@ match with the predictions, and the drift class and rate (module docstring of
   SPIRAL_MAX_ERROR, the drift is secular when the fitted rate times the run's length explains
   at least SECULAR_FRACTION of the largest error (median over the points), else bounded.
   Expected (the theorem): symmetric coefficients keep the energy error bounded away from
-  resonances (HLW XV.5: near-conservation of a modified energy by symmetric multistep methods
+  resonances (HLW ch. XV: near-conservation of a modified energy by symmetric multistep methods
   whose parasitic components stay small over long times), the others drift secularly at the
   principal root's rate (Quinlan 1999, sec. 1), judged where that rate is predicted (a circular
   orbit); off it a non-symmetric table's drift is measured without a verdict (its secular part

@@ -49,7 +49,7 @@ SECTION = SectionSpec(
     intro=("Second-order multistep tables scanned over the step size on Kepler orbits. Symmetric "
            "tables keep the energy error bounded except at resonant step sizes, where two "
            "parasitic roots e^(±iθ) couple through a harmonic m ω of the force along the orbit "
-           "(θ_i ± θ_j = m h ω mod 2π; Quinlan 1999, Hairer-Lubich-Wanner XV.8); the others "
+           "(θ_i ± θ_j = m h ω mod 2π; Quinlan 1999; Hairer-Lubich-Wanner ch. XV); the others "
            "(Störmer-Cowell with k > 2) spiral: their principal root's modulus differs from 1, "
            "and the energy drifts at a rate predicted from the coefficients."),
     build=multistep_orbits,
