@@ -182,3 +182,14 @@ def test_the_experiment_finds_qt8s_predicted_resonance():
     assert s["predicted_testable"] == 1 and s["predicted_found"] == 1
     found = s["resonances"].split(", ")  # the band (0.1042-0.1060) may hold two scanned points
     assert 1 <= len(found) == s["resonances_predicted"] and s["drift_class"] == "bounded"
+
+
+@pytest.mark.parametrize("name", DRIFTING)
+def test_the_spiralling_rate_has_the_order_the_error_constant_gives(name):
+    """g / omega ~ (h omega)^q, q = p for odd p and p + 1 for even p: the principal root's error
+    c (i h omega)^(p+1) changes its modulus only when p + 1 is even."""
+    method = get_stepper(name).coefficients
+    p = method.order()
+    q = p if p % 2 else p + 1
+    g1, g2 = principal_growth(method, 0.01), principal_growth(method, 0.02)
+    assert math.log2(g2 / g1) == pytest.approx(q, abs=0.05)
