@@ -329,7 +329,8 @@ def _start_unstable(starter: Stepper, dyn: Dynamics, t0: float, y0: np.ndarray, 
     interval = facts.real_interval
     if not facts.explicit or interval is None or not math.isfinite(interval):
         return False
-    jac = dyn.jac(t0, y0)
+    # the harness's check, not the method's work: a Dynamics of its own keeps the run's counts
+    jac = dyn.problem.dynamics(dyn.pars, y0.shape[1]).jac(t0, y0)
     if not np.all(np.isfinite(jac)):
         return False
     rates = [-np.linalg.eigvals(jac[:, :, j]).real.min() for j in range(jac.shape[2])]
