@@ -29,3 +29,39 @@ def test_report_refuses_an_unknown_experiment_subset():
 
     with pytest.raises(InputError, match="`experiments` must name some of"):
         build_report(steppers=["rk4"], problems=["harmonic"], experiments=["no-such"])
+
+
+def _rows(errors, messages, evals, t_end=1.0):
+    import pandas as pd
+
+    return pd.DataFrame({"error": errors, "message": messages, "rhs_evals": evals,
+                         "t_end": [t_end] * len(errors)})
+
+
+def test_every_cell_has_points_or_a_derived_reason():
+    """The test-set section's cell table: an explicit method on a problem stiff for it is not
+    measurable by its stability limit (interval / stiffness, from coefficients and the problem's
+    facts), an implicit one whose every point failed in Newton by that, a library by its own
+    message; a cell with a finite error has points."""
+    import math
+
+    import heyoka as hy
+
+    from harness.problem import Problem
+    from harness.report.test_sets import cell_status
+
+    y = hy.make_vars("y")
+    stiff = Problem("toy-stiff-decay", variables=[y], rhs=[-1e4 * (y - 1.0)], y0=[0.0],
+                    t_span=(0.0, 1.0), reference="y' = -1e4 (y - 1)")
+    inf = math.inf
+    rec = cell_status(_rows([inf, inf], ["", ""], [400, 800]), stiff, "rk4")
+    assert rec["status"] == "not measurable" and rec["reason"].startswith("stability limit")
+    assert "3.59e+03 steps" in rec["reason"]  # 1 x 1e4 / 2.785
+    rec = cell_status(_rows([math.nan], ["stepper 'bdf2': Newton iteration did not converge"], [9]),
+                      stiff, "bdf2")
+    assert rec["status"] == "not measurable" and rec["reason"].startswith("Newton failure")
+    rec = cell_status(_rows([math.nan], ["scipy Radau failed: Required step size"], [9]), stiff,
+                      "scipy-radau")
+    assert rec["reason"].startswith("solver or run: scipy Radau failed")
+    rec = cell_status(_rows([1e-6, inf], ["", ""], [400, 800]), stiff, "rk4")
+    assert rec["status"] == "points" and rec["points"] == 1

@@ -24,7 +24,7 @@ import pandas as pd
 
 from harness.kit.elements import Section, df_table
 
-__all__ = ["test_sets_section", "TITLE"]
+__all__ = ["test_sets_section", "cell_status", "TITLE"]
 
 EXPERIMENT = "work-precision"
 TITLE = "Published test sets"
@@ -63,6 +63,64 @@ def _stiff_over(problem, T: float) -> dict[str, Any]:
     else:
         check = "stiff where measured"
     return {"stiffness_span": span, "stiffness_measured": measured, "stiff_check": check}
+
+
+def cell_status(frame: pd.DataFrame, problem: Any, stepper_name: str) -> dict[str, Any]:
+    """One stepper's cell on one test-set problem: how many points have a finite error at the
+    end point, and where none does, why it is not measurable, derived (never a failed cell for
+    what the harness could not ask of the method):
+    - an explicit method on a problem stiff for it: its stable step is the real stability interval
+      (from its coefficients, `harness.facts.method_facts`) over the stiffness (largest -Re(lambda)
+      along the reference, `problem_facts`), so reaching the end point stably needs
+      (T - t0) x stiffness / interval steps; more evaluations than the sweep's work allowed (its
+      largest count) is the stability limit (Hairer & Wanner II, IV.2). The stiffness is taken
+      over the problem's convergence horizon, a lower bound over a longer span;
+    - every point's implicit solve failed (a Newton failure): beyond the range where the iteration
+      is guaranteed (HNW I, II.7, Theorem 7.2) at the step sizes the budget allowed;
+    - otherwise the solver's own message (an adaptive library's failure at the tolerances tried).
+
+    Parameters
+    ----------
+    frame : DataFrame, the work-precision rows of this stepper and problem.
+    problem : Problem; stepper_name : str.
+
+    Returns
+    -------
+    dict: problem, method, points (finite errors), status ('points' or 'not measurable') and
+    reason.
+    """
+    from harness.facts import method_facts, problem_facts
+    from harness.registry import get_stepper
+
+    errors = frame["error"].astype(float).to_numpy()
+    points = int(np.isfinite(errors).sum())
+    rec = {"problem": problem.name, "stepper": stepper_name, "points": points}
+    if points:
+        return dict(rec, status="points", reason="")
+    T = float(frame["t_end"].iloc[0])
+    spent = float(np.nanmax(frame["rhs_evals"].to_numpy(dtype=float))) if len(frame) else 0.0
+    messages = [m for m in frame["message"].astype(str) if m and m != "nan"]
+    try:
+        stepper = get_stepper(stepper_name)
+        method, per_step = method_facts(stepper), float(stepper.info.evals_per_step or 1.0)
+        stiffness = float(problem_facts(problem).stiffness)
+    except Exception:  # a plugin this process has not loaded: the messages only
+        method, per_step, stiffness = None, 1.0, math.nan
+    interval = method.real_interval if method is not None else None
+    if (method is not None and method.explicit and interval and math.isfinite(interval)
+            and stiffness > 0):
+        steps = (T - problem.t0) * stiffness / interval
+        if steps * per_step > spent:
+            return dict(rec, status="not measurable", reason=(
+                f"stability limit: h <= {interval:.4g} / {stiffness:.3g} = "
+                f"{interval / stiffness:.3g} needs {steps:.3g} steps ({steps * per_step:.3g} "
+                f"evaluations) to t = {T:.4g}, beyond the {spent:.3g} the sweep allowed"))
+    if messages and all("Newton" in m for m in messages):
+        return dict(rec, status="not measurable", reason=(
+            f"Newton failure at every step size the budget allowed ({len(messages)} points; "
+            f"first: {messages[0][:160]})"))
+    reason = messages[0][:200] if messages else "no finite error at any point"
+    return dict(rec, status="not measurable", reason=f"solver or run: {reason}")
 
 
 def test_sets_section(view: Any) -> Section:
@@ -117,6 +175,13 @@ def test_sets_section(view: Any) -> Section:
     sec.table(df_table(frame.sort_values(["problem", "stepper", "rhs_evals"]), cols,
                        "Error at the end point against work, per method", experiment=EXPERIMENT,
                        key=("stepper", "problem", "tol_or_h"), status=None, digits=3))
+    status = pd.DataFrame([cell_status(g, problems[p], st)
+                           for (p, st), g in frame.groupby(["problem", "stepper"], sort=True)])
+    sec.table(df_table(status, [("problem", "problem"), ("stepper", "method"),
+                                ("points", "points with an error"), ("status", "cell"),
+                                ("reason", "why not measurable")],
+                       "Every cell: points, or not measurable with the reason", experiment=EXPERIMENT,
+                       key=("stepper", "problem"), status=None, digits=3))
     table = pd.DataFrame(refs)
     for c in ("reference", "reference_error", "form", "message", "stiffness_span",
               "stiffness_measured", "stiff_check"):
