@@ -265,9 +265,10 @@ def test_the_report_section_shows_error_digits_and_work_at_the_end_point():
     ])
     sec = test_sets_section(_View(rows))
     tables = [b.table for b in sec.blocks if b.kind == "table"]
-    assert len(tables) == 2
-    work, refs = tables
+    assert len(tables) == 3
+    work, cells, refs = tables
     assert len(work.rows) == 1  # harmonic has no published form
+    assert [c.text for c in cells.rows[0].cells][:4] == ["detest-a1", "rk4", "1", "points"]
     text = [c.text for c in work.rows[0].cells]
     assert "detest-a1" in text and "3" in text  # 1e-3 of |y(20)|: three significant digits
     assert p.published.source in [c.text for c in refs.rows[0].cells]
