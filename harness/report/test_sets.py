@@ -65,6 +65,13 @@ def _stiff_over(problem, T: float) -> dict[str, Any]:
     return {"stiffness_span": span, "stiffness_measured": measured, "stiff_check": check}
 
 
+def _span_rate(problem: Any) -> float:
+    try:
+        return float(problem.time_scale.fastest_rate)
+    except Exception:  # no float64 orbit: the stiffness alone
+        return math.nan
+
+
 def cell_status(frame: pd.DataFrame, problem: Any, stepper_name: str) -> dict[str, Any]:
     """One stepper's cell on one test-set problem: how many points have a finite error at the
     end point, and where none does, why it is not measurable, derived (never a failed cell for
@@ -107,14 +114,17 @@ def cell_status(frame: pd.DataFrame, problem: Any, stepper_name: str) -> dict[st
     except Exception:  # a plugin this process has not loaded: the messages only
         method, per_step, stiffness = None, 1.0, math.nan
     interval = method.real_interval if method is not None else None
-    if (method is not None and method.explicit and interval and math.isfinite(interval)
-            and stiffness > 0):
-        steps = (T - problem.t0) * stiffness / interval
-        if steps * per_step > spent:
-            return dict(rec, status="not measurable", reason=(
-                f"stability limit: h <= {interval:.4g} / {stiffness:.3g} = "
-                f"{interval / stiffness:.3g} needs {steps:.3g} steps ({steps * per_step:.3g} "
-                f"evaluations) to t = {T:.4g}, beyond the {spent:.3g} the sweep allowed"))
+    if method is not None and method.explicit and interval and math.isfinite(interval):
+        # the stiffness over the horizon; else the spectral radius along the orbit over the span
+        # (`Problem.time_scale`: OREGO's fast phase comes after its horizon, near t = 124)
+        for rate, what in ((stiffness, "stiffness"),
+                           (_span_rate(problem), "spectral radius over the span")):
+            steps = (T - problem.t0) * rate / interval if rate > 0 else 0.0
+            if steps * per_step > spent:
+                return dict(rec, status="not measurable", reason=(
+                    f"stability limit: h <= {interval:.4g} / {rate:.3g} ({what}) = "
+                    f"{interval / rate:.3g} needs {steps:.3g} steps ({steps * per_step:.3g} "
+                    f"evaluations) to t = {T:.4g}, beyond the {spent:.3g} the sweep allowed"))
     if messages and all("Newton" in m for m in messages):
         return dict(rec, status="not measurable", reason=(
             f"Newton failure at every step size the budget allowed ({len(messages)} points; "
