@@ -21,6 +21,9 @@ from fractions import Fraction
 
 import numpy as np
 
+from harness.coefficients import ButcherTableau, SplittingScheme
+from harness.theory import rooted_trees
+
 __all__ = ["extrapolation_tableau", "extrapolation_weights", "composition", "null_space_weights",
            "HIGH_ORDER_PROBLEMS", "draw_high_order", "perturb_high_order", "subtle_high_order"]
 
@@ -140,8 +143,6 @@ def composition(levels: Sequence[str], name: str, top_factor: Fraction = Fractio
     -------
     SplittingScheme: the composed scheme, coefficients exact.
     """
-    from harness.coefficients import SplittingScheme
-
     half = Fraction(1, 2)  # velocity Verlet, kick-drift-kick: the symmetric base of order 2
     scheme, order = SplittingScheme(f"{name}-base", [("K", half), ("D", 1), ("K", half)]), 2
     for i, kind in enumerate(levels):
@@ -171,8 +172,6 @@ def null_space_weights(A, b, order: int, size: float = 0.05) -> list[float] | No
     -------
     list of float or None: the moved weights.
     """
-    from harness.theory import rooted_trees
-
     A_arr, b_arr = np.array(A, dtype=float), np.array(b, dtype=float)
     g: list[np.ndarray] = []
     for t in rooted_trees(order - 1):
@@ -232,8 +231,6 @@ def build_high_order(spec, name: str):
     -------
     ButcherTableau or SplittingScheme.
     """
-    from harness.coefficients import ButcherTableau, SplittingScheme
-
     if spec[0] == "rk":
         return ButcherTableau(name, spec[1], spec[2])
     scheme = composition(spec[1], name, spec[2] if len(spec) > 2 else Fraction(0))

@@ -21,9 +21,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from harness import registry
 from harness import tolerances as tol
 from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
+from harness.facts import central_field, method_facts, problem_facts
 from harness.provenance import PROJECT_ROOT
+from harness.rules import convergence_expectation
 
 __all__ = ["ClaimSpec", "ClaimResult", "CLAIMS", "check_claims", "course_material_dir"]
 
@@ -119,8 +122,6 @@ def steppers_with(*records: object) -> list[str]:
     -------
     list of str: stepper names, in registry order.
     """
-    from harness import registry
-
     def identity(c) -> tuple:
         return type(c), getattr(c, "float_fingerprint", c.fingerprint)()
 
@@ -189,8 +190,6 @@ def _velocity_verlet_two_orders(tables: Tables) -> tuple[str, str, list[dict]]:
 
 def _registered(kind: str, name: str):
     """The registered stepper or problem `name`, or None (a saved run's plugin not loaded now)."""
-    from harness import registry
-
     try:
         return registry.get_stepper(name) if kind == "stepper" else registry.get_problem(name)
     except Exception:
@@ -201,9 +200,6 @@ def _exact_on(stepper_name: str, problem_name: str) -> bool | None:
     """True when the gate's rules expect the method to be exact on the problem (a polynomial
     solution its linear order reproduces, `harness.rules.convergence_expectation`); None when
     either is not registered."""
-    from harness.facts import method_facts, problem_facts
-    from harness.rules import convergence_expectation
-
     stepper, problem = _registered("stepper", stepper_name), _registered("problem", problem_name)
     if stepper is None or problem is None:
         return None
@@ -253,8 +249,6 @@ def _angular_momentum_exact(tables: Tables) -> tuple[str, str, list[dict]]:
     """Judged on the methods the claim names (the kick-drift-kick and drift-kick-drift splittings,
     whatever their names: the leapfrog runs the former's scheme) and only on central fields
     (`harness.facts.central_field`: every body's acceleration parallel to its position)."""
-    from harness.facts import central_field
-
     en = _summary(tables, "energy")
     if en.empty or "angular_momentum_conserved" not in en:
         return NOT_MEASURED, "no energy-drift results", []

@@ -10,8 +10,10 @@ from typing import Any
 import pandas as pd
 
 from harness.errors import InputError, UnknownNameError
+from harness.experiments import EXPERIMENTS
 from harness.experiments.base import Experiment
 from harness.progress import Progress
+from harness.registry import load_plugin
 from harness.runner.checks import (
     check_names,
     check_plugins,
@@ -58,8 +60,6 @@ def run_experiments(
     -------
     dict of str to RunResult: by experiment name; pass it to `harness.store.save_run`.
     """
-    from harness.experiments import EXPERIMENTS
-
     if experiments is None:
         experiments = list(EXPERIMENTS)
     if isinstance(experiments, str | Experiment):
@@ -71,7 +71,6 @@ def run_experiments(
     if unknown:
         raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
     sched = check_scheduler(scheduler)
-    from harness.registry import load_plugin
 
     plugin_paths = check_plugins(plugins)
     for p in plugin_paths:

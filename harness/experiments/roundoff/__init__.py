@@ -40,10 +40,12 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
-from harness.errors import InputError
+from harness.errors import IncompatibleError, InputError
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
 from harness.experiments.roundoff.section import SECTION
-from harness.stepper import AdaptiveStepper, StepFailure
+from harness.ground_truth import reference
+from harness.registry import get_problem, get_stepper
+from harness.stepper import AdaptiveStepper, StepFailure, check_compatible
 
 __all__ = ["RoundoffExperiment", "ROW_COLUMNS", "SUMMARY_COLUMNS", "step_sizes"]
 
@@ -115,10 +117,6 @@ class RoundoffExperiment(Experiment):
         -------
         (list of Cell, list of Skip)
         """
-        from harness.errors import IncompatibleError
-        from harness.registry import get_problem, get_stepper
-        from harness.stepper import check_compatible
-
         want_s, want_p = list(config["steppers"]), list(config["problems"])
         cells: list[Cell] = []
         skips: list[Skip] = []
@@ -166,9 +164,6 @@ class RoundoffExperiment(Experiment):
         -------
         DataFrame: one row per step size.
         """
-        from harness.ground_truth import reference
-        from harness.registry import get_problem, get_stepper
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         n = int(config["n_steps"])
