@@ -68,7 +68,6 @@ def _created(root: Path) -> Path:
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # a file where the directory belongs, no permission, ...
-
         raise OutputError(*describe_os_error(exc, root)) from None
     return root
 

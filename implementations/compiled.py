@@ -685,7 +685,6 @@ def compiled_variant(stepper: Stepper) -> Stepper:
         return CompiledMultistep(stepper)
     if isinstance(coeffs, SecondOrderMultistep):
         if isinstance(stepper, SecondOrderMultistepStepper):  # the family's own compiled loop
-
             return CompiledSecondOrderMultistep(stepper)
         return CompiledStormer(stepper)
     raise InputError(

@@ -20,6 +20,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import cloudpickle
+
 from harness.errors import (
     InputError,
     StepperOutputError,
@@ -129,12 +131,10 @@ def shipped_objects(stepper_names: Sequence[str], problem_names: Sequence[str]) 
             for n in sorted(set(names)) if n in reg and reg.origin(n) == SHIPPED_ORIGIN]
     if not objs:
         return None
-    import cloudpickle
 
     try:
         return cloudpickle.dumps(objs)
     except Exception as exc:  # a closure over a lock, an open file, ...
-
         raise InputError(f"`jobs` > 1 ships {', '.join(map(repr, objs))} to worker processes, but "
                          f"cloudpickle cannot pickle it: {type(exc).__name__}: {exc}; use jobs=1") from None
 
@@ -146,7 +146,6 @@ def _ensure_objects(data: bytes | None, submitter: int | None) -> None:
     key = hashlib.sha256(data).hexdigest()
     if key in _shipped:
         return
-    import cloudpickle
 
     objs = cloudpickle.loads(data)
     for obj in objs:
