@@ -160,7 +160,6 @@ def method_facts(stepper: Stepper) -> MethodFacts:
 def _coefficient_facts(fingerprint: str, box: tuple) -> dict[str, Any]:
     # order conditions and scanned stability intervals take seconds over a registry: kept on
     # disk under the coefficients' fingerprint and this module's code (harness.derived)
-
     return remembered(__name__, "coefficient_facts", [fingerprint],
                       lambda: _derive_coefficient_facts(box[0]))
 
@@ -212,7 +211,6 @@ def problem_facts(problem: Problem) -> ProblemFacts:
 def _problem_facts(fingerprint: str, box: tuple) -> ProblemFacts:
     # the stiffness samples the Jacobian along the orbit (compiled functions, a Taylor orbit):
     # kept on disk under the definition and this module's code (harness.derived)
-
     return ProblemFacts(**remembered(__name__, "problem_facts", [fingerprint],
                                      lambda: asdict(_derive_problem_facts(box[0]))))
 

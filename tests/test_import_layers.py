@@ -58,9 +58,12 @@ _BUILDER = ("a family module builds its steppers while it is imported (`Method.s
             "only when it builds: at module level it would import a half-imported family")
 # Deferred imports of project modules that import no optional library, each with its reason.
 DEFERRED: dict[tuple[str, str], str] = {
+    ("harness.cli", "harness.cli.lookups"):
+        "`harness list steppers|problems` and `reference` import the registry and the ground truth "
+        "(heyoka, pandas: ~1 s CPU), which `harness --help` and a usage error (exit 2) never need",
     ("harness.cli", "harness.cli.commands"):
-        "the commands import the registry, experiments and report (heyoka, pandas, matplotlib: "
-        "~2 s CPU), which `harness --help` and a usage error (exit 2) never need",
+        "the other commands import the experiments, runner and report too (matplotlib, jinja2: "
+        "~2 s CPU), which a lookup does not need",
     ("harness.pytest_plugin", "harness.api"):
         "pytest imports the plugin at the start of every test run of every project that has the "
         "harness installed; only a test that asks for the fixture needs the API (~2 s CPU)",

@@ -21,7 +21,8 @@ SIGPIPE death would give), a full disk or another I/O error (74), no permission 
 where a directory belongs or the reverse (73).
 
 This module parses the command line and dispatches; `output` is the output layer, `tables` prints
-records, `commands` holds the commands (imported only once the command line has parsed).
+records, `lookups` and `commands` hold the commands (imported only once the command line has
+parsed).
 """
 
 from __future__ import annotations
@@ -224,10 +225,15 @@ def _main(args: argparse.Namespace) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
-    # The command line's one deferred import of a project module (tests/test_import_layers.py
-    # allows exactly this one): the commands import the registry, the experiments and the report
-    # (heyoka, pandas, matplotlib: ~2 s CPU), which `harness --help`, `harness COMMAND --help`
-    # and a usage error (exit 2, one line) never need; parsing costs ~0.05 s without them.
+    # The command line's deferred imports of project modules (tests/test_import_layers.py allows
+    # exactly these two): parsing, `--help` and a usage error (exit 2, one line) need neither.
+    # Looking up steppers, problems or a reference needs the registry and the ground truth
+    # (heyoka, pandas: ~1 s CPU); the other commands also need the experiments, the runner and
+    # the report (matplotlib, jinja2: ~2 s CPU).
+    if args.command == "reference" or (args.command == "list" and args.kind != "experiments"):
+        from harness.cli import lookups
+
+        return lookups.run_lookup(args)
     from harness.cli import commands
 
     return commands.run_command(args)

@@ -158,7 +158,6 @@ class WorkPrecisionExperiment(Experiment):
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         # The convergence sweeps read their own settings: start from theirs, then this config.
-
         cfg = {**get_experiment("convergence").default_config, **config, "local": False}
         if cfg.get("t_end") is None and problem.published is not None:
             cfg["t_end"] = float(problem.t_end)  # the published end point, rounded to float64
