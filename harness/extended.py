@@ -26,6 +26,7 @@ from fractions import Fraction
 from typing import Any
 
 import heyoka as hy
+import mpmath
 import numpy as np
 
 from harness import cache
@@ -103,8 +104,6 @@ def refine_composition_weights(base: SplittingScheme, weights: list, order: int,
     -------
     list of str: decimal strings. NotMeasurable when it does not converge (a start not near a
     solution)."""
-    import mpmath
-
     if base.exact is None:
         raise NotMeasurable("the base method's coefficients are given only to float64")
     with mpmath.workdps(digits + 25):
@@ -141,8 +140,6 @@ def composition_defect(base: SplittingScheme, weights: list, order: int) -> floa
     Returns
     -------
     float: ~0 when the weights are accurate, ~1e-16 for float64 weights."""
-    import mpmath
-
     with mpmath.workdps(60):
         mp = mpmath.mp
         free = [mp.mpf(Fraction(w).numerator) / Fraction(w).denominator for w in weights]

@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from fractions import Fraction
 
+import mpmath
 import numpy as np
 
 from harness.coefficients import ButcherTableau, SplittingScheme
@@ -115,8 +116,6 @@ def _level_weights(kind: str, order: int) -> list[str]:
     """Weights raising a symmetric method of even `order` by two: the triple jump
     (g, 1 - 2g, g), g = 1 / (2 - 2^(1/(order+1))), or Suzuki's five-fold
     (p, p, 1 - 4p, p, p), p = 1 / (4 - 4^(1/(order+1))), to _DIGITS digits."""
-    import mpmath
-
     with mpmath.workdps(_DIGITS + 10):
         k = mpmath.mpf(1) / (order + 1)
         if kind == "triple":

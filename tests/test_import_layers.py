@@ -44,7 +44,6 @@ EXCEPTIONS: dict[tuple[str, str], str] = {}
 DEFERRABLE_LIBRARIES: dict[str, str] = {
     "jax": "the jax extra: problems as jax.numpy code and the library step contracts",
     "sympy": "the jax extra: heyoka expressions turned into jax.numpy through sympy",
-    "mpmath": "heyoka's sympy extra: arbitrary-precision order conditions and composition weights",
     "numba": "the compiled loops: their kernels compile on first use (~0.3 s CPU just to import)",
     "llvmlite": "numba's code generator: native entry points of compiled problems",
     "sksundae": "the sundials extra: CVODE for stiff references and the cvode steppers",
@@ -413,7 +412,7 @@ def test_the_deferred_rule_sees_libraries_and_wrappers(tmp_path, monkeypatch):
     (pkg / "opt" / "__init__.py").write_text("import jax\n")
     (pkg / "opt" / "member.py").write_text("X = 1\n")
     (pkg / "wrap.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import numba\n"
-                                 "else:\n    import mpmath\n")
+                                 "else:\n    import sksundae\n")
     (pkg / "via.py").write_text("from harness import wrap\n")
     (pkg / "plain.py").write_text("import numpy as np\n")
     (pkg / "cli.py").write_text("def dispatch():\n    from harness import plain\n")

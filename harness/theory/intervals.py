@@ -15,6 +15,7 @@ from collections.abc import Callable
 from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
+import mpmath
 import numpy as np
 from scipy.optimize import brentq
 
@@ -60,7 +61,6 @@ def _rk_numerator_denominator(tableau: ButcherTableau) -> tuple[np.ndarray, ...]
     if tableau.explicit:
         r, r_abs = rk_stability_coefficients(tableau, s)
         return r, r_abs, np.array([1.0]), np.array([1.0])
-    import mpmath
 
     with mpmath.workdps(40):
         A = mpmath.matrix([[mpmath.mpf(float(x)) for x in row] for row in tableau.A])
