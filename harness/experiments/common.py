@@ -349,15 +349,18 @@ def problem_cells(
     steppers: Sequence[str],
     problems: Sequence[str],
     applicable: Callable[[Any], str | None],
+    pair_reason: Callable[[Any, Any], str | None] | None = None,
 ) -> tuple[list[Cell], list[Skip]]:
     """Cells for the (stepper, problem) pairs whose problem passes `applicable(problem) -> reason
-    or None` and whose stepper can run it; every other pair becomes a `Skip` with its reason.
+    or None`, whose pair passes `pair_reason(stepper, problem)` when given, and whose stepper can
+    run the problem; every other pair becomes a `Skip` with its reason (the first that applies).
 
     Parameters
     ----------
     experiment : str, the experiment's name (written into each cell).
     steppers, problems : sequence of str, the registered names.
     applicable : callable, Problem -> reason or None.
+    pair_reason : callable, optional, (Stepper, Problem) -> reason or None.
 
     Returns
     -------
@@ -370,8 +373,9 @@ def problem_cells(
         reason = applicable(problem)
         for s in steppers:
             stepper = get_stepper(s)
-            if reason is not None:
-                skips.append(Skip(experiment, s, p, reason))
+            why = reason if reason is not None or pair_reason is None else pair_reason(stepper, problem)
+            if why is not None:
+                skips.append(Skip(experiment, s, p, why))
                 continue
             try:
                 check_compatible(stepper, problem)

@@ -38,9 +38,8 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.coefficients import SplittingScheme
-from harness.errors import IncompatibleError
-from harness.experiments.base import Cell, Experiment, Skip, register_experiment
-from harness.experiments.common import summary_per_cell
+from harness.experiments.base import Cell, Experiment, register_experiment
+from harness.experiments.common import problem_cells, summary_per_cell
 from harness.experiments.convergence import classify_points, fit_order
 from harness.experiments.energy import check_config, classify_drift, rounding_growth, save_grid
 from harness.experiments.step_control.section import SECTION
@@ -49,7 +48,6 @@ from harness.registry import get_problem, get_stepper, steppers
 from harness.registry import problems as problem_registry
 from harness.registry import steppers as stepper_registry
 from harness.step_loops import fastest
-from harness.stepper import check_compatible
 
 __all__ = ["StepControlExperiment", "fixed_peer", "is_step_controlled", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
 
@@ -174,30 +172,19 @@ class StepControlExperiment(Experiment):
                      positives=("energy_control", "fit_decades", "target_error"),
                      name_lists=("problems",))
         steppers, problems = _with_related(list(steppers), list(problems), config)
-        cells, skips = [], []
-        for p in problems:
-            problem = get_problem(p)
-            for s in steppers:
-                stepper = get_stepper(s)
-                reason = None
-                if not is_step_controlled(stepper):
-                    reason = "not step-controlled (its h is a physical step, not a control parameter)"
-                elif p not in config["problems"]:
-                    reason = f"problem {p!r} is not in this experiment's problem set (config `problems`)"
-                elif not problem.conservative or "energy" not in problem.invariants:
-                    reason = f"problem {p!r} is not conservative (no energy to follow)"
-                elif fixed_peer(stepper) is None:
-                    reason = "no fixed-step stepper with the same splitting coefficients is registered"
-                else:
-                    try:
-                        check_compatible(stepper, problem)
-                    except IncompatibleError as exc:
-                        reason = str(exc)
-                if reason:
-                    skips.append(Skip(self.name, s, p, reason))
-                else:
-                    cells.append(Cell(self.name, s, p))
-        return cells, skips
+
+        def pair_reason(stepper, problem) -> str | None:
+            if not is_step_controlled(stepper):
+                return "not step-controlled (its h is a physical step, not a control parameter)"
+            if problem.name not in config["problems"]:
+                return f"problem {problem.name!r} is not in this experiment's problem set (config `problems`)"
+            if not problem.conservative or "energy" not in problem.invariants:
+                return f"problem {problem.name!r} is not conservative (no energy to follow)"
+            if fixed_peer(stepper) is None:
+                return "no fixed-step stepper with the same splitting coefficients is registered"
+            return None
+
+        return problem_cells(self.name, steppers, problems, lambda problem: None, pair_reason)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
         """The energy rows of the controlled stepper and its fixed peer at equal work, and the
