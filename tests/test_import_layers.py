@@ -25,6 +25,7 @@ import ast
 import functools
 import importlib.metadata
 import re
+import subprocess
 import sys
 import tomllib
 from pathlib import Path
@@ -429,6 +430,22 @@ def test_the_deferred_rule_sees_libraries_and_wrappers(tmp_path, monkeypatch):
     assert [f.split(":")[0] for f in faults] == ["harness.user, line 2", "harness.user, line 3",
                                                  "harness.user, line 4"]
     assert "`pandas`" in faults[0] and "`json`" in faults[1] and "`harness.plain`" in faults[2]
+
+
+def _loaded_by(module: str, libraries: tuple[str, ...]) -> list[str]:
+    code = f"import sys, {module}; print(' '.join(m for m in {libraries!r} if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    return out.stdout.split()
+
+
+def test_what_the_deferred_entries_buy():
+    """The start-up DEFERRED's entries keep: parsing the command line and loading the pytest
+    plugin import no heavy library; a lookup imports neither the report's drawing nor its
+    templates."""
+    heavy = ("heyoka", "numpy", "pandas", "scipy", "matplotlib", "jinja2")
+    assert _loaded_by("harness.cli", heavy) == []
+    assert _loaded_by("harness.pytest_plugin", heavy) == []
+    assert _loaded_by("harness.cli.lookups", ("matplotlib", "jinja2")) == []
 
 
 def main() -> None:
