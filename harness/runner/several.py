@@ -3,7 +3,7 @@ grow), one progress display and one Dask connection, each experiment run by `run
 
 from __future__ import annotations
 
-import os
+import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -28,6 +28,9 @@ from harness.runner.result import RunResult
 
 __all__ = ["run_experiments"]
 
+#: The keywords `run_experiments` passes on to every `run_experiment`: the fields of `RunOptions`.
+RUN_OPTION_NAMES = tuple(f.name for f in dataclasses.fields(RunOptions))
+
 
 def run_experiments(
     experiments: Sequence[str | Experiment] | None = None,
@@ -35,15 +38,8 @@ def run_experiments(
     problems: Sequence[str] | None = None,
     *,
     configs: Mapping[str, Mapping[str, Any]] | None = None,
-    quick: bool = False,
-    jobs: int | None = None,
-    scheduler: str | Any | None = None,
-    fresh: bool = False,
-    cache: bool = True,
-    cache_dir: str | os.PathLike | None = None,
-    plugins: Sequence[str | os.PathLike] = (),
-    cell_timeout: float | None = None,
     progress: Progress | bool | str | None = None,
+    **run_options: Any,
 ) -> dict[str, RunResult]:
     """`run_experiment` for several experiments (None: every registered one), in order, with one
     progress display and one Dask connection.
@@ -53,13 +49,20 @@ def run_experiments(
     experiments : sequence of str or Experiment, optional, the experiments (None: every registered one).
     steppers, problems : sequence of str, optional, registered names (None: every one).
     configs : mapping, optional, experiment name -> overrides of its settings.
-    quick, jobs, scheduler, fresh, cache, cache_dir, plugins, cell_timeout, progress
-        As in `run_experiment`.
+    progress : as in `run_experiment`.
+    **run_options
+        How to run the cells, the fields of `RunOptions` as keywords (quick, jobs, scheduler,
+        fresh, cache, cache_dir, plugins, cell_timeout), as in `run_experiment`.
 
     Returns
     -------
     dict of str to RunResult: by experiment name; pass it to `harness.store.save_run`.
     """
+    unknown_options = sorted(set(run_options) - set(RUN_OPTION_NAMES))
+    if unknown_options:
+        raise InputError(f"`run_experiments` takes the run options {', '.join(RUN_OPTION_NAMES)}; "
+                         f"got unknown keyword(s) {', '.join(unknown_options)}")
+    run_options.setdefault("plugins", ())
     if experiments is None:
         experiments = list(EXPERIMENTS)
     if isinstance(experiments, str | Experiment):
@@ -70,13 +73,13 @@ def run_experiments(
     unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
     if unknown:
         raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
-    sched = check_scheduler(scheduler)
+    sched = check_scheduler(run_options.get("scheduler"))
 
-    plugin_paths = check_plugins(plugins)
+    plugin_paths = check_plugins(run_options["plugins"])
     for p in plugin_paths:
         load_plugin(p)
-    options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
-                         cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
+    options = RunOptions(**{**run_options, "scheduler": None, "plugins": tuple(plugin_paths)})
+    quick = options.quick
     stepper_names = check_names("steppers", steppers)
     problem_names = check_names("problems", problems)
     bar, own_bar = progress_display(progress, "cells")
