@@ -14,14 +14,7 @@ from harness.experiments import EXPERIMENTS
 from harness.experiments.base import Experiment
 from harness.progress import Progress
 from harness.registry import load_plugin
-from harness.runner.checks import (
-    check_names,
-    check_plugins,
-    check_scheduler,
-    progress_display,
-    resolve_config,
-    resolve_experiment,
-)
+from harness.runner import checks
 from harness.runner.executors import dask_client
 from harness.runner.orchestration import RunOptions, no_cells_error, run_experiment
 from harness.runner.result import RunResult
@@ -67,29 +60,29 @@ def run_experiments(
         experiments = list(EXPERIMENTS)
     if isinstance(experiments, str | Experiment):
         experiments = [experiments]
-    exps = [resolve_experiment(e) for e in experiments]
+    exps = [checks.resolve_experiment(e) for e in experiments]
     if configs is not None and not isinstance(configs, Mapping):
         raise InputError(f"`configs` must map experiment names to settings, got {type(configs).__name__}")
     unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
     if unknown:
         raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
-    sched = check_scheduler(run_options.get("scheduler"))
+    sched = checks.check_scheduler(run_options.get("scheduler"))
 
-    plugin_paths = check_plugins(run_options["plugins"])
+    plugin_paths = checks.check_plugins(run_options["plugins"])
     for p in plugin_paths:
         load_plugin(p)
     options = RunOptions(**{**run_options, "scheduler": None, "plugins": tuple(plugin_paths)})
     quick = options.quick
-    stepper_names = check_names("steppers", steppers)
-    problem_names = check_names("problems", problems)
-    bar, own_bar = progress_display(progress, "cells")
+    stepper_names = checks.check_names("steppers", steppers)
+    problem_names = checks.check_names("problems", problems)
+    bar, own_bar = checks.progress_display(progress, "cells")
     # Every experiment's cells are listed once, here: the whole run's size first, so the
     # display's total does not grow; each `run_experiment` takes its list.
     listed: dict[str, tuple[list, list]] = {}
     versions: dict[tuple[str, str], Any] = {}
     for exp in exps:
         try:
-            cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
+            cfg = checks.resolve_config(exp, (configs or {}).get(exp.name), quick)
             cells, skips = exp.cells(stepper_names, problem_names, cfg)
             listed[exp.name] = (list(cells), list(skips))
         except Exception:  # run_experiment lists it again and reports the failure properly
