@@ -30,8 +30,11 @@ import numpy as np
 
 from harness.coefficients import LinearMultistep
 from harness.errors import IncompatibleError, InputError, UnknownNameError
+from harness.facts import method_facts
+from harness.ground_truth import reference
 from harness.methods import Method
 from harness.problem import Dynamics
+from harness.registry import get_stepper
 from harness.stepper import Carry, Stepper, check_compatible
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations import coefficient_info
@@ -177,7 +180,6 @@ class LinearMultistepStepper(NewtonStepper):
     def _starter_stepper(self) -> Stepper:
         if isinstance(self.starter, Stepper):
             return self.starter
-        from harness.registry import get_stepper  # lazy: the registry imports this module
 
         starter = get_stepper(self.starter)
         if isinstance(starter, LinearMultistepStepper):
@@ -219,8 +221,6 @@ class LinearMultistepStepper(NewtonStepper):
         return values
 
     def _reference_start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float, count: int) -> list:
-        from harness.ground_truth import reference  # lazy: heavy, only for this start
-
         times = t0 + h * np.arange(1, count + 1)
         ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)
         dyn.counts["starter_steps"] = dyn.counts.get("starter_steps", 0) + count
@@ -323,8 +323,6 @@ def _start_unstable(starter: Stepper, dyn: Dynamics, t0: float, y0: np.ndarray, 
     h lambda = -5e7 on POLLU: y_1 ~ 1e12), which no later step of a zero-stable method undoes
     (Hairer & Wanner II, IV.2: stability of explicit methods on stiff problems).
     False for implicit or claim-only starters and when the Jacobian is not finite."""
-    from harness.facts import method_facts  # lazy: the facts layer reads the registry
-
     facts = method_facts(starter)
     interval = facts.real_interval
     if not facts.explicit or interval is None or not math.isfinite(interval):
