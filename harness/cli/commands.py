@@ -47,8 +47,6 @@ def _problem_names(args) -> list[str]:
     problem of a published test set (tagged 'test-set': DETEST, Bari) after them."""
     if not getattr(args, "test_sets", False):
         return _names("problem", args.problem)
-    from harness.registry import problems
-
     sets = [p.name for p in problems.all(variants=True) if "test-set" in p.tags]
     return list(dict.fromkeys([*_names("problem", args.problem), *sets] if args.problem else sets))
 

@@ -22,10 +22,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.facts import problem_facts
+from harness.facts import method_facts, problem_facts
 from harness.ground_truth import reference
 from harness.kit.elements import Section, df_table
-from harness.registry import get_problem
+from harness.registry import get_problem, get_stepper
 from harness.tolerances import STIFF_STEP_COUNT
 
 __all__ = ["test_sets_section", "cell_status", "TITLE"]
@@ -95,9 +95,6 @@ def cell_status(frame: pd.DataFrame, problem: Any, stepper_name: str) -> dict[st
     dict: problem, method, points (finite errors), status ('points' or 'not measurable') and
     reason.
     """
-    from harness.facts import method_facts, problem_facts
-    from harness.registry import get_stepper
-
     errors = frame["error"].astype(float).to_numpy()
     points = int(np.isfinite(errors).sum())
     rec = {"problem": problem.name, "stepper": stepper_name, "points": points}
