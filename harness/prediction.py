@@ -36,6 +36,7 @@ import numpy as np
 
 from harness import tolerances as tol
 from harness.derived import remembered
+from harness.facts import problem_facts
 from harness.problem import Problem
 from harness.theory import rooted_trees
 from harness.theory.classes import rk_error_defects
@@ -132,6 +133,14 @@ def _propagate(problem: Problem, order: int) -> dict[str, Any]:
     # vertices: 0.61 s compiled at level 3, 0.07 s at 0, E_t(T) equal to 6e-16)
     ta = hy.taylor_adaptive(sys, state.tolist(), time=float(problem.t0), tol=tol.PREDICTION_TAYLOR_TOL,
                             pars=problem.parameter_values.tolist(), compact_mode=True, opt_level=0)
+    # stiff for an explicit Taylor integration (as the ground truth refuses one: its steps stay
+    # near p / (e |lambda|)): E5, ROBER, POLLU would need 1e5-1e13 steps of the augmented system
+    rate = problem_facts(problem).stiffness
+    steps = math.e * rate * (problem.convergence_t_end - problem.t0) / ta.order
+    if steps > tol.REFERENCE_STIFF_STEPS:
+        return {"why": (f"not predicted: the variational equation is stiff for the explicit Taylor "
+                        f"integration (-Re(lambda) = {rate:.3g}: about {steps:.3g} steps of order "
+                        f"{ta.order} to the horizon, more than {tol.REFERENCE_STIFF_STEPS:.0e})")}
     outcome = ta.propagate_until(problem.convergence_t_end)[0]
     if outcome != hy.taylor_outcome.time_limit:
         return {"why": f"not predicted: the variational integration stopped ({outcome})"}
