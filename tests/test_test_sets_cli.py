@@ -65,3 +65,20 @@ def test_every_cell_has_points_or_a_derived_reason():
     assert rec["reason"].startswith("solver or run: scipy Radau failed")
     rec = cell_status(_rows([1e-6, inf], ["", ""], [400, 800]), stiff, "rk4")
     assert rec["status"] == "points" and rec["points"] == 1
+
+
+def test_the_leading_term_of_a_stiff_problem_is_not_integrated_by_explicit_taylor():
+    """The gate's predicted error constant integrates the variational equation with explicit
+    Taylor; on a problem stiff over its horizon (here -1e6 over 1: ~1e5 steps) it says why not,
+    at once, instead of running for minutes (the stiff Bari problems in the gate)."""
+    import heyoka as hy
+
+    from harness.prediction import propagated_tree_terms
+    from harness.problem import Problem
+
+    y = hy.make_vars("y")
+    stiff = Problem("toy-stiff-horizon", variables=[y], rhs=[-1e6 * (y - hy.cos(hy.time))],
+                    y0=[1.0], t_span=(0.0, 1.0), convergence_t_end=1.0,
+                    reference="y' = -1e6 (y - cos t)")
+    out = propagated_tree_terms(stiff, 3)
+    assert "stiff for the explicit Taylor" in out["why"] and "trees" not in out
