@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from harness import cache
 from harness import tolerances as tol
 from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
 
@@ -37,6 +38,7 @@ __all__ = ["NotMeasurable", "exact_form", "extended_sweep", "refine_composition_
 EXTENDED_EPS = 2.0**-113
 # Precision (bits) of the ground truth and of its certifier.
 _REFERENCE_PREC, _CERTIFIER_PREC = 192, 256
+_integrators = cache.IntegratorPool()  # Taylor, by (problem, precision): ~0.15 s to build each
 
 
 class NotMeasurable(Exception):
@@ -187,8 +189,6 @@ def _step_function(problem, step: list, evals_per_step: int):
     y_k and h = par[0]) compiled once in real128 and called n times."""
     import heyoka as hy
 
-    from harness import cache
-
     cache.configure_heyoka_cache()
     fn = hy.cfunc(step, list(problem.variables), fp_type=hy.real128, compact_mode=cache.compact_mode(problem))
 
@@ -274,7 +274,6 @@ def _lmm2_runner(problem, coefficients, exact):
     order H + 1 (`harness.theory.newtonian.velocity_weights`)."""
     import heyoka as hy
 
-    from harness import cache
     from harness.theory.newtonian import velocity_weights
 
     form, qi, vi = _newtonian_indices(problem, "a second-order multistep table")
@@ -295,10 +294,11 @@ def _lmm2_runner(problem, coefficients, exact):
         X = [y0[qi].copy()] + [_to_real128([s[i] for i in qi]) for s in starts]
         A = [accel(x) for x in X]
         evals = len(X)
+        XA, AA, hb = np.array(X[-k:]), np.array(A[-k:]), (h2 * beta[:k])[:, None]  # the last k as rows
         for _ in range(n - (keep - 1)):
-            psi = np.zeros_like(X[-1])
+            aX, hA, psi = alpha[:k, None] * XA, hb * AA, np.zeros_like(X[-1])
             for j in range(k):
-                psi = psi - alpha[j] * X[j - k] + h2 * beta[j] * A[j - k]
+                psi = psi - aX[j] + hA[j]
             x = psi
             if beta[k] != 0:  # implicit: x = psi + h^2 beta_k a(x), a contraction at small h
                 for _ in range(tol.NEWTON_MAX_ITER * 10):
@@ -310,6 +310,7 @@ def _lmm2_runner(problem, coefficients, exact):
                         break
             X = X[1:] + [x]
             A = A[1:] + [accel(x)]
+            XA[:-1], AA[:-1], XA[-1], AA[-1] = XA[1:], AA[1:], x, A[-1]
             evals += 1
         v = (X[-1] - X[-2]) / h
         for j in range(keep):
@@ -337,27 +338,26 @@ def _runner(coefficients, problem):
 
 # -- ground truth in 192 bits, certified by 256 ----------------------------------------------------
 def _taylor(problem, T, prec: int, times: list | None = None) -> list:
-    """The `prec`-bit Taylor state at T; with `times` (increasing, `prec`-bit reals), the states
-    there instead, on the same orbit."""
+    """The `prec`-bit Taylor state at T, or at each of `times` (increasing, `prec`-bit reals)."""
     import heyoka as hy
 
-    from harness import cache
+    def build():
+        start = [hy.real(float(v), prec) for v in problem.y0]
+        pars = [hy.real(float(v), prec) for v in problem.parameter_values] if problem.parameters else []
+        return hy.taylor_adaptive(list(zip(problem.variables, problem.rhs, strict=True)), start, pars=pars,
+                                  tol=hy.real(2.0 ** (1 - prec), prec), high_accuracy=True, compact_mode=True,
+                                  fp_type=hy.real, prec=prec)
 
-    cache.configure_heyoka_cache()
-    sys = list(zip(problem.variables, problem.rhs, strict=True))
-    state = [hy.real(float(v), prec) for v in problem.y0]
-    kwargs: dict[str, Any] = {"tol": hy.real(2.0 ** (1 - prec), prec), "high_accuracy": True,
-                              "compact_mode": True, "fp_type": hy.real, "prec": prec}
-    if problem.parameters:
-        kwargs["pars"] = [hy.real(float(v), prec) for v in problem.parameter_values]
-    ta = hy.taylor_adaptive(sys, state, **kwargs)
-    ta.time = hy.real(float(problem.t0), prec)
-    out = []
-    for t in ([hy.real(float(T), prec)] if times is None else times):
-        outcome = ta.propagate_until(t)[0]
-        if outcome != hy.taylor_outcome.time_limit:
-            raise NotMeasurable(f"the {prec}-bit ground truth stopped with {outcome}")
-        out.append(list(ta.state))
+    lock, ta = _integrators.get((problem.fingerprint(), prec), build)
+    with lock:  # set to the start: its steps follow from its state and time alone
+        ta.state[:] = [hy.real(float(v), prec) for v in problem.y0]
+        ta.time = hy.real(float(problem.t0), prec)
+        out = []
+        for t in ([hy.real(float(T), prec)] if times is None else times):
+            outcome = ta.propagate_until(t)[0]
+            if outcome != hy.taylor_outcome.time_limit:
+                raise NotMeasurable(f"the {prec}-bit ground truth stopped with {outcome}")
+            out.append(list(ta.state))
     return out[0] if times is None else out
 
 
