@@ -494,3 +494,15 @@ PREDICTION_TAYLOR_TOL = 1e-10
 # A slope above the order is explained when the predicted leading term C h^p is below this
 # fraction of the measured error over the fit: the fitted points are then set by later terms.
 SLOPE_EXPLAINED_RATIO = 0.3
+
+# Second-order multistep tables on orbits (harness.experiments.multistep_orbits), one reason each:
+PARASITIC_UNIT_CIRCLE = 1e-8  # |root| - 1 of a root on the circle: float64 roots of simple roots ~1e-13
+# A resonance: energy error this far above the log-log trend of RESONANCE_WINDOW neighbours a side
+# (bounded runs scatter ~2x about it; QT8's resonances stand 1e2-1e8 above it).
+RESONANCE_SPIKE_FACTOR, RESONANCE_WINDOW = 10.0, 3
+RESONANCE_MATCH_REL = 0.02  # parasitic roots move O((h omega)^2): QT8's band centre sits 0.5 % off
+JACOBIAN_HARMONIC_FLOOR = 0.05  # share of the largest harmonic (a circular orbit's others: 1e-15)
+# Drift read where the run stays near the orbit and above rounding (leading-order law holds), and
+# called secular when slope x T explains this share of the largest error (bounded: a small share).
+SPIRAL_MAX_ERROR, SPIRAL_MIN_CHANGE, SECULAR_FRACTION = 1e-2, 1e-10, 0.5
+SPIRAL_RATE_FACTOR = 2.0  # measured / predicted drift rate (leading order; stormer4-6: 1.00 +- 0.02)

@@ -732,7 +732,6 @@ def faster(stepper: Stepper) -> Stepper | None:
 
 # -- the registered variants -----------------------------------------------------------------------------
 #: Built-in steppers with a coefficient object that no compiled family runs: name -> reason
-#: (today the implicit second-order multistep tables, Cowell's, which run their NumPy loop).
 NOT_COMPILED: dict[str, str] = {}
 
 

@@ -49,6 +49,7 @@ KERNELS = (
     "rk_advance", "rk_advance_cols", "split_advance", "split_advance_cols", "leapfrog_advance",
     "leapfrog_advance_cols", "stormer_advance", "lmm_explicit_advance", "irk_advance",
     "lmm_implicit_advance", "controlled_advance", "rhs_all", "accel_all", "lmm2_explicit_advance",
+    "lmm2_implicit_advance",
 )
 #: Per problem: 'functions' (rhs, rhs_cols, and accel, accel_cols for accelerations of the
 #: positions only) and 'jacobian' (jac, for the Newton-solved families).

@@ -113,7 +113,7 @@ def test_every_builtin_with_coefficients_has_a_registered_compiled_variant():
         if s.coefficients is not None
     ]
     assert len(builtins) >= 25
-    # the one family without a compiled loop says why (its NumPy loop runs everywhere)
+    # a family without a compiled loop says why (none today: Cowell's implicit tables have one)
     assert {get_stepper(n).info.family for n in NOT_COMPILED} <= {"second-order-multistep"}
     assert all("no compiled loop" in why for why in NOT_COMPILED.values())
     names = {s.info.name for s in COMPILED}

@@ -286,6 +286,12 @@ def test_a_clause_repeated_with_other_numbers_is_said_once():
     clauses = [f"horizon cut to t = {t:g} at h = {h:.3g}" for t, h in ((8, 0.1), (2, 0.05), (0.5, 1e-3))]
     out = summarise_clauses(["too few points", *clauses, "too few points", ""])
     assert out == "too few points; horizon cut to t = 8 at h = 0.1 (and 2 more like it)"
+    # Notes that are themselves joined clauses (a step's failure, then the sweep's notes, as a
+    # Newton failure at three step sizes gives) say each clause once, not once per note.
+    notes = [f"Newton failed at h = {h:g}; floor at 1e-10; explicit tableaux only" for h in (1, 0.5)]
+    out = summarise_clauses(["too few points", *notes, "floor at 1e-10; explicit tableaux only"])
+    assert out == ("too few points; Newton failed at h = 1 (and 1 more like it); floor at 1e-10; "
+                   "explicit tableaux only")
 
 
 def test_a_stiff_problems_horizon_reaches_past_its_initial_layer():

@@ -23,6 +23,7 @@ EXPERIMENT_MODULES = {
     "stability": "stability",
     "reversibility": "reversibility",
     "energy": "energy",
+    "multistep-orbits": "multistep_orbits",
     "symplecticity": "symplecticity",
     "work-precision": "work_precision",
     "roundoff": "roundoff",

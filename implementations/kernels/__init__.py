@@ -5,7 +5,7 @@ and method.
 Kernels: explicit Runge-Kutta, splitting, the staggered leapfrog, Stormer's two-step rule and a
 splitting under a step controller, with column forms of the first three for ensembles
 (`one_step`); explicit and implicit linear multistep (`multistep`); implicit Runge-Kutta by
-Newton's method (`implicit_rk`); explicit second-order multistep (`second_order_multistep`);
+Newton's method (`implicit_rk`); explicit and implicit second-order multistep (`second_order_multistep`);
 what they share (`common`). A kernel reads its method from
 arrays (A, b, c; the drift/kick sequence; alpha, beta) and calls the problem's functions through
 their addresses (`implementations.kernel_calls`: an indirect call, as a C loop through a function
@@ -57,6 +57,7 @@ KERNELS = {
     "controlled_advance": "one_step", "lmm_explicit_advance": "multistep",
     "lmm_implicit_advance": "multistep", "irk_advance": "implicit_rk", "rhs_all": "common",
     "accel_all": "common", "lmm2_explicit_advance": "second_order_multistep",
+    "lmm2_implicit_advance": "second_order_multistep",
 }
 
 

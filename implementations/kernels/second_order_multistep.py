@@ -1,5 +1,7 @@
-"""Kernel of explicit second-order multistep tables (Stormer, the symmetric Quinlan-Tremaine
-methods), run by `implementations.second_order_multistep_compiled`.
+"""Kernels of second-order multistep tables, run by `implementations.second_order_multistep_compiled`:
+explicit tables (Stormer, the symmetric Quinlan-Tremaine methods: `lmm2_explicit_advance`) and
+implicit ones (Cowell: `lmm2_implicit_advance`, its simplified Newton iteration as the NumPy
+loop runs it).
 
 The same operations in the same order as `SecondOrderMultistepStepper._step` (no fused
 multiply-add, `error_model="numpy"`): psi = -sum_j alpha_j x_(n+j) + sum_j (h^2 beta_j) a_(n+j),
@@ -14,9 +16,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from implementations.kernels.common import EXACT, rhs_members
+from implementations.kernel_calls import call_state
+from implementations.kernels.common import EXACT, lu_apply, lu_factor, rhs_members
 
-__all__ = ["lmm2_explicit_advance"]
+__all__ = ["lmm2_explicit_advance", "lmm2_implicit_advance"]
 
 
 @njit(**EXACT)
@@ -83,3 +86,138 @@ def lmm2_explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, kno
         known[out] = 0
         head = (head + 1) % keep
     return evals, head
+
+
+@njit(**EXACT)
+def lmm2_implicit_advance(f_accel, f_jac, alpha, beta, wpred, h2, t0, n0, h, nsteps, X, A, known, head,
+                          P, tol, max_iter, stats):
+    """Advance the ring `nsteps` implicit steps: `SecondOrderMultistepStepper._step` for an implicit
+    table, its operations in its order: psi as the explicit kernel forms it; the predictor
+    sum_q wpred_q x_(n+q); per member the matrix I - h^2 beta_k da/dq at the predictor (velocity
+    0), factored once (LU with partial pivoting); then simplified Newton iterations on
+    x - psi - h^2 beta_k a(x), all members together, until the largest |dx| / (1 + |x|) over
+    members and components is at most `tol`.
+
+    Parameters
+    ----------
+    f_accel, f_jac : addresses of the problem's acceleration a(t, q) and Jacobian (state form, the
+        full first-order system's: its block (velocities, positions) is da/dq).
+    alpha, beta : the table (k + 1 values each, oldest first); wpred : (k,) predictor weights.
+    h2, t0, n0, h, nsteps, X, A, known, head, P : as in `lmm2_explicit_advance`.
+    tol : float, the Newton tolerance; max_iter : int, the most iterations.
+    stats : (4,) float array, written: accelerations, Jacobians (whole-ensemble calls), the step
+        (0-based) whose iteration failed or -1, the last correction there.
+
+    Returns
+    -------
+    int: the new oldest slot.
+    """
+    keep, nq, N = X.shape
+    dim = 2 * nq
+    k = alpha.shape[0] - 1
+    npar = P.shape[0]
+    x = np.empty(nq)
+    a = np.empty(nq)
+    p = np.empty(npar)
+    psi = np.empty((nq, N))
+    Xn = np.empty((nq, N))
+    An = np.empty((nq, N))
+    Mats = np.empty((N, nq, nq))
+    Piv = np.empty((N, nq), dtype=np.int64)
+    yfull = np.zeros(dim)
+    Jb = np.empty(dim * dim)
+    res = np.empty(nq)
+    dx = np.empty(nq)
+    hb = h2 * beta[k]
+    evals = 0
+    jacs = 0
+    stats[2] = -1.0
+    for s in range(nsteps):
+        tc = t0 + (n0 + s) * h
+        newest = (head + keep - 1) % keep
+        out = head
+        finite = True
+        for j in range(N):
+            for d in range(nq):
+                if not abs(X[newest, d, j]) <= 1.7976931348623157e308:
+                    finite = False
+        if not finite:
+            for j in range(N):
+                for d in range(nq):
+                    X[out, d, j] = np.nan
+            known[out] = 0
+            head = (head + 1) % keep
+            continue
+        for jj in range(k):
+            slot = (head + keep - k + jj) % keep
+            if beta[jj] != 0.0 and known[slot] == 0:
+                rhs_members(f_accel, tc + (jj - k + 1) * h, X[slot], P, A[slot], x, a, p)
+                known[slot] = 1
+                evals += 1
+        for j in range(N):
+            for d in range(nq):
+                psi[d, j] = 0.0
+            for jj in range(k):
+                slot = (head + keep - k + jj) % keep
+                if alpha[jj] != 0.0:
+                    for d in range(nq):
+                        psi[d, j] = psi[d, j] - alpha[jj] * X[slot, d, j]
+                if beta[jj] != 0.0:
+                    c = h2 * beta[jj]
+                    for d in range(nq):
+                        psi[d, j] = psi[d, j] + c * A[slot, d, j]
+            for d in range(nq):
+                acc = 0.0
+                for q in range(k):
+                    acc = acc + wpred[q] * X[(head + keep - k + q) % keep, d, j]
+                Xn[d, j] = acc
+        t_new = tc + h
+        for j in range(N):
+            for d in range(nq):
+                yfull[d] = Xn[d, j]
+            for q in range(npar):
+                p[q] = P[q, j]
+            call_state(f_jac, t_new, yfull, p, Jb)
+            for r in range(nq):
+                for q in range(nq):
+                    v = -(hb * Jb[(nq + r) * dim + q])
+                    if r == q:
+                        v = 1.0 - hb * Jb[(nq + r) * dim + q]
+                    Mats[j, r, q] = v
+            lu_factor(Mats[j], Piv[j])
+        jacs += 1
+        correction = np.inf
+        done = False
+        for _ in range(max_iter):
+            rhs_members(f_accel, t_new, Xn, P, An, x, a, p)
+            evals += 1
+            correction = 0.0
+            for j in range(N):
+                for d in range(nq):
+                    res[d] = Xn[d, j] - psi[d, j] - hb * An[d, j]
+                lu_apply(Mats[j], Piv[j], res, dx)
+                for d in range(nq):
+                    xn = Xn[d, j] - dx[d]
+                    Xn[d, j] = xn
+                    r = abs(dx[d]) / (1.0 + abs(xn))
+                    if not (r <= correction):
+                        correction = r
+            if correction <= tol:
+                done = True
+                break
+            if not (abs(correction) <= 1.7976931348623157e308):
+                break
+        if not done:
+            stats[0] = evals
+            stats[1] = jacs
+            stats[2] = s
+            stats[3] = correction
+            return head
+        for j in range(N):
+            for d in range(nq):
+                X[out, d, j] = Xn[d, j]
+        known[out] = 0
+        head = (head + 1) % keep
+    stats[0] = evals
+    stats[1] = jacs
+    return head

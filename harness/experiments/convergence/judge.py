@@ -176,7 +176,8 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
 
 def summarise_clauses(clauses: list[str]) -> str:
     """The clauses joined by '; ', each said once: clauses that differ only in their numbers
-    (one note per step size or member) are kept at their first, with how many more there were.
+    (one note per step size or member) are kept at their first, with how many more there were;
+    a note that is itself several clauses joined by '; ' is split into them first.
 
     Parameters
     ----------
@@ -187,7 +188,9 @@ def summarise_clauses(clauses: list[str]) -> str:
     str
     """
     variants: dict[str, dict[str, None]] = {}  # shape -> its distinct texts, in order
-    for c in clauses:
+    # A note may already be several clauses joined by '; ' (a step's failure, then the sweep's
+    # notes): each clause is grouped on its own, so a note repeated inside another is said once.
+    for c in (part for note in clauses if note for part in note.split("; ")):
         if c:
             variants.setdefault(re.sub(r"[-+]?\d[\d.]*(?:e[-+]?\d+)?", "#", c), {})[c] = None
     return "; ".join(next(iter(v)) + (f" (and {len(v) - 1} more like it)" if len(v) > 1 else "")

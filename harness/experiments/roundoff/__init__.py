@@ -13,16 +13,31 @@ the first stays while the second vanishes with h: the floors differ by about 1/(
 
 For one (stepper, problem) cell: an ensemble of `ensemble` starts (member 0 is the problem's own)
 is integrated for `n_steps` steps of each size h in a geometric sweep from `h_max` down to `h_min`
-(`points_per_decade` per decade). At fixed n the truncation error falls like h^3 (global error
-C T h^2 with T = n h), so at the small end only rounding is left. Each point records the
-position error relative to max |q| (max over components and members) against the certified
-ground truth (`harness.ground_truth.reference`) at t0 + n h, and the truncation error predicted
-at that h from the largest step (error(h_max) (h / h_max)^3).
+(`points_per_decade` per decade). At fixed n the truncation error falls like h^(p+1) (global error
+C T h^p with T = n h, p the method's order from its coefficients), so at the small end only
+rounding is left. Each point records the position error relative to max |q| (max over
+components and members) against the certified ground truth (`harness.ground_truth.reference`)
+at t0 + n h, and the truncation error predicted at that h from the largest step
+(error(h_max) (h / h_max)^(p+1)). A second series (`series` 'growth') follows the error along
+the run at the smallest step, at `growth_points` step counts from n / 100 to n: its log-log
+slope is the rounding error's growth exponent. A double integrator of independent rounding
+errors gives n^(3/2), a one-step form on a linear problem n^(1/2); measured at h = 1e-6 over
+10^2-10^4 steps the two-step forms grow like n^2 (harmonic, circular Kepler: 2.00-2.05): the
+increment h^2 a_n is ~1e-12 of x_n and changes slowly, so the rounding of x_n + increment keeps
+its sign over many steps and is integrated twice as a constant bias, not as a random walk.
 
 Summary per cell: `floor_error`, the smallest error over the sweep (the best accuracy any h
 reaches: below it rounding wins) and the h where it occurs; `error_at_h_min`; whether the
 smallest step is rounding-limited (its error more than ROUNDOFF_TRUNCATION_FACTOR times the
-predicted truncation); the floor in units of eps.
+predicted truncation); the floor in units of eps; the growth exponent (Theil-Sen slope of log
+error against log n over the growth series).
+
+The default steppers are the course's three (two-step Verlet, leapfrog, velocity Verlet) and two
+k-step members of the same two-step form, sum alpha_j x_(n+j) = h^2 sum beta_j a_(n+j): an
+explicit Stormer method (k = 4, order 4) and Quinlan & Tremaine's symmetric SL8 (order 8), which add
+h^2 sum beta_j a_(n+j) to the positions the same way and, their rho having the double root 1,
+integrate its rounding twice like the two-step rule (QT8's other roots lie on the unit circle
+and add bounded parts).
 
 References: Verlet, Phys. Rev. 159, 98 (1967) (the two-step form); Hairer, Lubich & Wanner,
 *Geometric Numerical Integration*, 2nd ed., VIII.5 (rounding errors, Brouwer's law);
@@ -49,12 +64,12 @@ __all__ = ["RoundoffExperiment", "ROW_COLUMNS", "SUMMARY_COLUMNS", "step_sizes"]
 
 ROW_COLUMNS = [
     "stepper", "problem", "h", "n_steps", "t_end", "error", "state_error", "reference_error",
-    "truncation_estimate", "ensemble_size", "wall_s", "message",
+    "truncation_estimate", "ensemble_size", "wall_s", "message", "series",
 ]
 SUMMARY_COLUMNS = [
     "stepper", "problem", "n_steps", "h_min", "h_max", "floor_error", "floor_h", "floor_eps",
-    "error_at_h_min", "truncation_at_h_min", "rounding_limited", "reference_error", "verdict",
-    "wall_s", "message",
+    "error_at_h_min", "truncation_at_h_min", "rounding_limited", "reference_error",
+    "growth_exponent", "verdict", "wall_s", "message",
 ]
 
 
@@ -88,7 +103,7 @@ class RoundoffExperiment(Experiment):
     description = ("Roundoff floor at very small steps (fixed step count): two-step Verlet "
                    "against leapfrog and velocity Verlet.")
     default_config: Mapping[str, Any] = {
-        "steppers": ["stormer-verlet", "leapfrog", "velocity-verlet"],
+        "steppers": ["stormer-verlet", "leapfrog", "velocity-verlet", "stormer4", "quinlan-tremaine8"],
         "problems": ["harmonic", "kepler-circular"],
         "n_steps": 10_000,
         "h_max": 1e-2,
@@ -96,6 +111,7 @@ class RoundoffExperiment(Experiment):
         "points_per_decade": 2,
         "ensemble": 4,
         "seed": 0,
+        "growth_points": 9,
     }
     quick_config: Mapping[str, Any] = {"n_steps": 5_000, "points_per_decade": 1}
     finite_columns = ("h", "n_steps", "t_end")
@@ -178,7 +194,9 @@ class RoundoffExperiment(Experiment):
                         int(config["points_per_decade"]))
         y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]))
         nq = len(problem.newtonian.positions)
-        times = problem.t0 + n * hs[::-1]  # increasing
+        growth_n = np.unique(np.geomspace(max(n // 100, 1), n,
+                                          int(config.get("growth_points", 9))).astype(np.int64))
+        times = np.unique(np.concatenate([problem.t0 + n * hs, problem.t0 + growth_n * hs[-1]]))
         ref = reference(problem, times, y0)
         records = []
         for h in hs:
@@ -204,7 +222,10 @@ class RoundoffExperiment(Experiment):
             })
         rows = pd.DataFrame(records)
         first = rows.error.iloc[0]
-        rows["truncation_estimate"] = first * (rows.h / rows.h.iloc[0]) ** 3
+        rows["truncation_estimate"] = first * (rows.h / rows.h.iloc[0]) ** (_order(stepper) + 1)
+        rows["series"] = "sweep"
+        rows = pd.concat([rows, _growth(stepper, problem, float(hs[-1]), growth_n, y0, ref, times, nq)],
+                         ignore_index=True)
         rows["stepper"] = stepper.info.name
         rows["problem"] = problem.name
         rows["ensemble_size"] = y0.shape[1]
@@ -226,8 +247,10 @@ class RoundoffExperiment(Experiment):
         if rows.empty:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         out = []
-        for (s, p), g in rows.groupby(["stepper", "problem"], sort=False):
-            g = g.sort_values("h", ascending=False)
+        series = rows["series"] if "series" in rows else pd.Series("sweep", index=rows.index)
+        for (s, p), g_all in rows.groupby(["stepper", "problem"], sort=False):
+            g = g_all[series.loc[g_all.index].fillna("sweep") == "sweep"].sort_values("h", ascending=False)
+            grow = g_all[series.loc[g_all.index] == "growth"]
             finite = g[np.isfinite(g.error)]
             messages = [m for m in g.message.fillna("") if m]
             rec: dict[str, Any] = {
@@ -238,6 +261,7 @@ class RoundoffExperiment(Experiment):
                 "truncation_at_h_min": float(g.truncation_estimate.iloc[-1]),
                 "rounding_limited": False,
                 "reference_error": float(g.reference_error.max()),
+                "growth_exponent": _growth_exponent(grow),
                 "verdict": "failed" if finite.empty else "measured",
                 "wall_s": float(g.wall_s.sum()), "message": "; ".join(messages[:1]),
             }
@@ -252,6 +276,55 @@ class RoundoffExperiment(Experiment):
                 )
             out.append(rec)
         return pd.DataFrame(out, columns=SUMMARY_COLUMNS)
+
+
+def _order(stepper) -> int:
+    """The method's order from its coefficients (`harness.facts`), else its claimed order."""
+    from harness.facts import method_facts
+
+    order = method_facts(stepper).order
+    return int(order if order is not None else stepper.info.claimed_order or 2)
+
+
+def _growth(stepper, problem, h: float, steps: np.ndarray, y0: np.ndarray, ref, times: np.ndarray,
+            nq: int) -> pd.DataFrame:
+    """The growth series: the relative position error after each of `steps` steps of size h."""
+    started = time.perf_counter()
+    message = ""
+    try:
+        tr = stepper.integrate(problem, h=h, n_steps=int(steps[-1]), y0=y0, save_steps=steps)
+    except StepFailure as exc:
+        tr, message = None, f"step failure: {exc}"
+    records = []
+    for k, n_k in enumerate(steps):
+        i = int(np.argmin(np.abs(times - (problem.t0 + n_k * h))))
+        exact = ref.y[i]
+        q_scale = max(float(np.max(np.abs(exact[:nq]))), tol.EPS)
+        err = math.nan
+        if tr is not None:
+            with np.errstate(all="ignore"):
+                d = np.abs(tr.y[k] - exact)
+            err = float(np.max(d[:nq])) / q_scale if np.all(np.isfinite(d)) else math.inf
+        records.append({"h": h, "n_steps": int(n_k), "t_end": float(problem.t0 + n_k * h),
+                        "error": err, "state_error": math.nan, "truncation_estimate": math.nan,
+                        "reference_error": float(np.max(ref.error[i])) / q_scale,
+                        "wall_s": 0.0, "message": message, "series": "growth"})
+    rows = pd.DataFrame(records)
+    rows.loc[rows.index[-1], "wall_s"] = time.perf_counter() - started
+    rows["stepper"] = stepper.info.name
+    rows["problem"] = problem.name
+    rows["ensemble_size"] = y0.shape[1]
+    return rows[ROW_COLUMNS]
+
+
+def _growth_exponent(grow: pd.DataFrame) -> float:
+    """Theil-Sen slope of log error against log n over the growth series (NaN below 3 points)."""
+    g = grow[np.isfinite(grow["error"].astype(float)) & (grow["error"].astype(float) > 0)]
+    if len(g) < 3:
+        return math.nan
+    from scipy import stats
+
+    return float(stats.theilslopes(np.log(g["error"].astype(float)), np.log(g["n_steps"].astype(float)))[0])
 
 
 register_experiment(RoundoffExperiment())

@@ -25,6 +25,8 @@ def roundoff_figure(rows: pd.DataFrame, palette: fs.Palette) -> Figure | None:
     -------
     Figure or None: None for no rows.
     """
+    if "series" in rows:
+        rows = rows[rows["series"].fillna("sweep") == "sweep"]
     if rows.empty:
         return None
     problems = list(dict.fromkeys(rows["problem"]))
@@ -40,7 +42,7 @@ def roundoff_figure(rows: pd.DataFrame, palette: fs.Palette) -> Figure | None:
         if len(first):
             s = g[g["stepper"] == first["stepper"].iloc[0]].sort_values("h")
             ax.plot(s["h"], fs.clip_log(s["truncation_estimate"]), ":",
-                    color="k", lw=0.9, label="truncation alone (∝ h³ at fixed N)")
+                    color="k", lw=0.9, label="truncation alone (∝ h^(p+1) at fixed N)")
         fs.loglog_axes(ax)
         ax.set_xlabel("step size h")
         ax.set_title(f"{fs.label_text(problem)}, N = {int(g['n_steps'].iloc[0])} steps")
