@@ -36,6 +36,7 @@ I*, II.1 (order).
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import hashlib
 import textwrap
@@ -46,9 +47,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.errors import InputError
+from harness.errors import InputError, NoApplicableCellsError
+from harness.gate import NOT_VERIFIED, gate_table
 from harness.problem import Dynamics, Problem
 from harness.problem.checks import check_positive
+from harness.registry import get_stepper
+from harness.registry import problems as problem_registry
+from harness.registry import steppers as stepper_registry
+from harness.runner import run_experiment
 from harness.sources import source_of
 from harness.stepper import FORMS, Carry, Stepper
 from harness.stepper.contracts import (
@@ -216,8 +222,6 @@ def _registered(registry, obj) -> Iterator[str]:
 
 
 def _resolve_stepper(stepper: Any, order, symmetric, energy, symplectic=None) -> Stepper:
-    from harness.registry import get_stepper
-
     if isinstance(stepper, str):
         stepper = get_stepper(stepper)
     elif not isinstance(stepper, Stepper):
@@ -238,8 +242,6 @@ def _resolve_stepper(stepper: Any, order, symmetric, energy, symplectic=None) ->
         # the energy experiment judges a bounded-energy claim as it judges a symplectic one
         changes["symplectic"] = True
     if changes:
-        import copy
-
         stepper = copy.copy(stepper)
         stepper.info = dataclasses.replace(stepper.info, **changes)
     return stepper
@@ -260,8 +262,6 @@ def _check_claims(order, symmetric, energy, symplectic=None) -> None:
 
 # -- judging ----------------------------------------------------------------------------------------
 def _order_rows(summary: pd.DataFrame) -> list[dict]:
-    from harness.gate import NOT_VERIFIED, gate_table
-
     rows = []
     for rec in gate_table(summary).to_dict("records"):
         measured = rec.get("measured_order")
@@ -379,11 +379,6 @@ def check(
     Raises `ClaimError` (an AssertionError with the measured table) when a claim is false and
     `raise_on_failure`; `InputError` for bad input.
     """
-    from harness.errors import NoApplicableCellsError
-    from harness.registry import problems as problem_registry
-    from harness.registry import steppers as stepper_registry
-    from harness.runner import run_experiment
-
     _check_claims(order, symmetric, energy, symplectic)
     if isinstance(problems, str | Problem) or not isinstance(problems, Sequence) or not problems:
         raise InputError("`problems` must be a non-empty list of problem names or Problem objects")

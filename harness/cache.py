@@ -13,11 +13,18 @@ share the project's compiled code this way).
 
 from __future__ import annotations
 
+import atexit
 import os
+import sys
 import threading
 from collections.abc import Callable, Hashable
 from pathlib import Path
 from typing import Any, TypeVar
+
+import heyoka as hy
+
+from harness import tolerances as tol
+from harness.errors import OutputError, describe_os_error
 
 T = TypeVar("T")
 
@@ -61,8 +68,6 @@ def _created(root: Path) -> Path:
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # a file where the directory belongs, no permission, ...
-        from harness.errors import OutputError, describe_os_error
-
         raise OutputError(*describe_os_error(exc, root)) from None
     return root
 
@@ -103,8 +108,6 @@ def float64_taylor_settings(problem) -> dict[str, Any]:
     -------
     dict: keyword arguments 'tol', 'high_accuracy', 'compact_mode' of heyoka's integrators.
     """
-    from harness import tolerances as tol
-
     return {"tol": tol.EPS, "high_accuracy": True, "compact_mode": compact_mode(problem)}
 
 
@@ -158,8 +161,6 @@ _exit_status: list[int] = []  # set once a compile has been abandoned
 
 def _abandon(status: int) -> None:
     if not _exit_status:
-        import atexit
-
         _exit_status.append(status)
         atexit.register(_exit_past_the_compile)
 
@@ -177,8 +178,6 @@ def set_exit_status(status: int) -> None:
 
 
 def _exit_past_the_compile() -> None:
-    import sys
-
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
@@ -198,8 +197,6 @@ def configure_heyoka_cache() -> Path:
     global _configured
     target = code_dir() / "heyoka"
     if _configured != target:
-        import heyoka as hy
-
         target.mkdir(parents=True, exist_ok=True)
         hy.llvm_state.set_diskcache_path(str(target))
         _configured = target

@@ -10,6 +10,7 @@ from __future__ import annotations
 import ast
 import functools
 import hashlib
+import importlib
 import importlib.util
 import json
 import os
@@ -405,7 +406,5 @@ def tolerance_values(names: set[str]) -> str:
     -------
     str: JSON object name -> repr of the value, keys sorted.
     """
-    import importlib
-
     tol = importlib.import_module(TOLERANCES)
     return json.dumps({n: repr(getattr(tol, n, "<missing>")) for n in sorted(names)})

@@ -20,7 +20,10 @@ from collections.abc import Callable
 import numpy as np
 
 from harness import tolerances as tol
+from harness.coefficients import ButcherTableau
+from harness.scales import derive_time_scale
 from harness.stepper import Stepper
+from harness.theory.defects import condition_defects, defect_floor
 
 __all__ = ["coefficient_floor", "coefficient_rounding_floor", "rounded_coefficient_floor", "order_bound",
            "mark_above_order", "problem_rate"]
@@ -38,8 +41,6 @@ def problem_rate(problem) -> float:
     -------
     float: a positive rate, 1.0 when it cannot be derived.
     """
-    from harness.scales import derive_time_scale
-
     try:
         rate = float(derive_time_scale(problem).fastest_rate)
     except Exception:  # a problem whose orbit sampling fails keeps its cell: unit rate
@@ -65,9 +66,6 @@ def coefficient_rounding_floor(coefficients, problem, *, span: float,
     -------
     callable: h array -> floor array, or -> None when there is no such floor.
     """
-    from harness.coefficients import ButcherTableau
-    from harness.theory.defects import condition_defects, defect_floor
-
     none = lambda h: None  # noqa: E731
     if not isinstance(coefficients, ButcherTableau) or not coefficients.explicit:
         return none
@@ -94,9 +92,6 @@ def rounded_coefficient_floor(coefficients, problem, *, span: float, scale: floa
     -------
     callable or None: h array -> floor array; None for other families than ButcherTableau.
     """
-    from harness.coefficients import ButcherTableau
-    from harness.theory.defects import condition_defects, defect_floor
-
     if not isinstance(coefficients, ButcherTableau):
         return None
     sizes = [(eps * size, size) for _, size in condition_defects(coefficients, coefficients.order())]
@@ -120,9 +115,6 @@ def coefficient_floor(coefficients, problem, *, span: float, scale: float,
     -------
     callable: h array -> floor array; its value is None where the defects are within noise.
     """
-    from harness.coefficients import ButcherTableau
-    from harness.theory.defects import condition_defects, defect_floor
-
     none = lambda h: None  # noqa: E731
     if not isinstance(coefficients, ButcherTableau) or not coefficients.explicit:
         return none

@@ -9,6 +9,7 @@ Used by the coefficient objects of `harness.coefficients` (which re-exports `as_
 from __future__ import annotations
 
 from collections.abc import Sequence
+from decimal import Decimal
 from fractions import Fraction
 
 import numpy as np
@@ -76,8 +77,6 @@ def published_precision(*values) -> float:
     float
         The printing's half unit, or 0.0 when no coefficient is a cut decimal.
     """
-    from decimal import Decimal
-
     def flat(v):
         if isinstance(v, np.ndarray):
             yield from v.ravel().tolist()
@@ -107,8 +106,6 @@ def exact_value(x) -> Fraction | None:
     -------
     Fraction or None.
     """
-    from decimal import Decimal
-
     if isinstance(x, bool):
         return None
     if isinstance(x, (int, Fraction, Decimal, str)):

@@ -36,6 +36,7 @@ from harness.coefficient_input import (
 )
 from harness.errors import CoefficientError
 from harness.multistep_coefficients import LinearMultistep, SecondOrderMultistep
+from harness.theory import rk_linear_order, rk_order, splitting_linear_order, splitting_order
 from harness.tolerances import COEFFICIENT_ULPS, EPS
 
 __all__ = [
@@ -219,8 +220,6 @@ class ButcherTableau:
         -------
         int: the largest p whose order conditions all hold, to the coefficients' rounding.
         """
-        from harness.theory import rk_order
-
         return rk_order(self)
 
     def embedded_order(self) -> int | None:
@@ -232,7 +231,6 @@ class ButcherTableau:
         """
         if self.b_hat is None:
             return None
-        from harness.theory import rk_order
 
         return rk_order(self.embedded(f"{self.name}-embedded"))
 
@@ -243,8 +241,6 @@ class ButcherTableau:
         -------
         int: the largest p with R(z) - e^z = O(z^{p+1}) (`harness.theory.rk_linear_order`).
         """
-        from harness.theory import rk_linear_order
-
         return rk_linear_order(self)
 
     @property
@@ -375,8 +371,6 @@ class SplittingScheme:
         -------
         int: the order of the composition on q'' = a(q, t).
         """
-        from harness.theory import splitting_order
-
         return splitting_order(self)
 
     def linear_order(self) -> int:
@@ -387,8 +381,6 @@ class SplittingScheme:
         -------
         int: the order of the propagator's match with the exact rotation.
         """
-        from harness.theory import splitting_linear_order
-
         return splitting_linear_order(self)
 
     @classmethod

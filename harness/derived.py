@@ -27,6 +27,7 @@ import hashlib
 import json
 import os
 from collections.abc import Callable, Sequence
+from importlib.metadata import version
 from typing import Any
 
 from harness.code_versions import module_version, project_files
@@ -64,8 +65,6 @@ def _version(module: str) -> str:
     signature = _project_files_signature()
     known = _versions.get(module)
     if known is None or known[0] != signature:
-        from importlib.metadata import version
-
         # the module's code, the problem's (a derived fact is of a problem's dynamics, reached
         # through its object), and the integrator that follows the orbits
         known = (signature, "\n".join([module_version(module), module_version("harness.problem"),

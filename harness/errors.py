@@ -1,5 +1,8 @@
 """Exceptions the harness raises on purpose. Each message names the argument and the rule."""
 
+import errno
+import os
+
 __all__ = [
     "HarnessError",
     "InputError",
@@ -105,9 +108,6 @@ def describe_os_error(exc: OSError, path: object = None) -> tuple[str, int]:
     -------
     tuple (str, int): the message and the exit status.
     """
-    import errno
-    import os
-
     where = exc.filename if exc.filename is not None else path
     where = os.fsdecode(where) if isinstance(where, bytes | os.PathLike) else where
     shown = repr(str(where)) if where is not None else "a file"
@@ -130,8 +130,6 @@ def describe_os_error(exc: OSError, path: object = None) -> tuple[str, int]:
 
 def _first_non_directory(path: str) -> str:
     """The first component of `path` that exists and is not a directory (else `path`)."""
-    import os
-
     parts = os.path.abspath(path).split(os.sep)
     for i in range(2, len(parts) + 1):
         head = os.sep.join(parts[:i])

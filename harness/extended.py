@@ -25,11 +25,18 @@ import time
 from fractions import Fraction
 from typing import Any
 
+import heyoka as hy
+import mpmath
 import numpy as np
 
 from harness import cache
 from harness import tolerances as tol
+from harness.coefficient_floors import coefficient_floor, mark_above_order, rounded_coefficient_floor
 from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
+from harness.order_fit import classify_points, fit_order
+from harness.problem.definition import subs_pars
+from harness.theory.newtonian import velocity_weights
+from harness.theory.series import Series, composition_series
 
 __all__ = ["NotMeasurable", "exact_form", "extended_sweep", "refine_composition_weights", "EXTENDED_EPS",
            "extended_reference"]
@@ -74,8 +81,6 @@ def _composition_residuals(mp, base_exact, free, order: int) -> list:
     base(w_m h)...base(w_0 h)...base(w_m h), w_0 = 1 - 2 sum w_i, on the generic separable
     problem of `harness.theory` (every component, both starting points): all vanish exactly
     when the composition has that order."""
-    from harness.theory.series import Series, composition_series
-
     w0 = 1 - 2 * sum(free)
     weights = [*reversed(free), w0, *free]
     steps = [(k, w * mp.mpf(v.numerator) / v.denominator) for w in weights for k, v in base_exact]
@@ -100,8 +105,6 @@ def refine_composition_weights(base: SplittingScheme, weights: list, order: int,
     -------
     list of str: decimal strings. NotMeasurable when it does not converge (a start not near a
     solution)."""
-    import mpmath
-
     if base.exact is None:
         raise NotMeasurable("the base method's coefficients are given only to float64")
     with mpmath.workdps(digits + 25):
@@ -138,8 +141,6 @@ def composition_defect(base: SplittingScheme, weights: list, order: int) -> floa
     Returns
     -------
     float: ~0 when the weights are accurate, ~1e-16 for float64 weights."""
-    import mpmath
-
     with mpmath.workdps(60):
         mp = mpmath.mp
         free = [mp.mpf(Fraction(w).numerator) / Fraction(w).denominator for w in weights]
@@ -154,8 +155,6 @@ def composition_defect(base: SplittingScheme, weights: list, order: int) -> floa
 # for bit, at 3-8x less time: rk4 on damped-cubic 6 us a step against 48 us).
 def _real128(value) -> Any:
     """A float or an exact Fraction as real128 (a Fraction rounded once, by the division)."""
-    import heyoka as hy
-
     if isinstance(value, Fraction):
         return hy.real128(value.numerator) / hy.real128(value.denominator)
     return hy.real128(value)
@@ -166,18 +165,12 @@ def _to_real128(values) -> np.ndarray:
 
 
 def _real128_constant(value) -> Any:
-    import heyoka as hy
-
     return hy.expression(_real128(Fraction(value)))
 
 
 def _with_parameter_values(problem, exprs: list) -> list:
     """`exprs` with the problem's parameters replaced by their values (h is the only runtime
     parameter of a step function)."""
-    import heyoka as hy
-
-    from harness.problem.definition import subs_pars
-
     if not problem.parameters:
         return list(exprs)
     mapping = {f"p{i}": hy.expression(float(v)) for i, v in enumerate(problem.parameter_values)}
@@ -187,8 +180,6 @@ def _with_parameter_values(problem, exprs: list) -> list:
 def _step_function(problem, step: list, evals_per_step: int):
     """(y0, span, n) -> (y_n, evaluations) with h = span / n: `step` (y_{k+1} as expressions of
     y_k and h = par[0]) compiled once in real128 and called n times."""
-    import heyoka as hy
-
     cache.configure_heyoka_cache()
     fn = hy.cfunc(step, list(problem.variables), fp_type=hy.real128, compact_mode=cache.compact_mode(problem))
 
@@ -206,8 +197,6 @@ def _step_function(problem, step: list, evals_per_step: int):
 
 def _rk_runner(problem, exact):
     """y_{n+1} = y_n + h sum b_i k_i, k_i = f(t_n + c_i h, y_n + h sum_j a_ij k_j) in real128."""
-    import heyoka as hy
-
     if problem.time_dependent:
         raise NotMeasurable("extended precision runs autonomous problems only")
     A, b, _ = exact
@@ -244,8 +233,6 @@ def _newtonian_indices(problem, what: str):
 
 def _split_runner(problem, exact):
     """Drifts q += a h v and kicks v += b h a(q) in real128."""
-    import heyoka as hy
-
     form, qi, vi = _newtonian_indices(problem, "a drift/kick composition")
     accel = _with_parameter_values(problem, form.acceleration)
     positions = [str(v) for v in form.positions]
@@ -272,10 +259,6 @@ def _lmm2_runner(problem, coefficients, exact):
     ground truth at t_0 + j h (j < H, H = max(k, p - 1) as the float64 loop keeps), implicit tables
     by fixed-point iteration to real128 rounding; the velocity at the end by the loop's formula of
     order H + 1 (`harness.theory.newtonian.velocity_weights`)."""
-    import heyoka as hy
-
-    from harness.theory.newtonian import velocity_weights
-
     form, qi, vi = _newtonian_indices(problem, "a second-order multistep table")
     cache.configure_heyoka_cache()
     accel = hy.cfunc(_with_parameter_values(problem, form.acceleration), list(form.positions),
@@ -338,8 +321,11 @@ def _runner(coefficients, problem):
 
 # -- ground truth in 192 bits, certified by 256 ----------------------------------------------------
 def _taylor(problem, T, prec: int, times: list | None = None) -> list:
-    """The `prec`-bit Taylor state at T, or at each of `times` (increasing, `prec`-bit reals)."""
-    import heyoka as hy
+    """The `prec`-bit Taylor state at T; with `times` (increasing, `prec`-bit reals), the states
+    there instead, on the same orbit. The integrator is built once per process for a problem and
+    precision (~0.15 s; a second-order multistep sweep asks for its starting values at every step
+    count) and set to the start before each use: its steps follow from its state and time alone,
+    so the states are those of a fresh integrator, digit for digit."""
 
     def build():
         start = [hy.real(float(v), prec) for v in problem.y0]
@@ -349,7 +335,7 @@ def _taylor(problem, T, prec: int, times: list | None = None) -> list:
                                   fp_type=hy.real, prec=prec)
 
     lock, ta = _integrators.get((problem.fingerprint(), prec), build)
-    with lock:  # set to the start: its steps follow from its state and time alone
+    with lock:
         ta.state[:] = [hy.real(float(v), prec) for v in problem.y0]
         ta.time = hy.real(float(problem.t0), prec)
         out = []
@@ -377,8 +363,6 @@ def extended_reference(problem, T: float) -> tuple[list, float]:
 
 
 def _error(y: np.ndarray, ref: list) -> float:
-    import heyoka as hy
-
     return max(float(abs(hy.real(v, _REFERENCE_PREC) - r)) for v, r in zip(y, ref, strict=True))
 
 
@@ -412,9 +396,6 @@ def extended_sweep(coefficients, problem, *, T: float | None = None, work_budget
     -------
     dict: 'rows' (h, n_steps, error, reference_error, rounding_level, excluded), 'fit' (order,
     points, h range) or None, 'reference_error', 'stopped_by', 'note', 'evals' and more."""
-    from harness.coefficient_floors import coefficient_floor, mark_above_order, rounded_coefficient_floor
-    from harness.order_fit import classify_points, fit_order
-
     runner = _runner(coefficients, problem)
     growth = getattr(runner, "rounding_exponent", 0.5)  # rounding as a random walk: n^(1/2) eps
     T = float(problem.convergence_t_end if T is None else T)

@@ -29,10 +29,17 @@ from dataclasses import asdict, dataclass
 from functools import lru_cache
 from typing import Any
 
+import heyoka as hy
 import numpy as np
 
+from harness import tolerances as tol
+from harness.coefficients import ButcherTableau, SplittingScheme
+from harness.derived import remembered
+from harness.ground_truth import reference
 from harness.problem import Problem
 from harness.stepper import AdaptiveStepper, Stepper
+from harness.theory import analytic_stability
+from harness.theory.classes import rk_class_orders, rk_stage_order, rk_stiffly_accurate
 
 __all__ = ["MethodFacts", "ProblemFacts", "central_field", "class_key", "method_facts",
            "problem_facts"]
@@ -153,16 +160,11 @@ def method_facts(stepper: Stepper) -> MethodFacts:
 def _coefficient_facts(fingerprint: str, box: tuple) -> dict[str, Any]:
     # order conditions and scanned stability intervals take seconds over a registry: kept on
     # disk under the coefficients' fingerprint and this module's code (harness.derived)
-    from harness.derived import remembered
-
     return remembered(__name__, "coefficient_facts", [fingerprint],
                       lambda: _derive_coefficient_facts(box[0]))
 
 
 def _derive_coefficient_facts(coeffs: Any) -> dict[str, Any]:
-    from harness.coefficients import ButcherTableau, SplittingScheme
-    from harness.theory import analytic_stability
-
     stab = analytic_stability(coeffs) or {}
     embedded = getattr(coeffs, "embedded_order", None)
     return {
@@ -180,8 +182,6 @@ def _derive_coefficient_facts(coeffs: Any) -> dict[str, Any]:
 
 
 def _rk_class_facts(tableau: Any) -> dict[str, Any]:
-    from harness.theory.classes import rk_class_orders, rk_stage_order, rk_stiffly_accurate
-
     classes = [(nystrom, degree) for nystrom in (False, True)
                for degree in (None, *range(2, CLASS_MAX_DEGREE + 1)) if class_key(nystrom, degree)]
     orders = {class_key(*c): k for c, k in zip(classes, rk_class_orders(tableau, classes), strict=True)}
@@ -211,8 +211,6 @@ def problem_facts(problem: Problem) -> ProblemFacts:
 def _problem_facts(fingerprint: str, box: tuple) -> ProblemFacts:
     # the stiffness samples the Jacobian along the orbit (compiled functions, a Taylor orbit):
     # kept on disk under the definition and this module's code (harness.derived)
-    from harness.derived import remembered
-
     return ProblemFacts(**remembered(__name__, "problem_facts", [fingerprint],
                                      lambda: asdict(_derive_problem_facts(box[0]))))
 
@@ -240,8 +238,6 @@ def central_field(problem: Problem) -> bool:
 
 @lru_cache(maxsize=256)
 def _central_field(fingerprint: str, box: tuple) -> bool:
-    from harness import tolerances as tol
-
     problem = box[0]
     if problem.newtonian is None or problem.velocity_dependent or problem.time_dependent:
         return False
@@ -295,8 +291,6 @@ def _rhs_degree(problem: Problem) -> int | None:
     for a transcendental or rational term. A text screen (only variables, parameters, sums,
     products, non-negative integer powers and division by a parameter or number) skips the
     derivatives where they could not vanish."""
-    import heyoka as hy
-
     variables, rhs = list(problem.variables), list(problem.rhs)
     if problem.time_dependent:
         clock = hy.make_vars("clock_time_")
@@ -323,8 +317,6 @@ def _rhs_degree(problem: Problem) -> int | None:
 
 def _constant_jacobian(problem: Problem) -> np.ndarray | None:
     """The Jacobian as numbers when no entry depends on a state variable, else None."""
-    import heyoka as hy
-
     names = {str(v) for v in problem.variables}
     for expr in problem.jacobian_expressions:
         if set(hy.get_variables(expr)) & names:
@@ -353,8 +345,6 @@ def _stiffness(problem: Problem) -> float:
     """The largest -Re(lambda) of the Jacobian's eigenvalues along the reference solution from
     the problem's own start over its convergence horizon (0 when every eigenvalue has a
     non-negative real part): the rate a stable explicit step must resolve."""
-    from harness.ground_truth import reference
-
     t0, T = problem.t0, problem.convergence_t_end
     times = np.linspace(t0, T, _STIFFNESS_SAMPLES)[1:]
     try:

@@ -31,8 +31,11 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
+from harness.coefficients import ButcherTableau
 from harness.facts import MethodFacts, method_facts, problem_facts
 from harness.perturbation_law import judge_split_map
+from harness.prediction import explain_slope, predicted_error
+from harness.registry import get_problem, get_stepper
 from harness.rules import convergence_expectation, judge_convergence
 
 __all__ = ["judge", "gate_table", "stiff_span_flag", "claim_contradictions", "GATE_COLUMNS", "NOT_VERIFIED"]
@@ -96,8 +99,6 @@ def _judge(record: Mapping, facts: MethodFacts | None = None,
            problem=None) -> tuple[str, str, str, float | None, float, str]:
     """`judge`, the predicted leading error coefficient and why none is given (NaN and a sentence
     where the theory does not apply)."""
-    from harness.registry import get_problem, get_stepper
-
     stepper = get_stepper(record["stepper"])
     facts = facts or method_facts(stepper)
     problem = problem if problem is not None else get_problem(record["problem"])
@@ -154,9 +155,6 @@ def _leading_term(stepper, problem, expectation) -> tuple[float, str]:
     """(C, '') of the predicted leading global error C h^p (`harness.prediction`) where its
     theorem applies (HNW I, II.8, Theorem 8.1: a Runge-Kutta tableau, a fixed step, the
     non-stiff h^p law expected), else (NaN, why not)."""
-    from harness.coefficients import ButcherTableau
-    from harness.prediction import predicted_error
-
     coeffs = getattr(stepper, "coefficients", None)
     if not isinstance(coeffs, ButcherTableau):
         kind = type(coeffs).__name__ if coeffs is not None else "a black box without coefficients"
@@ -199,9 +197,6 @@ def _explain_slope(record: Mapping, stepper, problem, expectation, reason: str
     term (`harness.prediction`) says whether the fitted points could show the order at all.
     Explained (a tiny or cancelling leading term) is `not-measurable`, otherwise the fail
     stands with the prediction's numbers. Returns (outcome, reason, predicted C)."""
-    from harness.coefficients import ButcherTableau
-    from harness.prediction import explain_slope, predicted_error
-
     coeffs = getattr(stepper, "coefficients", None)
     if not isinstance(coeffs, ButcherTableau):
         return "fail", reason, np.nan
@@ -232,8 +227,6 @@ def gate_table(summary: pd.DataFrame) -> pd.DataFrame:
     pandas.DataFrame
         One row per cell and per unverified stepper, columns GATE_COLUMNS.
     """
-    from harness.registry import get_stepper
-
     rows = []
     per_stepper: dict[str, tuple[MethodFacts, list[str]]] = {}
     for rec in summary.to_dict("records"):

@@ -19,7 +19,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from fractions import Fraction
 
+import mpmath
 import numpy as np
+
+from harness.coefficients import ButcherTableau, SplittingScheme
+from harness.theory import rooted_trees
 
 __all__ = ["extrapolation_tableau", "extrapolation_weights", "composition", "null_space_weights",
            "HIGH_ORDER_PROBLEMS", "draw_high_order", "perturb_high_order", "subtle_high_order"]
@@ -112,8 +116,6 @@ def _level_weights(kind: str, order: int) -> list[str]:
     """Weights raising a symmetric method of even `order` by two: the triple jump
     (g, 1 - 2g, g), g = 1 / (2 - 2^(1/(order+1))), or Suzuki's five-fold
     (p, p, 1 - 4p, p, p), p = 1 / (4 - 4^(1/(order+1))), to _DIGITS digits."""
-    import mpmath
-
     with mpmath.workdps(_DIGITS + 10):
         k = mpmath.mpf(1) / (order + 1)
         if kind == "triple":
@@ -140,8 +142,6 @@ def composition(levels: Sequence[str], name: str, top_factor: Fraction = Fractio
     -------
     SplittingScheme: the composed scheme, coefficients exact.
     """
-    from harness.coefficients import SplittingScheme
-
     half = Fraction(1, 2)  # velocity Verlet, kick-drift-kick: the symmetric base of order 2
     scheme, order = SplittingScheme(f"{name}-base", [("K", half), ("D", 1), ("K", half)]), 2
     for i, kind in enumerate(levels):
@@ -171,8 +171,6 @@ def null_space_weights(A, b, order: int, size: float = 0.05) -> list[float] | No
     -------
     list of float or None: the moved weights.
     """
-    from harness.theory import rooted_trees
-
     A_arr, b_arr = np.array(A, dtype=float), np.array(b, dtype=float)
     g: list[np.ndarray] = []
     for t in rooted_trees(order - 1):
@@ -232,8 +230,6 @@ def build_high_order(spec, name: str):
     -------
     ButcherTableau or SplittingScheme.
     """
-    from harness.coefficients import ButcherTableau, SplittingScheme
-
     if spec[0] == "rk":
         return ButcherTableau(name, spec[1], spec[2])
     scheme = composition(spec[1], name, spec[2] if len(spec) > 2 else Fraction(0))

@@ -12,9 +12,13 @@ INVARIANT_FLOW_DRIFT of its size. A declared invariant that fails is the problem
 
 from __future__ import annotations
 
+import heyoka as hy
 import numpy as np
 
+from harness import tolerances as tol
+from harness.derived import remembered
 from harness.errors import ProblemError
+from harness.scales import sample_orbit
 
 __all__ = ["check_invariants_along_flow"]
 
@@ -29,7 +33,6 @@ def check_invariants_along_flow(problem) -> None:
     """
     if not problem.invariants:
         return
-    from harness.derived import remembered
 
     defects = remembered("harness.invariant_checks", "invariant_defects",
                          [problem.fingerprint()], lambda: _invariant_defects(problem))
@@ -43,11 +46,6 @@ def check_invariants_along_flow(problem) -> None:
 
 
 def _invariant_defects(problem) -> list:
-    import heyoka as hy
-
-    from harness import tolerances as tol
-    from harness.scales import sample_orbit
-
     orbit = sample_orbit(problem)
     idx = np.arange(orbit.t.size)
     if idx.size > tol.ORBIT_MAX_SAMPLES:

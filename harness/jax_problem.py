@@ -28,9 +28,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import heyoka as hy
 import numpy as np
 
 from harness.errors import InputError
+from harness.problem import Problem
+from harness.registry import get_problem
 
 __all__ = ["JaxFunctions", "jax_functions", "require_x64", "expression_to_jax"]
 
@@ -121,7 +124,6 @@ def expression_to_jax(expr: Any, variables: Sequence[str]) -> Callable:
     fn(t, values, pars): `values` a sequence of arrays (one per variable), `pars` an array whose
     row i is parameter `p<i>`; the result broadcasts over the arrays' shape.
     """
-    import heyoka as hy
     import jax.numpy as jnp
 
     try:
@@ -219,14 +221,10 @@ def jax_functions(problem: Any) -> JaxFunctions:
     A `JaxFunctions`. Raises `InputError` when JAX is missing or in 32-bit mode, or when the
     definition uses an operation with no JAX counterpart.
     """
-    from harness.problem import Problem
-
     jax = require_x64()
     import jax.numpy as jnp
 
     if isinstance(problem, str):
-        from harness.registry import get_problem
-
         problem = get_problem(problem)
     if not isinstance(problem, Problem):
         raise InputError(f"`problem` must be a Problem or a problem name, got {type(problem).__name__}")

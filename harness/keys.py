@@ -28,9 +28,11 @@ Forgetting a module in `JUDGING_MODULES` costs recomputation, never a stale cell
 from __future__ import annotations
 
 import hashlib
+import importlib
 from collections.abc import Mapping
 from typing import Any
 
+from harness import __version__
 from harness.code_versions import (  # noqa: F401  (re-exported: the cache keys' vocabulary)
     JUDGING_MODULES,
     MEASURING_MODULES,
@@ -45,6 +47,9 @@ from harness.code_versions import (  # noqa: F401  (re-exported: the cache keys'
 from harness.errors import HarnessError
 from harness.experiments.base import Cell, Experiment
 from harness.provenance import to_jsonable
+from harness.registry import get_problem, get_stepper
+from harness.step_loops import implementations_of
+from harness.store import CELL_SCHEMA
 
 __all__ = ["cell_key", "code_version", "experiment_fingerprint", "measuring_modules", "module_version",
            "judging_version", "project_files",
@@ -65,8 +70,6 @@ def judging_version(experiment: Experiment) -> str:
     -------
     str: hex sha256 digest.
     """
-    import importlib
-
     every = {n for n in dir(importlib.import_module(TOLERANCES)) if n.isupper()}
     return module_version(*experiment_modules(experiment), *MEASURING_MODULES, judging=True,
                           extra=tolerance_values(every))
@@ -85,8 +88,6 @@ def experiment_fingerprint(experiment: Experiment) -> str:
     -------
     str: hex sha256 digest.
     """
-    from harness import __version__
-
     parts = [__version__, type(experiment).__qualname__, str(experiment.name)]
     own = getattr(experiment, "fingerprint", None)
     if callable(own):
@@ -114,9 +115,6 @@ def code_version(stepper: str, problem: str) -> str:
     -------
     str: 32 hex digits. Raises HarnessError when a fingerprint is not a string.
     """
-    from harness.registry import get_problem, get_stepper
-    from harness.step_loops import implementations_of
-
     # every implementation a cell of the stepper may run (`fastest`), each with the code of the
     # module its class is defined in and what that imports (module-level helpers of a family's
     # loop; a compiled variant's kernels): a change to either changes the key of each cell it
@@ -146,7 +144,5 @@ def cell_key(cell: Cell, config: Mapping[str, Any], experiment_version: str, sp_
     -------
     str: the key `Cell.key` makes.
     """
-    from harness.store import CELL_SCHEMA
-
     code = hashlib.sha256(f"{sp_version}\n{experiment_version}\n{CELL_SCHEMA}".encode()).hexdigest()[:32]
     return cell.key(code, to_jsonable(dict(config)))

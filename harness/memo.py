@@ -15,6 +15,11 @@ import json
 from collections.abc import Callable
 from typing import Any
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX
+    fcntl = None
+
 from harness.cache import cache_dir
 from harness.errors import OutputError
 from harness.store import atomic_write_bytes
@@ -67,9 +72,7 @@ def _read(path, key: str) -> tuple[Any] | None:
 def _key_lock(path):
     """An exclusive lock on `path`'s `.lock` file while the value is computed; no lock (each
     process computes for itself) without `fcntl` or where the lock file cannot be made."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
+    if fcntl is None:  # pragma: no cover - not POSIX
         yield
         return
     try:

@@ -14,6 +14,7 @@ import numpy as np
 
 from harness.errors import InputError
 from harness.names import check_name
+from harness.tolerances import MAX_CLAIMED_ORDER, MAX_RECORD_ENTRIES
 
 __all__ = ["check_record", "check_claimed_order"]
 
@@ -32,8 +33,6 @@ def check_claimed_order(value: Any, label: str, *, optional: bool = False) -> in
     -------
     int or None
     """
-    from harness.tolerances import MAX_CLAIMED_ORDER
-
     if value is None and optional:
         return None
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
@@ -88,8 +87,6 @@ def check_record(record: Any) -> str:
 
 
 def _entries(values: Any, label: str) -> list:
-    from harness.tolerances import MAX_RECORD_ENTRIES
-
     if isinstance(values, str | bytes | Mapping) or not hasattr(values, "__len__"):
         raise InputError(f"{label} must be a list, got {type(values).__name__}")
     if len(values) > MAX_RECORD_ENTRIES:

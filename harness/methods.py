@@ -32,8 +32,18 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+from harness.coefficients import (
+    ButcherTableau,
+    LinearMultistep,
+    SecondOrderMultistep,
+    SplittingScheme,
+    exact_value,
+)
 from harness.errors import InputError
+from harness.method_checks import check_claimed_order, check_record
+from harness.step_loops import build_stepper
 from harness.stepper import Stepper
+from harness.tolerances import COEFFICIENT_TOL
 
 __all__ = ["Method", "from_record", "method_from_record", "RECORD_KEYS"]
 
@@ -69,7 +79,6 @@ class Method:
         if not hasattr(self.coefficients, "fingerprint") or not hasattr(self.coefficients, "name"):
             kind = type(self.coefficients).__name__
             raise InputError(f"`coefficients` must be a coefficient object, got {kind}")
-        from harness.method_checks import check_claimed_order
 
         check_claimed_order(self.claimed_order, f"method {self.name!r}: `claimed_order`")
         check_claimed_order(self.claimed_embedded_order,
@@ -89,8 +98,6 @@ class Method:
         -------
         Stepper: built by `harness.step_loops.build_stepper`.
         """
-        from harness.step_loops import build_stepper
-
         return build_stepper(self)
 
     def steppers(self) -> list[Stepper]:
@@ -149,8 +156,6 @@ def _multistep(name: str, alpha, beta):
     apart by the coefficients: consistency for y' = f needs sum j alpha_j = sum beta_j != 0,
     for x'' = f it needs sum j alpha_j = 0 and sum beta_j = sum j^2 alpha_j / 2 (HNW I, III.2
     and III.10)."""
-    from harness.coefficients import LinearMultistep, SecondOrderMultistep, exact_value
-
     try:
         exact = [exact_value(a) for a in alpha]
         moment = (sum(j * a for j, a in enumerate(exact)) if all(e is not None for e in exact)
@@ -158,7 +163,6 @@ def _multistep(name: str, alpha, beta):
         size = sum(j * abs(float(a)) for j, a in enumerate(alpha))
     except (TypeError, ValueError):
         return LinearMultistep(name, alpha, beta)  # reports the bad coefficient
-    from harness.tolerances import COEFFICIENT_TOL
 
     if abs(float(moment)) <= COEFFICIENT_TOL * max(1.0, size) and any(b != 0 for b in beta):
         return SecondOrderMultistep(name, alpha, beta)
@@ -178,8 +182,6 @@ def method_from_record(record: Mapping[str, Any]) -> Method:
     -------
     Method: the coefficient object with its claims.
     """
-    from harness.method_checks import check_record
-
     name = check_record(record)  # types, sizes and numbers first (`harness.method_checks`)
     for key in ("claimed_order", "reference"):
         if key not in record:
@@ -187,13 +189,9 @@ def method_from_record(record: Mapping[str, Any]) -> Method:
     family = _family(record)
     try:
         if family == "runge-kutta":
-            from harness.coefficients import ButcherTableau
-
             coeffs = ButcherTableau(name, record["A"], record["b"], record.get("c"),
                                     b_hat=record.get("b_hat"))
         elif family == "splitting":
-            from harness.coefficients import SplittingScheme
-
             coeffs = SplittingScheme(name, record["sequence"])
         else:
             coeffs = _multistep(name, record["alpha"], record["beta"])

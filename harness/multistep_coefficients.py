@@ -17,6 +17,7 @@ import numpy as np
 
 from harness.coefficient_input import Number, as_float_array, close_to_rounding, exact_rows
 from harness.errors import CoefficientError
+from harness.theory import lmm_order, second_order_lmm_order
 from harness.tolerances import COEFFICIENT_ULPS, EPS
 
 __all__ = ["LinearMultistep", "SecondOrderMultistep"]
@@ -124,8 +125,6 @@ class LinearMultistep(_MultistepFacts):
         -------
         int: the largest p with C_0 = ... = C_p = 0.
         """
-        from harness.theory import lmm_order
-
         return lmm_order(self)
 
 
@@ -188,7 +187,5 @@ class SecondOrderMultistep(_MultistepFacts):
         -------
         int: the order p of the method for x'' = a (error constants C_0 ... C_{p+1} zero).
         """
-        from harness.theory import second_order_lmm_order
-
         return second_order_lmm_order(self)
 

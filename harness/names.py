@@ -7,6 +7,7 @@ import unicodedata
 from typing import Any
 
 from harness.errors import InputError
+from harness.tolerances import MAX_NAME_LENGTH
 
 __all__ = ["check_name"]
 
@@ -22,8 +23,6 @@ def check_name(name: Any, what: str) -> str:
     -------
     str: the name, unchanged.
     """
-    from harness.tolerances import MAX_NAME_LENGTH
-
     if not isinstance(name, str) or not name.strip():
         raise InputError(f"{what} must be a non-empty string, got {name!r}"[:300])
     if len(name) > MAX_NAME_LENGTH:

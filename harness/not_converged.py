@@ -22,6 +22,10 @@ from pathlib import Path
 
 import pandas as pd
 
+from harness.errors import InputError
+from harness.gate import gate_table
+from harness.registry import load_plugin
+
 __all__ = ["not_converged", "format_not_converged", "main"]
 
 
@@ -73,8 +77,6 @@ def format_not_converged(rows: pd.DataFrame, total: int) -> str:
 def _latest(results: Path) -> Path:
     runs = sorted((p for p in results.glob("*/convergence.summary.parquet")), key=lambda p: p.stat().st_mtime)
     if not runs:
-        from harness.errors import InputError
-
         raise InputError(f"`RESULTS_DIR`: no convergence.summary.parquet under {results}")
     return runs[-1].parent
 
@@ -90,10 +92,6 @@ def main(argv: list[str] | None = None) -> int:
     -------
     int: 0, 1 when a cell fails, 2 on bad input.
     """
-    from harness.errors import InputError
-    from harness.gate import gate_table
-    from harness.registry import load_plugin
-
     parser = argparse.ArgumentParser(prog="python -m harness.not_converged",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("results", nargs="?", help="a run directory (default: the newest under results/)")

@@ -17,6 +17,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from scipy import stats
 
 from harness import tolerances as tol
 
@@ -39,8 +40,6 @@ def fit_order(h: Sequence[float], error: Sequence[float]) -> dict[str, float]:
     -------
     dict: 'order' (the slope), 'intercept', 'residual', 'ci_low', 'ci_high' (NaN for two points).
     """
-    from scipy import stats
-
     x = np.log(np.asarray(h, dtype=float))
     y = np.log(np.asarray(error, dtype=float))
     n = x.size

@@ -39,10 +39,25 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
+from scipy.optimize import brentq
 
 from harness.coefficients import ButcherTableau, LinearMultistep, SplittingScheme
-from harness.high_order import HIGH_ORDER_PROBLEMS
+from harness.experiments.base import Cell
+from harness.experiments.convergence import ConvergenceExperiment
+from harness.facts import method_facts, problem_facts
+from harness.gate import claim_contradictions
+from harness.high_order import (
+    HIGH_ORDER_PROBLEMS,
+    build_high_order,
+    draw_high_order,
+    perturb_high_order,
+    subtle_high_order,
+)
 from harness.methods import Method
+from harness.registry import get_problem
+from harness.registry import steppers as registry
+from harness.rules import convergence_expectation, judge_convergence
+from harness.theory import rooted_trees
 
 __all__ = ["Member", "generate", "error_rates", "FAMILIES", "HIGH_FAMILIES", "PROBLEMS"]
 
@@ -105,8 +120,6 @@ def _split2(a: float) -> list:
 
 def _split4(w1: float) -> list | None:
     """Weights (w1, w2, w0, w2, w1) with 2 w1 + 2 w2 + w0 = 1 and 2 w1^3 + 2 w2^3 + w0^3 = 0."""
-    from scipy.optimize import brentq
-
     def g(w2: float) -> float:
         w0 = 1 - 2 * w1 - 2 * w2
         return 2 * w1**3 + 2 * w2**3 + w0**3
@@ -197,8 +210,6 @@ def _subtle(family: str, coeffs, claimed: int):
     """Coefficients of order exactly claimed - 1 (Runge-Kutta) or claimed - 2 (a symmetric
     composition), or None where the family leaves no such freedom."""
     if family.startswith("rk-"):
-        from harness.theory import rooted_trees
-
         A, b = np.array(coeffs[0], dtype=float), np.array(coeffs[1], dtype=float)
         g: list[np.ndarray] = []
         for t in rooted_trees(claimed - 1):
@@ -230,8 +241,6 @@ def _subtle(family: str, coeffs, claimed: int):
 
 def _high_order_members(family: str, size: int, rng, seed: int, max_order: int) -> list[Member]:
     """`size` correct members of a high-order family (`harness.high_order`) and their mutants."""
-    from harness.high_order import build_high_order, draw_high_order, perturb_high_order, subtle_high_order
-
     out: list[Member] = []
     for made in range(size):
         spec, claimed = draw_high_order(family, rng, max_order)
@@ -329,14 +338,6 @@ def error_rates(members: Sequence[Member], *, config: dict | None = None,
     -------
     tuple of DataFrame: (one row per method and problem, `rates` of that table).
     """
-    from harness.experiments.base import Cell
-    from harness.experiments.convergence import ConvergenceExperiment
-    from harness.facts import method_facts, problem_facts
-    from harness.gate import claim_contradictions
-    from harness.registry import get_problem
-    from harness.registry import steppers as registry
-    from harness.rules import convergence_expectation, judge_convergence
-
     exp = ConvergenceExperiment()
     cfg = exp.config({"local": False, "ensemble": 4, **(config or {})})
     rows = []

@@ -31,10 +31,14 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import heyoka as hy
 import numpy as np
 
 from harness import tolerances as tol
+from harness.derived import remembered
 from harness.problem import Problem
+from harness.theory import rooted_trees
+from harness.theory.classes import rk_error_defects
 
 __all__ = ["elementary_differentials", "propagated_tree_terms", "predicted_error", "explain_slope"]
 
@@ -43,8 +47,6 @@ def _autonomous(problem: Problem) -> tuple[list, list]:
     """(variables, right-hand side) with the time made a variable `tau_time_` (t' = 1) when the
     problem reads it; the Runge-Kutta tableaux here have c = A e, so the time is integrated
     exactly and the autonomous B-series applies."""
-    import heyoka as hy
-
     variables, rhs = list(problem.variables), list(problem.rhs)
     if problem.time_dependent:
         tau = hy.make_vars("tau_time_")
@@ -67,10 +69,6 @@ def elementary_differentials(problem: Problem, order: int) -> tuple[list, list[l
     -------
     (trees, differentials) : the `RootedTree`s and, per tree, one expression per component.
     """
-    import heyoka as hy
-
-    from harness.theory import rooted_trees
-
     variables, f = _autonomous(problem)
     n = len(variables)
     trees = rooted_trees(order)
@@ -107,15 +105,11 @@ def propagated_tree_terms(problem: Problem, order: int) -> dict[str, Any]:
     dict with `trees` (labels), `terms` (one list of dim numbers per tree, in the problem's
     variables) and `t_end`; or `why` (a sentence) when the prediction is not made.
     """
-    from harness.derived import remembered
-
     return remembered(__name__, "propagated_tree_terms", [problem.fingerprint(), order],
                       lambda: _propagate(problem, order))
 
 
 def _propagate(problem: Problem, order: int) -> dict[str, Any]:
-    import heyoka as hy
-
     if problem.dim ** (order - 1) > tol.PREDICTION_MAX_WORK:
         return {"why": (f"not predicted: {problem.dim} variables and trees of order {order} (the "
                         f"symbolic elementary differentials grow like dim^(order-1) = "
@@ -170,8 +164,6 @@ def predicted_error(tableau: Any, problem: Problem, order: int, *, next_term: bo
     (the order-(p+1) estimate, NaN when not made), `crossover_h` (C / C_next: below it the h^p
     term leads) and `why` (empty, or the reason nothing was predicted).
     """
-    from harness.theory.classes import rk_error_defects
-
     out = {"order": order, "coefficient": math.nan, "next_coefficient": math.nan,
            "crossover_h": math.nan, "why": ""}
     sizes = []

@@ -14,6 +14,10 @@ import sys
 import time
 from typing import IO, Any
 
+from tqdm.auto import tqdm
+
+from harness.errors import InputError
+
 __all__ = ["Progress", "choose_mode", "MODES"]
 
 MODES = ("auto", "bar", "lines", "off")
@@ -55,8 +59,6 @@ class Progress:
         mode: str = "auto",
         interval: float = LINE_INTERVAL_S,
     ):
-        from harness.errors import InputError
-
         if mode not in MODES:
             raise InputError(f"`mode` must be one of {', '.join(MODES)}, got {mode!r}")
         if isinstance(total, bool) or not isinstance(total, int) or total < 0:
@@ -76,8 +78,6 @@ class Progress:
         self._closed = False
         self._bar: Any = None
         if self.mode == "bar":
-            from tqdm.auto import tqdm
-
             self._bar = tqdm(total=total, desc=self.desc, file=self.stream, unit="cell",
                              mininterval=0.2, dynamic_ncols=True, leave=True)
 

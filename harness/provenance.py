@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from harness import __version__
+
 __all__ = [
     "PROJECT_ROOT",
     "git_info",
@@ -124,8 +126,6 @@ def versions() -> dict[str, str | None]:
     -------
     dict: name -> version string or None; 'python' and 'harness' always set.
     """
-    from harness import __version__
-
     out: dict[str, str | None] = {"python": platform.python_version(), "harness": __version__}
     for name, dist in _DISTRIBUTIONS.items():
         try:

@@ -55,6 +55,10 @@ def integrator_claims(request: pytest.FixtureRequest) -> Callable[..., Any]:
     -------
     callable: ``check(stepper, problems, **claims_and_options)`` -> `ClaimReport`.
     """
+    # The plugin's one deferred import of a project module (tests/test_import_layers.py allows
+    # exactly this one): pytest imports this module at the start of every test run of every
+    # project that has the harness installed; the API imports heyoka, pandas and the experiments
+    # (~2 s CPU), which only a test that asks for this fixture needs.
     from harness.api import check
 
     full = bool(request.config.getoption("--integrator-claims-full"))

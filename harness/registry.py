@@ -38,6 +38,7 @@ from typing import Any, Generic, TypeVar
 
 from harness.entry_points import group_entry_points, missing_builtins
 from harness.errors import InputError, PluginError, UnknownNameError
+from harness.methods import Method, method_from_record
 from harness.problem import Problem
 from harness.stepper import Stepper
 
@@ -320,8 +321,6 @@ def _build_records(records: Any, path: str | Path) -> list[Stepper]:
     """Steppers from a plugin's `METHODS` (method records, `harness.methods`): each record is
     built on its own, and one that fails its checks is reported by name in `plugin_errors()`
     while the others load."""
-    from harness.methods import Method, method_from_record
-
     if records is None:
         return []
     if isinstance(records, str | bytes) or not hasattr(records, "__iter__"):

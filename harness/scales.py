@@ -37,6 +37,7 @@ import numpy as np
 
 from harness import tolerances as tol
 from harness.derived import remembered
+from harness.errors import ProblemError
 from harness.orbit import Orbit, fastest_times, jacobian_eigenvalues, orbit_rates, sample_orbit, states_at
 
 __all__ = [
@@ -126,8 +127,6 @@ def derive_time_scale(problem) -> TimeScale:
 def _derive_time_scale(problem) -> TimeScale:
     orbit = sample_orbit(problem)
     if orbit.singular:
-        from harness.errors import ProblemError
-
         raise ProblemError(
             f"problem {problem.name!r}: its solution is singular within its span "
             f"[{problem.t0:g}, {problem.t_end:g}]: {orbit.singular} (heyoka's float64 Taylor "

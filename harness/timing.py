@@ -33,6 +33,7 @@ rigorous Java performance evaluation", OOPSLA 2007 (warm-up excluded, repeat unt
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import math
 import os
@@ -47,8 +48,10 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import threadpoolctl
 
 from harness import tolerances as tol
+from harness.coefficients import SplittingScheme
 from harness.errors import InputError
 from harness.provenance import cpu_model
 
@@ -174,15 +177,10 @@ def machine_info() -> dict[str, Any]:
         where the platform has none).
     """
     blas, threads = "none loaded", -1
-    try:
-        import threadpoolctl
-
-        pools = [p for p in threadpoolctl.threadpool_info() if p.get("user_api") == "blas"]
-        if pools:
-            blas = f"{pools[0].get('internal_api')} {pools[0].get('version') or ''}".strip()
-            threads = int(pools[0].get("num_threads", -1))
-    except ImportError:
-        pass
+    pools = [p for p in threadpoolctl.threadpool_info() if p.get("user_api") == "blas"]
+    if pools:
+        blas = f"{pools[0].get('internal_api')} {pools[0].get('version') or ''}".strip()
+        threads = int(pools[0].get("num_threads", -1))
     try:
         load = float(os.getloadavg()[0])
     except OSError:
@@ -337,13 +335,10 @@ def method_identity(stepper: Any) -> str | None:
     coefficients = getattr(stepper, "coefficients", None)
     declared = stepper.info.extra.get("declared_splitting")
     if coefficients is None and declared:
-        from harness.coefficients import SplittingScheme
-
         coefficients = SplittingScheme(f"{stepper.info.name} (declared)", [tuple(x) for x in declared])
     fp = getattr(coefficients, "fingerprint", None)
     if fp is None:
         return None
-    import hashlib
 
     return hashlib.sha256(f"{type(coefficients).__name__}:{fp()}".encode()).hexdigest()[:16]
 

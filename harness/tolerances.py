@@ -90,8 +90,6 @@ SCALE_FLOOR = 1e-300
 MIN_FIT_POINTS = 4
 # Errors above this are a blow-up (`unstable`), as is any NaN or inf.
 BLOWUP_ERROR = 1e6
-# Errors at or below this many units of rounding at every step size: the method is exact.
-EXACT_ULPS = 1e3
 
 # Gate: a measured order may differ from the claim by at most this.
 GATE_ORDER_TOL = 0.2

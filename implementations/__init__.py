@@ -7,6 +7,8 @@ Every built-in stepper is registered here, in one place: each family module expo
 import threading
 from importlib import import_module
 
+from harness.stepper import StepperInfo
+
 __all__ = [
     "ProblemCache", "builtin_steppers", "coefficient_info", "unavailable_steppers",
     "FAMILY_MODULES", "OPTIONAL_MODULES", "optional_library",
@@ -118,8 +120,6 @@ def coefficient_info(coefficients, *, family: str, form: str = "first-order", **
     -------
     StepperInfo: the derived values, `fields` applied over them.
     """
-    from harness.stepper import StepperInfo
-
     derived = {
         "name": coefficients.name,
         "symplectic": bool(getattr(coefficients, "symplectic", False)),

@@ -42,6 +42,7 @@ from harness.coefficients import ButcherTableau, LinearMultistep, SecondOrderMul
 from harness.errors import InputError
 from harness.problem import Dynamics, Problem
 from harness.stepper import Carry, StepFailure, Stepper
+from implementations import FAMILY_MODULES
 from implementations.compiled_kernels import (
     COMPILE_LOG,
     UnsupportedExpression,
@@ -49,9 +50,12 @@ from implementations.compiled_kernels import (
     call_kernel,
     problem_functions,
 )
-from implementations.implicit_rk import NewtonSettings, extrapolation_matrix
+from implementations.implicit_rk import ImplicitRungeKutta, NewtonSettings, extrapolation_matrix
 from implementations.multistep import LinearMultistepStepper
-from implementations.splitting import StaggeredLeapfrog
+from implementations.runge_kutta import ExplicitRungeKutta
+from implementations.second_order_multistep import SecondOrderMultistepStepper
+from implementations.second_order_multistep_compiled import CompiledSecondOrderMultistep
+from implementations.splitting import SplittingStepper, StaggeredLeapfrog
 from implementations.step_control import ControlledSplittingStepper
 from implementations.verlet import TwoStepVerlet, stormer_carry
 
@@ -680,11 +684,7 @@ def compiled_variant(stepper: Stepper) -> Stepper:
     if isinstance(coeffs, LinearMultistep):
         return CompiledMultistep(stepper)
     if isinstance(coeffs, SecondOrderMultistep):
-        from implementations.second_order_multistep import SecondOrderMultistepStepper
-
         if isinstance(stepper, SecondOrderMultistepStepper):  # the family's own compiled loop
-            from implementations.second_order_multistep_compiled import CompiledSecondOrderMultistep
-
             return CompiledSecondOrderMultistep(stepper)
         return CompiledStormer(stepper)
     raise InputError(
@@ -696,11 +696,6 @@ def compiled_variant(stepper: Stepper) -> Stepper:
 
 def _family_loops() -> tuple[type, ...]:
     """The NumPy loop classes the compiled families mirror step for step."""
-    from implementations.implicit_rk import ImplicitRungeKutta
-    from implementations.runge_kutta import ExplicitRungeKutta
-    from implementations.second_order_multistep import SecondOrderMultistepStepper
-    from implementations.splitting import SplittingStepper
-
     return (ExplicitRungeKutta, ImplicitRungeKutta, SplittingStepper, StaggeredLeapfrog,
             LinearMultistepStepper, TwoStepVerlet, ControlledSplittingStepper,
             SecondOrderMultistepStepper)
@@ -736,8 +731,6 @@ NOT_COMPILED: dict[str, str] = {}
 
 
 def _registered() -> list[Stepper]:
-    from implementations import FAMILY_MODULES
-
     out = []
     for name in FAMILY_MODULES:
         if name == "compiled":

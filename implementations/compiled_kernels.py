@@ -24,6 +24,11 @@ import threading
 import time
 from typing import Any
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX
+    fcntl = None
+
 from harness import cache
 from harness.errors import InputError
 from harness.problem import Problem
@@ -68,9 +73,7 @@ def _compile_lock(stem: str):
     loading) what `stem` names: workers started together (the gate's, the report's) compile each
     kernel and problem module once between them; the others wait and load it from numba's disk
     cache. Without `fcntl` (not POSIX) every process compiles for itself."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
+    if fcntl is None:  # pragma: no cover - not POSIX
         yield
         return
     path = cache.code_dir() / "numba" / f"{stem}.lock"

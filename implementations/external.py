@@ -31,7 +31,9 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from scipy.integrate import solve_ivp
 
+from harness.errors import InputError
 from harness.problem import Dynamics
 from harness.stepper import AdaptiveStepper, Carry, StepFailure, Stepper, StepperInfo, WorkLimitFailure
 from harness.tolerances import ADAPTIVE_MAX_EVALS, SCIPY_MIN_RTOL, SCIPY_STALL_CALLS
@@ -299,8 +301,6 @@ class ScipyStepper(MemberByMemberStepper):
 
     def __init__(self, method: str, tol: float = AdaptiveStepper.tol):
         if method not in SCIPY_METHODS:
-            from harness.errors import InputError
-
             raise InputError(f"`method` must be one of {sorted(SCIPY_METHODS)}, got {method!r}")
         name, order, explicit, uses_jac, evals, reference, description = SCIPY_METHODS[method]
         self.method = method
@@ -341,8 +341,6 @@ class ScipyStepper(MemberByMemberStepper):
 
     def _solve_member(self, member: MemberDynamics, m: int, t: float, target: float,
                       y: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
-        from scipy.integrate import solve_ivp  # imported on first use: listing steppers needs none
-
         options = {"jac": member.jac} if self.uses_jacobian else {}
         try:
             with warnings.catch_warnings():

@@ -27,8 +27,10 @@ import numpy as np
 
 from harness.coefficients import LinearMultistep
 from harness.errors import IncompatibleError, InputError, UnknownNameError
+from harness.ground_truth import reference
 from harness.methods import Method
 from harness.problem import Dynamics
+from harness.registry import get_stepper
 from harness.stepper import Carry, Stepper, check_compatible
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
 from implementations import coefficient_info
@@ -174,7 +176,6 @@ class LinearMultistepStepper(NewtonStepper):
     def _starter_stepper(self) -> Stepper:
         if isinstance(self.starter, Stepper):
             return self.starter
-        from harness.registry import get_stepper  # lazy: the registry imports this module
 
         starter = get_stepper(self.starter)
         if isinstance(starter, LinearMultistepStepper):
@@ -201,8 +202,6 @@ class LinearMultistepStepper(NewtonStepper):
         if count == 0:
             return []
         if self.starter_name == "reference":
-            from harness.ground_truth import reference  # lazy: heavy, only for this starter
-
             times = t0 + h * np.arange(1, count + 1)
             ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)
             values = [np.array(ref.y[i], dtype=np.float64) for i in range(count)]

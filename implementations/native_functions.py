@@ -42,6 +42,7 @@ import os
 import re
 import struct
 import threading
+import time
 import weakref
 from typing import Any
 
@@ -161,8 +162,6 @@ def function_address(problem: Problem, name: str) -> int | tuple[int, int, int]:
 
 # -- loading -------------------------------------------------------------------------------------
 def _load(problem: Problem, name: str) -> NativeFunction:
-    import time
-
     kind, form = NAMES[name]
     if kind == "accel_q" and (problem.newtonian is None or problem.velocity_dependent):
         raise UnsupportedExpression(

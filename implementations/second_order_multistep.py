@@ -36,6 +36,7 @@ Reversing time turns the stored history into the pending future, like the first-
 from __future__ import annotations
 
 from fractions import Fraction
+from math import comb
 
 import numpy as np
 
@@ -43,6 +44,7 @@ from harness.coefficients import SecondOrderMultistep
 from harness.errors import CoefficientError, IncompatibleError
 from harness.methods import Method
 from harness.problem import Dynamics
+from harness.registry import get_stepper
 from harness.stepper import Carry, StepFailure, Stepper, check_compatible
 from harness.theory.newtonian import velocity_weights
 from harness.tolerances import NEWTON_MAX_ITER, NEWTON_TOL
@@ -78,8 +80,6 @@ def _sigma(n: int, stormer: bool) -> list[Fraction]:
 
 def _backward_to_table(sigma: list[Fraction], newest: int, k: int) -> list[Fraction]:
     """beta_0..beta_k from sum_j sigma_j nabla^j a_(n+newest) (oldest coefficient first)."""
-    from math import comb
-
     beta = [Fraction(0)] * (k + 1)
     for j, s in enumerate(sigma):
         for i in range(j + 1):  # nabla^j a_m = sum_i (-1)^i C(j, i) a_(m-i)
@@ -211,8 +211,6 @@ class SecondOrderMultistepStepper(Stepper):
 
     # -- history --------------------------------------------------------------------------------
     def _starter_stepper(self) -> Stepper:
-        from harness.registry import get_stepper
-
         return get_stepper(self.starter)
 
     def incompatibility(self, problem) -> str | None:

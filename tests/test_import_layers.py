@@ -8,6 +8,13 @@ imports under `if TYPE_CHECKING:` are left out (they never run). An arrow that b
 today is allowed only if it is in `EXCEPTIONS` with its reason; an entry the code no longer needs
 fails the test too, so the list only shrinks.
 
+Deferred imports (inside a function) are allowed only where an optional library is imported on
+first use: a library of `DEFERRABLE_LIBRARIES` (each shown optional: not installed by the
+project's required dependencies), or a project module that imports one at module level (itself,
+through its own module-level imports, or through its package). The entry points' start-up and one
+import-time re-entrance keep a few more, each in `DEFERRED` with its reason; that list only shrinks
+too.
+
 Run as a script (`python tests/test_import_layers.py`) to print the measured graph: modules,
 imports, imports inside functions, cycles and upward arrows with and without the exceptions.
 """
@@ -16,8 +23,11 @@ from __future__ import annotations
 
 import ast
 import functools
+import importlib.metadata
 import re
+import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,6 +38,39 @@ PACKAGES = ("harness", "implementations", "problems")
 # allowed only where a heavy optional library is imported on first use, which is never a module
 # of this project.
 EXCEPTIONS: dict[tuple[str, str], str] = {}
+
+# Libraries a function may import on first use, each with its reason: every one is optional (not
+# installed by the [project] dependencies of pyproject.toml; `test_deferrable_libraries_are_optional`
+# checks it), so a module-level import would break the harness where it is missing.
+DEFERRABLE_LIBRARIES: dict[str, str] = {
+    "jax": "the jax extra: problems as jax.numpy code and the library step contracts",
+    "sympy": "the jax extra: heyoka expressions turned into jax.numpy through sympy",
+    "numba": "the compiled loops: their kernels compile on first use (~0.3 s CPU just to import)",
+    "llvmlite": "numba's code generator: native entry points of compiled problems",
+    "sksundae": "the sundials extra: CVODE for stiff references and the cvode steppers",
+    "rebound": "the rebound extra: REBOUND's N-body integrators",
+    "distributed": "a Dask cluster, only when `--scheduler` names one",
+    "psutil": "available memory and machine facts where installed (dask brings it)",
+}
+
+_BUILDER = ("a family module builds its steppers while it is imported (`Method.stepper()` asks the "
+            "step loops, whose first call loads this builder), so the builder imports the families "
+            "only when it builds: at module level it would import a half-imported family")
+# Deferred imports of project modules that import no optional library, each with its reason.
+DEFERRED: dict[tuple[str, str], str] = {
+    ("harness.cli", "harness.cli.lookups"):
+        "`harness list steppers|problems` and `reference` import the registry and the ground truth "
+        "(heyoka, pandas: ~1 s CPU), which `harness --help` and a usage error (exit 2) never need",
+    ("harness.cli", "harness.cli.commands"):
+        "the other commands import the experiments, runner and report too (matplotlib, jinja2: "
+        "~2 s CPU), which a lookup does not need",
+    ("harness.pytest_plugin", "harness.api"):
+        "pytest imports the plugin at the start of every test run of every project that has the "
+        "harness installed; only a test that asks for the fixture needs the API (~2 s CPU)",
+    **{("implementations.builder", f"implementations.{family}"): _BUILDER
+       for family in ("runge_kutta", "implicit_rk", "splitting", "multistep", "verlet",
+                      "second_order_multistep", "compiled")},
+}
 
 
 # -- the layers, read from docs/LAYOUT.md --------------------------------------------------------------
@@ -83,30 +126,44 @@ def _resolve(name: str, modules) -> str | None:
     return name or None
 
 
-def _visit(node: ast.AST, deferred: bool, mod: str, is_pkg: bool, modules, edges: list) -> None:
-    """Append to `edges` the imports under `node` in module `mod` (see `import_edges`)."""
+@functools.lru_cache(maxsize=1024)
+def _parsed(path: Path) -> ast.Module:
+    return ast.parse(path.read_text())
+
+
+def _statements(node: ast.AST, deferred: bool = False):
+    """Yield (import statement, inside a function) for every import under `node`; those under
+    `if TYPE_CHECKING:` are left out (its `else:` is kept)."""
     for child in ast.iter_child_nodes(node):
         if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
-            for sub in child.orelse:
-                _visit(sub, deferred, mod, is_pkg, modules, edges)
-            continue
-        inner = deferred or isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda)
-        if isinstance(child, ast.Import):
-            targets = [a.name for a in child.names]
-        elif isinstance(child, ast.ImportFrom):
-            src = child.module or ""
-            if child.level:
-                base = mod.split(".") if is_pkg else mod.split(".")[:-1]
-                base = base[: len(base) - (child.level - 1)]
-                src = ".".join(base + ([child.module] if child.module else []))
-            targets = [f"{src}.{a.name}" if f"{src}.{a.name}" in modules else src for a in child.names]
+            yield from _statements(ast.Module(body=child.orelse, type_ignores=[]), deferred)
+        elif isinstance(child, ast.Import | ast.ImportFrom):
+            yield child, deferred
         else:
-            _visit(child, inner, mod, is_pkg, modules, edges)
-            continue
-        for t in targets:
+            yield from _statements(child, deferred or isinstance(
+                child, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda))
+
+
+def _targets(node: ast.Import | ast.ImportFrom, mod: str, is_pkg: bool, modules) -> list[str]:
+    """The absolute names an import statement in module `mod` imports (`from package import
+    module` names the module)."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    src = node.module or ""
+    if node.level:
+        base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+        base = base[: len(base) - (node.level - 1)]
+        src = ".".join(base + ([node.module] if node.module else []))
+    return [f"{src}.{a.name}" if f"{src}.{a.name}" in modules else src for a in node.names]
+
+
+def _visit(node: ast.AST, deferred: bool, mod: str, is_pkg: bool, modules, edges: list) -> None:
+    """Append to `edges` the imports under `node` in module `mod` (see `import_edges`)."""
+    for child, inner in _statements(node, deferred):
+        for t in _targets(child, mod, is_pkg, modules):
             r = _resolve(t, modules)
             if r and r != mod:
-                edges.append((mod, r, deferred, child.lineno))
+                edges.append((mod, r, inner, child.lineno))
 
 
 def import_edges(modules: dict[str, tuple[Path, bool]]) -> list[tuple[str, str, bool, int]]:
@@ -119,7 +176,7 @@ def import_edges(modules: dict[str, tuple[Path, bool]]) -> list[tuple[str, str, 
     """
     edges: list[tuple[str, str, bool, int]] = []
     for mod, (path, is_pkg) in modules.items():
-        _visit(ast.parse(path.read_text()), False, mod, is_pkg, modules, edges)
+        _visit(_parsed(path), False, mod, is_pkg, modules, edges)
     return edges
 
 
@@ -180,6 +237,89 @@ def upward(arrows: set[tuple[str, str]], table) -> list[tuple[str, str]]:
     return sorted((a, b) for a, b in arrows if layer_of(b, table) > layer_of(a, table))
 
 
+# -- deferred imports ---------------------------------------------------------------------------------
+def _parents(module: str, modules) -> list[str]:
+    parts = module.split(".")
+    return [p for p in (".".join(parts[:i]) for i in range(1, len(parts))) if p in modules]
+
+
+def optional_wrappers(modules: dict[str, tuple[Path, bool]]) -> set[str]:
+    """The project modules whose import imports a library of DEFERRABLE_LIBRARIES: they import
+    one at module level, or import such a module at module level, or lie in a package that does.
+
+    Returns
+    -------
+    set of dotted module names.
+    """
+    libraries: dict[str, set[str]] = {}
+    imports: dict[str, set[str]] = {}
+    for mod, (path, is_pkg) in modules.items():
+        top = [t for node, inner in _statements(_parsed(path)) if not inner
+               for t in _targets(node, mod, is_pkg, modules)]
+        libraries[mod] = {t.split(".")[0] for t in top if _resolve(t, modules) is None}
+        imports[mod] = {r for t in top if (r := _resolve(t, modules)) and r != mod}
+        imports[mod].update(_parents(mod, modules))
+    found = {m for m, libs in libraries.items() if libs & set(DEFERRABLE_LIBRARIES)}
+    while True:
+        more = {m for m in modules if m not in found and imports[m] & found}
+        if not more:
+            return found
+        found |= more
+
+
+def deferred_imports(modules: dict[str, tuple[Path, bool]]) -> list[tuple[str, int, str, str | None]]:
+    """Every import inside a function.
+
+    Returns
+    -------
+    list of (module, line, imported name, the project module it resolves to or None).
+    """
+    out = []
+    for mod, (path, is_pkg) in modules.items():
+        for node, inner in _statements(_parsed(path)):
+            if inner:
+                out.extend((mod, node.lineno, t, _resolve(t, modules))
+                           for t in _targets(node, mod, is_pkg, modules))
+    return out
+
+
+def deferred_import_faults(modules: dict[str, tuple[Path, bool]]) -> list[str]:
+    """The deferred imports the rules do not allow, one line each (module docstring)."""
+    wrappers = optional_wrappers(modules)
+    faults = []
+    for mod, line, name, target in deferred_imports(modules):
+        if target is None and name.split(".")[0] not in DEFERRABLE_LIBRARIES:
+            faults.append(f"{mod}, line {line}: `{name}` imported inside a function: not an "
+                          "optional library of DEFERRABLE_LIBRARIES; import it at module level")
+        elif target and target not in wrappers and (mod, target) not in DEFERRED:
+            faults.append(f"{mod}, line {line}: `{target}` imported inside a function: it imports "
+                          "no optional library at module level; import it at module level")
+    return faults
+
+
+def _required_distributions() -> set[str]:
+    """The distributions the project's required dependencies install (their own requirements
+    without extras, transitively), normalized names."""
+    def norm(name: str) -> str:
+        return re.sub(r"[-_.]+", "-", name).lower()
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    todo = [re.match(r"[A-Za-z0-9_.-]+", d).group(0) for d in project["dependencies"]]
+    seen: set[str] = set()
+    while todo:
+        name = norm(todo.pop())
+        if name in seen:
+            continue
+        seen.add(name)
+        try:
+            requires = importlib.metadata.requires(name) or []
+        except importlib.metadata.PackageNotFoundError:
+            continue
+        todo += [re.match(r"[A-Za-z0-9_.-]+", r).group(0) for r in requires
+                 if "extra" not in r.partition(";")[2]]
+    return seen
+
+
 # -- the tests --------------------------------------------------------------------------------------
 def test_every_module_is_in_a_layer():
     table = layers()
@@ -237,6 +377,77 @@ def test_the_graph_sees_imports_inside_functions_and_package_members(tmp_path, m
     assert cycles(list(modules), {(a, b) for a, b, _ in arrows}) == [["harness.a", "harness.sub.b"]]
 
 
+def test_deferred_imports_only_for_optional_libraries():
+    faults = deferred_import_faults(project_modules())
+    assert not faults, "deferred imports the rules do not allow:\n  " + "\n  ".join(faults)
+
+
+def test_every_deferred_exception_is_still_needed():
+    modules = project_modules()
+    wrappers = optional_wrappers(modules)
+    present = {(mod, target) for mod, _, _, target in deferred_imports(modules)}
+    stale = [f"{a} -> {b}: " + ("no deferred import of it any more" if (a, b) not in present
+                                 else "it imports an optional library: allowed without an entry")
+             for a, b in DEFERRED if (a, b) not in present or b in wrappers]
+    assert not stale, "entries to remove from DEFERRED:\n  " + "\n  ".join(stale)
+
+
+def test_deferrable_libraries_are_optional():
+    """No library of DEFERRABLE_LIBRARIES comes with the required dependencies (read from
+    pyproject.toml and the installed distributions' own requirements)."""
+    required = _required_distributions()
+    assert {"heyoka", "numpy", "cloudpickle"} <= required  # the walk reaches requirements' requirements
+    dists = importlib.metadata.packages_distributions()
+    installed_required = [lib for lib in DEFERRABLE_LIBRARIES
+                          if {re.sub(r"[-_.]+", "-", d).lower() for d in dists.get(lib, [lib])} & required]
+    assert not installed_required, f"required, so not optional: {installed_required}"
+
+
+def test_the_deferred_rule_sees_libraries_and_wrappers(tmp_path, monkeypatch):
+    """The rule itself: inside a function, a required library, the standard library and a plain
+    project module are faults; an optional library, a module that imports one at module level
+    (or through a module or package that does) and an entry of DEFERRED are not."""
+    pkg = tmp_path / "harness"
+    (pkg / "opt").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "opt" / "__init__.py").write_text("import jax\n")
+    (pkg / "opt" / "member.py").write_text("X = 1\n")
+    (pkg / "wrap.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import numba\n"
+                                 "else:\n    import sksundae\n")
+    (pkg / "via.py").write_text("from harness import wrap\n")
+    (pkg / "plain.py").write_text("import numpy as np\n")
+    (pkg / "cli.py").write_text("def dispatch():\n    from harness import plain\n")
+    (pkg / "user.py").write_text(
+        "def f():\n    import pandas as pd\n    import json\n    from harness import plain\n"
+        "    import jax.numpy as jnp\n    from harness import wrap, via\n"
+        "    from harness.opt import member\n    from .opt import member\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    monkeypatch.setattr(sys.modules[__name__], "PACKAGES", ("harness",))
+    monkeypatch.setattr(sys.modules[__name__], "DEFERRED", {("harness.cli", "harness.plain"): "start-up"})
+    modules = project_modules()
+    assert optional_wrappers(modules) == {"harness.opt", "harness.opt.member", "harness.wrap", "harness.via"}
+    faults = deferred_import_faults(modules)
+    assert [f.split(":")[0] for f in faults] == ["harness.user, line 2", "harness.user, line 3",
+                                                 "harness.user, line 4"]
+    assert "`pandas`" in faults[0] and "`json`" in faults[1] and "`harness.plain`" in faults[2]
+
+
+def _loaded_by(module: str, libraries: tuple[str, ...]) -> list[str]:
+    code = f"import sys, {module}; print(' '.join(m for m in {libraries!r} if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    return out.stdout.split()
+
+
+def test_what_the_deferred_entries_buy():
+    """The start-up DEFERRED's entries keep: parsing the command line and loading the pytest
+    plugin import no heavy library; a lookup imports neither the report's drawing nor its
+    templates."""
+    heavy = ("heyoka", "numpy", "pandas", "scipy", "matplotlib", "jinja2")
+    assert _loaded_by("harness.cli", heavy) == []
+    assert _loaded_by("harness.pytest_plugin", heavy) == []
+    assert _loaded_by("harness.cli.lookups", ("matplotlib", "jinja2")) == []
+
+
 def main() -> None:
     """Print the measured graph (see the module docstring)."""
     table = layers()
@@ -252,6 +463,12 @@ def main() -> None:
             print("   cycle:", " ".join(c))
     for a, b in upward(arrows, table):
         print(f"   upward: {a} -> {b}{'' if (a, b) in EXCEPTIONS else '   (NOT EXCEPTED)'}")
+    deferred = deferred_imports(modules)
+    print(f"deferred imports: {len(deferred)} names, {sum(t is not None for *_, t in deferred)} of "
+          f"project modules ({len(optional_wrappers(modules))} modules import an optional library), "
+          f"{len(DEFERRED)} entries in DEFERRED; not allowed: {len(deferred_import_faults(modules))}")
+    for fault in deferred_import_faults(modules):
+        print("   " + fault)
 
 
 if __name__ == "__main__":

@@ -522,3 +522,8 @@ def test_a_parallel_run_equals_the_serial_one_whatever_order_workers_took(run):
     pd.testing.assert_frame_equal(serial.rows.drop(columns="wall_s", errors="ignore"),
                                   parallel.rows.drop(columns="wall_s", errors="ignore"))
     assert list(parallel.cells.cell) == list(serial.cells.cell)
+
+
+def test_run_experiments_names_an_unknown_run_option():
+    with pytest.raises(InputError, match="unknown keyword.*jbos"):
+        run_experiments(["toy"], ["toy-ok"], ["toy-decay"], jbos=1, progress=False)

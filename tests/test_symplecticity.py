@@ -20,12 +20,7 @@ from helpers import PlainEulerLabelledSymplectic, cells_or_reasons, relabelled
 from harness import tolerances as tol
 from harness.cli import main
 from harness.experiments import get_experiment
-from harness.experiments.symplecticity import (
-    SUMMARY_COLUMNS,
-    canonical_form,
-    one_step_jacobians,
-    symplectic_deviation,
-)
+from harness.experiments import symplecticity as symp
 from harness.registry import get_problem, steppers
 
 EXP = get_experiment("symplecticity")
@@ -37,13 +32,13 @@ run_direct, run = helpers.runners(EXP)
 
 # -- the machinery on maps with a known Jacobian ---------------------------------------------------
 def test_canonical_form_and_deviation_of_known_matrices():
-    omega = canonical_form(4)
+    omega = symp.canonical_form(4)
     assert np.array_equal(omega.T, -omega) and np.array_equal(omega @ omega, -np.eye(4))
     h = 0.1
     rotation = np.array([[np.cos(h), np.sin(h)], [-np.sin(h), np.cos(h)]])
     euler = np.array([[1.0, h], [-h, 1.0]])  # explicit Euler on x'' = -x: det = 1 + h^2
-    assert symplectic_deviation(rotation)[0] < 1e-15
-    dev, raw = symplectic_deviation(euler)
+    assert symp.symplectic_deviation(rotation)[0] < 1e-15
+    dev, raw = symp.symplectic_deviation(euler)
     assert raw == pytest.approx(h * h, rel=1e-12)
     assert dev == pytest.approx(np.sqrt(2) * h * h / (2 + 2 * h * h), rel=1e-12)
 
@@ -55,7 +50,7 @@ def test_finite_difference_jacobian_of_a_linear_map_is_exact_to_rounding(registe
     stepper = steppers.get(name)
     states = get_problem("harmonic").ensemble(3, seed=1)
     h = 0.05
-    J = one_step_jacobians(stepper, get_problem("harmonic"), states, h)
+    J = symp.one_step_jacobians(stepper, get_problem("harmonic"), states, h)
     assert J.shape == (3, 2, 2)
     assert np.max(np.abs(J - np.array([[1.0, h], [-h, 1.0]]))) < 1e-11
 
@@ -106,9 +101,9 @@ def test_trapezoid_is_symplectic_on_the_linear_oscillator_only(registry_table):
 
 
 def test_records_carry_the_promised_fields(registry_table):
-    assert list(registry_table.columns) == SUMMARY_COLUMNS
+    assert list(registry_table.columns) == symp.SUMMARY_COLUMNS
     for field in ("stepper", "problem", "deviation", "claimed_symplectic", "verdict", "passed"):
-        assert field in SUMMARY_COLUMNS
+        assert field in symp.SUMMARY_COLUMNS
 
 
 # -- mislabelled steppers must fail ---------------------------------------------------------------

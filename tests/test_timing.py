@@ -105,7 +105,7 @@ def test_time_points_ratio_uses_the_same_cells_baseline(monkeypatch):
         seen["clock"] = clock
         return "C fake loop", timing.Timing((4e-9, 5e-9), "spread"), ""
 
-    monkeypatch.setattr(timing, "baseline_step", fake_baseline)
+    monkeypatch.setattr(timed_runs, "baseline_step", fake_baseline)  # the name it calls
     stepper, problem = get_stepper("rk4"), get_problem("harmonic")
     frame = pd.DataFrame({"n_steps": [8, 16], "h": [0.5, 0.25], "tol": [np.nan, np.nan],
                           "t_end": [4.0, 4.0], "error": [1e-3, 1e-4], "wall_s": [1.5, 2e-3]})

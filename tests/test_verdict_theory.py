@@ -32,7 +32,7 @@ from harness.experiments import get_experiment
 from harness.facts import central_field
 from harness.problem import NBody, NewtonianForm, Problem
 from harness.registry import get_problem, steppers
-from harness.report.claims import AGREE, DISAGREE, NOT_MEASURED, check_claims
+from harness.report.claims import AGREE, CLAIMS, DISAGREE, NOT_MEASURED, check_claims
 from implementations.runge_kutta import ExplicitRungeKutta
 
 ENERGY = get_experiment("energy")
@@ -170,10 +170,15 @@ def _l_row(stepper, problem, error, steps=100_000):
                                         _l_row("velocity-verlet", "outer-solar-system", 1e-9)), AGREE),
     ("verlet-angular-momentum", _energy(_l_row("position-verlet", "kepler-elliptic", 1e-9)), DISAGREE),
     ("verlet-angular-momentum", _energy(_l_row("stormer-verlet", "kepler-elliptic", 1e-9)), NOT_MEASURED),
+    # a run without the experiment a claim reads leaves it not measured, for every claim
+    *[(spec.key, {}, NOT_MEASURED) for spec in CLAIMS],
 ])
 def test_course_claims_are_judged_on_what_they_name(key, tables, status):
     (result,) = [r for r in check_claims(tables) if r.key == key]
     assert result.status == status, result.measurement
+    if not tables:
+        (spec,) = [s for s in CLAIMS if s.key == key]
+        assert result.measurement == f"no {spec.experiment} results"
 
 
 # -- the gate's exit statuses ---------------------------------------------------------------------------

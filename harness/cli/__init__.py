@@ -20,8 +20,9 @@ problem, no traceback, with a sysexits-style status: the reader closed the pipe 
 SIGPIPE death would give), a full disk or another I/O error (74), no permission (77), a file
 where a directory belongs or the reverse (73).
 
-This module parses the command line and dispatches; `output` is the output layer, `commands` the
-commands.
+This module parses the command line and dispatches; `output` is the output layer, `tables` prints
+records, `lookups` and `commands` hold the commands (imported only once the command line has
+parsed).
 """
 
 from __future__ import annotations
@@ -29,28 +30,21 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 
-from harness.cli.commands import (
-    cmd_gate,
-    cmd_list,
-    cmd_population,
-    cmd_reference,
-    cmd_report,
-    cmd_run,
-    load_plugins,
-)
 from harness.cli.output import (
     EXIT_OK,
     EXIT_USAGE,
     OUTPUT,
     EscapingStream,
-    explain_skips,
     os_error_status,
     report_error,
     write_stdout,
 )
+from harness.errors import HarnessError, NoApplicableCellsError, Terminated
 
 __all__ = ["main", "build_parser"]
 
@@ -158,17 +152,12 @@ def _join_values(argv: Sequence[str]) -> list[str]:
 
 
 def _on_sigterm(signum, frame):
-    from harness.errors import Terminated
-
     raise Terminated()
 
 
 def _ignore_further_signals() -> None:
     """After the first Ctrl-C or SIGTERM the command is ending: a second one (an impatient
     double Ctrl-C) must not turn the exit status 130/143 into a death by signal."""
-    import signal
-    import threading
-
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, signal.SIG_IGN)
@@ -187,8 +176,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(_join_values(sys.argv[1:] if argv is None else argv))
-    import signal
-    import threading
 
     previous = None
     if threading.current_thread() is threading.main_thread():
@@ -202,22 +189,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:  # restored unless the command is ending on a signal (then ignored, see above)
         if previous is not None and signal.getsignal(signal.SIGTERM) is _on_sigterm:
             signal.signal(signal.SIGTERM, previous)
-    from harness import cache
-
-    cache.set_exit_status(code)  # the status kept if an interrupted compile is still running
+    # The status kept if an interrupted compile is still running. A command that compiles has
+    # loaded `harness.cache` (heyoka with it); one that never loaded it abandoned no compile, and
+    # `harness --help` or a usage error stays clear of heyoka.
+    cache = sys.modules.get("harness.cache")
+    if cache is not None:
+        cache.set_exit_status(code)
     return code
 
 
 def _main(args: argparse.Namespace) -> int:
-    from harness.errors import HarnessError, NoApplicableCellsError, Terminated
-
     OUTPUT.append(io.StringIO())
     try:
         err = EscapingStream(sys.stderr)
         with contextlib.redirect_stdout(err), contextlib.redirect_stderr(err):
             code = _dispatch(args)
-    except NoApplicableCellsError as exc:
-        explain_skips(exc.skips, getattr(args, "json", False))
+    except NoApplicableCellsError as exc:  # why each pair does not apply: printed by the command
         code = report_error(str(exc), EXIT_USAGE)
     except HarnessError as exc:
         code = report_error(str(exc), getattr(exc, "exit_status", EXIT_USAGE))
@@ -237,12 +224,16 @@ def _main(args: argparse.Namespace) -> int:
     return code if written == EXIT_OK else written
 
 
-# the parser's subcommands and the functions that run them
-COMMANDS = {"list": cmd_list, "reference": cmd_reference, "run": cmd_run, "gate": cmd_gate,
-            "report": cmd_report, "population": cmd_population}
-
-
 def _dispatch(args: argparse.Namespace) -> int:
-    load_plugins(args.plugin)
-    return COMMANDS[args.command](args)
+    # The command line's deferred imports of project modules (tests/test_import_layers.py allows
+    # exactly these two): parsing, `--help` and a usage error (exit 2, one line) need neither.
+    # Looking up steppers, problems or a reference needs the registry and the ground truth
+    # (heyoka, pandas: ~1 s CPU); the other commands also need the experiments, the runner and
+    # the report (matplotlib, jinja2: ~2 s CPU).
+    if args.command == "reference" or (args.command == "list" and args.kind != "experiments"):
+        from harness.cli import lookups
 
+        return lookups.run_lookup(args)
+    from harness.cli import commands
+
+    return commands.run_command(args)

@@ -1,12 +1,17 @@
-"""The commands of the `harness` command line, one function each (`harness list`, `run`,
-`reference`, `gate`, `report`, `population`), writing through `harness.cli.output`."""
+"""The commands of the `harness` command line, one function each (`harness run`, `gate`, `report`,
+`population`; `list` and `reference` come from `harness.cli.lookups`), writing through
+`harness.cli.output`."""
 
 from __future__ import annotations
 
 import os
 import sys
+import time
 from collections.abc import Sequence
 
+import pandas as pd
+
+from harness.cli.lookups import cmd_list, cmd_reference, load_plugins
 from harness.cli.output import (
     EXIT_FAILED,
     EXIT_NOT_VERIFIED,
@@ -14,28 +19,21 @@ from harness.cli.output import (
     SHOWN_SKIPS,
     one_line,
     output_buffer,
-    print_json,
-    print_table,
 )
-
-
-def load_plugins(paths: Sequence[str]) -> None:
-    """Load every plugin file in `paths` into the registry.
-
-    Parameters
-    ----------
-    paths : sequence of str
-        Plugin .py files.
-    """
-    from harness.registry import load_plugin
-
-    for path in paths:
-        load_plugin(path)
+from harness.cli.tables import explain_skips, print_json, print_table
+from harness.errors import InputError, NoApplicableCellsError
+from harness.experiments import EXPERIMENTS, get_experiment
+from harness.experiments.base import EXPERIMENT_ERRORS
+from harness.experiments.common import OVERRIDE_KEYS, check_overrides
+from harness.gate import GATE_COLUMNS, NOT_VERIFIED, gate_table
+from harness.populations import FAMILIES, HIGH_FAMILIES, error_rates, generate
+from harness.registry import problems, steppers
+from harness.report import build_report, rerender_report
+from harness.runner import RunResult, run_experiment
+from harness.store import save_run
 
 
 def _names(kind: str, requested: Sequence[str]) -> list[str]:
-    from harness.registry import problems, steppers
-
     reg = steppers if kind == "stepper" else problems
     if not requested:
         return reg.names()
@@ -59,15 +57,6 @@ def cmd_population(args) -> int:
     int
         EXIT_OK when the gate had no false alarm and no miss on the population, else EXIT_FAILED.
     """
-    import time
-
-    import pandas as pd
-
-    from harness.errors import InputError
-    from harness.populations import FAMILIES, HIGH_FAMILIES, error_rates, generate
-    from harness.runner import RunResult
-    from harness.store import save_run
-
     if not 1 <= args.size <= 1000:
         raise InputError(f"`--size` must lie in [1, 1000], got {args.size}")
     if not 4 <= args.max_order <= 12:
@@ -101,139 +90,6 @@ def cmd_population(args) -> int:
 
 
 
-def cmd_list(args) -> int:
-    """`harness list steppers|problems`: the registry as a table or JSON.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        `kind` ("steppers" or "problems") and `json` (records instead of a table).
-
-    Returns
-    -------
-    int
-        EXIT_OK; plugins that failed to load are listed, not fatal.
-    """
-    from harness.registry import plugin_errors, problems, steppers
-
-    if args.kind == "steppers":
-        records = [dict(s.info.as_dict(), origin=steppers.origin(s.info.name)) for s in steppers.all()]
-        cols = ["name", "family", "claimed_order", "explicit", "symplectic", "symmetric",
-                "evals_per_step", "form", "velocity_dependent", "adaptive"]
-    elif args.kind == "problems":
-        # every problem, those run only when named (`on_request`: the test sets, experiment-
-        # specific orbits) included and marked
-        records = [dict(p.describe(), origin=problems.origin(p.name))
-                   for p in problems.all(variants=True)]
-        cols = ["name", "form", "dim", "t_span", "velocity_dependent", "conservative",
-                "exact_solution", "invariants", "on_request"]
-    else:
-        from harness.experiments import EXPERIMENTS, get_experiment  # noqa: F401
-
-        records = [{"name": e.name, "description": e.description} for e in EXPERIMENTS.values()]
-        cols = ["name", "description"]
-    if args.json:
-        print_json(records)
-    else:
-        import pandas as pd
-
-        print_table(pd.DataFrame(records), cols)
-    from harness.experiments.base import EXPERIMENT_ERRORS
-
-    for err in [*plugin_errors(), *(EXPERIMENT_ERRORS if args.kind == "experiments" else [])]:
-        print(f"harness: warning: {one_line(err)}", file=sys.stderr)
-    return EXIT_OK
-
-
-def cmd_reference(args) -> int:
-    """`harness reference PROBLEM --t T`: the certified reference state at the given times.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        `problem`, the times `t` and `json`.
-
-    Returns
-    -------
-    int
-        EXIT_OK once the states are printed; a problem without a certifiable reference raises
-        (`main` turns it into its one line and status).
-    """
-    import numpy as np
-
-    from harness.ground_truth import reference
-    from harness.problem import check_time
-    from harness.registry import get_problem
-
-    problem = get_problem(args.problem)
-    t = check_time(args.t, "--t")
-    if t < problem.t0:
-        from harness.errors import InputError
-
-        raise InputError(f"`--t` must be >= the start time {problem.t0:g} of {problem.name!r}, got {t:g}")
-    ref = reference(problem, np.array([t]))
-    record = {
-        "problem": problem.name,
-        "t": t,
-        "variables": [str(v) for v in problem.variables],
-        "state": ref.y[-1][:, 0].tolist(),
-        "reference_error": float(np.max(ref.error[-1])),
-        "precision": ref.precision,
-        "certified_by": ref.certified_by,
-    }
-    float64_form = ref.y[-1][:, 0]
-    if problem.published is not None:
-        float64_form = _published_record(problem, t, ref, record)
-    if problem.exact is not None and float64_form is not None:
-        # the closed form is evaluated from the float64 start, so it is compared with the
-        # reference of the float64 form
-        from harness.problem.validation import exact_state
-
-        exact = exact_state(problem, t, problem.y0[:, None])[:, 0]
-        record["exact_state"] = exact.tolist()
-        record["exact_difference"] = float(np.max(np.abs(exact - float64_form)))
-    if args.json:
-        print_json([record])
-    else:
-        for k, v in record.items():
-            print(f"{k:>18}: {v}", file=output_buffer())
-    return EXIT_OK
-
-
-def _published_record(problem, t: float, ref, record: dict):
-    """Add to `record` how the reference of a test-set problem stands to its published form:
-    the float64 rounding of its inputs, the difference the rounding makes to the solution at `t`
-    (the float64 form's reference against the published form's), and, at the published end
-    time, the published values, the difference from them and whether it is within their stated
-    accuracy plus the reference's own error. Returns the float64 form's state at `t` (None when
-    it cannot be had)."""
-    import numpy as np
-
-    from harness.errors import ReferenceError_
-    from harness.ground_truth import reference
-
-    pub = problem.published
-    record["form"] = ref.form
-    record["float64_rounding"] = pub.rounding()
-    state = ref.y[-1][:, 0]
-    float64_form = state
-    if ref.form == "published":
-        try:
-            f64 = reference(problem, np.array([t]), problem.y0.reshape(-1, 1))
-            float64_form = f64.y[-1][:, 0]
-            record["float64_form_difference"] = float(np.max(np.abs(float64_form - state)))
-        except ReferenceError_:
-            float64_form = None
-    if pub.values is not None and t == pub.t_end_float:
-        values = np.array(pub.values_float)
-        diff = float(np.max(np.abs(values - state)))
-        allowed = pub.accuracy * float(np.max(np.abs(values)))
-        record.update(published_state=values.tolist(), published_difference=diff,
-                      published_accuracy=pub.accuracy, published_accuracy_note=pub.accuracy_note,
-                      within_published_accuracy=bool(diff <= allowed + float(np.max(ref.error[-1]))))
-    return float64_form
-
-
 def _shared_run_settings(args) -> dict[str, object]:
     """The run settings every running command takes from its options (quick, jobs, scheduler,
     fresh, plugins)."""
@@ -243,11 +99,6 @@ def _shared_run_settings(args) -> dict[str, object]:
 
 def _run(args, experiment: str):
     """Run one experiment's grid and save it under results/<run-id>/ (path on stderr)."""
-    from harness.experiments import get_experiment
-    from harness.experiments.common import OVERRIDE_KEYS, check_overrides
-    from harness.runner import run_experiment
-    from harness.store import save_run
-
     overrides = check_overrides(get_experiment(experiment),
                                 {k: getattr(args, k, None) for k in OVERRIDE_KEYS})
     result = run_experiment(
@@ -266,8 +117,6 @@ def _run(args, experiment: str):
 
 
 def _failures_table(result) -> list[dict]:
-    import pandas as pd
-
     f = result.failures
     if isinstance(f, pd.DataFrame):
         return f.to_dict("records")
@@ -289,8 +138,6 @@ def cmd_run(args) -> int:
     int
         EXIT_FAILED on a failed cell or a claim found false, else EXIT_OK.
     """
-    from harness.experiments import get_experiment
-
     get_experiment(args.experiment)  # unknown name -> exit 2 with the closest names
     result = _run(args, args.experiment)
     records = result.summary.to_dict("records")
@@ -343,8 +190,6 @@ def cmd_gate(args) -> int:
     int
         EXIT_FAILED, EXIT_NOT_VERIFIED or EXIT_OK, as above.
     """
-    from harness.gate import GATE_COLUMNS, NOT_VERIFIED, gate_table
-
     result = _run(args, "convergence")
     table = gate_table(result.summary)
     failures = _failures_table(result)
@@ -382,8 +227,6 @@ def cmd_report(args) -> int:
     int
         EXIT_OK once the report is written (its path printed).
     """
-    from harness.report import build_report, rerender_report
-
     if args.from_run is not None:
         path = rerender_report(args.from_run, output=args.output, compare=args.compare,
                                grid_options=_grid_options_given(args))
@@ -409,3 +252,42 @@ def _grid_options_given(args) -> list[str]:
     given += [f"--{k.replace('_', '-')}" for k in ("jobs", "scheduler", "cell_timeout")
               if getattr(args, k) is not None]
     return given
+
+
+# the parser's subcommands and the functions that run them
+def cmd_list_experiments(args) -> int:
+    """`harness list` with the registered experiments at hand (`lookups.cmd_list`).
+
+    Parameters
+    ----------
+    args : argparse.Namespace, as for `lookups.cmd_list`.
+
+    Returns
+    -------
+    int: EXIT_OK.
+    """
+    return cmd_list(args, EXPERIMENTS, EXPERIMENT_ERRORS)
+
+
+COMMANDS = {"list": cmd_list_experiments, "reference": cmd_reference, "run": cmd_run, "gate": cmd_gate,
+            "report": cmd_report, "population": cmd_population}
+
+
+def run_command(args) -> int:
+    """Load the plugins `args.plugin` names, then run the command `args.command`.
+
+    Parameters
+    ----------
+    args : argparse.Namespace, the parsed command line.
+
+    Returns
+    -------
+    int: the command's exit status. A run or gate over zero applicable cells prints why each
+    requested pair does not apply, then its `NoApplicableCellsError` propagates.
+    """
+    load_plugins(args.plugin)
+    try:
+        return COMMANDS[args.command](args)
+    except NoApplicableCellsError as exc:
+        explain_skips(exc.skips, getattr(args, "json", False))
+        raise

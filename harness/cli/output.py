@@ -1,17 +1,16 @@
 """The command line's one output layer: the collected stdout of a command, its writing at the end,
-one-line errors with sysexits-style statuses, JSON and table printing. (A compiled library's
-C-level stdout is kept off the command's stdout by `harness.c_streams`.)"""
+one-line errors with sysexits-style statuses (JSON and table printing: `harness.cli.tables`). (A
+compiled library's C-level stdout is kept off the command's stdout by `harness.c_streams`.)"""
 
 from __future__ import annotations
 
 import contextlib
 import io
-import json
-import math
 import os
 import sys
-from collections.abc import Sequence
-from typing import Any
+import unicodedata
+
+from harness.errors import describe_os_error
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 EXIT_CANTCREAT, EXIT_IOERR, EXIT_NOPERM, EXIT_PIPE = 73, 74, 77, 141
@@ -62,8 +61,6 @@ def os_error_status(exc: OSError) -> tuple[str, int]:
     -------
     (str, int)
     """
-    from harness.errors import describe_os_error
-
     return describe_os_error(exc)
 
 
@@ -108,24 +105,6 @@ def _silence_stdout() -> None:
         os.close(devnull)
 
 
-def explain_skips(skips: Sequence[dict], as_json: bool) -> None:
-    """Why each requested pair does not apply: JSON records or a table, on stdout.
-
-    Parameters
-    ----------
-    skips : sequence of dict, skip records (stepper, problem, reason, ...).
-    as_json : bool, print JSON records instead of a table.
-    """
-    if as_json:
-        print_json([dict(r, verdict="not-applicable", passed=False) for r in skips])
-        return
-    import pandas as pd
-
-    print("not applicable:", file=output_buffer())
-    print_table(pd.DataFrame(list(skips), columns=["experiment", "stepper", "problem", "reason"]),
-                 ["experiment", "stepper", "problem", "reason"])
-
-
 def one_line(text: str) -> str:
     """`text` on one line, whitespace collapsed, control characters escaped, cut to 500
     characters.
@@ -158,8 +137,6 @@ def escape_controls(text: str) -> str:
     -------
     str: `text` itself when it has nothing to escape.
     """
-    import unicodedata
-
     if text.isprintable() or all(c in _KEPT or c.isprintable() or c == " " for c in text):
         return text
     out = []
@@ -219,51 +196,3 @@ class EscapingStream(io.TextIOBase):
             True.
         """
         return True
-
-
-
-def _jsonable(value: Any) -> Any:
-    import numpy as np
-
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def print_json(records: Any) -> None:
-    """Print `records` as indented JSON to the command's output.
-
-    Parameters
-    ----------
-    records : any, JSON-able data (NumPy and pandas values converted).
-    """
-    print(json.dumps(_jsonable(records), indent=2), file=output_buffer())
-
-
-def print_table(frame, columns: Sequence[str]) -> None:
-    """Print the `columns` of `frame` as a plain-text table to the command's output.
-
-    Parameters
-    ----------
-    frame : DataFrame
-    columns : sequence of str, the columns shown.
-    """
-    import pandas as pd
-
-    if frame.empty:
-        print("(none)", file=output_buffer())
-        return
-    cols = [c for c in columns if c in frame.columns]
-    with pd.option_context("display.max_rows", None, "display.max_columns", None,
-                           "display.width", 200, "display.max_colwidth", 70):
-        print(frame[cols].to_string(index=False, float_format=lambda x: f"{x:.4g}"), file=output_buffer())
-
-

@@ -30,6 +30,7 @@ instance, a subclass, or a callable returning one or a list of them.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import json
 from abc import ABC, abstractmethod
@@ -39,6 +40,9 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import pandas as pd
+
+from harness.errors import UnknownNameError
+from harness.registry import expand, group_entry_points, missing_builtins
 
 if TYPE_CHECKING:
     from harness.kit.section import SectionSpec
@@ -222,7 +226,6 @@ def load_experiments() -> None:
     if _loaded:
         return
     _loaded.append(True)
-    from harness.registry import expand, group_entry_points, missing_builtins
 
     own, others = group_entry_points("harness.experiments")
     if not own:
@@ -256,14 +259,10 @@ def get_experiment(name: str) -> Experiment:
     -------
     Experiment: the registered instance.
     """
-    from harness.errors import UnknownNameError
-
     load_experiments()
     try:
         return EXPERIMENTS[name]
     except KeyError:
-        import difflib
-
         close = difflib.get_close_matches(str(name), EXPERIMENTS, n=3)
         hint = f"; closest: {', '.join(close)}" if close else f"; known: {', '.join(sorted(EXPERIMENTS))}"
         raise UnknownNameError(f"unknown experiment {name!r}{hint}") from None

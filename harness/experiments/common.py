@@ -24,9 +24,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from harness.errors import InputError
+from harness.derived import remembered
+from harness.errors import IncompatibleError, InputError
 from harness.experiments.base import Cell, Skip
 from harness.problem.checks import check_positive
+from harness.regimes import regime_end
+from harness.registry import get_problem, get_stepper
+from harness.scales import fastest_times, sample_orbit, states_at
+from harness.stepper import check_compatible
 
 __all__ = [
     "check_config",
@@ -243,8 +248,6 @@ def hamiltonian_weights(problem, states: np.ndarray | None = None) -> np.ndarray
     ndarray of float, shape (positions,), or None
     """
     if states is None:
-        from harness.derived import remembered
-
         found = remembered("harness.experiments.common", "hamiltonian_weights", [problem.fingerprint()],
                            lambda: _as_list(_weights(problem, _orbit_states(problem))))
         return None if found is None else np.asarray(found, dtype=float)
@@ -256,8 +259,6 @@ def _as_list(w: np.ndarray | None) -> list[float] | None:
 
 
 def _orbit_states(problem) -> np.ndarray:
-    from harness.scales import sample_orbit
-
     orbit = sample_orbit(problem)
     return orbit.y[:, np.unique(np.linspace(0, orbit.t.size - 1, 8).round().astype(int))]
 
@@ -333,8 +334,6 @@ def period_states(problem, n: int, t_end: float | None = None) -> np.ndarray:
     -------
     ndarray, shape (dim, m), m <= n
     """
-    from harness.scales import fastest_times, states_at
-
     n_fast = n // 2
     n_even = n - n_fast
     span = (float(t_end) - problem.t0) if t_end is not None else problem.time_scale.period
@@ -350,24 +349,23 @@ def problem_cells(
     steppers: Sequence[str],
     problems: Sequence[str],
     applicable: Callable[[Any], str | None],
+    pair_reason: Callable[[Any, Any], str | None] | None = None,
 ) -> tuple[list[Cell], list[Skip]]:
     """Cells for the (stepper, problem) pairs whose problem passes `applicable(problem) -> reason
-    or None` and whose stepper can run it; every other pair becomes a `Skip` with its reason.
+    or None`, whose pair passes `pair_reason(stepper, problem)` when given, and whose stepper can
+    run the problem; every other pair becomes a `Skip` with its reason (the first that applies).
 
     Parameters
     ----------
     experiment : str, the experiment's name (written into each cell).
     steppers, problems : sequence of str, the registered names.
     applicable : callable, Problem -> reason or None.
+    pair_reason : callable, optional, (Stepper, Problem) -> reason or None.
 
     Returns
     -------
     (list of Cell, list of Skip)
     """
-    from harness.errors import IncompatibleError
-    from harness.registry import get_problem, get_stepper
-    from harness.stepper import check_compatible
-
     cells: list[Cell] = []
     skips: list[Skip] = []
     for p in problems:
@@ -375,8 +373,9 @@ def problem_cells(
         reason = applicable(problem)
         for s in steppers:
             stepper = get_stepper(s)
-            if reason is not None:
-                skips.append(Skip(experiment, s, p, reason))
+            why = reason if reason is not None or pair_reason is None else pair_reason(stepper, problem)
+            if why is not None:
+                skips.append(Skip(experiment, s, p, why))
                 continue
             try:
                 check_compatible(stepper, problem)
@@ -404,8 +403,6 @@ def summary_per_cell(rows: pd.DataFrame, columns: Sequence[str],
     -------
     DataFrame
     """
-    from harness.registry import get_stepper
-
     if rows.empty:
         return pd.DataFrame(columns=columns)
     out = [summarize_cell(get_stepper(s), p, g, *args)
@@ -489,8 +486,6 @@ def long_run_steps(problem, h: float, n: int) -> tuple[int, str]:
     -------
     (int, str)
     """
-    from harness.regimes import regime_end
-
     stop, why = regime_end(problem, problem.t0 + n * h)
     if not why or problem.t0 + n * h <= stop:
         return n, ""

@@ -58,6 +58,7 @@ from typing import Any
 import numpy as np
 
 from harness.errors import InputError, ReferenceError_, StiffReferenceError
+from harness.ground_truth import stiff
 from harness.ground_truth.disk import (
     cache_path,
     load_reference,
@@ -79,6 +80,7 @@ from harness.ground_truth.levels import (
 from harness.ground_truth.propagation import certifier_tol, integrators, propagate, reference_tol
 from harness.problem import Problem, check_state, check_time
 from harness.problem.checks import check_positive
+from harness.registry import get_problem
 
 # the integrators built in this process, by (problem, level, tolerance); benchmarks clear it
 _integrators = integrators
@@ -129,8 +131,6 @@ def _stiff_reference(problem: Problem, times: np.ndarray, y: np.ndarray, t0: flo
                      start: float, refusal: StiffReferenceError) -> Reference:
     """The cross-checked implicit reference (`harness.ground_truth.stiff`), cached on disk like
     the Taylor ones; the refusal stands when its solvers are not installed."""
-    from harness.ground_truth import stiff
-
     if not stiff.available():
         raise refusal
     exam = _implicit_exam(problem, start)
@@ -141,8 +141,6 @@ def _stiff_reference(problem: Problem, times: np.ndarray, y: np.ndarray, t0: flo
 
 def _implicit_cached(problem: Problem, times: np.ndarray, y: np.ndarray, t0: float, P: np.ndarray,
                      start: float) -> Reference:
-    from harness.ground_truth import stiff
-
     key = reference_key(problem, stiff.IMPLICIT_LEVEL, times, t0, y, P)
     path = cache_path(problem, stiff.IMPLICIT_LEVEL, key)
     loaded = load_reference(path, times, (times.size, problem.dim, y.shape[1]))
@@ -233,8 +231,6 @@ def reference(
     """
     start = time.perf_counter()
     if isinstance(problem, str):
-        from harness.registry import get_problem
-
         problem = get_problem(problem)
     if not isinstance(problem, Problem):
         raise InputError(f"`problem` must be a Problem or a registered name, got {type(problem).__name__}")

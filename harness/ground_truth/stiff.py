@@ -29,7 +29,9 @@ import time
 import warnings
 
 import numpy as np
+from scipy.integrate import solve_ivp
 
+from harness.c_streams import library_output_captured
 from harness.errors import ReferenceError_, WorkLimitError
 from harness.problem import Problem
 from harness.tolerances import (
@@ -80,8 +82,6 @@ class _Counted:
 
 
 def _radau(problem, times, y0, t0, pars, atol):
-    from scipy.integrate import solve_ivp
-
     fn = _Counted(problem, pars, "scipy Radau")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -95,8 +95,6 @@ def _radau(problem, times, y0, t0, pars, atol):
 
 def _cvode(problem, times, y0, t0, pars, atol):
     from sksundae.cvode import CVODE
-
-    from harness.c_streams import library_output_captured
 
     fn = _Counted(problem, pars, "CVODE BDF")
 

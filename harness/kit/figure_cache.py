@@ -18,12 +18,18 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
+import json
 import os
 import pickle  # only to hash the arguments; nothing is ever unpickled
 import time
 from collections.abc import Callable
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
+
+import pandas as pd
+
+from harness.cache import cache_dir
 
 __all__ = ["cached_call", "figure_cache_dir", "code_version", "keep_figures_of", "MAX_AGE_DAYS"]
 
@@ -40,8 +46,6 @@ def code_version() -> str:
     -------
     str: 20 hex digits of a SHA-256 over matplotlib's version and every module of `harness`.
     """
-    from importlib.metadata import version  # without importing matplotlib (a second)
-
     h = hashlib.sha256(version("matplotlib").encode())
     package = Path(__file__).resolve().parent.parent  # all of `harness`: a figure may use any
     for f in sorted(package.rglob("*.py")):           # of it (the convergence fit, tolerances)
@@ -60,8 +64,6 @@ def figure_cache_dir() -> Path | None:
     if os.environ.get(_DISABLE_ENV, "").lower() in ("off", "0", "no"):
         return None
     try:
-        from harness.cache import cache_dir
-
         d = cache_dir() / "figures"
         d.mkdir(parents=True, exist_ok=True)
         return d
@@ -136,8 +138,6 @@ def cached_call(fn: Callable, args: tuple, kwargs: dict) -> Any:
 
 def _read(path: Path) -> Any:
     """The Figure (or None) kept at `path` (+ its `.parquet` table): JSON and Parquet only."""
-    import json
-
     Figure = _figure_type
     if Figure is None:
         raise LookupError("no figure class registered")
@@ -147,16 +147,12 @@ def _read(path: Path) -> Any:
         return None
     data = None
     if entry["data"]:
-        import pandas as pd
-
         data = pd.read_parquet(path.with_suffix(".parquet"))
     return Figure(str(entry["slug"]), str(entry["svg"]), str(entry["alt"]), data=data,
                   css=str(entry["css"]))
 
 
 def _write(directory: Path, key: str, result: Any) -> None:
-    import json
-
     if _figure_type is None or (result is not None and not isinstance(result, _figure_type)):
         return  # only figures are kept
     tmp = [directory / f".{key}.{os.getpid()}.{ext}.tmp" for ext in ("parquet", "json")]

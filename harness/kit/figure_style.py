@@ -8,11 +8,17 @@ mathematics and a name with a stray backslash cannot break the drawing.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
+import matplotlib
 import numpy as np
+from matplotlib.figure import Figure as MplFigure
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
+
+from harness.kit.figure_cache import cached_call
 
 __all__ = ["Palette", "panels", "MAX_LINES_PER_PANEL", "MAX_POINTS_PER_LINE", "EXCLUSION_STYLE",
            "LOG_FLOOR", "LOG_CEILING", "finite_or_none"]
@@ -182,11 +188,7 @@ def styled(fn):
     -------
     callable: `fn` wrapped; same arguments, the figure possibly from the cache.
     """
-    import functools
-
     def draw(*args, **kwargs):
-        import matplotlib
-
         with matplotlib.rc_context(RC_PARAMS):
             return fn(*args, **kwargs)
 
@@ -194,8 +196,6 @@ def styled(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        from harness.kit.figure_cache import cached_call
-
         return cached_call(draw, args, kwargs)
 
     return wrapper
@@ -214,8 +214,6 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, size: tuple[float, float] = (7
     -------
     (Figure, ndarray of Axes): the figure and its axes, always 2-D.
     """
-    from matplotlib.figure import Figure as MplFigure
-
     fig = MplFigure(figsize=size)
     axes = fig.subplots(nrows, ncols, squeeze=False, **kw)
     # the page is white: white backgrounds behind the figure and each panel draw nothing
@@ -256,8 +254,6 @@ def loglog_axes(ax: Any, x: bool = True, y: bool = True) -> None:
     ax : matplotlib Axes.
     x, y : bool, optional, which axes become logarithmic (default both).
     """
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
-
     for on, axis, scale, lim in ((x, ax.xaxis, ax.set_xscale, ax.get_xlim),
                                  (y, ax.yaxis, ax.set_yscale, ax.get_ylim)):
         if not on:

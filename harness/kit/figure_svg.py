@@ -16,6 +16,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import matplotlib as mpl
 import pandas as pd
 
 from harness.kit.figure_cache import keep_figures_of
@@ -452,8 +453,6 @@ def _attr(text: str) -> str:
 
 
 def _rc(slug: str):
-    import matplotlib as mpl
-
     return mpl.rc_context({**RC_PARAMS, "svg.hashsalt": f"harness-report-{slug}"})
 
 

@@ -7,6 +7,7 @@ from typing import Any
 
 import pandas as pd
 
+from harness.gate import gate_table
 from harness.kit.figure_style import Palette
 
 __all__ = ["RunView", "split", "part", "rows_of", "problems_in"]
@@ -37,8 +38,6 @@ class RunView:
         """
         cached = self.__dict__.get("_gate")
         if cached is None:
-            from harness.gate import gate_table
-
             conv = self.summary("convergence")
             cached = gate_table(conv) if len(conv) and "stepper" in conv else pd.DataFrame(
                 columns=["stepper", "problem", "passed", "reason", "verdict", "expected"])

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from harness.errors import InputError
+from harness.tolerances import MAX_ENSEMBLE_SIZE
 
 
 def check_time(value: Any, name: str) -> float:
@@ -39,8 +40,6 @@ def check_ensemble_size(size: Any) -> int:
     -------
     int: `size`, checked.
     """
-    from harness.tolerances import MAX_ENSEMBLE_SIZE
-
     return check_count(size, "`ensemble` size", MAX_ENSEMBLE_SIZE)
 
 

@@ -20,6 +20,8 @@ from harness.problem.dynamics import Dynamics
 from harness.problem.nbody import NBody, NewtonianForm, expression_names
 from harness.problem.published import Published
 from harness.problem.validation import check_definition, check_start
+from harness.scales import derive_perturbation, derive_time_scale, draw_noise
+from harness.tolerances import HORIZON_PERIODS, STIFF_HORIZON_STEPS
 
 ExactSolution = Callable[[float, np.ndarray, float, np.ndarray], np.ndarray]
 
@@ -154,7 +156,6 @@ class Problem:
         so the measurement reaches the slow manifold, where the problem is stiff."""
         if self.declared_convergence_t_end is not None:
             return self.declared_convergence_t_end
-        from harness.tolerances import HORIZON_PERIODS, STIFF_HORIZON_STEPS
 
         scale = self.time_scale
         horizon = min(self.t_end, self.t0 + HORIZON_PERIODS * scale.period)
@@ -243,8 +244,6 @@ class Problem:
         -------
         ndarray, shape (dim, size): the initial states.
         """
-        from harness.scales import draw_noise
-
         size = check_ensemble_size(size)
         if size == 1:
             return self.y0[:, None].copy()
@@ -303,15 +302,11 @@ class Problem:
     @cached_property
     def time_scale(self):
         """Natural period, fastest rate and the long-run step size (`harness.scales.TimeScale`)."""
-        from harness.scales import derive_time_scale
-
         return derive_time_scale(self)
 
     @cached_property
     def ensemble_perturbation(self):
         """Relative size and component scales of the ensemble (`harness.scales.Perturbation`)."""
-        from harness.scales import derive_perturbation
-
         return derive_perturbation(self)
 
     # -- derived numerical functions --------------------------------------------------------------

@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import heyoka as hy
 import numpy as np
 
 from harness.errors import InputError, ProblemError
@@ -35,8 +36,6 @@ def check_definition(name: Any, variables: Sequence[Any], newtonian: Any) -> str
     -------
     str: the name.
     """
-    import heyoka as hy
-
     name = check_name(name, "problem `name`")
     if len(variables) == 0:
         raise InputError(f"problem {name!r}: `variables` must hold at least one state variable, "

@@ -23,6 +23,7 @@ current directory's `reports/` when the package is installed elsewhere).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import shutil
 import time
@@ -30,13 +31,24 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import jinja2
+
+from harness import __version__, registry
 from harness.errors import InputError
 
 # The experiments a report runs, in the order of its sections: the one list in
 # harness/experiments/__init__.py.
 from harness.experiments import EXPERIMENT_NAMES as REPORT_EXPERIMENTS
+from harness.experiments.base import ENTRY_POINT_EXPERIMENTS
+from harness.kit import Palette, RunView
+from harness.kit.figure_svg import page_css, short_classes, short_ids
 from harness.progress import Progress
 from harness.provenance import default_directory
+from harness.report.compare import VERDICTS_FILE, load_previous
+from harness.report.sections import build_sections
+from harness.runner import check_names, check_plugins, run_experiments
+from harness.store import StoredRun, load_run, resolve_run, save_run
+from harness.store.schema import SAFE_NAME
 
 __all__ = ["build_report", "write_report", "rerender_report", "report_experiments", "reports_root",
            "render_html", "run_view"]
@@ -52,8 +64,6 @@ def report_experiments() -> list[str]:
     -------
     list of str: experiment names.
     """
-    from harness.experiments.base import ENTRY_POINT_EXPERIMENTS
-
     return [*REPORT_EXPERIMENTS, *ENTRY_POINT_EXPERIMENTS]
 
 TEMPLATE = "report.html.j2"
@@ -98,8 +108,6 @@ def render_html(context: dict[str, Any]) -> str:
     -------
     str: the HTML page.
     """
-    import jinja2
-
     env = jinja2.Environment(
         loader=jinja2.PackageLoader("harness.report", "templates"),
         autoescape=True,
@@ -113,8 +121,6 @@ def render_html(context: dict[str, Any]) -> str:
 def _write_report(root: Path, report_id: str, html: str, extra: dict[str, str] | None = None) -> Path:
     """Write `<root>/<report id>/index.html` (and the `extra` files) atomically (staging
     directory, then rename) and point `<root>/latest` at it. Returns the index.html path."""
-    from harness.store.schema import SAFE_NAME
-
     if not SAFE_NAME.match(report_id) or report_id.strip(".") == "":  # a path only from a safe id
         raise InputError(f"report id {report_id[:80]!r} must use letters, digits and _.+- only")
     root.mkdir(parents=True, exist_ok=True)
@@ -219,8 +225,6 @@ def build_report(
     quick = _check_flag("quick", quick)
     fresh = _check_flag("fresh", fresh)
     root = reports_root(output)
-    from harness import registry
-    from harness.runner import check_names, check_plugins, run_experiments
 
     plugin_paths = check_plugins(plugins)
     for p in plugin_paths:
@@ -233,8 +237,6 @@ def build_report(
         raise InputError("`problems` must name at least one problem")
     experiments = report_experiments()
     if compare is not None:
-        from harness.store import resolve_run
-
         resolve_run(compare, root=results_root)  # a bad --compare fails before anything runs
 
     if isinstance(progress, Progress):
@@ -252,8 +254,6 @@ def build_report(
         if own:
             bar.close()
     t_run = time.perf_counter() - started
-
-    from harness.store import load_run, save_run
 
     t0 = time.perf_counter()
     run_dir = save_run(results, root=results_root, config={
@@ -293,12 +293,9 @@ def rerender_report(run: str | os.PathLike | None, *, output: str | os.PathLike 
     if grid_options:
         raise InputError(f"`--from` re-renders a saved run as it was measured; it takes no "
                          f"{', '.join(grid_options)}")
-    from harness.store import load_run
 
     stored = load_run(run)
     if compare is not None:
-        from harness.store import resolve_run
-
         resolve_run(compare, root=stored.path.parent)
     return write_report(stored, output=output, compare=compare, compare_default=True)
 
@@ -319,9 +316,6 @@ def run_view(stored: Any, *, need_steppers: bool = True) -> Any:
     -------
     RunView
     """
-    from harness import registry
-    from harness.kit import Palette, RunView
-
     meta = stored.meta
     cfg = meta.get("config", {}).get("run", {})
     stepper_names = list(cfg.get("steppers") or registry.steppers.names())
@@ -373,11 +367,6 @@ def write_report(
     -------
     Path: the report's index.html.
     """
-    from harness import __version__
-    from harness.report.compare import VERDICTS_FILE, load_previous
-    from harness.report.sections import build_sections
-    from harness.store import StoredRun, load_run
-
     stored = run if isinstance(run, StoredRun) else load_run(run)
     root = reports_root(output)
     bar = progress if progress is not None else Progress(0, "report", mode="off")
@@ -402,9 +391,6 @@ def write_report(
                 f"{totals.get('cells', 0)} cells ({totals.get('computed', 0)} computed, "
                 f"{totals.get('cached', 0)} from cache, {totals.get('failed', 0)} failed) in "
                 f"{len(meta.get('experiments', {}))} experiments.")
-    import dataclasses
-
-    from harness.kit.figure_svg import page_css, short_classes, short_ids
 
     blocks = [b for sec in sections for b in sec.blocks if b.figure is not None]
     svgs, figure_css = short_classes([b.figure.svg for b in blocks], page_css(b.figure for b in blocks))

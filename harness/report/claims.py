@@ -3,8 +3,9 @@
 The four course texts (`../shared/course-material/`, see its README) make statements about the
 methods the harness measures. Each `ClaimSpec` paraphrases one statement (the texts are cited,
 not quoted), names its source file and a phrase that locates it (the line number is looked up
-when the file is present), and a `judge` function that turns this run's summary tables into a
-`ClaimResult`: the measurement in words and numbers, and `agree`, `disagree` or `not measured`.
+when the file is present), the experiment whose summary it reads, and a `judge` function that
+turns that summary into a `ClaimResult` (a run without that experiment's results leaves the claim
+`not measured`): the measurement in words and numbers, and `agree`, `disagree` or `not measured`.
 A claim is judged on what its own words name: the methods (matched by their coefficients,
 whatever a stepper is called) and the problems (a class derived from the definition, e.g. a
 central field), leaving out the cells where the named method is exact or no measurement could
@@ -21,9 +22,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from harness import registry
 from harness import tolerances as tol
 from harness.coefficients import ButcherTableau, SecondOrderMultistep, SplittingScheme
+from harness.facts import central_field, method_facts, problem_facts
 from harness.provenance import PROJECT_ROOT
+from harness.rules import convergence_expectation
 
 __all__ = ["ClaimSpec", "ClaimResult", "CLAIMS", "check_claims", "course_material_dir"]
 
@@ -38,7 +42,8 @@ class ClaimSpec:
     claim: str
     source: str
     anchor: str
-    judge: Callable[[Tables], tuple[str, str, list[dict]]]
+    experiment: str
+    judge: Callable[[pd.DataFrame], tuple[str, str, list[dict]]]
 
 
 @dataclass
@@ -72,11 +77,6 @@ def _line_of(source: str, anchor: str) -> int | None:
     except OSError:
         return None
     return None
-
-
-def _summary(tables: Tables, name: str) -> pd.DataFrame:
-    df = tables.get(name)
-    return df if isinstance(df, pd.DataFrame) else pd.DataFrame()
 
 
 def _num(x: object) -> float:
@@ -119,8 +119,6 @@ def steppers_with(*records: object) -> list[str]:
     -------
     list of str: stepper names, in registry order.
     """
-    from harness import registry
-
     def identity(c) -> tuple:
         return type(c), getattr(c, "float_fingerprint", c.fingerprint)()
 
@@ -134,10 +132,9 @@ def steppers_with(*records: object) -> list[str]:
 
 
 # -- the judges -------------------------------------------------------------------------------------
-def _verlet_local_h4(tables: Tables) -> tuple[str, str, list[dict]]:
-    conv = _summary(tables, "convergence")
-    if conv.empty or "local_exponent_q" not in conv:
-        return NOT_MEASURED, "no convergence results", []
+def _verlet_local_h4(conv: pd.DataFrame) -> tuple[str, str, list[dict]]:
+    if "local_exponent_q" not in conv:
+        return NOT_MEASURED, "no local exponents in the convergence results", []
     s = conv[conv["stepper"].isin(steppers_with(STORMER))]
     q = s["local_exponent_q"].astype(float)
     values = [{"stepper": n, "problem": p, "local exponent (positions)": _fmt(v, 4)}
@@ -153,10 +150,7 @@ def _verlet_local_h4(tables: Tables) -> tuple[str, str, list[dict]]:
     return (AGREE if ok else DISAGREE), text, values
 
 
-def _velocity_verlet_two_orders(tables: Tables) -> tuple[str, str, list[dict]]:
-    conv = _summary(tables, "convergence")
-    if conv.empty:
-        return NOT_MEASURED, "no convergence results", []
+def _velocity_verlet_two_orders(conv: pd.DataFrame) -> tuple[str, str, list[dict]]:
     orders: dict[str, float] = {}
     values = []
     for name, record in (("two-step", STORMER), ("velocity", VELOCITY_VERLET)):
@@ -189,8 +183,6 @@ def _velocity_verlet_two_orders(tables: Tables) -> tuple[str, str, list[dict]]:
 
 def _registered(kind: str, name: str):
     """The registered stepper or problem `name`, or None (a saved run's plugin not loaded now)."""
-    from harness import registry
-
     try:
         return registry.get_stepper(name) if kind == "stepper" else registry.get_problem(name)
     except Exception:
@@ -201,22 +193,16 @@ def _exact_on(stepper_name: str, problem_name: str) -> bool | None:
     """True when the gate's rules expect the method to be exact on the problem (a polynomial
     solution its linear order reproduces, `harness.rules.convergence_expectation`); None when
     either is not registered."""
-    from harness.facts import method_facts, problem_facts
-    from harness.rules import convergence_expectation
-
     stepper, problem = _registered("stepper", stepper_name), _registered("problem", problem_name)
     if stepper is None or problem is None:
         return None
     return convergence_expectation(method_facts(stepper), problem_facts(problem)).verdict == "exact"
 
 
-def _rk4_drifts(tables: Tables) -> tuple[str, str, list[dict]]:
+def _rk4_drifts(en: pd.DataFrame) -> tuple[str, str, list[dict]]:
     """Judged on the cells of the RK4 tableau whose drift class was measured, leaving out the
     problems where RK4 is exact (a claim about drift cannot be refuted where the method makes no
     error) and the runs that could not show a class (`not-measurable`)."""
-    en = _summary(tables, "energy")
-    if en.empty:
-        return NOT_MEASURED, "no energy-drift results", []
     s = en[en["stepper"].isin(steppers_with(RK4))]
     if s.empty:
         return NOT_MEASURED, "no stepper with the classical RK4 tableau was run in the energy experiment", []
@@ -249,15 +235,12 @@ def _rk4_drifts(tables: Tables) -> tuple[str, str, list[dict]]:
     return (AGREE if ok else DISAGREE), text, values
 
 
-def _angular_momentum_exact(tables: Tables) -> tuple[str, str, list[dict]]:
+def _angular_momentum_exact(en: pd.DataFrame) -> tuple[str, str, list[dict]]:
     """Judged on the methods the claim names (the kick-drift-kick and drift-kick-drift splittings,
     whatever their names: the leapfrog runs the former's scheme) and only on central fields
     (`harness.facts.central_field`: every body's acceleration parallel to its position)."""
-    from harness.facts import central_field
-
-    en = _summary(tables, "energy")
-    if en.empty or "angular_momentum_conserved" not in en:
-        return NOT_MEASURED, "no energy-drift results", []
+    if "angular_momentum_conserved" not in en:
+        return NOT_MEASURED, "no angular momentum in the energy-drift results", []
     verlet = steppers_with(VELOCITY_VERLET, POSITION_VERLET)
     s = en[en["stepper"].isin(verlet) & en["max_rel_angular_momentum_error"].notna()]
     s = s[np.isfinite(s["max_rel_angular_momentum_error"].astype(float))]
@@ -285,10 +268,7 @@ def _angular_momentum_exact(tables: Tables) -> tuple[str, str, list[dict]]:
     return (AGREE if ok else DISAGREE), text, values
 
 
-def _euler_interval(tables: Tables) -> tuple[str, str, list[dict]]:
-    st = _summary(tables, "stability")
-    if st.empty:
-        return NOT_MEASURED, "no stability results", []
+def _euler_interval(st: pd.DataFrame) -> tuple[str, str, list[dict]]:
     s = st[st["stepper"].isin(steppers_with(EULER))]
     if s.empty:
         return NOT_MEASURED, "no stepper with forward Euler's tableau was in this report's stability run", []
@@ -304,10 +284,7 @@ def _euler_interval(tables: Tables) -> tuple[str, str, list[dict]]:
     return (AGREE if ok else DISAGREE), text, values
 
 
-def _verlet_rounding(tables: Tables) -> tuple[str, str, list[dict]]:
-    ro = _summary(tables, "roundoff")
-    if ro.empty:
-        return NOT_MEASURED, "no roundoff results", []
+def _verlet_rounding(ro: pd.DataFrame) -> tuple[str, str, list[dict]]:
     values = []
     ratios = []
     for problem, g in ro.groupby("problem", sort=False):
@@ -335,26 +312,32 @@ CLAIMS: tuple[ClaimSpec, ...] = (
     ClaimSpec("verlet-local-h4",
               "The position-only Verlet step x(n+1) = 2x(n) - x(n-1) + h^2 a(n) makes a local "
               "error proportional to h^4.",
-              "000_30bd195af4439699.txt", "scales like $h^4$", _verlet_local_h4),
+              "000_30bd195af4439699.txt", "scales like $h^4$", "convergence",
+              _verlet_local_h4),
     ClaimSpec("velocity-verlet-two-orders",
               "Velocity Verlet, with an error term of order h^2, is two orders worse than the "
               "plain Verlet method.",
-              "001_99dff2c5051246a9.txt", "two orders of magnitude worse", _velocity_verlet_two_orders),
+              "001_99dff2c5051246a9.txt", "two orders of magnitude worse", "convergence",
+              _velocity_verlet_two_orders),
     ClaimSpec("rk4-drifts",
               "RK4 does not conserve the energy: over long times it drifts away.",
-              "004_bfdbb1594143ed8b.txt", "do not conserve energy", _rk4_drifts),
+              "004_bfdbb1594143ed8b.txt", "do not conserve energy", "energy",
+              _rk4_drifts),
     ClaimSpec("verlet-angular-momentum",
               "In a central (spherically symmetric) field, leapfrog and velocity or position "
               "Verlet keep the angular momentum exactly.",
-              "004_bfdbb1594143ed8b.txt", "conserves it exactly", _angular_momentum_exact),
+              "004_bfdbb1594143ed8b.txt", "conserves it exactly", "energy",
+              _angular_momentum_exact),
     ClaimSpec("euler-interval",
               "Forward Euler is stable on y' = lambda y (lambda real) exactly when -2 < h lambda < 0.",
-              "004_bfdbb1594143ed8b.txt", "-2 < h\\lambda < 0", _euler_interval),
+              "004_bfdbb1594143ed8b.txt", "-2 < h\\lambda < 0", "stability",
+              _euler_interval),
     ClaimSpec("verlet-rounding",
               "The original two-step Verlet form suffers more from rounding than leapfrog, because "
               "it adds h^2 times the acceleration, a very small number, to numbers the size of the "
               "positions.",
-              "002_b3abae41bf42a307.txt", "square of the time step", _verlet_rounding),
+              "002_b3abae41bf42a307.txt", "square of the time step", "roundoff",
+              _verlet_rounding),
 )
 
 
@@ -372,10 +355,14 @@ def check_claims(tables: Tables) -> list[ClaimResult]:
     """
     out = []
     for spec in CLAIMS:
-        try:
-            status, text, values = spec.judge(tables)
-        except Exception as exc:  # a summary table without the expected columns
-            status, text, values = NOT_MEASURED, f"could not judge: {type(exc).__name__}: {exc}", []
+        summary = tables.get(spec.experiment)
+        if not isinstance(summary, pd.DataFrame) or summary.empty:
+            status, text, values = NOT_MEASURED, f"no {spec.experiment} results", []
+        else:
+            try:
+                status, text, values = spec.judge(summary)
+            except Exception as exc:  # a summary table without the expected columns
+                status, text, values = NOT_MEASURED, f"could not judge: {type(exc).__name__}: {exc}", []
         out.append(ClaimResult(spec.key, spec.claim, spec.source, _line_of(spec.source, spec.anchor),
                                status, text, values))
     return out

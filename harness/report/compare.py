@@ -13,6 +13,7 @@ with both runs' provenance. Rows measured in only one run are counted, not liste
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -24,6 +25,9 @@ import pandas as pd
 
 from harness.kit import RunView, anchor, is_missing
 from harness.report.specs import experiment_key, section_spec
+from harness.report.verdicts import VERDICT_COLUMNS, collect_verdicts
+from harness.store import list_runs, load_run
+from harness.store.files import read_bounded
 
 __all__ = ["Previous", "Comparison", "load_previous", "compare_runs", "VERDICTS_FILE"]
 
@@ -68,8 +72,6 @@ def load_previous(run: str | os.PathLike | None, *, results_root: str | os.PathL
     -------
     Previous or None
     """
-    from harness.store import list_runs, load_run
-
     if run is None:
         ids = [r for r in list_runs(results_root) if r != current]
         ids = [r for r in ids if r < current] or []
@@ -87,8 +89,6 @@ def load_previous(run: str | os.PathLike | None, *, results_root: str | os.PathL
     if verdicts is not None:
         source = f"recorded by its report ({saved})"
     else:
-        from harness.report.verdicts import collect_verdicts
-
         stored = load_run(stored.path)
         verdicts = collect_verdicts(view_factory(stored))
         source = "judged again from its saved summaries with this build's rules"
@@ -100,11 +100,6 @@ def load_previous(run: str | os.PathLike | None, *, results_root: str | os.PathL
 def _read_verdicts(path: Path) -> tuple[pd.DataFrame | None, str]:
     """(the verdicts an earlier report recorded, "") or (None, why the file cannot be used): a
     damaged file is judged again from the saved run, never a crash."""
-    import io
-
-    from harness.report.verdicts import VERDICT_COLUMNS
-    from harness.store.files import read_bounded
-
     try:
         text = read_bounded(path).decode("utf-8")
         verdicts = pd.read_csv(io.StringIO(text), dtype={"key": str, "stepper": str, "problem": str},

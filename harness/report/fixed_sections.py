@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from harness import perf_history
 from harness import tolerances as tol
+from harness.ground_truth import reference
 from harness.kit import (
     FAIL,
     MARK,
@@ -29,9 +32,14 @@ from harness.kit import (
     fmt,
     text_cell,
 )
+from harness.problem.validation import exact_state
+from harness.provenance import PROJECT_ROOT
+from harness.registry import get_problem
 from harness.report.claims import AGREE, DISAGREE, check_claims
+from harness.report.compare import compare_runs
 from harness.report.history_figure import perf_history_figure
 from harness.report.specs import section_spec
+from harness.store import list_runs, load_run
 
 __all__ = ["verdicts_section", "changes_section", "ground_truth", "claims", "gate_trust", "provenance",
            "performance_history"]
@@ -147,8 +155,6 @@ def changes_section(view: RunView, verdicts: pd.DataFrame, previous: Any) -> Sec
     -------
     Section: tables of the changed verdicts and moved figures, or a note.
     """
-    from harness.report.compare import compare_runs
-
     sec = Section("changes", 2, "What changed since the last run")
     sec.intro = ("Every verdict that differs from the earlier run's, and every measured figure "
                  "that moved beyond its confidence interval (or, for a figure without one, its "
@@ -197,9 +203,6 @@ def ground_truth(view: RunView) -> Section:
     -------
     Section: per problem, the reference's precision and certified error.
     """
-    from harness.ground_truth import reference
-    from harness.registry import get_problem
-
     sec = Section("ground-truth", 0, "Ground truth")
     sec.intro = ("Every error in this report is measured against heyoka's Taylor integrator "
                  "(tolerance at the unit roundoff of its precision, high_accuracy on), whose own "
@@ -226,8 +229,6 @@ def ground_truth(view: RunView) -> Section:
                        certified_error=ref.max_error, compute_s=ref.compute_s,
                        cached="yes" if ref.cached else "no")
             if problem.exact is not None:
-                from harness.problem.validation import exact_state
-
                 diff = float(np.max(np.abs(exact_state(problem, T, y0) - ref.y[-1])))
                 scale = max(1.0, float(np.max(np.abs(ref.y[-1]))))
                 allowed = ref.max_error + tol.GROUND_TRUTH_EXACT_ULPS * tol.EPS * scale
@@ -306,11 +307,6 @@ def gate_trust(view: RunView, results_dir: Any) -> Section:
     -------
     Section: a note saying so when no population run is saved.
     """
-    import json
-    from pathlib import Path
-
-    from harness.store import list_runs, load_run
-
     sec = Section("gate-population", 0, "How much to trust the gate")
     sec.intro = ("The gate judged on generated methods whose truth is known: random correct "
                  "members of parametric families (every one must pass) and mutants with one "
@@ -425,13 +421,6 @@ def performance_history() -> Section:
     sec = Section("performance-history", 0, "Performance history")
     sec.intro = ("Speed and tracked accuracy over commits, from asv's result files "
                  "(drawn here because asv's own dashboard loads its scripts from the internet).")
-    try:
-        from harness import perf_history  # type: ignore[attr-defined]
-    except ImportError:
-        sec.note("No asv results yet (run `make nightly`).")
-        return sec
-    from harness.provenance import PROJECT_ROOT
-
     try:
         history = perf_history.load_history(PROJECT_ROOT / ".asv" / "results")
     except Exception as exc:

@@ -18,11 +18,19 @@ from __future__ import annotations
 
 import contextlib
 import json
+import multiprocessing
+import os
+import signal
+import sys
+import time
+import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from harness.errors import Terminated
 from harness.experiments import EXPERIMENTS
 from harness.kit.elements import Block, Section, SectionTimer, drop_unlinked_row_ids
 from harness.kit.section import missing, skip_note
@@ -31,6 +39,7 @@ from harness.report import fixed_sections as X
 from harness.report.specs import section_spec
 from harness.report.test_sets import test_sets_section
 from harness.report.verdicts import collect_verdicts
+from harness.runner.executors import workers_born_deaf
 
 __all__ = ["build_sections", "section_titles", "section_spec"]
 
@@ -155,8 +164,6 @@ _FORKED_VIEW: list[RunView] = []
 
 def _section_in_worker(name: str, number: Mapping[str, int], titles: Mapping[str, str]
                        ) -> tuple[Section, float]:
-    import time
-
     started = time.perf_counter()
     sec = _built_section(_FORKED_VIEW[0], name, number, titles)
     return sec, time.perf_counter() - started
@@ -175,18 +182,11 @@ class _Pending:
 
 def _start_experiment_sections(view: RunView, experiments: Sequence[str], number: Mapping[str, int],
                                titles: Mapping[str, str]) -> _Pending | None:
-    import multiprocessing
-    import os
-    from concurrent.futures import ProcessPoolExecutor
-
     workers = min(os.cpu_count() or 1, len(experiments))
     if workers < 2 or "fork" not in multiprocessing.get_all_start_methods():
         return None
     size = {name: len(view.rows.get(name, ())) for name in experiments}
     _FORKED_VIEW[:] = [view]
-    import signal
-
-    from harness.runner.executors import workers_born_deaf
 
     try:  # forked with the signals ignored until `_quiet_signals` (the parent's handlers raise)
         with workers_born_deaf((signal.SIGINT, signal.SIGTERM)):
@@ -203,8 +203,6 @@ def _start_experiment_sections(view: RunView, experiments: Sequence[str], number
 def _quiet_signals() -> None:
     """In a forked section worker: Ctrl-C and SIGTERM (sent to the whole process group) end it
     at once and silently; the parent, which got them too, reports the interruption once."""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
@@ -225,10 +223,6 @@ def _finish_experiment_section(pending: _Pending | None, view: RunView, name: st
 
 
 def _close(pending: _Pending | None) -> None:
-    import sys
-
-    from harness.errors import Terminated
-
     if pending is not None:  # interrupted: the workers got the signal too; do not wait for them
         interrupted = isinstance(sys.exc_info()[1], KeyboardInterrupt | SystemExit | Terminated)
         if interrupted:  # one forked while the signals were ignored may have missed it
@@ -247,8 +241,6 @@ def _guarded(fn: Callable[[RunView], Section], view: RunView, name: str,
         sec.number = number.get(name, sec.number)
         return sec
     except Exception as exc:
-        import traceback
-
         title = (titles or {}).get(name, name)
         sec = Section(name, number.get(name, 0), title)
         sec.note(f"This section could not be built: {type(exc).__name__}: {exc}", cls="warning")

@@ -22,7 +22,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from harness.facts import problem_facts
+from harness.ground_truth import reference
 from harness.kit.elements import Section, df_table
+from harness.registry import get_problem
+from harness.tolerances import STIFF_STEP_COUNT
 
 __all__ = ["test_sets_section", "TITLE"]
 
@@ -35,8 +39,6 @@ INTRO = ("Problems from the published test sets (DETEST, Hull et al. 1972; the B
 
 
 def _published(name: str):
-    from harness.registry import get_problem
-
     try:
         return get_problem(name)
     except Exception:  # a problem of a plugin this process has not loaded
@@ -48,9 +50,6 @@ def _stiff_over(problem, T: float) -> dict[str, Any]:
     `harness.facts`) times its declared span and times the span the points measured; a problem
     stiff over its span (`STIFF_STEP_COUNT`: more steps than that for stability alone at an
     interval of 1) but not over the measured one is flagged: its points test nothing stiff."""
-    from harness.facts import problem_facts
-    from harness.tolerances import STIFF_STEP_COUNT
-
     try:
         rate = float(problem_facts(problem).stiffness)
     except Exception as exc:  # reported in the row, never fatal
@@ -76,8 +75,6 @@ def test_sets_section(view: Any) -> Section:
     -------
     Section
     """
-    from harness.ground_truth import reference
-
     sec = Section("test-sets", 0, TITLE)
     sec.intro = INTRO
     rows = view.rowtable(EXPERIMENT) if view.has(EXPERIMENT) else pd.DataFrame()

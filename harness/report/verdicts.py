@@ -15,6 +15,7 @@ import pandas as pd
 
 from harness.kit import VERDICT_COLUMNS, RunView, anchor, first_sentence, summary_verdicts
 from harness.kit.section import key_text
+from harness.report.claims import AGREE, DISAGREE, check_claims
 from harness.report.specs import experiment_key, section_spec
 
 __all__ = ["VERDICT_COLUMNS", "collect_verdicts", "summary_verdicts", "claim_verdicts"]
@@ -31,8 +32,6 @@ def claim_verdicts(view: RunView) -> pd.DataFrame:
     -------
     DataFrame: one judged row per claim that agreed or disagreed.
     """
-    from harness.report.claims import AGREE, DISAGREE, check_claims
-
     out = []
     for r in check_claims(dict(view.summaries)):
         if r.status not in (AGREE, DISAGREE):

@@ -10,10 +10,11 @@ from typing import Any
 
 import numpy as np
 
+from harness import registry
 from harness.errors import (
     InputError,
 )
-from harness.experiments.base import Experiment
+from harness.experiments.base import Experiment, get_experiment
 from harness.progress import Progress
 
 # A local run uses at most this many worker processes per core.
@@ -106,8 +107,6 @@ def check_names(kind: str, names: Any) -> list[str]:
     -------
     list of str
     """
-    from harness import registry
-
     reg = registry.steppers if kind == "steppers" else registry.problems
     if names is None:
         return reg.names()
@@ -160,8 +159,6 @@ def resolve_experiment(experiment: Any) -> Experiment:
     -------
     Experiment
     """
-    from harness.experiments.base import get_experiment
-
     if isinstance(experiment, Experiment):
         return experiment
     if not isinstance(experiment, str) or not experiment:

@@ -3,17 +3,27 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import re
 import shutil
+import signal
+import socket
+import struct
 import sys
 import tempfile
+import threading
+import time
+import uuid
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from joblib.externals.loky import get_reusable_executor
 
 from harness.errors import (
     InputError,
@@ -87,8 +97,6 @@ def quiet_worker_signals() -> None:
     group, but only the parent decides (it stops the pool and prints one line), so workers
     ignore SIGINT; SIGTERM ends a worker at once and silently. Never a worker's traceback.
     Workers started by `loky_batch` ignore SIGINT from birth already (`workers_born_deaf`)."""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
@@ -114,9 +122,6 @@ def workers_born_deaf(signals: Sequence[int] = ()):
     ------
     None
     """
-    import signal
-    import threading
-
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -133,8 +138,6 @@ def _quiet_loky() -> None:
     comes when an idle worker times out (LOKY_IDLE_TIMEOUT_S) just as a batch arrives; loky
     starts a replacement and loses nothing, and a worker that really dies is found by its
     claim file and reported in its cell. Other warnings pass."""
-    import warnings
-
     warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given",
                             category=UserWarning)
 
@@ -155,8 +158,6 @@ def loky_batch(batch: Sequence[Task], n: int, accept) -> tuple[BaseException | N
     -------
     (BaseException or None, list of Task)
     """
-    from joblib.externals.loky import get_reusable_executor
-
     _quiet_loky()
     executor, futures = None, {}
     try:
@@ -202,9 +203,6 @@ def _stop_pool(executor: Any, futures: Mapping[Any, Task]) -> None:
     while it stops (the run is already ending), pending futures are cancelled, and the pool's
     manager thread, which can trip over the killed workers' queue (a KeyError in loky), is
     joined with its exception dropped: the user sees one line, `harness: interrupted`."""
-    import signal
-    import threading
-
     main = threading.current_thread() is threading.main_thread()
     saved = [(s, signal.signal(s, signal.SIG_IGN)) for s in (signal.SIGINT, signal.SIGTERM)] \
         if main else []
@@ -304,8 +302,6 @@ def dask_client(scheduler: Any) -> tuple[Any, bool]:
         except Exception as exc:  # noqa: BLE001  (whatever the peer makes distributed raise)
             failure = f"{type(exc).__name__}: {one_line(str(exc), 200)}"
         if failure is not None:
-            import gc
-
             gc.collect()  # the half-built client goes now, while its complaint is silenced
     finally:
         sys.unraisablehook = hook
@@ -322,10 +318,6 @@ def _handshake(address: str) -> None:
     handshake naming its Python and pickle protocol. A port that accepts and never answers, or
     answers with something else (an HTTP or SSH server), is one `InputError` line, before
     distributed reads a garbage length and tries to allocate it."""
-    import socket
-    import struct
-    import time
-
     host, _, port = address.removeprefix("tcp://").rpartition(":")
     host = host.strip("[]")
     deadline = time.monotonic() + DASK_CONNECT_TIMEOUT_S
@@ -372,8 +364,6 @@ def run_dask(tasks: Sequence[Task], client: Any, accept) -> None:
     accept : callable
         ``accept(task, outcome)``, called once per task.
     """
-    import uuid
-
     from distributed import as_completed
 
     tag = uuid.uuid4().hex[:8]

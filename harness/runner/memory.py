@@ -12,6 +12,8 @@ from harness.errors import (
     InputError,
 )
 from harness.experiments.base import Cell, Experiment
+from harness.registry import get_problem
+from harness.tolerances import MEMORY_HEADROOM
 
 # Working arrays a stepper keeps per state (stages, carries, temporaries) in the default
 # memory estimate: 16 covers an 8-stage Runge-Kutta method with its error estimate.
@@ -75,8 +77,6 @@ def check_memory(needed: int, *, argument: str, detail: str = "",
     detail : str, optional, added to the message.
     available : int, optional, bytes available (default measured now).
     """
-    from harness.tolerances import MEMORY_HEADROOM
-
     avail = available_memory() if available is None else int(available)
     limit = int(MEMORY_HEADROOM * avail)
     if needed > limit:
@@ -95,7 +95,6 @@ def _cell_estimate(experiment: Experiment, cell: Cell, config: Mapping[str, Any]
     size = config.get("ensemble")
     if isinstance(size, bool) or not isinstance(size, int | np.integer) or not cell.problem:
         return 0, "ensemble"
-    from harness.registry import get_problem
 
     try:
         dim = get_problem(cell.problem).dim

@@ -21,6 +21,7 @@ from harness.errors import (
 from harness.experiments.base import Cell, Experiment, Skip, failed_record
 from harness.keys import cell_key, code_version, experiment_fingerprint
 from harness.progress import Progress
+from harness.registry import load_plugin
 from harness.runner.checks import (
     check_jobs,
     check_names,
@@ -227,7 +228,6 @@ def run_experiment(
         if not isinstance(flag, bool | np.bool_):
             raise InputError(f"`{name}` must be True or False, got {flag!r}")
     store = CellCache(cache_dir).check_writable() if cache else None  # unwritable: one line, 77
-    from harness.registry import load_plugin
 
     for p in plugin_paths:
         load_plugin(p)

@@ -3,28 +3,26 @@ grow), one progress display and one Dask connection, each experiment run by `run
 
 from __future__ import annotations
 
-import os
+import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import pandas as pd
 
 from harness.errors import InputError, UnknownNameError
+from harness.experiments import EXPERIMENTS
 from harness.experiments.base import Experiment
 from harness.progress import Progress
-from harness.runner.checks import (
-    check_names,
-    check_plugins,
-    check_scheduler,
-    progress_display,
-    resolve_config,
-    resolve_experiment,
-)
+from harness.registry import load_plugin
+from harness.runner import checks
 from harness.runner.executors import dask_client
 from harness.runner.orchestration import RunOptions, no_cells_error, run_experiment
 from harness.runner.result import RunResult
 
 __all__ = ["run_experiments"]
+
+#: The keywords `run_experiments` passes on to every `run_experiment`: the fields of `RunOptions`.
+RUN_OPTION_NAMES = tuple(f.name for f in dataclasses.fields(RunOptions))
 
 
 def run_experiments(
@@ -33,15 +31,8 @@ def run_experiments(
     problems: Sequence[str] | None = None,
     *,
     configs: Mapping[str, Mapping[str, Any]] | None = None,
-    quick: bool = False,
-    jobs: int | None = None,
-    scheduler: str | Any | None = None,
-    fresh: bool = False,
-    cache: bool = True,
-    cache_dir: str | os.PathLike | None = None,
-    plugins: Sequence[str | os.PathLike] = (),
-    cell_timeout: float | None = None,
     progress: Progress | bool | str | None = None,
+    **run_options: Any,
 ) -> dict[str, RunResult]:
     """`run_experiment` for several experiments (None: every registered one), in order, with one
     progress display and one Dask connection.
@@ -51,43 +42,47 @@ def run_experiments(
     experiments : sequence of str or Experiment, optional, the experiments (None: every registered one).
     steppers, problems : sequence of str, optional, registered names (None: every one).
     configs : mapping, optional, experiment name -> overrides of its settings.
-    quick, jobs, scheduler, fresh, cache, cache_dir, plugins, cell_timeout, progress
-        As in `run_experiment`.
+    progress : as in `run_experiment`.
+    **run_options
+        How to run the cells, the fields of `RunOptions` as keywords (quick, jobs, scheduler,
+        fresh, cache, cache_dir, plugins, cell_timeout), as in `run_experiment`.
 
     Returns
     -------
     dict of str to RunResult: by experiment name; pass it to `harness.store.save_run`.
     """
-    from harness.experiments import EXPERIMENTS
-
+    unknown_options = sorted(set(run_options) - set(RUN_OPTION_NAMES))
+    if unknown_options:
+        raise InputError(f"`run_experiments` takes the run options {', '.join(RUN_OPTION_NAMES)}; "
+                         f"got unknown keyword(s) {', '.join(unknown_options)}")
+    run_options.setdefault("plugins", ())
     if experiments is None:
         experiments = list(EXPERIMENTS)
     if isinstance(experiments, str | Experiment):
         experiments = [experiments]
-    exps = [resolve_experiment(e) for e in experiments]
+    exps = [checks.resolve_experiment(e) for e in experiments]
     if configs is not None and not isinstance(configs, Mapping):
         raise InputError(f"`configs` must map experiment names to settings, got {type(configs).__name__}")
     unknown = [k for k in (configs or {}) if k not in {e.name for e in exps}]
     if unknown:
         raise UnknownNameError(f"`configs` names experiments not being run: {unknown}")
-    sched = check_scheduler(scheduler)
-    from harness.registry import load_plugin
+    sched = checks.check_scheduler(run_options.get("scheduler"))
 
-    plugin_paths = check_plugins(plugins)
+    plugin_paths = checks.check_plugins(run_options["plugins"])
     for p in plugin_paths:
         load_plugin(p)
-    options = RunOptions(quick=quick, jobs=jobs, scheduler=None, fresh=fresh, cache=cache,
-                         cache_dir=cache_dir, plugins=tuple(plugin_paths), cell_timeout=cell_timeout)
-    stepper_names = check_names("steppers", steppers)
-    problem_names = check_names("problems", problems)
-    bar, own_bar = progress_display(progress, "cells")
+    options = RunOptions(**{**run_options, "scheduler": None, "plugins": tuple(plugin_paths)})
+    quick = options.quick
+    stepper_names = checks.check_names("steppers", steppers)
+    problem_names = checks.check_names("problems", problems)
+    bar, own_bar = checks.progress_display(progress, "cells")
     # Every experiment's cells are listed once, here: the whole run's size first, so the
     # display's total does not grow; each `run_experiment` takes its list.
     listed: dict[str, tuple[list, list]] = {}
     versions: dict[tuple[str, str], Any] = {}
     for exp in exps:
         try:
-            cfg = resolve_config(exp, (configs or {}).get(exp.name), quick)
+            cfg = checks.resolve_config(exp, (configs or {}).get(exp.name), quick)
             cells, skips = exp.cells(stepper_names, problem_names, cfg)
             listed[exp.name] = (list(cells), list(skips))
         except Exception:  # run_experiment lists it again and reports the failure properly

@@ -20,14 +20,19 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import cloudpickle
+
 from harness.errors import (
+    InputError,
     StepperOutputError,
     Terminated,
 )
 from harness.experiments.base import Cell
 from harness.keys import code_version
+from harness.registry import load_plugin, problems, steppers
 from harness.runner.limits import HARD_TIMEOUT_GRACE_S, CellTimeout, call_limited
 from harness.runner.validation import CellOutputError, validate_rows
+from harness.stepper import Stepper
 from harness.store import (
     atomic_write_bytes,
 )
@@ -91,8 +96,6 @@ def plugin_spec(path: str | os.PathLike) -> dict:
 def _ensure_plugins(specs: Sequence[dict]) -> None:
     """Load the run's plugin files in this process: from their path when it holds the same
     content, else from a copy written to the temp directory."""
-    from harness.registry import load_plugin
-
     for spec in specs:
         path = Path(spec["path"])
         try:
@@ -124,19 +127,14 @@ def shipped_objects(stepper_names: Sequence[str], problem_names: Sequence[str]) 
     -------
     bytes or None
     """
-    from harness.registry import problems, steppers
-
     objs = [reg.get(n) for reg, names in ((steppers, stepper_names), (problems, problem_names))
             for n in sorted(set(names)) if n in reg and reg.origin(n) == SHIPPED_ORIGIN]
     if not objs:
         return None
-    import cloudpickle
 
     try:
         return cloudpickle.dumps(objs)
     except Exception as exc:  # a closure over a lock, an open file, ...
-        from harness.errors import InputError
-
         raise InputError(f"`jobs` > 1 ships {', '.join(map(repr, objs))} to worker processes, but "
                          f"cloudpickle cannot pickle it: {type(exc).__name__}: {exc}; use jobs=1") from None
 
@@ -148,10 +146,6 @@ def _ensure_objects(data: bytes | None, submitter: int | None) -> None:
     key = hashlib.sha256(data).hexdigest()
     if key in _shipped:
         return
-    import cloudpickle
-
-    from harness.registry import problems, steppers
-    from harness.stepper import Stepper
 
     objs = cloudpickle.loads(data)
     for obj in objs:

@@ -29,6 +29,7 @@ This module holds the `Stepper` base class; `records` holds the records and chec
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 from abc import ABC, abstractmethod
@@ -40,6 +41,7 @@ import numpy as np
 from harness.errors import IncompatibleError, InputError, StepperOutputError
 from harness.problem import Dynamics, Problem, check_state, check_time
 from harness.problem.checks import check_positive
+from harness.sources import source_of
 from harness.stepper.records import (
     FORMS,
     MAX_STEPS,
@@ -116,8 +118,6 @@ class Stepper(NonfiniteReplay, ABC):
             The record's name and claims, the coefficients' fingerprint (if any) and the source of
             every class of the stepper below `Stepper`.
         """
-        from harness.sources import source_of
-
         parts = [self.info.name, repr(sorted(self.info.as_dict().items()))]
         if self.coefficients is not None and hasattr(self.coefficients, "fingerprint"):
             parts.append(self.coefficients.fingerprint())
@@ -428,8 +428,6 @@ class AdaptiveStepper(Stepper):
         AdaptiveStepper
             A shallow copy with `tol` set (and its record's `extra` updated by `extra_info`).
         """
-        import copy
-
         tol = check_positive(tol, "`tol`")
         clone = copy.copy(self)
         clone.tol = tol

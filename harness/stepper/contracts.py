@@ -50,6 +50,8 @@ from typing import Any
 import numpy as np
 
 from harness.errors import InputError, StepperOutputError
+from harness.ground_truth import reference
+from harness.jax_problem import jax_functions, require_x64
 from harness.problem import Dynamics
 from harness.problem.checks import check_positive
 from harness.sources import source_of
@@ -177,8 +179,6 @@ class Field:
         """
         import jax.numpy as jnp
 
-        from harness.jax_problem import jax_functions
-
         f, jac, accel = jax_functions(dyn.problem).bind(dyn.pars)
         return cls(f, accel, jac, lambda A, b: batched_solve(A, b, jnp))
 
@@ -246,8 +246,6 @@ class StateStepper(Stepper):
         if isinstance(history, bool) or not isinstance(history, int) or history < 1:
             raise InputError(f"`history` must be a whole number >= 1, got {history!r}")
         if backend == "jax":
-            from harness.jax_problem import require_x64
-
             require_x64()
             # a JAX loop traps no overflow, so a replay cannot tell a blow-up's NaN from the
             # step's own: like a compiled loop, it gets the benefit of the doubt
@@ -356,8 +354,6 @@ class StateStepper(Stepper):
     def _start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float) -> Carry:
         c = Carry(t0, h, y0, state=None, known=[y0], pending=[])
         if self.history_length > 1:
-            from harness.ground_truth import reference  # lazy: heavy, only for multistep
-
             count = self.history_length - 1
             times = t0 + h * np.arange(1, count + 1)
             ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)

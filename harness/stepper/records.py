@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from harness.errors import HarnessError, IncompatibleError, InputError
+from harness.method_checks import check_claimed_order
+from harness.names import check_name
 from harness.problem import Problem
 from harness.problem.checks import check_count, check_time
 
@@ -52,9 +54,6 @@ class StepperInfo:
     extra: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        from harness.method_checks import check_claimed_order
-        from harness.names import check_name
-
         check_name(self.name, "stepper `name`")
         if self.form not in FORMS:
             raise InputError(f"stepper {self.name!r}: `form` must be one of {FORMS}, got {self.form!r}")

@@ -9,13 +9,17 @@ import hashlib
 import json
 import os
 import re
+import sys
+import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
-from harness.errors import InputError, describe_os_error
+from harness.cache import cache_dir
+from harness.errors import InputError, OutputError, describe_os_error
 from harness.provenance import to_jsonable
 from harness.store.files import (
     arrow_table,
@@ -34,8 +38,6 @@ def _content_sha256(df: pd.DataFrame) -> str:
     so it can live inside the file it checks). Numeric columns count by their bytes, text
     columns by pandas' 64-bit hash of each value (vectorised: a million-row pack in a fraction
     of a second), any other column by each value's repr."""
-    import numpy as np
-
     h = hashlib.sha256()
     dtypes = list(df.dtypes)
     h.update(json.dumps([[str(c), str(d)] for c, d in zip(df.columns, dtypes, strict=True)]).encode())
@@ -132,8 +134,6 @@ class CellCache:
 
     def __init__(self, root: str | os.PathLike | None = None):
         if root is None:
-            from harness.cache import cache_dir
-
             root = cache_dir()
         if not isinstance(root, str | os.PathLike) or not str(root):
             raise InputError(f"`cache_dir` must be a directory path, got {root!r}")
@@ -211,8 +211,6 @@ class CellCache:
         path : Path, the damaged entry.
         reason : str, what is wrong with it (for the warning line).
         """
-        import sys
-
         if path.is_dir() and not path.is_symlink():
             print(f"harness: warning: cache entry {str(path)!r} is a directory; not used, "
                   "move it away", file=sys.stderr)
@@ -234,10 +232,6 @@ class CellCache:
         -------
         CellCache: self.
         """
-        import tempfile
-
-        from harness.errors import OutputError
-
         try:
             self.root.mkdir(parents=True, exist_ok=True)
             fd, probe = tempfile.mkstemp(prefix=".writable-", dir=self.root)

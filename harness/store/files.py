@@ -8,16 +8,20 @@ import hashlib
 import io
 import json
 import os
+import stat
 import tempfile
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import IO, Any
 
 import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from harness.errors import InputError, OutputError, describe_os_error
 from harness.provenance import to_jsonable
 from harness.store.schema import CorruptResultsError
+from harness.tolerances import MAX_STORED_FILE_BYTES
 
 _META_MARK = b"harness"
 
@@ -123,8 +127,6 @@ def arrow_table(df: pd.DataFrame) -> Any:
     -------
     pyarrow.Table
     """
-    import pyarrow as pa
-
     if not isinstance(df, pd.DataFrame):
         raise InputError(f"a results table must be a pandas DataFrame, got {type(df).__name__}")
     try:
@@ -145,8 +147,6 @@ def table_bytes(table: Any, extra: Mapping[str, Any] | None = None) -> bytes:
     -------
     bytes
     """
-    import pyarrow.parquet as pq
-
     try:
         if extra is not None:
             meta = dict(table.schema.metadata or {})
@@ -194,8 +194,6 @@ def decode_parquet(data: bytes, path: str | os.PathLike = "<bytes>") -> tuple[pd
     -------
     (DataFrame, dict)
     """
-    import pyarrow.parquet as pq
-
     try:
         table = pq.read_table(io.BytesIO(data))
         df = table.to_pandas()
@@ -249,10 +247,6 @@ def read_bounded(path: str | os.PathLike, limit: int | None = None) -> bytes:
     -------
     bytes
     """
-    import stat
-
-    from harness.tolerances import MAX_STORED_FILE_BYTES
-
     limit = MAX_STORED_FILE_BYTES if limit is None else int(limit)
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     with os.fdopen(fd, "rb") as fh:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -77,8 +78,6 @@ class StoredRun:
                 f"`table` must be one of rows, summary, failures, skips, cells; got {name!r}"
             )
         if experiment is not None and experiment not in self.meta["experiments"]:
-            import difflib
-
             close = difflib.get_close_matches(str(experiment), self.experiments, n=3)
             raise UnknownNameError(
                 f"`experiment` {str(experiment)[:80]!r} is not in run {self.run_id!r}; it has: "

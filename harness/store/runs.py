@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import datetime as _dt
+import difflib
 import os
 import re
 import shutil
@@ -136,7 +137,6 @@ def resolve_run(run: str | os.PathLike | None = None, root: str | os.PathLike | 
             raise ResultsError(f"`run` {text[:200]!r} is a directory but not a saved run (no meta.json)")
         return as_path
     ids = list_runs(base)
-    import difflib
 
     close = difflib.get_close_matches(text, ids, n=3)
     hint = f"; closest: {', '.join(close)}" if close else (f"; newest: {ids[-1]}" if ids else "")

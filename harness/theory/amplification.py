@@ -20,6 +20,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.optimize import brentq
 
 from harness import tolerances as tol
 from harness.errors import InputError
@@ -234,8 +235,6 @@ def stability_boundary(
     -------
     float: the end of the stable interval: 0.0, a finite x, or +inf.
     """
-    from scipy.optimize import brentq
-
     limit = check_positive(limit, "`limit`")
     if not (isinstance(scan_step, int | float) and 0 < scan_step <= min(limit, 1.0)):
         raise InputError(f"`scan_step` must lie in (0, min(limit, 1)], got {scan_step!r}")

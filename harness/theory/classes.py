@@ -32,6 +32,7 @@ without stiff accuracy), and B-convergence holds with order q (Theorem 15.3 ther
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 from functools import cache
 from typing import TYPE_CHECKING
 
@@ -193,7 +194,6 @@ def rk_error_defects(tableau: ButcherTableau, order: int) -> tuple[list[RootedTr
     trees = [t for t in rooted_trees(order) if t.order == order]
     if tableau.exact is not None:
         phi = _exact_weights(tableau.exact, order)
-        from fractions import Fraction
 
         defects = [(phi[t.index] - Fraction(1, t.gamma)) / tree_symmetry(t) for t in trees]
         return trees, np.array([float(x) for x in defects])
@@ -202,8 +202,6 @@ def rk_error_defects(tableau: ButcherTableau, order: int) -> tuple[list[RootedTr
 
 
 def _exact_weights(exact: tuple, max_order: int) -> list:
-    from fractions import Fraction
-
     A, b, _ = exact
     s = len(b)
     g: list[list] = []

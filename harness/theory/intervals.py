@@ -15,11 +15,14 @@ from collections.abc import Callable
 from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
+import mpmath
 import numpy as np
+from scipy.optimize import brentq
 
 from harness import tolerances as tol
 from harness.theory import amplification
 from harness.theory.checks import check_type, family_of
+from harness.theory.newtonian import hw_bands
 from harness.theory.orders import rk_linear_order, rk_stability_coefficients
 
 if TYPE_CHECKING:  # annotations only: the theory reads coefficient objects by their `family`
@@ -58,7 +61,6 @@ def _rk_numerator_denominator(tableau: ButcherTableau) -> tuple[np.ndarray, ...]
     if tableau.explicit:
         r, r_abs = rk_stability_coefficients(tableau, s)
         return r, r_abs, np.array([1.0]), np.array([1.0])
-    import mpmath
 
     with mpmath.workdps(40):
         A = mpmath.matrix([[mpmath.mpf(float(x)) for x in row] for row in tableau.A])
@@ -121,8 +123,6 @@ def _interval_end(F: np.ndarray, F_abs: np.ndarray, forced_zeros: int,
     `excess(x)` (> 0: unstable), a numerically stable evaluation of the amplification, is
     scanned with no ceiling (linear steps, then geometric) and its first positive value is
     refined by Brent's method."""
-    from scipy.optimize import brentq
-
     sign, G = _leading_sign(F, F_abs, forced_zeros)
     if sign == 0:
         return math.inf
@@ -270,8 +270,6 @@ def exact_hw_bands(coefficients: Any):
 
 @lru_cache(maxsize=256)
 def _bands_cached(fingerprint: str, box: tuple):
-    from harness.theory.newtonian import hw_bands
-
     return hw_bands(box[0], tol.STABILITY_HW_SEARCH_LIMIT)
 
 
@@ -297,8 +295,6 @@ def lmm_real_interval(method: LinearMultistep, scanned: float) -> float:
         The interval length x of [-x, 0]: `scanned` when finite; otherwise the first locus
         crossing beyond which the method is unstable, inf when proven, else `scanned`.
     """
-    from scipy.optimize import brentq
-
     alpha, beta = method.alpha, method.beta
 
     def z_of(theta: np.ndarray) -> np.ndarray:

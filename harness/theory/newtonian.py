@@ -35,6 +35,7 @@ from fractions import Fraction
 from typing import TYPE_CHECKING
 
 from harness import tolerances as tol
+from harness.theory.amplification import hw_stability_limit, splitting_amplification
 from harness.theory.checks import check_type, family_of
 from harness.theory.roots import (
     Poly,
@@ -187,8 +188,6 @@ def splitting_hw_bands(scheme: SplittingScheme, hw_max: float = tol.STABILITY_HW
     bits = sum(max(Fraction(c).numerator.bit_length(), Fraction(c).denominator.bit_length())
                for _, c in seq)
     if kicks * bits > tol.EXACT_BANDS_MAX_WORK:
-        from harness.theory.amplification import hw_stability_limit, splitting_amplification
-
         limit = hw_stability_limit(lambda hw: splitting_amplification(scheme, hw), limit=hw_max)
         return HwBands(limit, (), (), f"sampled spectral radius, not isolated exactly: a trace of "
                        f"degree ~{kicks} with ~{bits}-bit coefficients is over the exact budget "

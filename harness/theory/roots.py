@@ -24,6 +24,8 @@ import math
 from collections.abc import Callable
 from fractions import Fraction
 
+import numpy as np
+
 from harness.theory.polynomials import (
     Poly,
     det_exact,
@@ -191,8 +193,6 @@ def root_bound(a: Poly) -> Fraction:
 def _root_estimates(q: Poly, lo: Fraction, hi: Fraction) -> list[float]:
     """Sorted floating-point estimates of the real roots of q in (lo, hi] (eigenvalues of the
     companion matrix; only used to choose where to cut)."""
-    import numpy as np
-
     coeffs = np.array([float(c) for c in q])
     if not np.all(np.isfinite(coeffs)) or coeffs[-1] == 0:
         return []

@@ -12,6 +12,8 @@ from collections.abc import Callable
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
+import mpmath
+
 from harness import tolerances as tol
 from harness.theory.checks import check_int, check_type
 
@@ -212,7 +214,6 @@ def splitting_local_error_series(scheme: SplittingScheme, degree: int = 11) -> l
     """
     check_type(scheme, "splitting", "scheme")
     degree = check_int(degree, "degree", 1, 16)
-    import mpmath
 
     out = [0.0] * (degree + 1)
     with mpmath.workdps(_SERIES_DPS):
@@ -320,7 +321,6 @@ def rk_order_series(tableau: ButcherTableau, max_order: int = 8) -> int:
     """
     check_type(tableau, "runge-kutta", "tableau")
     max_order = check_int(max_order, "max_order", 1, 12)
-    import mpmath
 
     degree = max_order + 1
     worst = [0.0] * (degree + 1)

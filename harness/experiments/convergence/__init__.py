@@ -50,6 +50,7 @@ from harness.coefficient_floors import coefficient_floor, coefficient_rounding_f
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
 from harness.experiments.convergence.extended import extended_if_floor_bound
+from harness.experiments.convergence.judge import summarize_cell
 from harness.experiments.convergence.reference_error import (
     best_reference,
     error_amplification,
@@ -58,7 +59,10 @@ from harness.experiments.convergence.reference_error import (
     state_scale,
 )
 from harness.experiments.convergence.section import SECTION
+from harness.ground_truth import reference
 from harness.order_fit import classify_points, fit_order
+from harness.registry import get_problem, get_stepper
+from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper, WorkLimitFailure
 
 __all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
@@ -124,8 +128,6 @@ class ConvergenceExperiment(Experiment):
         -------
         DataFrame: one row per step size and kind ('global', 'local', 'local-q') or tolerance.
         """
-        from harness.registry import get_problem, get_stepper
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         if isinstance(stepper, AdaptiveStepper):
@@ -144,8 +146,6 @@ class ConvergenceExperiment(Experiment):
         -------
         DataFrame: SUMMARY_COLUMNS.
         """
-        from harness.experiments.convergence.judge import summarize_cell
-
         return summary_per_cell(rows, SUMMARY_COLUMNS, summarize_cell)
 
 
@@ -212,8 +212,6 @@ def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
 
 
 def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
-    from harness.step_loops import fastest  # the compiled loop where it is the same method
-
     runner = fastest(stepper, problem)
     T0 = problem.t0
     span = T - T0
@@ -363,8 +361,6 @@ def _frame(records: dict[int, dict]) -> pd.DataFrame:
 
 def _local_sweep(stepper: Stepper, problem, y0: np.ndarray, global_frame: pd.DataFrame, config):
     """One step of the recurrence from exact history, for h from the global fit range down."""
-    from harness.ground_truth import reference
-
     k = stepper.history_length
     fit = global_frame[global_frame.in_fit]
     h_max = float(fit.h.max()) if len(fit) else float(global_frame.h.min())

@@ -16,6 +16,7 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.coefficient_floors import mark_above_order, order_bound
+from harness.extended import NotMeasurable, extended_sweep
 from harness.stepper import Stepper
 
 __all__ = ["floor_bound", "extended_if_floor_bound"]
@@ -60,8 +61,6 @@ def extended_if_floor_bound(stepper: Stepper, problem, frame: pd.DataFrame, conf
     -------
     DataFrame: `frame`, or with its global rows replaced by the real128 ones.
     """
-    from harness.extended import NotMeasurable, extended_sweep
-
     bound = order_bound(stepper)
     mine = (frame.kind == "global").values
     if mine.any():

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pandas as pd
+from matplotlib.lines import Line2D
 
 from harness import tolerances as tol
 from harness.kit.figure_style import (
@@ -82,8 +83,6 @@ def convergence_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     -------
     Figure or None: None when no global row has a finite h.
     """
-    from matplotlib.lines import Line2D
-
     g = rows[(rows["kind"] == "global") & np.isfinite(rows["h"].astype(float))]
     if g.empty:
         return None

@@ -25,6 +25,7 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.order_fit import fit_order
+from harness.rules import tolerance_allowance
 from harness.stepper import Stepper
 
 __all__ = ["summarize_cell", "insufficient_range_reason", "summarise_clauses"]
@@ -87,7 +88,6 @@ def summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame) -> dict:
     if (g.kind == "tolerance").any():
         t = g[g.kind == "tolerance"]
         scale = t.rounding_level / tol.EPS  # the state's size, as the sweep measured it
-        from harness.rules import tolerance_allowance
 
         members = t["ensemble_size"].clip(lower=1) if "ensemble_size" in t else 1
         amp = t["flow_amplification"] if "flow_amplification" in t else np.nan

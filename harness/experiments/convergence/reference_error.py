@@ -10,6 +10,9 @@ import math
 import numpy as np
 
 from harness import tolerances as tol
+from harness.errors import ReferenceError_
+from harness.flow import flow_amplification
+from harness.ground_truth import reference
 
 __all__ = ["best_reference", "error_amplification", "max_error", "reference_at_clocks",
            "state_scale"]
@@ -63,9 +66,6 @@ def best_reference(problem, T: float, y0: np.ndarray):
     -------
     Reference: `harness.ground_truth.reference`'s result at T, with its certified error.
     """
-    from harness.errors import ReferenceError_
-    from harness.ground_truth import reference
-
     try:
         return reference(problem, np.array([T]), y0, required_error=tol.EPS * state_scale(y0))
     except ReferenceError_:
@@ -109,8 +109,6 @@ def error_amplification(problem, span: float, y0: np.ndarray) -> float:
     -------
     float: at least 1.
     """
-    from harness.flow import flow_amplification
-
     try:
         value = flow_amplification(problem, span, y0)
     except Exception:  # a problem whose float64 Taylor orbit fails: the plain rounding level

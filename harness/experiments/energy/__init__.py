@@ -88,7 +88,12 @@ from harness.experiments.energy.judge import (
     rounding_growth,
 )
 from harness.experiments.energy.section import SECTION
+from harness.facts import central_field, method_facts
 from harness.invariant_checks import check_invariants_along_flow
+from harness.regimes import fastest_approach
+from harness.registry import get_problem, get_stepper
+from harness.rules import describe_drift, drift_prediction, energy_expectation
+from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["EnergyExperiment", "classify_drift", "conserves_quadratic_invariants", "ROW_COLUMNS",
@@ -169,8 +174,6 @@ class EnergyExperiment(Experiment):
         -------
         DataFrame: ROW_COLUMNS, one row per saved step and quantity.
         """
-        from harness.registry import get_problem, get_stepper
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         check_invariants_along_flow(problem)  # a wrong invariant is the problem's fault
@@ -263,7 +266,6 @@ def _run(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFrame:
     y0 = initial_ensemble(problem, config, size)
     period = problem.time_scale.period
     save = save_grid(n, int(config["samples_per_decade"]), int(config["uniform_samples"]))
-    from harness.step_loops import fastest  # the compiled loop where it applies
 
     runner = fastest(stepper, problem)
     started = time.perf_counter()
@@ -324,8 +326,6 @@ def _summarize_cell(stepper: Stepper, problem: str, g: pd.DataFrame, config) -> 
                        period_steps=steps_per_period)
     if "step failure: " in message:
         e["drift_class"] = "unstable"  # an implicit solve broke down: the motion is destroyed
-    from harness.facts import central_field, method_facts
-    from harness.rules import describe_drift, drift_prediction, energy_expectation
 
     facts = method_facts(stepper)
     expected_class, expected_reason = energy_expectation(facts, bool(info.symplectic))
@@ -453,8 +453,6 @@ def _last_closest_approach(problem, energy: pd.DataFrame, h: float) -> dict | No
     its maximum over the run, when that is more than ENCOUNTER_RATE_RISE times the rate at the
     start (a close encounter the run meets late); None otherwise (an oscillator, a Kepler orbit
     whose pericentre comes within the first period) or when the orbit cannot be had."""
-    from harness.regimes import fastest_approach
-
     found = fastest_approach(problem, float(energy.t.iloc[-1]))
     if found is None:  # no float64 orbit: no correction
         return None
@@ -466,8 +464,6 @@ def _last_closest_approach(problem, energy: pd.DataFrame, h: float) -> dict | No
 
 
 def _problem(name: str):
-    from harness.registry import get_problem
-
     return get_problem(name)
 
 

@@ -9,8 +9,10 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from harness import tolerances as tol
+from harness.facts import method_facts
 from harness.stepper import Stepper
 
 __all__ = ["classify_drift", "conserves_quadratic_invariants", "rounding_growth"]
@@ -30,8 +32,6 @@ def conserves_quadratic_invariants(stepper: Stepper) -> bool:
     -------
     bool
     """
-    from harness.facts import method_facts
-
     return bool(method_facts(stepper).symplectic)
 
 
@@ -86,7 +86,6 @@ def classify_drift(steps: np.ndarray, t: np.ndarray, error: np.ndarray, *, fit_s
     if idx.size < 3:
         out["drift_class"] = "bounded"
         return out
-    from scipy import stats
 
     x, m = steps[idx], running[idx]
     exponent = float(stats.theilslopes(np.log(m), np.log(x))[0])

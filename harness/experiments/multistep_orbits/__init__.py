@@ -54,11 +54,15 @@ from scipy import stats
 
 from harness import tolerances as tol
 from harness.coefficients import SecondOrderMultistep
+from harness.errors import IncompatibleError, InputError
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
 from harness.experiments.common import check_config, primary_invariant, summary_per_cell
 from harness.experiments.multistep_orbits.judge import summarize_cell
 from harness.experiments.multistep_orbits.section import SECTION
-from harness.stepper import AdaptiveStepper, StepFailure
+from harness.ground_truth import reference
+from harness.registry import get_problem, get_stepper
+from harness.step_loops import fastest
+from harness.stepper import AdaptiveStepper, StepFailure, check_compatible
 from harness.theory.multistep_orbits import combination_resonances, principal_growth
 
 __all__ = ["MultistepOrbitsExperiment", "orbit_facts", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
@@ -92,8 +96,6 @@ def orbit_facts(problem) -> dict[str, Any]:
     dict: harmonics (list of int), curvatures (list of float), v2_over_energy (float),
         circular (bool), omega (float).
     """
-    from harness.ground_truth import reference
-
     nq = len(problem.newtonian.positions)
     omega = 2.0 * math.pi / problem.period
     M = _JACOBIAN_SAMPLES
@@ -161,15 +163,9 @@ class MultistepOrbitsExperiment(Experiment):
         -------
         (list of Cell, list of Skip)
         """
-        from harness.errors import IncompatibleError
-        from harness.registry import get_problem, get_stepper
-        from harness.stepper import check_compatible
-
         check_config(config, counts=("points", "steps", "implicit_steps", "samples", "max_predicted"),
                      positives=("x_min", "x_max"), name_lists=("problems",))
         if config["x_min"] >= config["x_max"]:
-            from harness.errors import InputError
-
             raise InputError(f"config `x_min` must be below `x_max` ({config['x_max']!r}), "
                              f"got {config['x_min']!r}")
         want = list(config["problems"])
@@ -215,9 +211,6 @@ class MultistepOrbitsExperiment(Experiment):
         -------
         DataFrame: ROW_COLUMNS, one row per step size.
         """
-        from harness.registry import get_problem, get_stepper
-        from harness.step_loops import fastest
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         runner = fastest(stepper, problem)

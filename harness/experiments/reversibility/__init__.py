@@ -66,6 +66,8 @@ from harness.experiments.common import (
 )
 from harness.experiments.reversibility.section import SECTION
 from harness.flow import flow_amplification
+from harness.registry import get_problem, get_stepper
+from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["ReversibilityExperiment", "flow_amplification", "rounding_bound_ulps", "ROW_COLUMNS",
@@ -168,8 +170,6 @@ class ReversibilityExperiment(Experiment):
         -------
         (list of Cell, list of Skip): one cell per N, each with its `steps`.
         """
-        from harness.registry import get_problem, get_stepper
-
         check_config(config, counts=("ensemble", "adaptive_ensemble"),
                      count_lists=("steps", "implicit_steps", "adaptive_steps"),
                      positives=("adaptive_tol", "adaptive_output_periods"),
@@ -203,8 +203,6 @@ class ReversibilityExperiment(Experiment):
         DataFrame: ROW_COLUMNS, one row (return error, relative and in ulps, the flow's
             amplification, the rounding bound).
         """
-        from harness.registry import get_problem, get_stepper
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         return _round_trip(stepper, problem, int(cell.param("steps")), config)
@@ -222,8 +220,6 @@ class ReversibilityExperiment(Experiment):
         -------
         DataFrame: SUMMARY_COLUMNS, a row per (stepper, problem, N).
         """
-        from harness.registry import get_stepper
-
         if rows.empty:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         out = []
@@ -267,7 +263,6 @@ def _round_trip(stepper: Stepper, problem, n: int, config: Mapping[str, Any]) ->
     size = int(config["adaptive_ensemble" if isinstance(stepper, AdaptiveStepper) else "ensemble"])
     y0 = initial_ensemble(problem, config, size)
     amplification = flow_amplification(problem, n * h)
-    from harness.step_loops import fastest  # the compiled loop where it applies
 
     runner = fastest(stepper, problem)
     message = ""

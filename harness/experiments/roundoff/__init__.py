@@ -53,12 +53,16 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from harness import tolerances as tol
-from harness.errors import InputError
+from harness.errors import IncompatibleError, InputError
 from harness.experiments.base import Cell, Experiment, Skip, register_experiment
 from harness.experiments.roundoff.section import SECTION
-from harness.stepper import AdaptiveStepper, StepFailure
+from harness.facts import method_facts
+from harness.ground_truth import reference
+from harness.registry import get_problem, get_stepper
+from harness.stepper import AdaptiveStepper, StepFailure, check_compatible
 
 __all__ = ["RoundoffExperiment", "ROW_COLUMNS", "SUMMARY_COLUMNS", "step_sizes"]
 
@@ -131,10 +135,6 @@ class RoundoffExperiment(Experiment):
         -------
         (list of Cell, list of Skip)
         """
-        from harness.errors import IncompatibleError
-        from harness.registry import get_problem, get_stepper
-        from harness.stepper import check_compatible
-
         want_s, want_p = list(config["steppers"]), list(config["problems"])
         cells: list[Cell] = []
         skips: list[Skip] = []
@@ -182,9 +182,6 @@ class RoundoffExperiment(Experiment):
         -------
         DataFrame: one row per step size.
         """
-        from harness.ground_truth import reference
-        from harness.registry import get_problem, get_stepper
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         n = int(config["n_steps"])
@@ -280,8 +277,6 @@ class RoundoffExperiment(Experiment):
 
 def _order(stepper) -> int:
     """The method's order from its coefficients (`harness.facts`), else its claimed order."""
-    from harness.facts import method_facts
-
     order = method_facts(stepper).order
     return int(order if order is not None else stepper.info.claimed_order or 2)
 
@@ -322,7 +317,6 @@ def _growth_exponent(grow: pd.DataFrame) -> float:
     g = grow[np.isfinite(grow["error"].astype(float)) & (grow["error"].astype(float) > 0)]
     if len(g) < 3:
         return math.nan
-    from scipy import stats
 
     return float(stats.theilslopes(np.log(g["error"].astype(float)), np.log(g["n_steps"].astype(float)))[0])
 

@@ -32,7 +32,9 @@ import pandas as pd
 from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import problem_cells
 from harness.experiments.side_by_side.section import SECTION
+from harness.ground_truth import reference
 from harness.problem import NBody
+from harness.registry import get_problem, get_stepper
 from harness.stepper import AdaptiveStepper, StepFailure
 
 __all__ = ["SideBySideExperiment", "SUMMARY_COLUMNS", "nbody_reason"]
@@ -91,9 +93,6 @@ class SideBySideExperiment(Experiment):
         -------
         DataFrame: one row.
         """
-        from harness.ground_truth import reference
-        from harness.registry import get_problem, get_stepper
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         T = float(problem.convergence_t_end)

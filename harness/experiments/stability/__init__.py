@@ -81,6 +81,8 @@ from harness.experiments.stability.probes import (
     block_companion,
 )
 from harness.experiments.stability.section import SECTION
+from harness.registry import get_problem, get_stepper
+from harness.registry import problems as problem_registry
 from harness.stepper import AdaptiveStepper, Stepper
 
 __all__ = [
@@ -198,9 +200,6 @@ class StabilityExperiment(Experiment):
         -------
         (list of Cell, list of Skip)
         """
-        from harness.registry import get_stepper
-        from harness.registry import problems as problem_registry
-
         cells, skips = [], []
         for s in steppers:
             stepper = get_stepper(s)
@@ -238,8 +237,6 @@ class StabilityExperiment(Experiment):
         -------
         DataFrame: the probed grid's rows and one row of kind 'summary'.
         """
-        from harness.registry import get_problem, get_stepper
-
         config = _check_config({**self.default_config, **dict(config)})
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)

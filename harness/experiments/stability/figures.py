@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from matplotlib.lines import Line2D
 
 from harness.kit import figure_style as fs
 from harness.kit.figure_svg import Figure, to_svg
@@ -38,8 +39,6 @@ def stability_overlay_figure(rows: pd.DataFrame, palette: fs.Palette) -> Figure 
     -------
     Figure or None: None when no stepper has a grid.
     """
-    from matplotlib.lines import Line2D
-
     names = [s for s, g in rows.groupby("stepper", sort=False) if _grid(g) is not None]
     if not names:
         return None

@@ -38,11 +38,16 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.coefficients import SplittingScheme
-from harness.experiments.base import Cell, Experiment, Skip, register_experiment
-from harness.experiments.common import summary_per_cell
+from harness.experiments.base import Cell, Experiment, register_experiment
+from harness.experiments.common import problem_cells, summary_per_cell
 from harness.experiments.convergence import classify_points, fit_order
 from harness.experiments.energy import check_config, classify_drift, rounding_growth, save_grid
 from harness.experiments.step_control.section import SECTION
+from harness.ground_truth import reference
+from harness.registry import get_problem, get_stepper, steppers
+from harness.registry import problems as problem_registry
+from harness.registry import steppers as stepper_registry
+from harness.step_loops import fastest
 
 __all__ = ["StepControlExperiment", "fixed_peer", "is_step_controlled", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
 
@@ -90,8 +95,6 @@ def fixed_peer(stepper):
     -------
     Stepper or None: found by the scheme's fingerprint, never by name.
     """
-    from harness.registry import steppers
-
     fingerprint = stepper.record.scheme.fingerprint()
     for other in steppers.all():
         coeffs = getattr(other, "coefficients", None)
@@ -106,9 +109,6 @@ def _with_related(steppers: list[str], problems: list[str], config) -> tuple[lis
     request only (see `harness.registry`): asked for the fixed-step method a controller runs, or
     for one problem of the set, the experiment adds the related entries: the controlled versions
     of the requested fixed-step schemes, and the rest of its problem set."""
-    from harness.registry import problems as problem_registry
-    from harness.registry import steppers as stepper_registry
-
     names = set(steppers)
     for other in stepper_registry.all(variants=True):
         if other.info.name in names or not is_step_controlled(other):
@@ -167,39 +167,24 @@ class StepControlExperiment(Experiment):
         -------
         (list of Cell, list of Skip): with the reason of each pair left out.
         """
-        from harness.errors import IncompatibleError
-        from harness.registry import get_problem, get_stepper
-        from harness.stepper import check_compatible
-
         check_config(config, counts=("energy_steps", "samples_per_decade", "uniform_samples",
                                      "n_start", "sweep_points", "control_budget", "fixed_budget"),
                      positives=("energy_control", "fit_decades", "target_error"),
                      name_lists=("problems",))
         steppers, problems = _with_related(list(steppers), list(problems), config)
-        cells, skips = [], []
-        for p in problems:
-            problem = get_problem(p)
-            for s in steppers:
-                stepper = get_stepper(s)
-                reason = None
-                if not is_step_controlled(stepper):
-                    reason = "not step-controlled (its h is a physical step, not a control parameter)"
-                elif p not in config["problems"]:
-                    reason = f"problem {p!r} is not in this experiment's problem set (config `problems`)"
-                elif not problem.conservative or "energy" not in problem.invariants:
-                    reason = f"problem {p!r} is not conservative (no energy to follow)"
-                elif fixed_peer(stepper) is None:
-                    reason = "no fixed-step stepper with the same splitting coefficients is registered"
-                else:
-                    try:
-                        check_compatible(stepper, problem)
-                    except IncompatibleError as exc:
-                        reason = str(exc)
-                if reason:
-                    skips.append(Skip(self.name, s, p, reason))
-                else:
-                    cells.append(Cell(self.name, s, p))
-        return cells, skips
+
+        def pair_reason(stepper, problem) -> str | None:
+            if not is_step_controlled(stepper):
+                return "not step-controlled (its h is a physical step, not a control parameter)"
+            if problem.name not in config["problems"]:
+                return f"problem {problem.name!r} is not in this experiment's problem set (config `problems`)"
+            if not problem.conservative or "energy" not in problem.invariants:
+                return f"problem {problem.name!r} is not conservative (no energy to follow)"
+            if fixed_peer(stepper) is None:
+                return "no fixed-step stepper with the same splitting coefficients is registered"
+            return None
+
+        return problem_cells(self.name, steppers, problems, lambda problem: None, pair_reason)
 
     def run_cell(self, cell: Cell, config: Mapping[str, Any]) -> pd.DataFrame:
         """The energy rows of the controlled stepper and its fixed peer at equal work, and the
@@ -214,9 +199,6 @@ class StepControlExperiment(Experiment):
         -------
         DataFrame: ROW_COLUMNS and `peer`.
         """
-        from harness.registry import get_problem, get_stepper
-        from harness.step_loops import fastest  # the compiled loops where they apply
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         peer = fixed_peer(stepper)
@@ -287,8 +269,6 @@ def _energy_frame(role: str, tr, h: float, err: np.ndarray) -> pd.DataFrame:
 
 def _state_error(problem, tr) -> tuple[float, float, float]:
     """(max-norm error of member 0 at its own final clock, certified reference error, |y|)."""
-    from harness.ground_truth import reference
-
     if not tr.finite:
         return float("inf"), float("nan"), float("nan")
     t_end = float(tr.t[-1])

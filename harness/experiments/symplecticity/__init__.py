@@ -77,6 +77,9 @@ from harness.experiments.common import (
     problem_cells,
 )
 from harness.experiments.symplecticity.section import SECTION
+from harness.ground_truth import reference
+from harness.registry import get_problem, get_stepper
+from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["SymplecticityExperiment", "one_step_jacobians", "symplectic_deviation",
@@ -200,8 +203,6 @@ class SymplecticityExperiment(Experiment):
         -------
         (list of Cell, list of Skip): kept pairs, and skipped ones with the reason.
         """
-        from harness.registry import get_stepper
-
         check_config(config, counts=("states", "adaptive_states"),
                      positives=("adaptive_tol", "adaptive_output_periods"),
                      optional_positives=("h", "t_end"))
@@ -227,8 +228,6 @@ class SymplecticityExperiment(Experiment):
         -------
         DataFrame: one row per base state.
         """
-        from harness.registry import get_problem, get_stepper
-
         return _measure(get_stepper(cell.stepper), get_problem(cell.problem), config)
 
     def summarize(self, rows: pd.DataFrame, config: Mapping[str, Any]) -> pd.DataFrame:
@@ -244,8 +243,6 @@ class SymplecticityExperiment(Experiment):
         -------
         DataFrame: one row per cell.
         """
-        from harness.registry import get_stepper
-
         if rows.empty:
             return pd.DataFrame(columns=SUMMARY_COLUMNS)
         cells = []
@@ -339,7 +336,6 @@ def _measure(stepper: Stepper, problem, config: Mapping[str, Any]) -> pd.DataFra
     if weights is None:  # checked when the cells were listed, at fewer states
         weights = np.ones(nq)
     S = np.concatenate([np.sqrt(weights) / block[0], np.sqrt(weights) / block[1]])
-    from harness.step_loops import fastest  # the compiled loop where it applies
 
     runner = fastest(stepper, problem)
     started = time.perf_counter()
@@ -384,8 +380,6 @@ def _one_step_error(runner: Stepper, problem, states: np.ndarray, h: float) -> f
     """max |map(y) - flow_h(y)| / max |y| over the base states, against the certified reference:
     how far the map is from the exact (symplectic) flow. A map this close to it can only be as
     far from symplectic as that, which finite differences may not resolve."""
-    from harness.ground_truth import reference
-
     try:
         with np.errstate(all="ignore"):
             mapped = runner.integrate(problem, h=h, n_steps=1, y0=states).final

@@ -38,11 +38,12 @@ import pandas as pd
 
 from harness import tolerances as tol
 from harness.errors import InputError
-from harness.experiments.base import Cell, Experiment, register_experiment
+from harness.experiments.base import Cell, Experiment, get_experiment, register_experiment
 from harness.experiments.common import check_config, perturbation_used, problem_cells
 from harness.experiments.convergence import step_sweep, tolerance_sweep
 from harness.experiments.work_precision.section import SECTION
 from harness.experiments.work_precision.timed_runs import TIMING_COLUMNS, time_points
+from harness.registry import get_problem, get_stepper
 from harness.stepper import AdaptiveStepper
 
 __all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS"]
@@ -154,13 +155,9 @@ class WorkPrecisionExperiment(Experiment):
         -------
         DataFrame: the COLUMNS present, one row per point.
         """
-        from harness.registry import get_problem, get_stepper
-
         stepper = get_stepper(cell.stepper)
         problem = get_problem(cell.problem)
         # The convergence sweeps read their own settings: start from theirs, then this config.
-        from harness.experiments.base import get_experiment
-
         cfg = {**get_experiment("convergence").default_config, **config, "local": False}
         if cfg.get("t_end") is None and problem.published is not None:
             cfg["t_end"] = float(problem.t_end)  # the published end point, rounded to float64

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
+from matplotlib.lines import Line2D
 
 from harness.kit.figure_style import (
     LEGEND_CHAR_W,
@@ -83,8 +84,6 @@ def work_precision_figure(problem: str, rows: pd.DataFrame, palette: Palette,
     -------
     Figure or None: None when nothing finite can be drawn.
     """
-    from matplotlib.lines import Line2D
-
     err = rows["error"].astype(float) if "error" in rows else pd.Series(dtype=float)
     frame = rows[np.isfinite(err) & (err > 0) & (err <= LOG_CEILING)]
     if frame.empty:

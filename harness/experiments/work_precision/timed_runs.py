@@ -11,6 +11,7 @@ same coefficients in two implementations, side by side.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -18,7 +19,11 @@ import numpy as np
 import pandas as pd
 
 from harness import tolerances as tol
+from harness.errors import ReferenceError_
+from harness.ground_truth import reference
+from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure
+from harness.timing import baseline_step, machine_info, measure, method_identity
 
 __all__ = ["time_points", "TIMING_COLUMNS", "protocol_settings"]
 
@@ -51,9 +56,6 @@ def protocol_settings(config: Mapping[str, Any]) -> dict[str, Any]:
 
 def _reference_state(problem, T: float, y0: np.ndarray) -> np.ndarray:
     """The certified state at T (float64 rounding where heyoka's levels allow, else the best)."""
-    from harness.errors import ReferenceError_
-    from harness.ground_truth import reference
-
     scale = max(tol.SCALE_FLOOR, float(np.max(np.abs(y0))))
     try:
         return reference(problem, np.array([T]), y0, required_error=tol.EPS * scale).y[-1]
@@ -83,11 +85,6 @@ def time_points(stepper, problem, frame: pd.DataFrame, config: Mapping[str, Any]
         NaN); `timing_cell_s` is the wall time the timing took in this cell (the budget's
         measure), the same on every row of the cell.
     """
-    import time
-
-    from harness.step_loops import fastest
-    from harness.timing import baseline_step, machine_info, measure, method_identity
-
     started = time.perf_counter()
     clock = clock or time.perf_counter
     settings = protocol_settings(config)
@@ -152,8 +149,6 @@ def _time_twin(stepper, runner, problem, out: pd.DataFrame, y0: np.ndarray, call
     reference as the sweep's); it is warmed up by one run of the cell's first point. A NumPy
     step that fails where the compiled loop's did not (its own Newton iterates) leaves the twin
     untimed at that point, with the failure in the row's message: the cell stands."""
-    from harness.timing import measure
-
     for c in ("twin_error", "twin_min_s", "twin_spread", "twin_repeats"):
         out[c] = np.nan
     out["twin_implementation"] = ""

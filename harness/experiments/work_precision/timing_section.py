@@ -16,12 +16,15 @@ from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
+from matplotlib.lines import Line2D
 
 from harness import tolerances as tol
+from harness.experiments.work_precision.figures import WORK_TARGET_ERROR, best_per_family
 from harness.kit import RunView, Section, df_table
 from harness.kit import figure_style as fs
 from harness.kit.elements import Block, csv_download
 from harness.kit.figure_svg import Figure, to_svg
+from harness.timing import PROTOCOL, same_method_groups, time_to_target_table
 
 __all__ = ["time_precision_figure", "add_time_sections", "twin_rows", "fastest_table", "group_summary"]
 
@@ -46,10 +49,6 @@ def time_precision_figure(problem: str, rows: pd.DataFrame, palette: fs.Palette,
     -------
     Figure or None: None when no point has a finite, positive time and error.
     """
-    from matplotlib.lines import Line2D
-
-    from harness.experiments.work_precision.figures import WORK_TARGET_ERROR, best_per_family
-
     if "t_min_s" not in rows or "error" not in rows:
         return None
     err = rows["error"].astype(float)
@@ -206,8 +205,6 @@ def add_time_sections(view: RunView, sec: Section) -> None:
     view : RunView, the run (its work-precision summary, else its rows).
     sec : Section, the work-precision section, appended to.
     """
-    from harness.timing import PROTOCOL, same_method_groups, time_to_target_table
-
     name = "work-precision"
     rows = view.summary(name)  # every row, with the Pareto marks (`pareto_time`)
     if "t_min_s" not in rows:
