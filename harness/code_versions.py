@@ -14,6 +14,7 @@ import importlib
 import importlib.util
 import json
 import os
+import stat
 import sys
 from typing import Any
 
@@ -54,6 +55,7 @@ TOLERANCES = "harness.tolerances"
 PRESENTING_PARTS = ("judge", "section", "figures", "timing_section")
 
 
+@functools.cache
 def _excluded(name: str) -> bool:
     """A judging-only or listing module (a package in JUDGING_MODULES excludes its submodules,
     except `harness.experiments`, whose experiment modules are measuring code)."""
@@ -71,23 +73,31 @@ def _is_project(name: str) -> bool:
 
 
 def _module_path(name: str) -> str | None:
-    mod = sys.modules.get(name)
-    path = getattr(mod, "__file__", None)
+    path = _located(name)
+    return path if path and os.path.isfile(path) else None
+
+
+def _located(name: str) -> str | None:
+    """The file module `name` is loaded, or would be loaded, from (not checked to exist)."""
+    path = getattr(sys.modules.get(name), "__file__", None)
     if path is None:
         try:
             spec = importlib.util.find_spec(name)
         except (ImportError, ValueError):
             spec = None
         path = spec.origin if spec is not None else None
-    return path if path and os.path.isfile(path) else None
+    return path
 
 
 def _source(name: str) -> str | None:
     """The module's source text (None when it has no source file)."""
-    path = _module_path(name)
-    if path is None:
+    path = _located(name)
+    try:
+        st = os.stat(path) if path else None
+    except OSError:
+        st = None
+    if st is None or not stat.S_ISREG(st.st_mode):
         return None
-    st = os.stat(path)
     return _read(path, st.st_mtime_ns, st.st_size)
 
 
@@ -328,7 +338,9 @@ def module_version(*names: str, judging: bool = False, extra: str = "") -> str:
     """sha256 of project modules' source and of every project module they import, directly or
     through others (imports inside functions count; judging-only modules are followed only with
     `judging`), with the values of the thresholds they read: what a value computed by those
-    modules depends on.
+    modules depends on. The walk over the import graph is remembered per process and redone when
+    the source of a module it read is no longer the text it read (every cell asks this of its
+    stepper's modules); the thresholds' values are read on every call.
 
     Parameters
     ----------
@@ -339,12 +351,34 @@ def module_version(*names: str, judging: bool = False, extra: str = "") -> str:
     -------
     str: hex sha256 digest.
     """
+    walk = _walks.get((names, judging))
+    if walk is None or not all(_same(_source(m), text) for m, text in walk[0]):
+        walk = _walks[(names, judging)] = _walk(names, judging)
+    _, parts, tol_names = walk
+    text = "\n".join(sorted([extra, *parts, tolerance_values(tol_names)]))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+# (names, judging) -> the walk of `module_version`: ((module, source text read), ...), its parts
+# (module name and source digest) and the thresholds read
+_walks: dict[tuple[tuple[str, ...], bool], tuple[tuple[tuple[str, str | None], ...], tuple[str, ...],
+                                                 frozenset[str]]] = {}
+
+
+def _same(now: str | None, then: str | None) -> bool:
+    return now is then or now == then  # the same object while the file is unchanged (`_read`)
+
+
+def _walk(names: tuple[str, ...], judging: bool):
+    """The modules `module_version` reads from `names` with the text of each, their parts and the
+    thresholds they read."""
     def skipped(m: str) -> bool:
         if judging:
             return m == "harness.experiments" or any(m == x or m.startswith(x + ".") for x in LISTING_MODULES)
         return _excluded(m)
 
-    parts: list[str] = [extra]
+    read: list[tuple[str, str | None]] = []
+    parts: list[str] = []
     tol_names: set[str] = set()
     todo, seen = list(names), set()
     while todo:
@@ -353,12 +387,12 @@ def module_version(*names: str, judging: bool = False, extra: str = "") -> str:
             continue
         seen.add(m)
         text = _source(m)
+        read.append((m, text))
         parts.append(m + "\n" + hashlib.sha256((text or f"<no source: {m}>").encode()).hexdigest())
-        modules, names = _module_imports(m, text)
-        tol_names |= names
+        modules, names_read = _module_imports(m, text)
+        tol_names |= names_read
         todo += [i for i in sorted(modules) if _is_project(i) and not skipped(i) and i not in seen]
-    parts.append(tolerance_values(tol_names))
-    return hashlib.sha256("\n".join(sorted(parts)).encode()).hexdigest()
+    return tuple(read), tuple(parts), frozenset(tol_names)
 
 
 def tolerance_values(names: set[str]) -> str:

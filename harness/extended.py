@@ -45,6 +45,7 @@ __all__ = ["NotMeasurable", "exact_form", "extended_sweep", "refine_composition_
 EXTENDED_EPS = 2.0**-113
 # Precision (bits) of the ground truth and of its certifier.
 _REFERENCE_PREC, _CERTIFIER_PREC = 192, 256
+_integrators = cache.IntegratorPool()  # Taylor, by (problem, precision): ~0.15 s to build each
 
 
 class NotMeasurable(Exception):
@@ -276,10 +277,11 @@ def _lmm2_runner(problem, coefficients, exact):
         X = [y0[qi].copy()] + [_to_real128([s[i] for i in qi]) for s in starts]
         A = [accel(x) for x in X]
         evals = len(X)
+        XA, AA, hb = np.array(X[-k:]), np.array(A[-k:]), (h2 * beta[:k])[:, None]  # the last k as rows
         for _ in range(n - (keep - 1)):
-            psi = np.zeros_like(X[-1])
+            aX, hA, psi = alpha[:k, None] * XA, hb * AA, np.zeros_like(X[-1])
             for j in range(k):
-                psi = psi - alpha[j] * X[j - k] + h2 * beta[j] * A[j - k]
+                psi = psi - aX[j] + hA[j]
             x = psi
             if beta[k] != 0:  # implicit: x = psi + h^2 beta_k a(x), a contraction at small h
                 for _ in range(tol.NEWTON_MAX_ITER * 10):
@@ -291,6 +293,7 @@ def _lmm2_runner(problem, coefficients, exact):
                         break
             X = X[1:] + [x]
             A = A[1:] + [accel(x)]
+            XA[:-1], AA[:-1], XA[-1], AA[-1] = XA[1:], AA[1:], x, A[-1]
             evals += 1
         v = (X[-1] - X[-2]) / h
         for j in range(keep):
@@ -319,22 +322,28 @@ def _runner(coefficients, problem):
 # -- ground truth in 192 bits, certified by 256 ----------------------------------------------------
 def _taylor(problem, T, prec: int, times: list | None = None) -> list:
     """The `prec`-bit Taylor state at T; with `times` (increasing, `prec`-bit reals), the states
-    there instead, on the same orbit."""
-    cache.configure_heyoka_cache()
-    sys = list(zip(problem.variables, problem.rhs, strict=True))
-    state = [hy.real(float(v), prec) for v in problem.y0]
-    kwargs: dict[str, Any] = {"tol": hy.real(2.0 ** (1 - prec), prec), "high_accuracy": True,
-                              "compact_mode": True, "fp_type": hy.real, "prec": prec}
-    if problem.parameters:
-        kwargs["pars"] = [hy.real(float(v), prec) for v in problem.parameter_values]
-    ta = hy.taylor_adaptive(sys, state, **kwargs)
-    ta.time = hy.real(float(problem.t0), prec)
-    out = []
-    for t in ([hy.real(float(T), prec)] if times is None else times):
-        outcome = ta.propagate_until(t)[0]
-        if outcome != hy.taylor_outcome.time_limit:
-            raise NotMeasurable(f"the {prec}-bit ground truth stopped with {outcome}")
-        out.append(list(ta.state))
+    there instead, on the same orbit. The integrator is built once per process for a problem and
+    precision (~0.15 s; a second-order multistep sweep asks for its starting values at every step
+    count) and set to the start before each use: its steps follow from its state and time alone,
+    so the states are those of a fresh integrator, digit for digit."""
+
+    def build():
+        start = [hy.real(float(v), prec) for v in problem.y0]
+        pars = [hy.real(float(v), prec) for v in problem.parameter_values] if problem.parameters else []
+        return hy.taylor_adaptive(list(zip(problem.variables, problem.rhs, strict=True)), start, pars=pars,
+                                  tol=hy.real(2.0 ** (1 - prec), prec), high_accuracy=True, compact_mode=True,
+                                  fp_type=hy.real, prec=prec)
+
+    lock, ta = _integrators.get((problem.fingerprint(), prec), build)
+    with lock:
+        ta.state[:] = [hy.real(float(v), prec) for v in problem.y0]
+        ta.time = hy.real(float(problem.t0), prec)
+        out = []
+        for t in ([hy.real(float(T), prec)] if times is None else times):
+            outcome = ta.propagate_until(t)[0]
+            if outcome != hy.taylor_outcome.time_limit:
+                raise NotMeasurable(f"the {prec}-bit ground truth stopped with {outcome}")
+            out.append(list(ta.state))
     return out[0] if times is None else out
 
 

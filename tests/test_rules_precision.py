@@ -114,6 +114,28 @@ def test_fifteen_digit_weights_do_not_reach_order_8_in_real128():
     assert out["fit"] is None or abs(out["fit"]["order"] - 8.0) > tol.GATE_ORDER_TOL, out["fit"]
 
 
+@pytest.mark.parametrize("name", ["pendulum", "dahlquist"])  # dahlquist: with parameters
+def test_a_reused_reference_integrator_gives_the_states_a_fresh_one_gives(name):
+    """The 192-bit Taylor integrators are built once per process and set to the start before
+    each use: after propagating elsewhere, the same end state and starting values, digit for
+    digit, as from an integrator built for the call."""
+    import heyoka as hy
+
+    from harness import extended
+
+    problem, prec = get_problem(name), 192
+    times = [hy.real(x, prec) for x in (0.25, 0.5, 0.75)]
+    extended._integrators.clear()
+    end, starts = extended._taylor(problem, 3.0, prec), extended._taylor(problem, None, prec, times)
+    assert len(extended._integrators) == 1
+    again = extended._taylor(problem, 3.0, prec)  # reused, last left at t = 0.75
+    extended._integrators.clear()
+    fresh_starts = extended._taylor(problem, None, prec, times)
+    assert [str(v) for v in again] == [str(v) for v in end]
+    assert [[str(v) for v in s] for s in fresh_starts] == [[str(v) for v in s] for s in starts]
+    assert str(end[0]) != str(starts[-1][0])  # the two calls asked for different times
+
+
 def test_floor_bound_sweeps_are_rerun_only_with_exact_coefficients():
     from harness.experiments.convergence.extended import floor_bound as _floor_bound
 
