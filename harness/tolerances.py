@@ -449,25 +449,7 @@ INVARIANT_FLOW_DRIFT = 1e-6
 # bound so that a link to an endless device is refused, not read until memory runs out.
 MAX_STORED_FILE_BYTES = 2 * 1024**3
 
-# Timing protocol (`harness.timing`, the work-precision experiment's timed runs). A point is
-# repeated until the spread (median - min) / min of its repeats is at most TIMING_TARGET_SPREAD
-# (5 %: below the +-30 % load noise of a shared machine, which the minimum filters, and the
-# resolution a ratio table is read at), after at least TIMING_MIN_REPEATS runs (three give a
-# median that is not one of the extremes), at most TIMING_MAX_REPEATS runs (quick: fewer), or
-# until the point has spent TIMING_POINT_BUDGET_S seconds (quick: less). The sweep's own warm run
-# is the first sample, so a point dearer than the budget is not run again and the timing costs a
-# cell at most about (points below the budget) x budget: with ~5 points per sweep in the
-# 1-20 ms band, ~0.1 s a cell, ~1 minute over the registry (the report's budget: +25 %).
-TIMING_TARGET_SPREAD = 0.05
-TIMING_MIN_REPEATS = 3
-TIMING_MAX_REPEATS = 7
-TIMING_QUICK_MAX_REPEATS = 3
-TIMING_POINT_BUDGET_S = 0.02
-TIMING_QUICK_POINT_BUDGET_S = 0.01
-# The C baseline is timed on a run of about this many seconds per repeat (its step count is
-# doubled until one run takes this long), so the timer's resolution and the call's overhead are
-# below 0.1 % of it.
-TIMING_BASELINE_RUN_S = 0.002
+# The timing protocol's repeats and budgets are settings of `harness.timing`, beside it.
 # Implementations of one method agree "to rounding" when their errors at the same step differ by
 # at most this many float64 ulps of the state's scale, times sqrt(n_steps) (rounding accumulated
 # as a random walk), or this many times the point's rounding level (which carries the flow's

@@ -12,7 +12,6 @@ import pandas as pd
 import pytest
 
 from harness import timing
-from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.work_precision import pareto_front
 
@@ -118,7 +117,7 @@ def test_time_points_ratio_uses_the_same_cells_baseline(monkeypatch):
     assert np.isfinite(out.loc[1, "twin_error"]) and out.loc[1, "twin_min_s"] == pytest.approx(2e-3)
     assert seen["clock"] is clock
     assert out["t_min_s"].tolist() == pytest.approx([2e-3, 2e-3])
-    assert (out["t_repeats"] == tol.TIMING_MIN_REPEATS).all() and (out["t_stop"] == "spread").all()
+    assert (out["t_repeats"] == timing.TIMING_MIN_REPEATS).all() and (out["t_stop"] == "spread").all()
     assert out["baseline_units"].tolist() == pytest.approx([2e-3 / 4e-9] * 2)
     assert out["per_step_ratio"].tolist() == pytest.approx([2e-3 / 8 / 4e-9, 2e-3 / 16 / 4e-9])
     assert out["first_call_s"].tolist() == [1.5, 1.5]  # the sweep's first run, reported apart

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from harness import timing
 from harness import tolerances as tol
 from harness.errors import InputError
 from harness.experiments.base import Cell, Experiment, get_experiment, register_experiment
@@ -106,14 +107,14 @@ class WorkPrecisionExperiment(Experiment):
         "target_points": 1_000_000,
         "tolerances": [10.0**-k for k in range(3, 15)],
         "local": False,
-        "timing_max_repeats": tol.TIMING_MAX_REPEATS,
-        "timing_budget_s": tol.TIMING_POINT_BUDGET_S,
+        "timing_max_repeats": timing.TIMING_MAX_REPEATS,
+        "timing_budget_s": timing.TIMING_POINT_BUDGET_S,
     }
     quick_config: Mapping[str, Any] = {
         "work_budget": tol.SWEEP_WORK_BUDGET // 16,
         "tolerances": [10.0**-k for k in range(3, 13, 2)],
-        "timing_max_repeats": tol.TIMING_QUICK_MAX_REPEATS,
-        "timing_budget_s": tol.TIMING_QUICK_POINT_BUDGET_S,
+        "timing_max_repeats": timing.TIMING_QUICK_MAX_REPEATS,
+        "timing_budget_s": timing.TIMING_QUICK_POINT_BUDGET_S,
     }
 
     def cells(self, steppers, problems, config):

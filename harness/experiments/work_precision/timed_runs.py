@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from harness import timing
 from harness import tolerances as tol
 from harness.errors import ReferenceError_
 from harness.ground_truth import reference
@@ -48,10 +49,10 @@ def protocol_settings(config: Mapping[str, Any]) -> dict[str, Any]:
     dict
         min_repeats, max_repeats, target_spread, budget_s.
     """
-    max_r = int(config.get("timing_max_repeats", tol.TIMING_MAX_REPEATS))
-    return {"min_repeats": min(tol.TIMING_MIN_REPEATS, max_r), "max_repeats": max_r,
-            "target_spread": tol.TIMING_TARGET_SPREAD,
-            "budget_s": float(config.get("timing_budget_s", tol.TIMING_POINT_BUDGET_S))}
+    max_r = int(config.get("timing_max_repeats", timing.TIMING_MAX_REPEATS))
+    return {"min_repeats": min(timing.TIMING_MIN_REPEATS, max_r), "max_repeats": max_r,
+            "target_spread": timing.TIMING_TARGET_SPREAD,
+            "budget_s": float(config.get("timing_budget_s", timing.TIMING_POINT_BUDGET_S))}
 
 
 def _reference_state(problem, T: float, y0: np.ndarray) -> np.ndarray:
@@ -126,7 +127,7 @@ def time_points(stepper, problem, frame: pd.DataFrame, config: Mapping[str, Any]
     # the sweep's first run paid for compiling and loading; its warm repeats did not
     out["first_call_s"] = (float(out.at[first[0], "wall_s"]) if len(first) else np.nan)
     out["method_id"] = method_identity(stepper) or ""
-    few = min(settings["max_repeats"], tol.TIMING_MIN_REPEATS)  # the baseline is cheap and steady
+    few = min(settings["max_repeats"], timing.TIMING_MIN_REPEATS)  # the baseline is cheap and steady
     name, base, why = baseline_step(stepper.info.family, clock=clock,
                                     **{**settings, "min_repeats": few, "max_repeats": few})
     out["baseline"] = name if base is not None else f"none: {why}"

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.lines import Line2D
 
-from harness import tolerances as tol
+from harness import timing
 from harness.experiments.work_precision.figures import WORK_TARGET_ERROR, best_per_family
 from harness.kit import RunView, Section, df_table
 from harness.kit import figure_style as fs
@@ -215,9 +215,9 @@ def add_time_sections(view: RunView, sec: Section) -> None:
         return
     cfg = view.meta.get("experiments", {}).get(name, {}).get("config", {}) or {}
     sec.heading("Error against time")
-    sec.note(PROTOCOL.format(spread=tol.TIMING_TARGET_SPREAD, min_r=tol.TIMING_MIN_REPEATS,
-                             max_r=cfg.get("timing_max_repeats", tol.TIMING_MAX_REPEATS),
-                             budget=cfg.get("timing_budget_s", tol.TIMING_POINT_BUDGET_S))
+    sec.note(PROTOCOL.format(spread=timing.TIMING_TARGET_SPREAD, min_r=timing.TIMING_MIN_REPEATS,
+                             max_r=cfg.get("timing_max_repeats", timing.TIMING_MAX_REPEATS),
+                             budget=cfg.get("timing_budget_s", timing.TIMING_POINT_BUDGET_S))
              + " " + _machine_note(rows))
     cost = rows.groupby(["stepper", "problem"])["timing_cell_s"].first() if "timing_cell_s" in rows \
         else pd.Series(dtype=float)
