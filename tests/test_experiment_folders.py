@@ -86,3 +86,24 @@ def test_adding_an_experiment_is_one_folder_and_one_entry_line(tmp_path):
     # the measuring code is in the cells' key, the section is not
     assert "harness.experiments.evals_per_step" in seen["counted"]
     assert not [m for m in seen["counted"] if m.endswith(".section") or m.startswith("harness.kit")]
+
+
+def test_a_folder_names_its_experiment_and_gives_its_section_unless_the_class_does(tmp_path, monkeypatch):
+    body = ("from harness.experiments.base import Experiment\n"
+            "SECTION = object()\n"
+            "class Probe(Experiment):\n"
+            "    cells = run_cell = summarize = None\n"
+            "class Named(Experiment):\n"
+            "    name = 'own-name'\n"
+            "    section = 'own-section'\n"
+            "    cells = run_cell = summarize = None\n")
+    (tmp_path / "step_probe").mkdir()
+    (tmp_path / "step_probe" / "__init__.py").write_text(body)
+    (tmp_path / "plain_probe.py").write_text(body)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import plain_probe
+    import step_probe
+
+    assert (step_probe.Probe.name, step_probe.Probe.section) == ("step-probe", step_probe.SECTION)
+    assert (step_probe.Named.name, step_probe.Named.section) == ("own-name", "own-section")
+    assert (plain_probe.Probe.name, plain_probe.Probe.section) == ("", None)  # a module, not a folder

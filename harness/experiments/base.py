@@ -1,7 +1,9 @@
 """What to measure: the contract every experiment follows.
 
 Contract for an experiment (a subclass of `Experiment`, registered in `EXPERIMENTS`):
-1. `name` is its CLI name (`harness run NAME`).
+1. `name` is its CLI name (`harness run NAME`); an experiment that is a folder (its class defined in
+   a package's `__init__`) is named after the folder (`step_control` -> `step-control`) unless
+   the class sets one.
 2. `cells(steppers, problems, config)` lists the independent units of work (one per stepper x
    problem x parameters); a pair that does not apply is not a cell but a `Skip` with its reason.
 3. `run_cell(cell, config)` computes one cell and returns tidy rows (a DataFrame, one row per
@@ -14,7 +16,9 @@ Contract for an experiment (a subclass of `Experiment`, registered in `EXPERIMEN
    record (`harness.experiments.base.failed_record`), and the run goes on.
 6. `section` names its report section, a `harness.kit.SectionSpec` (title, intro, the function
    that draws it from the saved run, its scoreboard columns): the one way a section is
-   registered. None: the report shows the summary as one generic table.
+   registered. An experiment folder's is the `SECTION` its `__init__` exports (from its
+   `section.py`) unless the class sets one; None: the report shows the summary as one generic
+   table.
 
 A built-in experiment is one folder, `harness/experiments/<name>/`: `__init__.py` measures (the
 `Experiment` subclass, registered), `section.py` presents (its `SECTION`, over the presentation
@@ -33,6 +37,7 @@ from __future__ import annotations
 import difflib
 import hashlib
 import json
+import sys
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -129,6 +134,23 @@ class Experiment(ABC):
     default_config: Mapping[str, Any] = MappingProxyType({})
     quick_config: Mapping[str, Any] = MappingProxyType({})
     section: SectionSpec | None = None
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A subclass defined in an experiment folder's `__init__` takes its name from the folder
+        and its section from the folder's exported `SECTION` (rules 1 and 6), unless it sets them.
+
+        Parameters
+        ----------
+        **kwargs : passed on to `object.__init_subclass__`.
+        """
+        super().__init_subclass__(**kwargs)
+        module = sys.modules.get(cls.__module__)
+        if module is None or not hasattr(module, "__path__"):  # not a folder
+            return
+        if not cls.__dict__.get("name"):
+            cls.name = cls.__module__.rsplit(".", 1)[-1].replace("_", "-")
+        if cls.__dict__.get("section") is None and getattr(module, "SECTION", None) is not None:
+            cls.section = module.SECTION
 
     def config(self, overrides: Mapping[str, Any] | None = None, *, quick: bool = False) -> dict:
         """The settings of a run: the defaults, the quick ones over them, then `overrides`.

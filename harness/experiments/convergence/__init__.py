@@ -65,7 +65,14 @@ from harness.registry import get_problem, get_stepper
 from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper, WorkLimitFailure
 
-__all__ = ["ConvergenceExperiment", "fit_order", "classify_points", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
+__all__ = [
+    "ConvergenceExperiment",
+    "fit_order",
+    "classify_points",
+    "ROW_COLUMNS",
+    "SUMMARY_COLUMNS",
+    "SECTION",
+]
 
 ROW_COLUMNS = [
     "stepper", "problem", "kind", "h", "tol", "n_steps", "t_end", "error", "reference_error",
@@ -82,8 +89,6 @@ SUMMARY_COLUMNS = [
 
 # -- fitting ----------------------------------------------------------------------------------
 class ConvergenceExperiment(Experiment):
-    name = "convergence"
-    section = SECTION  # its report section: section.py beside this module
     description = "Global and local error order against step size (tolerance for adaptive steppers)."
     default_config: Mapping[str, Any] = {
         "ensemble": tol.ENSEMBLE_SIZE,

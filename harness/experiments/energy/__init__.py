@@ -97,7 +97,7 @@ from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["EnergyExperiment", "classify_drift", "conserves_quadratic_invariants", "ROW_COLUMNS",
-           "SUMMARY_COLUMNS"]
+           "SUMMARY_COLUMNS", "SECTION"]
 
 
 ROW_COLUMNS = [
@@ -116,8 +116,6 @@ SUMMARY_COLUMNS = [
 
 # -- the experiment -------------------------------------------------------------------------------
 class EnergyExperiment(Experiment):
-    name = "energy"
-    section = SECTION  # its report section: section.py beside this module
     finite_columns = ("step", "t", "h", "wall_s")
     description = "Long-run energy (and angular momentum) error envelope: bounded, sqrt, linear or unstable."
     default_config: Mapping[str, Any] = {

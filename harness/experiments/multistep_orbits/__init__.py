@@ -65,7 +65,7 @@ from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, check_compatible
 from harness.theory.multistep_orbits import combination_resonances, principal_growth
 
-__all__ = ["MultistepOrbitsExperiment", "orbit_facts", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
+__all__ = ["MultistepOrbitsExperiment", "orbit_facts", "ROW_COLUMNS", "SUMMARY_COLUMNS", "SECTION"]
 
 ROW_COLUMNS = [
     "stepper", "problem", "h", "h_omega", "x", "source", "prediction", "predictions", "steps", "t_end",
@@ -132,8 +132,6 @@ def _energy_errors(problem, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class MultistepOrbitsExperiment(Experiment):
-    name = "multistep-orbits"
-    section = SECTION  # its report section: section.py beside this module
     description = ("Second-order multistep methods on orbits: energy error against h, the resonant "
                    "step sizes of symmetric tables, the spiralling of the others.")
     default_config: Mapping[str, Any] = {

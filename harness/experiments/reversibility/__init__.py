@@ -71,7 +71,7 @@ from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["ReversibilityExperiment", "flow_amplification", "rounding_bound_ulps", "ROW_COLUMNS",
-           "SUMMARY_COLUMNS", "one_sided_reason"]
+           "SUMMARY_COLUMNS", "one_sided_reason", "SECTION"]
 
 ROW_COLUMNS = [
     "stepper", "problem", "steps", "h", "tol", "t_span", "return_error", "return_error_ulps",
@@ -131,8 +131,6 @@ def one_sided_reason(stepper) -> str | None:
 
 
 class ReversibilityExperiment(Experiment):
-    name = "reversibility"
-    section = SECTION  # its report section: section.py beside this module
     finite_columns = ("steps", "h", "t_span", "flow_amplification", "rounding_bound_ulps", "wall_s")
     description = "Return error of N steps forward and N back (ulps), against the symmetry claim."
     default_config: Mapping[str, Any] = {

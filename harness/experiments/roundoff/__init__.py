@@ -64,7 +64,7 @@ from harness.ground_truth import reference
 from harness.registry import get_problem, get_stepper
 from harness.stepper import AdaptiveStepper, StepFailure, check_compatible
 
-__all__ = ["RoundoffExperiment", "ROW_COLUMNS", "SUMMARY_COLUMNS", "step_sizes"]
+__all__ = ["RoundoffExperiment", "ROW_COLUMNS", "SUMMARY_COLUMNS", "step_sizes", "SECTION"]
 
 ROW_COLUMNS = [
     "stepper", "problem", "h", "n_steps", "t_end", "error", "state_error", "reference_error",
@@ -102,8 +102,6 @@ def step_sizes(h_max: float, h_min: float, points_per_decade: int) -> np.ndarray
 
 
 class RoundoffExperiment(Experiment):
-    name = "roundoff"
-    section = SECTION  # its report section: section.py beside this module
     description = ("Roundoff floor at very small steps (fixed step count): two-step Verlet "
                    "against leapfrog and velocity Verlet.")
     default_config: Mapping[str, Any] = {

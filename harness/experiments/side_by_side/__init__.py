@@ -37,7 +37,7 @@ from harness.problem import NBody
 from harness.registry import get_problem, get_stepper
 from harness.stepper import AdaptiveStepper, StepFailure
 
-__all__ = ["SideBySideExperiment", "SUMMARY_COLUMNS", "nbody_reason"]
+__all__ = ["SideBySideExperiment", "SUMMARY_COLUMNS", "nbody_reason", "SECTION"]
 
 SUMMARY_COLUMNS = ["stepper", "problem", "implementation", "h", "t_end", "steps", "tol", "error",
                    "evals", "evals_unit", "wall_s", "message"]
@@ -60,8 +60,6 @@ def nbody_reason(problem) -> str | None:
 
 
 class SideBySideExperiment(Experiment):
-    name = "side-by-side"
-    section = SECTION  # its report section: section.py beside this module
     description = ("N-body problems: every stepper at the problem's step to the same final time "
                    "(error, evaluations, wall time), beside its orders, drift and reversibility.")
     default_config: Mapping[str, Any] = {"seed": 0}

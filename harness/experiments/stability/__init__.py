@@ -93,6 +93,7 @@ __all__ = [
     "SUMMARY_COLUMNS",
     "FIRST_ORDER_PROBLEM",
     "NEWTONIAN_PROBLEM",
+    "SECTION",
 ]
 
 FIRST_ORDER_PROBLEM = "dahlquist"
@@ -168,8 +169,6 @@ def _check_config(config: Mapping[str, Any]) -> dict:
 
 class StabilityExperiment(Experiment):
     """The lambda h test for every fixed-step stepper (see the module docstring)."""
-    name = "stability"
-    section = SECTION  # its report section: section.py beside this module
     description = (
         "Linear stability: |R(z)| over the complex lambda h plane, real/imaginary intervals and "
         "h omega limits by root finding, probe against the coefficients' formula."

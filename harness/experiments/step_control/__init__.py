@@ -49,7 +49,8 @@ from harness.registry import problems as problem_registry
 from harness.registry import steppers as stepper_registry
 from harness.step_loops import fastest
 
-__all__ = ["StepControlExperiment", "fixed_peer", "is_step_controlled", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
+__all__ = ["StepControlExperiment", "fixed_peer", "is_step_controlled", "ROW_COLUMNS",
+           "SUMMARY_COLUMNS", "SECTION"]
 
 ROW_COLUMNS = [
     "stepper", "problem", "role", "kind", "h", "n_steps", "step", "t", "error", "reference_error",
@@ -124,8 +125,6 @@ def _with_related(steppers: list[str], problems: list[str], config) -> tuple[lis
 
 
 class StepControlExperiment(Experiment):
-    name = "step-control"
-    section = SECTION  # its report section: section.py beside this module
     description = ("Fixed steps against naive and reversible step control: energy drift, order in "
                    "the control parameter, work to reach an accuracy.")
     default_config: Mapping[str, Any] = {

@@ -83,7 +83,7 @@ from harness.step_loops import fastest
 from harness.stepper import AdaptiveStepper, StepFailure, Stepper
 
 __all__ = ["SymplecticityExperiment", "one_step_jacobians", "symplectic_deviation",
-           "canonical_form", "ROW_COLUMNS", "SUMMARY_COLUMNS"]
+           "canonical_form", "ROW_COLUMNS", "SUMMARY_COLUMNS", "SECTION"]
 
 ROW_COLUMNS = [
     "stepper", "problem", "state", "h", "tol", "deviation", "raw_deviation", "jacobian_norm",
@@ -176,8 +176,6 @@ def one_step_jacobians(
 
 
 class SymplecticityExperiment(Experiment):
-    name = "symplecticity"
-    section = SECTION  # its report section: section.py beside this module
     finite_columns = ("h", "wall_s")
     description = "max ||J^T Omega J - Omega|| of the one-step map's Jacobian, against the claim."
     default_config: Mapping[str, Any] = {

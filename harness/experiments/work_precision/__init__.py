@@ -47,7 +47,7 @@ from harness.experiments.work_precision.timed_runs import TIMING_COLUMNS, time_p
 from harness.registry import get_problem, get_stepper
 from harness.stepper import AdaptiveStepper
 
-__all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS"]
+__all__ = ["WorkPrecisionExperiment", "pareto_front", "COLUMNS", "SECTION"]
 
 COLUMNS = [
     "stepper", "problem", "kind", "h", "tol", "n_steps", "t_end", "error", "reference_error",
@@ -88,8 +88,6 @@ def pareto_front(df: pd.DataFrame, cost: str = "rhs_evals") -> pd.DataFrame:
 
 
 class WorkPrecisionExperiment(Experiment):
-    name = "work-precision"
-    section = SECTION  # its report section: section.py beside this module
     exclusive = True  # timed cells: the runner executes them one at a time (harness.timing)
     finite_columns = ("n_steps", "t_end", "rhs_evals", "wall_s")
     description = "Error at the final time against evaluations and wall time (step-size or tolerance sweep)."

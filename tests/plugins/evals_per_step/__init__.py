@@ -21,12 +21,12 @@ from harness.registry import get_problem, get_stepper
 
 from .section import SECTION
 
+__all__ = ["EvalsPerStep", "SECTION"]
+
 
 class EvalsPerStep(Experiment):
     """Evaluations counted over `n_steps` steps against the stepper's declared cost per step."""
 
-    name = "evals-per-step"
-    section = SECTION
     description = "Right-hand-side evaluations per step against the stepper's declared cost."
     default_config = {"n_steps": 100, "h": 0.01}
     quick_config = {"n_steps": 20}
