@@ -95,29 +95,6 @@ def compact_mode(problem) -> bool:
     return sum(len(str(e)) for e in problem.rhs) > COMPACT_MODE_SIZE
 
 
-# A compiled function of the state (right-hand side, Jacobian, invariants) is compiled in compact
-# mode above this many characters of printed expressions: DETEST C4's 51x51 Jacobian (46.9k
-# characters) took 10.4 CPU s unrolled against 0.06 s compact, its evaluation 1.5x slower (26 us
-# against 40 us for 64 states); the outer solar system's Jacobian (170k) 3.1 s against 0.34 s and
-# faster to evaluate; right-hand sides of the catalogue (up to 18k) stay unrolled (load 1.3).
-COMPACT_CFUNC_SIZE = 20_000
-
-
-def compact_cfunc(exprs) -> bool:
-    """Whether a compiled function of these expressions is compiled in compact mode (their
-    printed form is longer than COMPACT_CFUNC_SIZE characters).
-
-    Parameters
-    ----------
-    exprs : sequence of heyoka expressions.
-
-    Returns
-    -------
-    bool
-    """
-    return sum(len(str(e)) for e in exprs) > COMPACT_CFUNC_SIZE
-
-
 def float64_taylor_settings(problem) -> dict[str, Any]:
     """The settings of every float64 Taylor integrator of `problem` (orbits, time scales, flow
     amplification, the float64 ground truth): tolerance eps, high accuracy, compact mode by

@@ -367,8 +367,7 @@ class Problem:
             exprs = [subs_pars(e, mapping) for e in exprs]
         cache.configure_heyoka_cache()
         variables = list(self.newtonian.positions) if kind == "accel_q" else list(self.variables)
-        fn = (cache.interruptible(lambda: hy.cfunc(exprs, variables, compact_mode=cache.compact_cfunc(exprs)))
-              if exprs else None)
+        fn = cache.interruptible(lambda: hy.cfunc(exprs, variables)) if exprs else None
         with self._lock:
             self.__dict__["_compiled"][key] = fn
         return fn
