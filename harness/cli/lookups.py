@@ -51,9 +51,14 @@ def cmd_list(args, experiments: Mapping | None = None, experiment_errors: Sequen
         EXIT_OK; plugins that failed to load are listed, not fatal.
     """
     if args.kind == "steppers":
-        records = [dict(s.info.as_dict(), origin=steppers.origin(s.info.name)) for s in steppers.all()]
+        # every stepper, those run only when named (`on_request`: a family's further published
+        # members) included and marked; a compiled variant is its method's implementation, not a
+        # stepper of its own, and is left out
+        records = [dict(s.info.as_dict(), origin=steppers.origin(s.info.name),
+                        on_request=bool(s.info.extra.get("on_request")))
+                   for s in steppers.all(variants=True) if "numpy_implementation" not in s.info.extra]
         cols = ["name", "family", "claimed_order", "explicit", "symplectic", "symmetric",
-                "evals_per_step", "form", "velocity_dependent", "adaptive"]
+                "evals_per_step", "form", "velocity_dependent", "adaptive", "on_request"]
     elif args.kind == "problems":
         # every problem, those run only when named (`on_request`: the test sets, experiment-
         # specific orbits) included and marked
