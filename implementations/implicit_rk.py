@@ -32,13 +32,11 @@ from harness.methods import Method
 from harness.problem import Dynamics
 from harness.stepper import Carry, StepFailure, Stepper
 from harness.tolerances import (
-    EPS,
     NEWTON_MAX_ITER,
-    NEWTON_ROUNDING_ULPS,
-    NEWTON_STALL_CONTRACTION,
     NEWTON_TOL,
 )
 from implementations import coefficient_info
+from implementations.newton_rule import newton_stop
 
 __all__ = [
     "METHODS",
@@ -138,40 +136,6 @@ def scaled_norm(dx: np.ndarray, inv_scale: np.ndarray) -> float:
     float: the scaled max-norm.
     """
     return float(np.abs(dx * inv_scale).max())
-
-
-def newton_stop(norm: float, previous: float, tol: float, theta: float,
-                size: float) -> tuple[bool, float]:
-    """The stopping test of Newton's iteration, rounding-aware (Hairer & Wanner, Solving ODEs II,
-    IV.8); the compiled loops' `newton_converged` is the same rule.
-
-    Converged when the scaled increment `norm` is at most `tol`; or when the contraction
-    theta = norm / previous gives an estimated remaining error theta / (1 - theta) * norm at most
-    `tol` (eq. 8.10); or when the increment has stopped decreasing (theta >=
-    NEWTON_STALL_CONTRACTION) at the rounding level of the iterate, norm <= NEWTON_ROUNDING_ULPS x
-    eps x (1 + size): an ill-conditioned solve whose increments are rounding noise, which no
-    further iteration can lower. A divergent iteration (growing increments far above that level)
-    still fails.
-
-    Parameters
-    ----------
-    norm : float, this increment's scaled max-norm; previous : float, the last one (inf before
-    the second iteration); tol : float, the Newton tolerance; theta : float, the contraction so
-    far; size : float, the scaled max-norm of the iterate after this increment.
-
-    Returns
-    -------
-    tuple (bool, float): (converged, contraction).
-    """
-    if norm <= tol:
-        return True, theta
-    if math.isfinite(previous):
-        theta = norm / previous
-        if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
-            return True, theta
-        if theta >= NEWTON_STALL_CONTRACTION and norm <= NEWTON_ROUNDING_ULPS * EPS * (1.0 + size):
-            return True, theta
-    return False, theta
 
 
 def newton_solve(

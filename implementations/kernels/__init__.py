@@ -64,7 +64,8 @@ KERNELS = {
 
 def cache_directory() -> Path:
     """numba's cache directory for the kernels: named by a digest of every kernel module's text,
-    the call intrinsics' and the numba and Python versions.
+    the call intrinsics', the Newton rule's (compiled from `implementations.newton_rule`) and the
+    numba and Python versions.
 
     Returns
     -------
@@ -73,6 +74,7 @@ def cache_directory() -> Path:
     here = Path(__file__).resolve().parent
     texts = [(here / f"{m}.py").read_bytes() for m in ("__init__", *MODULES)]
     texts.append((here.parent / "kernel_calls.py").read_bytes())
+    texts.append((here.parent / "newton_rule.py").read_bytes())  # compiled as newton_converged
     # the thresholds the kernels read from harness.tolerances are compiled in as constants
     texts.append(f"newton stop {tolerances.NEWTON_STALL_CONTRACTION!r} "
                  f"{tolerances.NEWTON_ROUNDING_ULPS!r} {tolerances.EPS!r}".encode())

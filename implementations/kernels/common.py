@@ -11,8 +11,8 @@ in NumPy, and no check blocks vectorisation); `cache=True` (numba's disk cache, 
 import numpy as np
 from numba import njit
 
-from harness.tolerances import EPS, NEWTON_ROUNDING_ULPS, NEWTON_STALL_CONTRACTION
 from implementations.kernel_calls import call_state
+from implementations.newton_rule import newton_stop
 
 __all__ = ["CONTRACT", "EXACT", "INLINE", "is_finite", "rhs_members", "rhs_all", "accel_all", "lu_factor",
            "lu_apply", "newton_factor_members", "newton_solve_members", "newton_update", "newton_converged",
@@ -243,33 +243,9 @@ def newton_update(X, DX, inv_scale):
     return norm, size
 
 
-@njit(**EXACT)
-def newton_converged(norm, previous, tol, theta, size):
-    """The simplified-Newton stopping test (Hairer & Wanner, Solving ODEs II, IV.8), rounding-aware;
-    the same rule as `implementations.implicit_rk.newton_stop`.
-
-    Parameters
-    ----------
-    norm : float, this increment's scaled norm; previous : float, the last one (inf before the
-    second iteration); tol : float, the Newton tolerance; theta : float, the contraction so far;
-    size : float, the scaled max-norm of the iterate.
-
-    Returns
-    -------
-    tuple (bool, float): (converged, contraction), converged when the increment is at most tol,
-    when theta / (1 - theta) |dx| is at most tol, or when the increment has stopped decreasing
-    (theta >= NEWTON_STALL_CONTRACTION) at the rounding level of the iterate,
-    NEWTON_ROUNDING_ULPS eps (1 + size).
-    """
-    if norm <= tol:
-        return True, theta
-    if is_finite(previous):
-        theta = norm / previous
-        if theta < 1.0 and theta / (1.0 - theta) * norm <= tol:
-            return True, theta
-        if theta >= NEWTON_STALL_CONTRACTION and norm <= NEWTON_ROUNDING_ULPS * EPS * (1.0 + size):
-            return True, theta
-    return False, theta
+#: The simplified-Newton stopping test, rounding-aware (Hairer & Wanner, Solving ODEs II, IV.8):
+#: `implementations.newton_rule.newton_stop` compiled, the function the NumPy loops call.
+newton_converged = njit(**EXACT)(newton_stop)
 
 
 @njit(**INLINE)
