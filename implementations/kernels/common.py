@@ -16,7 +16,7 @@ from implementations.newton_rule import newton_stop
 
 __all__ = ["CONTRACT", "EXACT", "INLINE", "is_finite", "rhs_members", "rhs_all", "accel_all", "lu_factor",
            "lu_apply", "newton_factor_members", "newton_solve_members", "newton_update", "newton_converged",
-           "newton_start", "newton_members_step", "newton_stats"]
+           "load_member", "newton_start", "newton_members_step", "newton_stats"]
 
 #: The explicit one-step and Stormer loops: a*b + c may become one fused multiply-add, as in
 #: heyoka's compiled functions and the BLAS axpy updates of the NumPy loops; no other fast-math
@@ -241,6 +241,22 @@ def newton_update(X, DX, inv_scale):
     if nan_seen or not is_finite(norm):
         return np.nan, size
     return norm, size
+
+
+@njit(**INLINE)
+def load_member(X, P, j, n, y, p):
+    """Member j's first `n` state components and its parameters into the work vectors a call of
+    the problem's function reads.
+
+    Parameters
+    ----------
+    X : 2-d array (components, members); P : 2-d array (parameters, members); j : int, the member;
+    n : int, how many components; y, p : 1-d arrays, written.
+    """
+    for d in range(n):
+        y[d] = X[d, j]
+    for q in range(p.shape[0]):
+        p[q] = P[q, j]
 
 
 #: The simplified-Newton stopping test, rounding-aware (Hairer & Wanner, Solving ODEs II, IV.8):

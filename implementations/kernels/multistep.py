@@ -15,6 +15,7 @@ from implementations.kernels.common import (
     EXACT,
     INLINE,
     is_finite,
+    load_member,
     newton_members_step,
     newton_start,
     newton_stats,
@@ -413,10 +414,7 @@ def lmm_implicit_advance(f_rhs, f_jac, alpha, beta, wpred, full, tol, max_iter, 
         for it in range(1, max_iter + 1):
             res_norm = 0.0
             for j in range(N):
-                for d in range(dim):
-                    y[d] = X[d, j]
-                for q in range(npar):
-                    p[q] = P[q, j]
+                load_member(X, P, j, dim, y, p)
                 call_state(f_rhs, t_new, y, p, out)
                 for d in range(dim):
                     g = X[d, j] - psi[d, j] - hb * out[d]

@@ -17,7 +17,14 @@ import numpy as np
 from numba import njit
 
 from implementations.kernel_calls import call_state
-from implementations.kernels.common import EXACT, lu_apply, lu_factor, newton_converged, rhs_members
+from implementations.kernels.common import (
+    EXACT,
+    load_member,
+    lu_apply,
+    lu_factor,
+    newton_converged,
+    rhs_members,
+)
 
 __all__ = ["lmm2_explicit_advance", "lmm2_implicit_advance"]
 
@@ -173,10 +180,7 @@ def lmm2_implicit_advance(f_accel, f_jac, alpha, beta, wpred, h2, t0, n0, h, nst
                 Xn[d, j] = acc
         t_new = tc + h
         for j in range(N):
-            for d in range(nq):
-                yfull[d] = Xn[d, j]
-            for q in range(npar):
-                p[q] = P[q, j]
+            load_member(Xn, P, j, nq, yfull, p)
             call_state(f_jac, t_new, yfull, p, Jb)
             for r in range(nq):
                 for q in range(nq):
