@@ -19,6 +19,7 @@ from numba import njit
 from implementations.kernel_calls import call_state
 from implementations.kernels.common import (
     EXACT,
+    is_finite,
     load_member,
     lu_apply,
     lu_factor,
@@ -62,7 +63,7 @@ def lmm2_explicit_advance(f_accel, alpha, beta, h2, t0, n0, h, nsteps, X, A, kno
         finite = True
         for j in range(N):
             for d in range(nq):
-                if not abs(X[newest, d, j]) <= 1.7976931348623157e308:
+                if not is_finite(X[newest, d, j]):
                     finite = False
         if finite:
             for jj in range(k):  # stored points -k .. -1 are x_n .. x_(n+k-1)
@@ -146,7 +147,7 @@ def lmm2_implicit_advance(f_accel, f_jac, alpha, beta, wpred, h2, t0, n0, h, nst
         finite = True
         for j in range(N):
             for d in range(nq):
-                if not abs(X[newest, d, j]) <= 1.7976931348623157e308:
+                if not is_finite(X[newest, d, j]):
                     finite = False
         if not finite:
             for j in range(N):
@@ -212,7 +213,7 @@ def lmm2_implicit_advance(f_accel, f_jac, alpha, beta, wpred, h2, t0, n0, h, nst
                     z = abs(xn) / (1.0 + abs(xn))
                     if z > size:
                         size = z
-            if not (abs(correction) <= 1.7976931348623157e308):
+            if not is_finite(correction):
                 break
             # NEWTON_TOL, or stalled at the rounding level: the NumPy loop's `newton_stop`
             done, theta = newton_converged(correction, previous, tol, theta, size)
