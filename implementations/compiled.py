@@ -143,6 +143,9 @@ class _Compiled(Stepper):
             return f"no compiled right-hand side: {exc}"
         return None
 
+    def reference_times(self, problem: Problem, t0: float, y0: np.ndarray, h: float) -> np.ndarray:
+        return self.base.reference_times(problem, t0, y0, h)
+
     def fingerprint(self) -> str:
         # the source of this module and of every project module it imports (the kernels, their
         # call intrinsics, the NumPy loops whose helpers it shares): a change to any kernel

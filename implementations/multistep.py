@@ -220,6 +220,33 @@ class LinearMultistepStepper(NewtonStepper):
         dyn.counts["starter_steps"] = dyn.counts.get("starter_steps", 0) + count
         return values
 
+    def reference_times(self, problem, t0: float, y0: np.ndarray, h: float) -> np.ndarray:
+        """t0 + h, ..., t0 + (k - 1) h where the starting values come from the ground truth (the
+        'reference' starter, or an implicit table whose explicit starter would be unstable at h,
+        as `starting_values` decides); empty otherwise.
+
+        Parameters
+        ----------
+        problem : Problem; t0 : float; y0 : ndarray (dim, N); h : float, the step.
+
+        Returns
+        -------
+        ndarray: the times (empty when the starter runs).
+        """
+        count = self.coefficients.steps - 1
+        times = t0 + h * np.arange(1, count + 1)
+        if count == 0 or self.starter_name == "reference":
+            return times
+        if self.coefficients.explicit:
+            return np.empty(0)
+        try:
+            starter = self._starter_stepper()
+        except (UnknownNameError, InputError):
+            return np.empty(0)
+        y = np.asarray(y0, dtype=np.float64).reshape(problem.dim, -1)
+        unstable = _start_unstable(starter, problem.dynamics(None, y.shape[1]), t0, y, h)
+        return times if unstable else np.empty(0)
+
     def _reference_start(self, dyn: Dynamics, t0: float, y0: np.ndarray, h: float, count: int) -> list:
         times = t0 + h * np.arange(1, count + 1)
         ref = reference(dyn.problem, times, y0.copy(), t0=t0, pars=dyn.pars)

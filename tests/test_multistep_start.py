@@ -35,3 +35,63 @@ def test_an_unstable_explicit_start_is_replaced_by_the_reference(stepper):
     fine = interval / (2 * RATE)  # inside the interval: the declared starter
     run = stepper.integrate(DECAY, h=fine, n_steps=stepper.coefficients.steps - 1)
     assert "reference_start" not in run.evals
+
+
+@pytest.mark.parametrize("stepper", IMPLICIT, ids=[s.info.name for s in IMPLICIT])
+def test_the_times_a_start_reads_are_named_before_the_run(stepper, monkeypatch):
+    """`reference_times` names exactly the times `integrate` reads from the ground truth: the k - 1
+    starting times where the starter would be unstable, none where it runs."""
+    import implementations.multistep as module
+
+    read: list[float] = []
+    real = module.reference
+
+    def recorded(problem, times, *args, **kwargs):
+        read.extend(float(t) for t in np.atleast_1d(times))
+        return real(problem, times, *args, **kwargs)
+
+    monkeypatch.setattr(module, "reference", recorded)
+    interval = method_facts(get_stepper(stepper.starter_name)).real_interval
+    y0 = DECAY.ensemble(2, seed=0)
+    for h in (4 * interval / RATE, interval / (2 * RATE)):
+        read.clear()
+        named = stepper.reference_times(DECAY, 0.0, y0, h)
+        stepper.integrate(DECAY, h=h, n_steps=stepper.coefficients.steps, y0=y0, t0=0.0)
+        assert read == [float(t) for t in named]
+    assert read == []  # the fine step: the declared starter ran
+
+
+def test_a_sweep_on_the_stiff_reference_asks_for_every_time_it_reads_in_one_call(monkeypatch):
+    """Where the reference is the stiff path's (one implicit solve per member per call), the
+    convergence sweep asks for every time its runs' starts and its local sweep will read in one
+    call before the first run (`plan.read_references_once`); every later read is one of them."""
+    import dataclasses
+
+    import harness.experiments.convergence as conv
+    import harness.experiments.convergence.plan as plan
+    import implementations.multistep as module
+    from harness.ground_truth.stiff import IMPLICIT_LEVEL
+
+    asked: list[np.ndarray] = []
+    read: set[float] = set()
+    real_best, real_start, real_local = conv.best_reference, module.reference, conv.reference
+
+    def reads(real):
+        def wrapped(problem, times, *args, **kwargs):
+            read.update(float(t) for t in np.atleast_1d(times))
+            return real(problem, times, *args, **kwargs)
+        return wrapped
+
+    monkeypatch.setattr(conv, "best_reference", lambda *a: dataclasses.replace(
+        real_best(*a), precision=IMPLICIT_LEVEL))  # as if the stiff path had answered
+    monkeypatch.setattr(plan, "reference", lambda problem, times, *a, **k: asked.append(times))
+    monkeypatch.setattr(module, "reference", reads(real_start))
+    monkeypatch.setattr(conv, "reference", reads(real_local))
+    monkeypatch.setattr(conv, "fastest", lambda stepper, problem: stepper)  # the NumPy loop
+    stepper = get_stepper("bdf2")
+    config = {**conv.ConvergenceExperiment.default_config, "ensemble": 2, "work_budget": 1024,
+              "t_end": DECAY.t_end}
+    rows = conv.step_sweep(stepper, DECAY, config)
+    assert len(asked) == 1 and read and read <= {float(t) for t in asked[0]}
+    counts = set(rows[rows.kind == "global"].n_steps.astype(int))
+    assert counts <= set(plan.planned_counts(4, 4, config["ratio"], conv.step_budget(stepper, config)))

@@ -182,6 +182,36 @@ def test_the_implicit_cross_check_answers_a_stiff_problem_within_its_stated_erro
     assert np.all(ref.error < 1e-10)
 
 
+@pytest.mark.skipif(not stiff.available(), reason="scikit-sundae (the optional sundials extra) "
+                    "is not installed: the cross-check needs CVODE")
+def test_the_implicit_reference_is_computed_once_per_member_and_time(monkeypatch):
+    """Radau stops at each requested time (one solve per member over all of them), and a later
+    request reuses what was computed: a subset costs no solve, a new time is solved alone."""
+    from collections import OrderedDict
+
+    p = _prothero_robinson()
+    monkeypatch.setattr(stiff, "_computed", OrderedDict())
+    solved: list[list[float]] = []
+    real = stiff._radau
+
+    def counted(problem, times, *args):
+        solved.append([float(t) for t in times])
+        return real(problem, times, *args)
+
+    monkeypatch.setattr(stiff, "_radau", counted)
+    y0 = np.array([[1.0, 1.0 + 1e-9]])
+    pars = p.pars_for(2)
+    times = np.array([0.25, 0.5, 1.0])
+    y, error, _ = stiff.implicit_reference(p, times, y0, 0.0, pars)
+    assert solved == [list(times)] * 2
+    assert np.all(np.abs(y[:, 0, 0] - np.cos(times)) <= error[:, 0] + 4 * np.finfo(float).eps)
+    assert np.all(error < 1e-10)
+    again, again_error, _ = stiff.implicit_reference(p, times[1:2], y0, 0.0, pars)
+    assert len(solved) == 2 and np.array_equal(again[0], y[1]) and np.array_equal(again_error[0], error[1])
+    stiff.implicit_reference(p, np.array([0.5, 0.75]), y0, 0.0, pars)
+    assert solved[2:] == [[0.75]] * 2
+
+
 def test_without_the_implicit_solvers_a_stiff_problem_is_refused_as_stiff(without_implicit_path):
     with pytest.raises(StiffReferenceError, match="eigenvalue with real part -1e\\+06"):
         reference(_prothero_robinson(), [10.0])

@@ -17,6 +17,13 @@ Measured against the Bari test set's published end values (from the float64 star
 ROBER stated 2.3e-14, actual 5.6e-15; POLLU 2.4e-14 / 2.3e-14; VDPOL 1.3e-11 / 4.6e-14; OREGO
 1.7e-8 / 2.7e-11; E5 1.3e-21 / 1.3e-21 (on components of 9e-23: no correct digit, and said so).
 
+Radau stops at every requested time (one run per member over all of them, each segment started
+with the step size the last one reached), so every value is a step's end point, never the
+collocation polynomial between steps (stage order 3 against the end point's order 5). Values
+are kept in the process per member and time: a later request at times already computed (a
+convergence sweep asks for each step size's starting values, after asking for all of them at
+once) reuses them, and only missing times are integrated.
+
 Without scikit-sundae installed the path does not apply and the stiff refusal stands. The float64
 form of the problem is integrated (both solvers run in float64); a request from the published
 start at the published end time gets the published values first (more accurate), see
@@ -25,11 +32,13 @@ start at the published end time gets the published values first (more accurate),
 
 from __future__ import annotations
 
+import threading
 import time
 import warnings
+from collections import OrderedDict
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import Radau
 
 from harness.c_streams import library_output_captured
 from harness.errors import ReferenceError_, WorkLimitError
@@ -44,6 +53,12 @@ __all__ = ["implicit_reference", "IMPLICIT_LEVEL", "IMPLICIT_CERTIFIER", "availa
 
 IMPLICIT_LEVEL = "implicit"
 IMPLICIT_CERTIFIER = "radau+cvode-bdf"
+
+# Computed values per member (problem, t0, start, parameters) -> {time: (state, disagreement)},
+# least recently used dropped beyond _KEPT_MEMBERS members (a cell's ensemble and its few sweeps).
+_KEPT_MEMBERS = 256
+_computed: OrderedDict[tuple, dict[float, tuple[np.ndarray, float]]] = OrderedDict()
+_computed_lock = threading.Lock()
 
 
 def available() -> bool:
@@ -82,15 +97,28 @@ class _Counted:
 
 
 def _radau(problem, times, y0, t0, pars, atol):
+    """Radau IIA from t0 to each of `times` in turn, every time a step's end point: one solver
+    per segment, started with the last unclipped step of the previous one."""
     fn = _Counted(problem, pars, "scipy Radau")
+    out = np.empty((times.size, y0.size))
+    t, y, first = float(t0), np.asarray(y0, dtype=np.float64), None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        sol = solve_ivp(fn.f, (t0, float(times[-1])), y0, method="Radau", t_eval=times,
-                        rtol=STIFF_REFERENCE_RTOL, atol=atol, jac=fn.jac)
-    if sol.status != 0 or sol.y.shape[1] != times.size:
-        raise ReferenceError_(f"stiff reference for problem {problem.name!r}: scipy Radau failed "
-                              f"at t = {float(sol.t[-1]) if sol.t.size else t0!r}: {sol.message}")
-    return sol.y.T
+        for i, t_next in enumerate(np.asarray(times, dtype=np.float64)):
+            if t_next > t:
+                solver = Radau(fn.f, t, y, float(t_next), rtol=STIFF_REFERENCE_RTOL, atol=atol,
+                               jac=fn.jac, first_step=None if first is None else min(first, t_next - t))
+                taken: list[float] = []
+                while solver.status == "running":
+                    message = solver.step()
+                    taken.append(solver.step_size)
+                if solver.status != "finished":
+                    raise ReferenceError_(f"stiff reference for problem {problem.name!r}: scipy Radau "
+                                          f"failed at t = {float(solver.t)!r}: {message}")
+                t, y = float(t_next), solver.y.copy()
+                first = taken[-2] if len(taken) > 1 else taken[-1]
+            out[i] = y
+    return out
 
 
 def _cvode(problem, times, y0, t0, pars, atol):
@@ -136,13 +164,30 @@ def implicit_reference(problem: Problem, times: np.ndarray, y0: np.ndarray, t0: 
     started = time.perf_counter()
     scale = np.asarray(problem.ensemble_perturbation.component_scale, dtype=np.float64)
     atol = STIFF_REFERENCE_RTOL * STIFF_REFERENCE_ATOL_SHARE * scale
+    fingerprint = problem.fingerprint()
     ys, errors = [], []
     for n in range(y0.shape[1]):
-        a = _radau(problem, times, y0[:, n], t0, pars[:, n], atol)
-        b = _cvode(problem, times, y0[:, n], t0, pars[:, n], atol)
-        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-            raise ReferenceError_(f"stiff reference for problem {problem.name!r} is not finite "
-                                  f"(member {n})")
-        ys.append(a)
-        errors.append(np.max(np.abs(a - b), axis=1))
+        known = _member_values((fingerprint, float(t0), y0[:, n].tobytes(), pars[:, n].tobytes()))
+        missing = np.array(sorted({float(t) for t in times} - set(known)), dtype=np.float64)
+        if missing.size:
+            a = _radau(problem, missing, y0[:, n], t0, pars[:, n], atol)
+            b = _cvode(problem, missing, y0[:, n], t0, pars[:, n], atol)
+            if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+                raise ReferenceError_(f"stiff reference for problem {problem.name!r} is not finite "
+                                      f"(member {n})")
+            with _computed_lock:
+                known.update({float(t): (a[i], float(np.max(np.abs(a[i] - b[i]))))
+                              for i, t in enumerate(missing)})
+        ys.append(np.stack([known[float(t)][0] for t in times]))
+        errors.append(np.array([known[float(t)][1] for t in times]))
     return np.stack(ys, axis=-1), np.stack(errors, axis=-1), time.perf_counter() - started
+
+
+def _member_values(key: tuple) -> dict[float, tuple[np.ndarray, float]]:
+    """The values computed so far for one member (created empty), most recently used last."""
+    with _computed_lock:
+        known = _computed.pop(key, None)
+        _computed[key] = {} if known is None else known
+        while len(_computed) > _KEPT_MEMBERS:
+            _computed.popitem(last=False)
+        return _computed[key]

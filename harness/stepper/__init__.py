@@ -109,6 +109,22 @@ class Stepper(NonfiniteReplay, ABC):
             return False
         return True
 
+    def reference_times(self, problem: Problem, t0: float, y0: np.ndarray, h: float) -> np.ndarray:
+        """The times at which a run of `problem` from `y0` at step `h` reads the ground truth
+        (starting values taken from it), so a caller about to run many step sizes can have the
+        reference computed at all of them in one call; none for this base class.
+
+        Parameters
+        ----------
+        problem : Problem; t0 : float, the start time; y0 : ndarray (dim, N), the start states;
+        h : float, the step.
+
+        Returns
+        -------
+        ndarray: the times, increasing (empty when the run does not read the reference).
+        """
+        return np.empty(0)
+
     def fingerprint(self) -> str:
         """Changes whenever the method changes: its coefficients and its class's source.
 

@@ -51,6 +51,7 @@ from harness.experiments.base import Cell, Experiment, register_experiment
 from harness.experiments.common import perturbation_used, problem_cells, summary_per_cell
 from harness.experiments.convergence.extended import extended_if_floor_bound
 from harness.experiments.convergence.judge import summarize_cell
+from harness.experiments.convergence.plan import least_count, local_step_sizes, read_references_once
 from harness.experiments.convergence.reference_error import (
     best_reference,
     error_amplification,
@@ -226,6 +227,7 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
     ref_err = float(np.max(ref.error[-1]))
     scale = state_scale(y0, y_ref)
     budget = step_budget(stepper, config)
+    read_references_once(runner, problem, y0, T0, span, budget, config, ref)
     ratio = float(config["ratio"])
     records: dict[int, dict] = {}
     spent = 0
@@ -287,10 +289,7 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
             floor_of(np.array([rec["h"]])) is not None
             and rec["error"] < tol.COEFFICIENT_FLOOR_MARGIN * float(floor_of(np.array([rec["h"]]))[0]))
 
-    # A multistep method's first k - 1 values come from its starter: a sweep over fewer steps
-    # than twice its history would measure the starter (often exact), not the method.
-    history = int(getattr(stepper, "history_length", 1))
-    n_min = 2 * history if history > 1 else 1
+    n_min = least_count(stepper)  # a multistep method's k - 1 first values come from its starter
     # Phase 0: a start that is already below the start error (a high-order method on a smooth
     # span) is coarsened first, down to n_min steps, so the sweep sees the error fall.
     n = max(int(config["n_start"]), n_min)
@@ -369,8 +368,7 @@ def _local_sweep(stepper: Stepper, problem, y0: np.ndarray, global_frame: pd.Dat
     k = stepper.history_length
     fit = global_frame[global_frame.in_fit]
     h_max = float(fit.h.max()) if len(fit) else float(global_frame.h.min())
-    h_max = min(h_max, (problem.convergence_t_end - problem.t0) / max(k, 1))
-    hs = h_max * 0.5 ** np.arange(0, 12)
+    hs = local_step_sizes(h_max, problem, k)
     records = []
     nq = len(problem.newtonian.positions) if problem.newtonian is not None else None
     # One reference call for every time any step size needs: t0 + j h for j = 1..k.
