@@ -63,18 +63,19 @@ def test_the_times_a_start_reads_are_named_before_the_run(stepper, monkeypatch):
 
 def test_a_sweep_on_the_stiff_reference_asks_for_every_time_it_reads_in_one_call(monkeypatch):
     """Where the reference is the stiff path's (one implicit solve per member per call), the
-    convergence sweep asks for every time its runs' starts and its local sweep will read in one
-    call before the first run (`plan.read_references_once`); every later read is one of them."""
-    import dataclasses
+    convergence sweep asks for every time its runs' starts and its local sweep will read, and its
+    horizon, in one call before the first run (`plan.read_references_once`; its first member
+    alone first, to learn the path); every later read is one of them."""
+    from types import SimpleNamespace
 
     import harness.experiments.convergence as conv
     import harness.experiments.convergence.plan as plan
     import implementations.multistep as module
     from harness.ground_truth.stiff import IMPLICIT_LEVEL
 
-    asked: list[np.ndarray] = []
+    asked: list[tuple[np.ndarray, int]] = []
     read: set[float] = set()
-    real_best, real_start, real_local = conv.best_reference, module.reference, conv.reference
+    real_start, real_local = module.reference, conv.reference
 
     def reads(real):
         def wrapped(problem, times, *args, **kwargs):
@@ -82,9 +83,11 @@ def test_a_sweep_on_the_stiff_reference_asks_for_every_time_it_reads_in_one_call
             return real(problem, times, *args, **kwargs)
         return wrapped
 
-    monkeypatch.setattr(conv, "best_reference", lambda *a: dataclasses.replace(
-        real_best(*a), precision=IMPLICIT_LEVEL))  # as if the stiff path had answered
-    monkeypatch.setattr(plan, "reference", lambda problem, times, *a, **k: asked.append(times))
+    def stiff_path(problem, times, y0, **kwargs):  # as if the stiff path had answered
+        asked.append((times, y0.shape[1]))
+        return SimpleNamespace(precision=IMPLICIT_LEVEL)
+
+    monkeypatch.setattr(plan, "reference", stiff_path)
     monkeypatch.setattr(module, "reference", reads(real_start))
     monkeypatch.setattr(conv, "reference", reads(real_local))
     monkeypatch.setattr(conv, "fastest", lambda stepper, problem: stepper)  # the NumPy loop
@@ -92,6 +95,8 @@ def test_a_sweep_on_the_stiff_reference_asks_for_every_time_it_reads_in_one_call
     config = {**conv.ConvergenceExperiment.default_config, "ensemble": 2, "work_budget": 1024,
               "t_end": DECAY.t_end}
     rows = conv.step_sweep(stepper, DECAY, config)
-    assert len(asked) == 1 and read and read <= {float(t) for t in asked[0]}
+    assert [members for _, members in asked] == [1, 2]
+    grid = {float(t) for t in asked[1][0]}
+    assert read and read <= grid and float(DECAY.t_end) in grid
     counts = set(rows[rows.kind == "global"].n_steps.astype(int))
     assert counts <= set(plan.planned_counts(4, 4, config["ratio"], conv.step_budget(stepper, config)))

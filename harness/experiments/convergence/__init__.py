@@ -195,8 +195,11 @@ def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
         return _step_sweep(stepper, problem, config)
     T0, T = problem.t0, problem.convergence_t_end
     notes: list[str] = []
-    for attempt in range(tol.MAX_HORIZON_SHRINKS + 1):
-        frame = _step_sweep_at(stepper, problem, config, T)
+    horizons = [T]  # the loop's horizons, each computed as the loop does
+    for _ in range(tol.MAX_HORIZON_SHRINKS):
+        horizons.append(T0 + (horizons[-1] - T0) / tol.HORIZON_SHRINK)
+    for attempt in range(tol.MAX_HORIZON_SHRINKS + 1):  # the reads of every horizon asked at once
+        frame = _step_sweep_at(stepper, problem, config, T, horizons if attempt == 0 else ())
         g = frame[frame.kind == "global"]
         budget_bound = bool(frame.attrs.get("budget_ended"))
         enough = int(g.in_fit.sum()) >= tol.MIN_FIT_POINTS
@@ -217,18 +220,17 @@ def _shrinking_sweep(stepper: Stepper, problem, config) -> pd.DataFrame:
     return frame
 
 
-def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
+def _step_sweep_at(stepper: Stepper, problem, config, T: float, horizons=None) -> pd.DataFrame:
     runner = fastest(stepper, problem)
     T0 = problem.t0
     span = T - T0
     y0 = problem.ensemble(int(config["ensemble"]), seed=int(config["seed"]), scale=config.get("perturbation"))
+    budget = step_budget(stepper, config)
+    read_references_once(runner, problem, y0, T0, [T] if horizons is None else horizons, budget, config)
     ref = best_reference(problem, T, y0)
     y_ref = ref.y[-1]
     ref_err = float(np.max(ref.error[-1]))
     scale = state_scale(y0, y_ref)
-    budget = step_budget(stepper, config)
-    read_references_once(runner, problem, y0, T0, span, budget, config, ref)
-    ratio = float(config["ratio"])
     records: dict[int, dict] = {}
     spent = 0
     # Rounding committed along the way is carried to T by the flow: the floor is sqrt(n) eps |y|
@@ -312,7 +314,7 @@ def _step_sweep_at(stepper: Stepper, problem, config, T: float) -> pd.DataFrame:
             if int((reasons == "").sum()) >= target:
                 budget_ended = False
                 break
-        n = int(math.ceil(n * ratio))
+        n = int(math.ceil(n * float(config["ratio"])))
     # Phase 3: widen. Where the floor (or the budget) came before `target` points, fill in step
     # sizes between the measured ones (ratio sqrt 2), twice at most.
     for _ in range(2):

@@ -9,9 +9,9 @@ history at h_max 2^-i (`local_step_sizes`). A stepper whose start reads the grou
 explicit starter would be unstable, as on a stiff problem) needs the reference at a few new times
 per step size. Where that reference is the stiff path's (`harness.ground_truth.stiff`: an implicit
 solve per member, each costing about as much for a short span as for the whole horizon, which
-keeps the values it computed), asking for every time any run may read in one call costs one solve
-per member instead of one per step size: the same values, taken from the same solver's step end
-points, with the same stated error.
+keeps the values it computed), asking for every time any run may read, and the horizon, in one
+call costs one solve per member instead of one per step size and one more for the horizon: the
+same values, taken from the same solver's step end points, with the same stated error.
 """
 
 from __future__ import annotations
@@ -92,32 +92,38 @@ def planned_counts(n_first: int, n_min: int, ratio: float, budget: int) -> list[
     return sorted(counts)
 
 
-def read_references_once(runner, problem, y0: np.ndarray, T0: float, span: float, budget: int,
-                         config: Mapping[str, Any], ref) -> None:
-    """Have the stiff ground truth computed at once at every time a sweep over `span` from `y0`
-    may read (module docstring); nothing when its runs read no reference, or when the reference
-    at the horizon (`ref`) is not the stiff path's (the Taylor path is cheap per call).
+def read_references_once(runner, problem, y0: np.ndarray, T0: float, horizons, budget: int,
+                         config: Mapping[str, Any]) -> None:
+    """Have the stiff ground truth computed at once at every time a sweep from `y0` to any of
+    `horizons` may read, the horizons included (module docstring). Nothing when its runs read no
+    reference (or `horizons` is empty: already asked); where the reference is not the stiff
+    path's (the first member, asked first, says which: the Taylor path is cheap per call and
+    keeps no values between calls), the other members are not asked.
 
     Parameters
     ----------
     runner : Stepper, the implementation the sweep runs; problem : Problem; y0 : ndarray (dim, N);
-    T0 : float, the start; span : float, the horizon's length; budget : int, the step budget;
-    config : mapping, the sweep's `n_start` and `ratio`; ref : Reference, at the horizon.
+    T0 : float, the start; horizons : sequence of float, the end times the sweep may use (a
+    shrinking sweep's shorter horizons too); budget : int, the step budget; config : mapping, the
+    sweep's `n_start` and `ratio`.
     """
-    if ref.precision != IMPLICIT_LEVEL:
-        return
     k = int(runner.history_length)
     n_min = least_count(runner)
     counts = planned_counts(max(int(config["n_start"]), n_min), n_min, float(config["ratio"]), budget)
     times: set[float] = set()
-    for n in counts:
-        times.update(float(t) for t in runner.reference_times(problem, T0, y0, span / n))
+    for span in (float(T) - T0 for T in horizons):
+        for n in counts:
+            times.update(float(t) for t in runner.reference_times(problem, T0, y0, span / n))
     if not times:
         return
-    for n in counts:  # the local sweep, from any count the global fit may start at
-        for h in local_step_sizes(span / n, problem, k):
-            times.update(float(problem.t0 + h * j) for j in range(1, k + 1))
+    for span in (float(T) - T0 for T in horizons):
+        for n in counts:  # the local sweep, from any count the global fit may start at
+            for h in local_step_sizes(span / n, problem, k):
+                times.update(float(problem.t0 + h * j) for j in range(1, k + 1))
+    times.update(float(T) for T in horizons)
+    grid = np.array(sorted(times))
     try:
-        reference(problem, np.array(sorted(times)), y0, t0=T0)
+        if reference(problem, grid, y0[:, :1], t0=T0).precision == IMPLICIT_LEVEL:
+            reference(problem, grid, y0, t0=T0)
     except ReferenceError_:
         return  # each run then asks for its own times and meets the same refusal there
