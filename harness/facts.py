@@ -10,7 +10,9 @@ A verdict never looks at a name. It follows from
   explicit time), the degree of a polynomial solution (a nilpotent affine system), whether the
   acceleration is velocity-free (the Nystrom class), the right-hand side's degree when it is a
   polynomial in the state, and how stiff it is (the Jacobian's spectrum sampled along the
-  reference solution over the convergence horizon); `central_field`: whether every body's
+  reference solution over the convergence horizon), and whether it starts in an initial layer
+  (`layer_width`: the start's velocity lies mostly along fast decaying modes, so the solution is
+  a transient there, not the smooth solution); `central_field`: whether every body's
   acceleration is parallel to its own position (decided on the definition at sampled positions).
 A Runge-Kutta method's facts include its orders on those classes (`class_orders`, keyed by
 `class_key`), its stage order and whether it is stiffly accurate (`harness.theory.classes`).
@@ -111,6 +113,7 @@ class ProblemFacts:
     stiffness: float
     horizon: float
     rhs_degree: int | None = None  # polynomial degree of the right-hand side in the state
+    layer_width: float | None = None  # the start's initial layer: 1 / its fastest decay rate
 
     def as_dict(self) -> dict[str, Any]:
         """The facts as a plain dict (for the report and JSON).
@@ -277,6 +280,7 @@ def _derive_problem_facts(problem: Problem) -> ProblemFacts:
         stiffness=_stiffness(problem),
         horizon=float(problem.convergence_t_end - problem.t0),
         rhs_degree=_rhs_degree(problem),
+        layer_width=_initial_layer_width(problem),
     )
 
 
@@ -361,3 +365,36 @@ def _stiffness(problem: Problem) -> float:
         if np.all(np.isfinite(lam)):
             worst = max(worst, float(np.max(-lam.real)))
     return worst if math.isfinite(worst) else math.inf
+
+
+def _initial_layer_width(problem: Problem) -> float | None:
+    """The width 1 / (largest -Re(lambda) at the start) of the initial layer the problem starts
+    in, or None when it starts on a smooth solution. At y0 the velocity f(y0) is split along the
+    Jacobian's eigenvectors: modes that decay STIFF_HORIZON_DECAYS times over the horizon are
+    fast. On a smooth (slow-manifold) solution of a stiff problem the fast part of the velocity is
+    of the size of the slow part times slow rate / fast rate; at a start off that manifold it is
+    the offset times the fast rate (Hairer & Wanner II, VI.1: the reduced problem and the initial
+    layer of a singular perturbation problem). The start is in a layer when the fast part exceeds
+    LAYER_VELOCITY_RATIO times the slow part and no mode grows at a fast rate (a saddle, such as
+    a pericentre passage's +-lambda pair, is not a layer)."""
+    horizon = float(problem.convergence_t_end - problem.t0)
+    dyn = problem.dynamics(size=1)
+    y0 = np.ascontiguousarray(problem.y0.reshape(-1, 1), dtype=np.float64)
+    try:
+        jac = dyn.jac(problem.t0, y0)[:, :, 0]
+        velocity = np.asarray(dyn.f(problem.t0, y0), dtype=np.float64).ravel()
+        with np.errstate(all="ignore"):
+            lam, vectors = np.linalg.eig(jac)
+            amplitude = np.linalg.lstsq(vectors, velocity.astype(complex), rcond=None)[0]
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+        return None
+    if not (np.all(np.isfinite(lam)) and np.all(np.isfinite(amplitude))) or horizon <= 0:
+        return None
+    fast = -lam.real * horizon > tol.STIFF_HORIZON_DECAYS
+    if not fast.any() or np.any(lam.real * horizon > tol.STIFF_HORIZON_DECAYS):
+        return None
+    fast_part = float(np.linalg.norm(vectors[:, fast] @ amplitude[fast]))
+    slow_part = float(np.linalg.norm(vectors[:, ~fast] @ amplitude[~fast]))
+    if not fast_part > tol.LAYER_VELOCITY_RATIO * slow_part:
+        return None
+    return float(1.0 / np.max(-lam.real[fast]))

@@ -68,6 +68,9 @@ class TimeScale:
     # fastest over median spectral radius along the span: ~1 for an oscillator, large where
     # close encounters come and go (a fixed step is then far finer than most of the orbit needs)
     rate_contrast: float = 1.0
+    # the first time T at which (T - t0) x the largest spectral radius up to T reaches
+    # STIFF_HORIZON_STEPS (None: the span never does): where the span turns stiff
+    stiff_onset: float | None = None
 
     @property
     def steps_per_period(self) -> float:
@@ -160,7 +163,23 @@ def _derive_time_scale(problem) -> TimeScale:
     median = float(np.median(rates["spectral"]))
     contrast = rho / median if median > 0.0 else (1.0 if rho == 0.0 else math.inf)
     return TimeScale(period=period, fastest_rate=rho, h=h, source=source, reason=why,
-                     rate_contrast=contrast)
+                     rate_contrast=contrast, stiff_onset=_stiff_onset(problem.t0, orbit, rates["spectral"]))
+
+
+def _stiff_onset(t0: float, orbit: Orbit, spectral: np.ndarray) -> float | None:
+    """The first T with (T - t0) x max(spectral radius over [t0, T]) >= STIFF_HORIZON_STEPS, on
+    the orbit's (thinned) samples: past sample k the radius is at least its running maximum M_k,
+    so T = min_k max(t_k, t0 + STIFF_HORIZON_STEPS / M_k); None when no sample reaches it."""
+    idx = np.arange(orbit.t.size)
+    if idx.size > tol.ORBIT_MAX_SAMPLES:  # the samples orbit_rates read
+        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
+    t = orbit.t[idx]
+    running = np.maximum.accumulate(np.where(np.isfinite(spectral), spectral, 0.0))
+    with np.errstate(divide="ignore"):
+        reach = np.maximum(t, t0 + tol.STIFF_HORIZON_STEPS / running)
+    reach = reach[running > 0.0]
+    reach = reach[reach <= t[-1]]
+    return float(np.min(reach)) if reach.size else None
 
 
 # -- perturbation -----------------------------------------------------------------------------------

@@ -102,6 +102,11 @@ STIFF_STEP_COUNT = 1000.0
 # horizon (-Re(lambda) x horizon): the transient it leaves is then far below any error measured,
 # and an implicit method's stages see h|lambda| >> 1 at the sweep's coarse steps.
 STIFF_HORIZON_DECAYS = 100.0
+# A problem starts in an initial layer when, at its start, the velocity's part along those fast
+# decaying modes exceeds this multiple of its part along the others: on a smooth solution of a
+# stiff problem the fast part is the slow part times slow rate / fast rate (<< 1; 2e-4 on
+# van-der-pol-stiff), off it the offset times the fast rate (3e6 on Bari's VDPOL).
+LAYER_VELOCITY_RATIO = 1.0
 # An implicit method's stage equations y = h a f(y) + ... are guaranteed solvable by iteration for
 # h L |a| < 1 (HNW I, II.7, Thm 7.2), L >= the stiffness; at h x stiffness >= this no registered
 # implicit method (|a| >= 0.1: backward Euler 1, BDF2 2/3, AM3 5/12, Gauss 4 ~0.25) is covered, so

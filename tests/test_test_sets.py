@@ -363,3 +363,21 @@ def test_a_shortened_horizon_note_is_no_failure_but_a_step_that_could_not_be_com
     assert record["verdict"] == verdict
     if verdict == "failed":
         assert failure in record["message"]
+
+
+def test_a_problem_turning_stiff_late_is_measured_into_its_stiff_phase():
+    """A fast oscillation (period 0.063: ten periods end at 0.63) beside a decay whose rate
+    1 + (t/2)^8 grows along the span: the horizon is where T x the largest rate up to T reaches
+    STIFF_HORIZON_STEPS (T ~ 5.1), not the ten periods, which see no stiffness."""
+    from scipy.optimize import brentq
+
+    from harness.tolerances import HORIZON_PERIODS, STIFF_HORIZON_STEPS
+
+    x, v, w = hy.make_vars("x", "v", "w")
+    s2 = (hy.time / 2.0) * (hy.time / 2.0)
+    p = Problem("late-stiff", variables=[x, v, w],
+                rhs=[v, -1e4 * x, -(1.0 + (s2 * s2) * (s2 * s2)) * (w - hy.cos(hy.time)) - hy.sin(hy.time)],
+                y0=[1.0, 0.0, 1.0], t_span=(0.0, 10.0), description="d", reference="r")
+    onset = brentq(lambda T: T * max(100.0, 1.0 + (T / 2.0) ** 8) - STIFF_HORIZON_STEPS, 1.0, 10.0)
+    assert p.t0 + HORIZON_PERIODS * p.time_scale.period < 1.0 < onset
+    assert p.convergence_t_end == pytest.approx(onset, rel=1e-2)

@@ -8,15 +8,19 @@ Swept over the registry's fixed-step steppers: the verdict follows from the meth
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import heyoka as hy
 import numpy as np
 import pandas as pd
 import pytest
 
 from harness import tolerances as tol
 from harness.experiments.convergence.judge import summarize_cell
-from harness.facts import ProblemFacts, method_facts
+from harness.facts import ProblemFacts, method_facts, problem_facts
 from harness.gate import stiff_span_flag
-from harness.registry import steppers
+from harness.problem import Problem
+from harness.registry import get_problem, steppers
 from harness.rules import convergence_expectation, judge_convergence
 
 FIXED_STEP = [s for s in steppers.all() if not s.info.adaptive and s.info.form == "first-order"]
@@ -230,3 +234,58 @@ def test_a_fit_over_steps_outside_the_stability_interval_is_not_measurable(fit_h
     record = {"verdict": "converged", "measured_order": 0.0, "fit_h_max": fit_h_max, "message": ""}
     got, reason = judge_convergence(record, expectation)
     assert got == outcome, reason
+
+
+def _singular_perturbation(name: str, z0: float) -> Problem:
+    """y' = z, eps z' = (1 - y^2) z - y (van der Pol, eps = 1e-6) from y = 2: its slow manifold
+    has z = y / (1 - y^2) + O(eps) = -2/3 there."""
+    y, z = hy.make_vars("y", "z")
+    return Problem(name, variables=[y, z], rhs=[z, ((1.0 - y * y) * z - y) / 1e-6],
+                   y0=[2.0, z0], t_span=(0.0, 2.0), convergence_t_end=1e-3)
+
+
+def _prothero_robinson(name: str, y0: float) -> Problem:
+    """y' = -1e4 (y - cos t) - sin t: smooth solution cos t, a layer for any other start."""
+    y = hy.make_vars("y")
+    return Problem(name, variables=[y], rhs=[-1e4 * (y - hy.cos(hy.time)) - hy.sin(hy.time)],
+                   y0=[y0], t_span=(0.0, 1.0))
+
+
+@pytest.mark.parametrize("problem, width", [
+    (_singular_perturbation("sp-off-manifold", 0.0), 1e-6 / 3),  # offset 2/3 decaying at 3e6
+    (_singular_perturbation("sp-on-manifold", -2.0 / 3.0 - 10.0 / 81.0 * 1e-6), None),
+    (_prothero_robinson("pr-layer", 2.0), 1e-4),
+    (_prothero_robinson("pr-smooth", 1.0), None),
+    ("bari-vdpol", 1e-6 / 3), ("van-der-pol-stiff", None),
+    ("kepler-e0.9", None),  # a pericentre's +-lambda saddle: fast, but growing as well as decaying
+])
+def test_an_initial_layer_is_found_from_the_definition(problem, width):
+    problem = get_problem(problem) if isinstance(problem, str) else problem
+    found = problem_facts(problem).layer_width
+    if width is None:
+        assert found is None
+    else:
+        assert found == pytest.approx(width, rel=1e-3)
+
+
+@pytest.mark.parametrize("fit_h_min, outcome", [(1e-5, "not-measurable"), (1e-7, "fail")])
+@pytest.mark.parametrize("stepper", FIXED_STEP[:3] + [s for s in FIXED_STEP if not s.info.explicit][:3],
+                         ids=lambda s: s.info.name)
+def test_a_slope_over_steps_that_skip_an_initial_layer_is_not_measurable(stepper, fit_h_min, outcome):
+    """Order p on stiff problems needs a smooth solution (HW II VI.2-VI.3): a slope off the
+    claim over steps all above the layer's width says nothing; with a step inside it, it fails."""
+    facts = replace(_stiff_facts(), layer_width=1e-6 / 3)
+    expectation = convergence_expectation(method_facts(stepper), facts)
+    claimed = expectation.order
+    lowest = expectation.order_low if expectation.order_low is not None else claimed
+    record = {"verdict": "converged", "measured_order": lowest - 1.0, "fit_h_min": fit_h_min,
+              "fit_h_max": 8 * fit_h_min, "message": ""}
+    got, reason = judge_convergence(record, expectation)
+    if expectation.stable_h is not None and 8 * fit_h_min > expectation.stable_h:
+        assert got == "not-measurable" and "stable step" in reason  # the stability rule first
+        return
+    assert got == outcome, reason
+    if outcome == "not-measurable":
+        assert "initial layer of width 3.33e-07" in reason and "VI.2" in reason
+    record["measured_order"] = claimed
+    assert judge_convergence(record, expectation)[0] == "pass"

@@ -21,7 +21,7 @@ from harness.problem.nbody import NBody, NewtonianForm, expression_names
 from harness.problem.published import Published
 from harness.problem.validation import check_definition, check_start
 from harness.scales import derive_perturbation, derive_time_scale, draw_noise
-from harness.tolerances import HORIZON_PERIODS, STIFF_HORIZON_STEPS
+from harness.tolerances import HORIZON_PERIODS
 
 ExactSolution = Callable[[float, np.ndarray, float, np.ndarray], np.ndarray]
 
@@ -150,18 +150,20 @@ class Problem:
     def convergence_t_end(self) -> float:
         """The convergence horizon: declared, else the span cut to HORIZON_PERIODS natural
         periods (`time_scale`; order does not depend on the horizon, a long span only costs).
-        A problem stiff over its span whose cut horizon is not (its fastest rate times the
-        horizon below STIFF_HORIZON_STEPS: ten periods of the fastest rate end inside the initial
-        layer) gets the horizon STIFF_HORIZON_STEPS / rate, within the span: many layer widths,
-        so the measurement reaches the slow manifold, where the problem is stiff."""
+        A problem that turns stiff within its span but not within that cut (ten periods of the
+        fastest rate end inside the initial layer, or the fast phase comes later, as OREGO's)
+        gets the horizon where it turns stiff (`TimeScale.stiff_onset`: the first T at which T
+        times the largest spectral radius up to T reaches STIFF_HORIZON_STEPS), so the
+        measurement reaches the slow manifold and the stiff phase. With the fastest rate at the
+        start this is STIFF_HORIZON_STEPS / rate: many layer widths."""
         if self.declared_convergence_t_end is not None:
             return self.declared_convergence_t_end
 
         scale = self.time_scale
         horizon = min(self.t_end, self.t0 + HORIZON_PERIODS * scale.period)
-        rate = scale.fastest_rate
-        if rate * (horizon - self.t0) < STIFF_HORIZON_STEPS <= rate * (self.t_end - self.t0):
-            horizon = min(self.t_end, self.t0 + STIFF_HORIZON_STEPS / rate)
+        onset = scale.stiff_onset
+        if onset is not None and onset > horizon:
+            horizon = min(self.t_end, onset)
         return horizon
 
     @property
