@@ -4,7 +4,8 @@ code within it (`code_dir`), and the heyoka integrators built in this process (`
 `HARNESS_CACHE_DIR` overrides the default `.cache/` at the project root (or the current
 directory when the package is installed elsewhere). Compiled code (numba's family kernels in
 `numba/`, heyoka's on-disk JIT cache in `heyoka/`, so compiled right-hand sides and Taylor
-integrators survive across processes) lives in the same directory unless `HARNESS_CODE_CACHE_DIR`
+integrators survive across processes; the imports parsed from the project's sources for cache
+keys in `keys/`) lives in the same directory unless `HARNESS_CODE_CACHE_DIR`
 names another: compiled code is keyed by its own text (the family module by a hash of its source,
 numba's index by that file's stamp, heyoka's by the IR it compiles), never by measured results,
 so one code directory can serve any number of result caches (the test suite's private caches

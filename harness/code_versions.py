@@ -2,7 +2,10 @@
 imports, read from the source (never by importing anything new), with the thresholds it reads.
 
 What a remembered value (`harness.derived`) and a cell's cache key (`harness.keys`) depend on.
-Imports are parsed once per version of a module's text and kept on disk (`harness.memo`).
+Imports are parsed once per version of a module's text and kept on disk (`harness.memo`) under
+the compiled-code directory (`harness.cache.code_dir()`, `keys/`): like compiled code they
+follow from the source text alone, so a run with a cache directory of its own (a test's empty
+cache) still finds them.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import stat
 import sys
 from typing import Any
 
+from harness.cache import code_dir
 from harness.memo import kept
 from harness.provenance import PROJECT_ROOT
 
@@ -173,11 +177,11 @@ def _module_imports(name: str, text: str | None) -> tuple[frozenset[str], frozen
 def _read_once(kind: str, name: str, text: str) -> dict[str, Any]:
     """What `kind` ('imports': the whole module's imports; 'measuring': the measuring part of an
     experiment's module and its imports) reads from module `name`'s source `text`, parsed once
-    per version of the text and of the project's module list, then kept on disk (parsing is most
-    of a cached run's key computation, in every process)."""
+    per version of the text and of the project's module list, then kept on disk under
+    `code_dir()` (parsing is most of a cached run's key computation, in every process)."""
     listing = "\n".join(project_files())
     key = hashlib.sha256("\n".join([kind, name, listing, text]).encode()).hexdigest()[:32]
-    return kept("keys", key, lambda: _parsed(kind, name, text), kind)
+    return kept("keys", key, lambda: _parsed(kind, name, text), kind, root=code_dir)
 
 
 def _parsed(kind: str, name: str, text: str) -> dict[str, Any]:

@@ -2,6 +2,8 @@
 
 `kept(directory, key, compute)` returns the JSON value stored under `key` in
 `<cache root>/<directory>/<key[:2]>/<key>.json`, else `compute()`, then stores it atomically.
+The cache root is `harness.cache.cache_dir()` unless the caller names another (`root`): values
+that follow from the code's own text alone belong under `code_dir()`, shared like compiled code.
 A value not on disk is computed under an exclusive file lock of its key (`<key>.lock` beside
 it; POSIX `flock`, released when its process ends however it ends), so processes that ask for
 the same value at once compute it once: the others wait and read it. A file that cannot be read
@@ -20,6 +22,8 @@ try:
 except ImportError:  # pragma: no cover - not POSIX
     fcntl = None
 
+from pathlib import Path
+
 from harness.cache import cache_dir
 from harness.errors import OutputError
 from harness.store import atomic_write_bytes
@@ -27,7 +31,8 @@ from harness.store import atomic_write_bytes
 __all__ = ["kept"]
 
 
-def kept(directory: str, key: str, compute: Callable[[], Any], label: str = "") -> Any:
+def kept(directory: str, key: str, compute: Callable[[], Any], label: str = "",
+         root: Callable[[], Path] = cache_dir) -> Any:
     """The JSON value stored under `key` in `<cache root>/<directory>`, else `compute()`, then
     stored (atomically). A file that cannot be read or parsed is recomputed and replaced; a
     cache that cannot be written costs only time.
@@ -36,14 +41,16 @@ def kept(directory: str, key: str, compute: Callable[[], Any], label: str = "") 
     ----------
     directory : str, the folder under the cache root; key : str, the hex key (its first two
     characters name the subfolder); compute : callable with no argument returning JSON-serialisable
-    data; label : str, the function's name stored with the value.
+    data; label : str, the function's name stored with the value; root : callable with no
+    argument returning the cache root (default `harness.cache.cache_dir`; `code_dir` for values
+    of the code's text alone).
 
     Returns
     -------
     The stored or computed value.
     """
     try:
-        path = cache_dir() / directory / key[:2] / f"{key}.json"
+        path = root() / directory / key[:2] / f"{key}.json"
     except OutputError:  # no cache directory: the value is computed every time
         return compute()
     found = _read(path, key)

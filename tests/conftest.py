@@ -4,9 +4,9 @@ Saved runs go to a temporary directory, never into the repository's results/. Th
 and reference caches stay in the project's .cache/ so one test run warms them for the next (they
 are keyed by code and inputs, so sharing them is safe). Compiled code is shared further: a test
 that gives a run a private cache (HARNESS_CACHE_DIR, to start from no cells or to break that
-directory) still finds the kernels and heyoka's functions the session compiled, since
-HARNESS_CODE_CACHE_DIR is set here for the session and its subprocesses (unless already set);
-a test of a cold compile sets it too.
+directory) still finds the kernels and heyoka's functions the session compiled, and the imports
+parsed from the project's sources for cache keys, since HARNESS_CODE_CACHE_DIR is set here for
+the session and its subprocesses (unless already set); a test of a cold compile sets it too.
 """
 
 from __future__ import annotations

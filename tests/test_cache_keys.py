@@ -195,13 +195,16 @@ def test_a_packed_run_caches_its_summary_until_a_rule_or_threshold_changes(key_t
 
 def test_parsed_imports_kept_on_disk_are_read_back_and_a_damaged_file_is_parsed_again(tmp_path,
                                                                                         monkeypatch):
-    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path))
+    # kept with the compiled code (they follow from the source text alone), not with the results
+    monkeypatch.setenv("HARNESS_CACHE_DIR", str(tmp_path / "results-cache"))
+    monkeypatch.setenv("HARNESS_CODE_CACHE_DIR", str(tmp_path))
     exp = EXPERIMENTS["energy"]
     code_versions._read_once.cache_clear()
     code_versions._module_imports.cache_clear()
     first = keys.measuring_modules(exp)
     stored = sorted((tmp_path / "keys").rglob("*.json"))
     assert len(stored) > 10  # one file per module text read
+    assert not (tmp_path / "results-cache" / "keys").exists()
     code_versions._read_once.cache_clear()
     code_versions._module_imports.cache_clear()
     assert keys.measuring_modules(exp) == first  # read back from disk

@@ -438,8 +438,12 @@ def test_a_large_compile_is_interrupted_by_ctrl_c(tmp_path, delay):
     still takes Ctrl-C, and the process ends with its own status although the abandoned compile
     still runs (a normal exit ran LLVM's static destructors under it: SIGSEGV or SIGABRT in 2 of
     24 runs with the signal sent within 20 ms of the compile's start). The compile alone takes
-    minutes here, so the child ends long before."""
+    minutes here, so the child ends long before. The child compiles into its own empty code
+    directory (`configure_heyoka_cache`), never into heyoka's default per-user cache: a compile
+    that ever finished there (a run whose SIGINT was ignored) would be loaded within the delay
+    by every later run, which then exits 0."""
     source = ("import heyoka as hy, sys\nfrom harness import cache\n"
+              "cache.configure_heyoka_cache()\n"
               "xs = hy.make_vars(*[f'x{i}' for i in range(5000)])\n"
               "exprs = [xs[i] * xs[(i + 1) % 5000] + hy.sin(xs[i - 1]) for i in range(5000)]\n"
               "print('compiling', flush=True)\n"
