@@ -228,6 +228,9 @@ def _group_rows(errors, ids, implementations, steppers=None, times=(1.0, 3.0)):
     ([1e-6, 1e-6 * (1 + 1e-9)], True),          # a last-bits difference of a large error
     ([1e-12, 1e-12 + 2e-15], True),             # near rounding: within 64 ulps * sqrt(n)
     ([1e-6, 1.1e-6], False),                    # a different method
+    ([math.inf, math.inf], True),               # both overflowed at this step: no difference
+    ([math.inf, 1e-6], False),                  # one overflowed
+    ([math.nan, math.nan], False),              # nothing to compare
 ])
 def test_same_method_groups_check_errors_agree_to_rounding(errors, agree):
     groups = timing.same_method_groups(_group_rows(errors, ["id", "id"], ["compiled", "numpy"]))
