@@ -47,10 +47,7 @@ def check_invariants_along_flow(problem) -> None:
 
 def _invariant_defects(problem) -> list:
     orbit = sample_orbit(problem)
-    idx = np.arange(orbit.t.size)
-    if idx.size > tol.ORBIT_MAX_SAMPLES:
-        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
-    t, y = orbit.t[idx], np.ascontiguousarray(orbit.y[:, idx])
+    t, y = orbit.thinned()
     pars = problem.pars_for(t.size)
     names = sorted(problem.invariants)
     clock = hy.make_vars("harness_explicit_time_")

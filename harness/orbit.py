@@ -34,6 +34,19 @@ class Orbit:
     # what stopped it, in words
     singular: str = ""
 
+    def thinned(self) -> tuple[np.ndarray, np.ndarray]:
+        """The samples the rates are read at: every one, or ORBIT_MAX_SAMPLES evenly spread
+        (the first and the last kept).
+
+        Returns
+        -------
+        tuple of ndarray: times (n,) and states (dim, n), C-contiguous.
+        """
+        idx = np.arange(self.t.size)
+        if idx.size > tol.ORBIT_MAX_SAMPLES:
+            idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
+        return self.t[idx], np.ascontiguousarray(self.y[:, idx])
+
 
 # -- the reference orbit --------------------------------------------------------------------------
 _integrators = cache.IntegratorPool()  # by problem
@@ -165,10 +178,7 @@ def fastest_times(problem, n: int) -> np.ndarray:
     """
     orbit = sample_orbit(problem)
     rate = orbit_rates(problem, orbit)["spectral"]
-    idx = np.arange(orbit.t.size)
-    if idx.size > tol.ORBIT_MAX_SAMPLES:
-        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
-    t = orbit.t[idx]
+    t, _ = orbit.thinned()
     gap = 0.01 * (problem.t_end - problem.t0)
     chosen: list[float] = []
     for k in np.argsort(rate)[::-1]:
@@ -196,10 +206,7 @@ def orbit_rates(problem, orbit: Orbit, *, candidates: int | None = None) -> dict
     -------
     dict of ndarray: 'spectral', 'oscillation' and 'change' rates, one per (thinned) sample.
     """
-    idx = np.arange(orbit.t.size)
-    if idx.size > tol.ORBIT_MAX_SAMPLES:
-        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
-    t, y = orbit.t[idx], np.ascontiguousarray(orbit.y[:, idx])
+    t, y = orbit.thinned()
     n = t.size
     pars = problem.pars_for(n)
     jac = problem.compiled("jac", None)(y, pars=pars, time=t).reshape(problem.dim, problem.dim, n)

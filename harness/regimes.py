@@ -52,10 +52,7 @@ def regime_end(problem, t_end: float) -> tuple[float, str]:
 def _regime_end(problem, t_end: float) -> tuple[float, str]:
     base = problem.time_scale.fastest_rate
     orbit = sample_orbit(problem, t_end=t_end)
-    idx = np.arange(orbit.t.size)
-    if idx.size > tol.ORBIT_MAX_SAMPLES:
-        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
-    t, y = orbit.t[idx], np.ascontiguousarray(orbit.y[:, idx])
+    t, y = orbit.thinned()
     jac = problem.compiled("jac", None)(y, pars=problem.pars_for(t.size), time=t)
     jac = jac.reshape(problem.dim, problem.dim, t.size)
     limit = tol.REGIME_RATE_FACTOR * base

@@ -270,17 +270,17 @@ def judge_convergence(record: dict, expectation: Expectation) -> tuple[str, str]
             lo, hi = expectation.order_low, expectation.order
             if math.isfinite(measured) and lo - tol.GATE_ORDER_TOL <= measured <= hi + tol.GATE_ORDER_TOL:
                 return "pass", f"measured order {measured:.3f} within [{lo:g}, {hi:g}]: {expectation.reason}"
-            if _unresolved_layer(record, expectation):
+            if layer := _unresolved_layer(record, expectation):
                 return "not-measurable", (f"measured order {measured:.3f} outside [{lo:g}, {hi:g}], "
-                                          f"but {_unresolved_layer(record, expectation)}")
+                                          f"but {layer}")
             return "fail", (f"measured order {measured:.3f} outside [{lo:g}, {hi:g}] (+-"
                             f"{tol.GATE_ORDER_TOL}): {expectation.reason}")
         diff = abs(measured - expectation.order)
         if math.isfinite(measured) and diff <= tol.GATE_ORDER_TOL:
             return "pass", expectation.reason
-        if _unresolved_layer(record, expectation):
+        if layer := _unresolved_layer(record, expectation):
             return "not-measurable", (f"measured order {measured:.3f} against {expectation.order:g}, "
-                                      f"but {_unresolved_layer(record, expectation)}")
+                                      f"but {layer}")
         return "fail", (f"measured order {measured:.3f} differs from the expected "
                         f"{expectation.order:g} by {diff:.3f} > {tol.GATE_ORDER_TOL}"
                         + (f" ({expectation.reason})" if expectation.reason else ""))

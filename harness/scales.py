@@ -170,10 +170,7 @@ def _stiff_onset(t0: float, orbit: Orbit, spectral: np.ndarray) -> float | None:
     """The first T with (T - t0) x max(spectral radius over [t0, T]) >= STIFF_HORIZON_STEPS, on
     the orbit's (thinned) samples: past sample k the radius is at least its running maximum M_k,
     so T = min_k max(t_k, t0 + STIFF_HORIZON_STEPS / M_k); None when no sample reaches it."""
-    idx = np.arange(orbit.t.size)
-    if idx.size > tol.ORBIT_MAX_SAMPLES:  # the samples orbit_rates read
-        idx = np.unique(np.linspace(0, idx.size - 1, tol.ORBIT_MAX_SAMPLES).round().astype(int))
-    t = orbit.t[idx]
+    t, _ = orbit.thinned()  # the samples orbit_rates read
     running = np.maximum.accumulate(np.where(np.isfinite(spectral), spectral, 0.0))
     with np.errstate(divide="ignore"):
         reach = np.maximum(t, t0 + tol.STIFF_HORIZON_STEPS / running)
